@@ -1,0 +1,173 @@
+"""Optical constants (complex refractive index n + ik) of the film and substrate sets.
+
+The tables are copied unchanged from the refractiveindex.info database (CC0 1.0); see
+``microfacet/data/optical_constants/SOURCES.md`` for the original paper of each set.
+
+Defaults
+--------
+``DEFAULT_FILM = "TiO2_Jolivet2023_amorphous"``
+    Anodic TiO2 grown at the voltages that give interference colours (tens of volts) is
+    amorphous or at most partly crystalline (Diamanti et al. 2008; structure reviews cited
+    in ``docs/optical-constants.md``). Of the measured TiO2 sets only Jolivet et al. (2023)
+    state an amorphous phase explicitly; its index (n = 2.45 at 550 nm, k = 0 above 362 nm)
+    lies inside the 2.2-2.5 span reported for anodic films, and with it the computed colour
+    sequence (gold 20-30 nm, purple ~40 nm, blue ~50 nm, ...) follows the vendor charts.
+``DEFAULT_SUBSTRATE = "Ti_JohnsonChristy1974"``
+    The standard measured optical constants of titanium. With it the blue of the seed's
+    sample 2 falls at ~51 nm, matching the seed's Table 1 estimate (50.8 nm); Palm (2018) is an
+    annealed evaporated film with markedly lower n and k, the Rakic sets are model fits.
+
+Examples
+--------
+>>> from microfacet.optics import optical_constants
+>>> n = optical_constants("Ti_JohnsonChristy1974", [550.0])
+>>> bool(n.imag[0] > 3)
+True
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from importlib import resources
+
+import numpy as np
+
+__all__ = [
+    "DEFAULT_FILM",
+    "DEFAULT_SUBSTRATE",
+    "OpticalConstantSet",
+    "known_sets",
+    "load_set",
+    "optical_constants",
+    "resolve_index",
+]
+
+DEFAULT_FILM = "TiO2_Jolivet2023_amorphous"
+DEFAULT_SUBSTRATE = "Ti_JohnsonChristy1974"
+
+_DATA_PACKAGE = "microfacet.data"
+_DATA_DIR = "optical_constants"
+
+
+@dataclass(frozen=True)
+class OpticalConstantSet:
+    """One tabulated set of optical constants.
+
+    Attributes
+    ----------
+    name : str
+        File stem, e.g. ``"Ti_JohnsonChristy1974"``.
+    wavelength_nm : ndarray, shape (N,)
+        Vacuum wavelengths in nm, increasing.
+    n, k : ndarray, shape (N,)
+        Real and imaginary parts of the refractive index (k >= 0 is absorption).
+    """
+
+    name: str
+    wavelength_nm: np.ndarray
+    n: np.ndarray
+    k: np.ndarray
+
+    @property
+    def range_nm(self) -> tuple[float, float]:
+        """The tabulated wavelength range ``(min, max)`` in nm."""
+        return float(self.wavelength_nm[0]), float(self.wavelength_nm[-1])
+
+
+def _data_root():
+    return resources.files(_DATA_PACKAGE).joinpath(_DATA_DIR)
+
+
+@functools.cache
+def known_sets() -> tuple[str, ...]:
+    """Names of the bundled optical-constant sets, sorted."""
+    return tuple(
+        sorted(
+            p.name[: -len(".csv")]
+            for p in _data_root().iterdir()
+            if p.name.endswith(".csv")
+        )
+    )
+
+
+@functools.cache
+def load_set(name: str) -> OpticalConstantSet:
+    """Load one bundled set by name.
+
+    Raises
+    ------
+    ValueError
+        If ``name`` is not a bundled set; the message lists the known names.
+    """
+    if not isinstance(name, str) or name not in known_sets():
+        raise ValueError(
+            f"unknown optical-constant set {name!r}; known sets: {', '.join(known_sets())}"
+        )
+    text = _data_root().joinpath(name + ".csv").read_text()
+    table = np.loadtxt(text.splitlines(), delimiter=",", skiprows=1, ndmin=2)
+    order = np.argsort(table[:, 0], kind="stable")
+    table = table[order]
+    for arr in (table[:, 0], table[:, 1], table[:, 2]):
+        arr.setflags(write=False)
+    return OpticalConstantSet(name, table[:, 0].copy(), table[:, 1].copy(), table[:, 2].copy())
+
+
+def optical_constants(name: str, wavelength_nm) -> np.ndarray:
+    """Complex refractive index ``n + ik`` of a bundled set at the given wavelengths.
+
+    n and k are interpolated linearly in wavelength between the tabulated points.
+
+    Parameters
+    ----------
+    name : str
+        A bundled set, see :func:`known_sets` (e.g. ``"TiO2_Jolivet2023_amorphous"``).
+    wavelength_nm : array_like, any shape
+        Vacuum wavelengths in nm. NaN is passed through as NaN.
+
+    Returns
+    -------
+    ndarray of complex128, same shape as ``wavelength_nm``
+
+    Raises
+    ------
+    ValueError
+        If ``name`` is unknown (the message lists the known sets) or a wavelength lies
+        outside the set's tabulated range (no extrapolation).
+
+    Examples
+    --------
+    >>> from microfacet.optics import optical_constants
+    >>> optical_constants("TiO2_Jolivet2023_amorphous", 550.0).real.round(2)
+    array(2.45)
+    """
+    s = load_set(name)
+    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    lo, hi = s.range_nm
+    finite = wl[np.isfinite(wl)]
+    if np.any(np.isinf(wl)) or (finite.size and (finite.min() < lo or finite.max() > hi)):
+        bad = wl[~np.isnan(wl)]
+        bad = bad[(bad < lo) | (bad > hi)]
+        raise ValueError(
+            f"wavelength_nm: {bad.flat[0]:g} nm is outside the range of {name!r} "
+            f"({lo:g}-{hi:g} nm)"
+        )
+    n = np.interp(wl, s.wavelength_nm, s.n)
+    k = np.interp(wl, s.wavelength_nm, s.k)
+    return np.where(np.isnan(wl), np.nan, n + 1j * k)
+
+
+def resolve_index(value, wavelength_nm) -> np.ndarray:
+    """A refractive index given as a set name or as numbers, as a complex array.
+
+    Parameters
+    ----------
+    value : str or complex or array_like
+        A bundled set name (interpolated at ``wavelength_nm``) or index values that
+        broadcast against ``wavelength_nm``.
+    wavelength_nm : array_like
+        Wavelengths in nm, used only when ``value`` is a name.
+    """
+    if isinstance(value, str):
+        return optical_constants(value, wavelength_nm)
+    return np.asarray(value, dtype=np.complex128)

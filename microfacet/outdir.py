@@ -1,0 +1,53 @@
+"""Results folders that appear whole or not at all."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+from .errors import InputError
+
+__all__ = ["atomic_output_dir"]
+
+
+@contextlib.contextmanager
+def atomic_output_dir(out, *, overwrite=False):
+    """Write a results folder under a temporary name and rename it to ``out`` when complete.
+
+    Parameters
+    ----------
+    out : path-like
+        Final folder. Refused if it exists, unless ``overwrite``.
+    overwrite : bool
+        Replace an existing ``out`` (only after the new results are complete).
+
+    Yields
+    ------
+    pathlib.Path
+        The temporary folder (a sibling of ``out``) to write into. If the block raises, it
+        is removed and ``out`` is left as it was.
+    """
+    out = Path(out)
+    if out.exists() and not overwrite:
+        raise InputError(f"{out}: already exists (use --overwrite to replace it)")
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a folder")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(f"{out}: parent folder {parent} does not exist")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=parent))
+    try:
+        yield tmp
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=parent))
+            os.replace(out, old / out.name)
+            os.replace(tmp, out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise

@@ -1,0 +1,53 @@
+"""How much the choice of optical-constant set moves the predicted colours.
+
+For films of several thicknesses at normal incidence (D65, CIE 1931 2°, 1 nm), prints the
+CIELAB of the default film/substrate and the CIEDE2000 difference when the film or the
+substrate set is swapped, and the thickness of the first-order blue (hue angle nearest
+270°, 30-80 nm) for each combination.
+
+Run:  python pipelines/optical_constants_spread.py
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from microfacet import color
+from microfacet.colortable import _wavelengths, _white, direct_xyz
+from microfacet.optics import DEFAULT_FILM, DEFAULT_SUBSTRATE
+
+FILMS = ["TiO2_Jolivet2023_amorphous", "TiO2_Sarkar2019_amorphous", "TiO2_Franta2015_amorphous",
+         "TiO2_Jolivet2023_anatase", "TiO2_Devore1951_rutile_o"]
+SUBSTRATES = ["Ti_JohnsonChristy1974", "Ti_Palm2018", "Ti_Rakic1998_LorentzDrude"]
+THICKNESS_NM = [20.0, 40.0, 51.0, 80.0, 120.0, 140.0, 180.0]
+
+
+def lab(d, film, substrate):
+    w = _white(_wavelengths(1.0), "D65", "2")
+    return color.xyz_to_lab(direct_xyz(0.0, np.asarray(d), spectral_step_nm=1.0, film=film,
+                                       substrate=substrate), white=w)
+
+
+def blue_nm(film, substrate):
+    d = np.arange(30.0, 80.01, 0.1)
+    L = lab(d, film, substrate)
+    hue = np.rad2deg(np.arctan2(L[:, 2], L[:, 1])) % 360
+    return float(d[np.argmin(np.abs(hue - 270))])
+
+
+def main():
+    ref = lab(THICKNESS_NM, DEFAULT_FILM, DEFAULT_SUBSTRATE)
+    print(f"default: film {DEFAULT_FILM}, substrate {DEFAULT_SUBSTRATE}; normal incidence, "
+          "D65, 2 deg, 1 nm\n")
+    print("| film | substrate | " + " | ".join(f"dE00 @{d:g} nm" for d in THICKNESS_NM)
+          + " | first-order blue (nm) |")
+    print("|---|---|" + "---|" * (len(THICKNESS_NM) + 1))
+    combos = [(f, DEFAULT_SUBSTRATE) for f in FILMS] + [(DEFAULT_FILM, s) for s in SUBSTRATES[1:]]
+    for film, sub in combos:
+        de = color.delta_e_2000(lab(THICKNESS_NM, film, sub), ref)
+        print(f"| {film} | {sub} | " + " | ".join(f"{v:.1f}" for v in de)
+              + f" | {blue_nm(film, sub):.1f} |")
+
+
+if __name__ == "__main__":
+    main()
