@@ -264,9 +264,9 @@ class ColourTable:
         """Interpolated linear sRGB (float32, not clipped), white-balanced to the illuminant."""
         from . import color
 
-        xyz = self.xyz_at(theta_deg, thickness_nm) / self.white_xyz[1]
-        rgb = color.xyz_to_linear_srgb(xyz, illuminant=self.illuminant)
-        return np.asarray(rgb, dtype=np.float32)
+        return color.model_xyz_to_linear_srgb(
+            self.xyz_at(theta_deg, thickness_nm), white=self.white_xyz,
+            illuminant=self.illuminant, observer=self.observer)
 
 
 def build_colour_table(*, thickness_range_nm=(0.0, 400.0), theta_range_deg=(0.0, 45.0),

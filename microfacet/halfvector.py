@@ -241,7 +241,8 @@ def angular_colour_map(thickness_nm, *, theta_light_deg=None, theta_view_deg=Non
     xyz = exposure * direct_xyz(th_d, d, spectral_step_nm=spectral_step_nm, **kw)
     white = _white(_wavelengths(spectral_step_nm), illuminant, observer)
     lab = color.xyz_to_lab(xyz, white=white).astype(np.float32)
-    rgb = color.xyz_to_linear_srgb(xyz / white[1], illuminant=illuminant)
+    rgb = color.model_xyz_to_linear_srgb(xyz, white=white, illuminant=illuminant,
+                                         observer=observer)
     srgb = color.srgb_encode(rgb, dtype=np.uint8)
     return AngularColourMap(tl, tv, th_d, xyz, lab, srgb, d, float(exposure), str(film),
                             str(substrate), illuminant)

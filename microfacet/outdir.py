@@ -20,7 +20,8 @@ def atomic_output_dir(out, *, overwrite=False):
     Parameters
     ----------
     out : path-like
-        Final folder. Refused if it exists, unless ``overwrite``.
+        Final folder (missing parent folders are created). Refused if it exists, unless
+        ``overwrite``.
     overwrite : bool
         Replace an existing ``out`` (only after the new results are complete).
 
@@ -36,8 +37,12 @@ def atomic_output_dir(out, *, overwrite=False):
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder")
     parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(f"{out}: parent folder {parent} does not exist")
+    if parent.exists() and not parent.is_dir():
+        raise InputError(f"{out}: {parent} is not a folder")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{out}: cannot create parent folder ({exc.strerror})") from None
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=parent))
     try:
         yield tmp

@@ -387,3 +387,10 @@ def test_srgb_bad_input():
         mc.srgb_encode(np.zeros(3), dtype=np.int16)
     with pytest.raises(ValueError, match="rgb"):
         mc.linear_srgb_to_xyz(np.zeros((3, 2)))
+
+
+def test_docstring_examples():
+    import doctest
+
+    result = doctest.testmod(mc, optionflags=doctest.ELLIPSIS)
+    assert result.attempted > 15 and result.failed == 0

@@ -81,9 +81,12 @@ def test_grid_nodes_reproduce_the_tabulated_values(table):
 
 def test_linear_rgb_of_the_table_matches_the_colour_module(table):
     rgb = table.linear_rgb_at(0.0, 51.0)
-    ref = color.xyz_to_linear_srgb(table.xyz_at(0.0, 51.0) / table.white_xyz[1])
+    ref = color.model_xyz_to_linear_srgb(table.xyz_at(0.0, 51.0), white=table.white_xyz)
     np.testing.assert_allclose(rgb, ref, atol=1e-6)
     assert rgb[2] > rgb[0]  # the first-order blue
+    # The perfect reflector of the table's own grid is exactly RGB white.
+    np.testing.assert_allclose(color.model_xyz_to_linear_srgb(table.white_xyz,
+                                                              white=table.white_xyz), 1, atol=1e-6)
 
 
 @pytest.mark.parametrize("kw, name", [
