@@ -44,6 +44,9 @@ def atomic_output_dir(out, *, overwrite=False):
     except OSError as exc:
         raise InputError(f"{out}: cannot create parent folder ({exc.strerror})") from None
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes 0700; results follow the user's umask
     try:
         yield tmp
         if out.exists():

@@ -213,9 +213,10 @@ PRESETS: dict[str, SynthParams] = {
     "noisy": _p("noisy", tilt_lobes=(TiltLobe(0.6, 3.0), TiltLobe(0.4, 9.0)),
                 thickness=(ThicknessComponent(1.0, 130.0, 3.0),), full_well_e=150.0,
                 read_noise=0.02),
-    # Over-exposure: bright colours clip.
-    "overexposed": _p("overexposed", thickness=(ThicknessComponent(1.0, 120.0, 2.0),),
-                      exposure=2.6),
+    # Over-exposure: the gold (120 nm) regions clip, the magenta (145 nm) ones do not.
+    "overexposed": _p("overexposed", thickness=(ThicknessComponent(0.5, 120.0, 3.0),
+                                                ThicknessComponent(0.5, 145.0, 3.0)),
+                      exposure=1.5),
     # 16-bit slices.
     "16bit": _p("16bit", tilt_lobes=(TiltLobe(0.6, 3.0), TiltLobe(0.4, 9.0)),
                 thickness=(ThicknessComponent(0.5, 120.0, 3.0), ThicknessComponent(0.5, 140.0, 3.0)),

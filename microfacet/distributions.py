@@ -1,0 +1,215 @@
+"""The two distributions: oxide thickness (Gaussian mixture) and facet normals (NDF lobes).
+
+Thickness
+    ``g(d) = Σ w_i N(d; μ_i, σ_i²)`` in nm (seed Fig. 18a: three populations).
+
+Normals
+    A mixture of zero-mean lobes (seed Fig. 19: a narrow and a wide lobe, both with mode
+    0°). Each lobe is **Gaussian in slope space**: the facet slopes
+    ``(∂h/∂x, ∂h/∂y)`` are ``N(0, s² I)`` with ``s = tan(sd_deg)``. This is exactly the
+    Beckmann NDF with roughness ``α = √2 s``:
+
+        D(θ) = exp(−tan²θ / α²) / (π α² cos⁴θ),   ∫ D(ω) cos θ dω = 1.
+
+    The density of the tilt θ of the *projected* surface (what a per-pixel histogram of a
+    microscope image counts, one pixel = one unit of projected area) is
+
+        p(θ) = 2π D(θ) cos θ sin θ = (tan θ / s²) sec² θ exp(−tan² θ / (2 s²)),
+
+    i.e. the slope magnitude tan θ is Rayleigh-distributed with parameter ``s``. The
+    sin θ of the solid-angle element is inside p(θ); dividing a tilt histogram by
+    ``2π sin θ cos θ`` gives D. Smith's masking function for a mixture of slope
+    distributions is linear in the mixture: ``Λ = Σ w_i Λ_i`` with the Beckmann
+    ``Λ_i(θ) = (erf(a) − 1)/2 + exp(−a²)/(2 a √π)``, ``a = 1 / (α_i tan θ)``.
+
+Both serialise to the ``summary.json`` form of the results format
+(``{"components": [{"weight", "mean_nm", "sd_nm"}]}`` and
+``{"form": "gaussian-slope", "components": [{"weight", "mean_deg": 0, "sd_deg"}]}``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["NDF_FORM", "NDFMixture", "ThicknessMixture"]
+
+NDF_FORM = "gaussian-slope"
+_DEG = math.pi / 180.0
+
+
+def _components(items, name, n):
+    out = []
+    for i, c in enumerate(items):
+        c = tuple(float(v) for v in c)
+        if len(c) != n:
+            raise ValueError(f"{name}: component {i} needs {n} numbers, got {len(c)}")
+        if not all(math.isfinite(v) for v in c):
+            raise ValueError(f"{name}: component {i} is not finite")
+        if c[0] <= 0:
+            raise ValueError(f"{name}: component {i} has weight <= 0")
+        if c[-1] <= 0:
+            raise ValueError(f"{name}: component {i} has sd <= 0")
+        out.append(c)
+    if not out:
+        raise ValueError(f"{name}: at least one component is needed")
+    total = sum(c[0] for c in out)
+    return tuple((c[0] / total,) + c[1:] for c in out)
+
+
+@dataclass(frozen=True)
+class ThicknessMixture:
+    """Gaussian mixture of oxide thickness.
+
+    Parameters
+    ----------
+    components : sequence of (weight, mean_nm, sd_nm)
+        Weights are normalised to sum to 1; sorted by mean.
+
+    Examples
+    --------
+    >>> g = ThicknessMixture([(0.5, 120.0, 3.0), (0.5, 140.0, 3.0)])
+    >>> round(float(g.pdf(120.0)), 4)
+    0.0665
+    """
+
+    components: tuple
+
+    def __init__(self, components):
+        comps = _components(components, "thickness mixture", 3)
+        object.__setattr__(self, "components", tuple(sorted(comps, key=lambda c: c[1])))
+
+    @property
+    def weights(self):
+        return np.array([c[0] for c in self.components])
+
+    @property
+    def means_nm(self):
+        return np.array([c[1] for c in self.components])
+
+    @property
+    def sds_nm(self):
+        return np.array([c[2] for c in self.components])
+
+    def pdf(self, thickness_nm):
+        """Density per nm at ``thickness_nm`` (any shape)."""
+        d = np.asarray(thickness_nm, dtype=np.float64)[..., None]
+        z = (d - self.means_nm) / self.sds_nm
+        return np.sum(self.weights * np.exp(-0.5 * z * z) / (self.sds_nm * math.sqrt(2 * math.pi)),
+                      axis=-1)
+
+    def support_nm(self, *, n_sd: float = 4.0):
+        """``(low, high)`` thickness range holding all but a negligible mass."""
+        return (max(0.0, float(np.min(self.means_nm - n_sd * self.sds_nm))),
+                float(np.max(self.means_nm + n_sd * self.sds_nm)))
+
+    def to_json(self) -> dict:
+        return {"components": [{"weight": w, "mean_nm": m, "sd_nm": s}
+                               for w, m, s in self.components]}
+
+    @classmethod
+    def from_json(cls, data) -> "ThicknessMixture":
+        try:
+            return cls([(c["weight"], c["mean_nm"], c["sd_nm"]) for c in data["components"]])
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"thickness mixture: missing key {exc}") from None
+
+
+@dataclass(frozen=True)
+class NDFMixture:
+    """Mixture of zero-mean Gaussian-slope (Beckmann) lobes of facet normals.
+
+    Parameters
+    ----------
+    components : sequence of (weight, sd_deg)
+        ``sd_deg``: the per-axis slope standard deviation as an angle, ``s = tan(sd_deg)``.
+        Weights are normalised; sorted by width.
+
+    Examples
+    --------
+    >>> f = NDFMixture([(0.6, 3.0), (0.4, 9.0)])
+    >>> th = np.linspace(0, 89.9, 20000)
+    >>> round(float(np.trapezoid(f.tilt_pdf(th), th)), 4)
+    1.0
+    """
+
+    components: tuple
+
+    def __init__(self, components):
+        comps = _components(components, "NDF mixture", 2)
+        for w, sd in comps:
+            if not sd < 89.0:
+                raise ValueError("NDF mixture: sd_deg must be < 89")
+        object.__setattr__(self, "components", tuple(sorted(comps, key=lambda c: c[1])))
+
+    @property
+    def weights(self):
+        return np.array([c[0] for c in self.components])
+
+    @property
+    def sds_deg(self):
+        return np.array([c[1] for c in self.components])
+
+    @property
+    def slope_sd(self):
+        """Per-axis slope standard deviations ``s = tan(sd_deg)``."""
+        return np.tan(self.sds_deg * _DEG)
+
+    @property
+    def beckmann_alpha(self):
+        """Beckmann roughness of each lobe, ``α = √2 s``."""
+        return math.sqrt(2.0) * self.slope_sd
+
+    def tilt_pdf(self, theta_deg):
+        """Density per degree of the tilt of the projected surface (pixel histograms).
+
+        ``p(θ) = Σ w_i (tan θ / s_i²) sec² θ exp(−tan² θ / 2 s_i²)``, times π/180 per degree.
+        """
+        th = np.asarray(theta_deg, dtype=np.float64)[..., None] * _DEG
+        t = np.tan(th)
+        s2 = self.slope_sd ** 2
+        with np.errstate(over="ignore", invalid="ignore"):
+            p = self.weights * t / s2 / np.cos(th) ** 2 * np.exp(-0.5 * t * t / s2)
+        p = np.where(np.isfinite(p), p, 0.0)
+        return np.sum(p, axis=-1) * _DEG
+
+    def D(self, theta_deg):
+        """Beckmann-mixture NDF per steradian, normalised so ∫ D cos θ dω = 1."""
+        th = np.asarray(theta_deg, dtype=np.float64)[..., None] * _DEG
+        a2 = self.beckmann_alpha ** 2
+        c = np.cos(th)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            d = self.weights * np.exp(-np.tan(th) ** 2 / a2) / (math.pi * a2 * c ** 4)
+        d = np.where(np.isfinite(d) & (c > 0), d, 0.0)
+        return np.sum(d, axis=-1)
+
+    def smith_lambda(self, theta_deg):
+        """Smith's Λ for a direction at zenith ``theta_deg`` (linear in the mixture)."""
+        from scipy.special import erf
+
+        th = np.asarray(theta_deg, dtype=np.float64)[..., None] * _DEG
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            a = 1.0 / (self.beckmann_alpha * np.tan(th))
+            lam = (erf(a) - 1.0) / 2.0 + np.exp(-a * a) / (2.0 * a * math.sqrt(math.pi))
+        lam = np.where(np.isfinite(a) & (a > 0), lam, 0.0)
+        return np.sum(self.weights * np.maximum(lam, 0.0), axis=-1)
+
+    def to_json(self) -> dict:
+        return {"form": NDF_FORM,
+                "components": [{"weight": w, "mean_deg": 0.0, "sd_deg": s}
+                               for w, s in self.components]}
+
+    @classmethod
+    def from_json(cls, data) -> "NDFMixture":
+        form = data.get("form", NDF_FORM) if isinstance(data, dict) else None
+        if form != NDF_FORM:
+            raise ValueError(f"NDF mixture: unsupported form {form!r} (expected {NDF_FORM!r})")
+        try:
+            comps = data["components"]
+            if any(abs(float(c.get("mean_deg", 0.0))) > 1e-9 for c in comps):
+                raise ValueError("NDF mixture: lobes must have mean_deg 0")
+            return cls([(c["weight"], c["sd_deg"]) for c in comps])
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"NDF mixture: missing key {exc}") from None
