@@ -2,7 +2,7 @@
 
 Usage::
 
-    /work/venv/bin/python pipelines/bench_color.py [--n 1000000] [--repeat 3] [--seed 0]
+    python pipelines/bench_color.py [--n 1000000] [--repeat 3] [--seed 0]
 
 Prints a markdown table: best-of-``repeat`` wall time scaled to 1e6 pairs, pairs/s,
 ratio of each method's time to microfacet float64, and max |ΔE - colour's ΔE| on the
