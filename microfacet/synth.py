@@ -16,7 +16,10 @@ Scene (seed §3.2-3.3, Fig. 13)
   pixel is the tilt of its facet plane.
 * **Oxide thickness**: regions (Voronoi cells tens of µm across) whose thickness is drawn
   from a Gaussian mixture (the seed's ND sample: three populations between 100 and 160 nm),
-  plus a smooth fine variation inside regions and a small per-facet offset (grain texture).
+  plus a smooth fine variation inside regions (and, in the ``grainy`` preset, a per-facet
+  offset).
+* **Grooves**: the height steps between facets have walls steeper than the acceptance
+  angle; they image as dark lines whose width follows the step height.
 * **Focus stack**: slice k at stage height z_k shows every pixel blurred by a Gaussian of
   σ = sqrt(σ_diff² + (½ |z_k − h| tan(asin NA))²) (geometric defocus disc of radius
   |Δz| tan α, σ ≈ radius / 2; diffraction σ_diff = 0.21 λ/NA at 550 nm), evaluated by
@@ -104,8 +107,14 @@ class SynthParams:
     thickness_fine_sd_nm, thickness_fine_scale_um : float
         Smooth thickness variation inside regions (SD and correlation length).
     thickness_facet_sd_nm : float
-        Per-facet thickness offset (SD): anodic growth depends on the orientation of the
-        metal underneath, and it gives the grainy colour texture of real images.
+        Per-facet thickness offset (SD; 0 in most presets): anodic growth can depend on
+        the grain underneath. It mimics tilt in colour (10° ≈ 0.3 nm), which is why the
+        ``grainy`` preset has it: the hard case where tilt cannot come from colour.
+    groove_wall_deg : float
+        Slope of the walls of the height steps between facets. Walls steeper than
+        asin(NA)/2 reflect outside the objective, so a step of height Δh images as a dark
+        groove of projected width Δh / tan(groove_wall_deg) (pixel coverage blended); 0
+        disables grooves. They give the images the texture focus needs.
     exposure : float
         Model linear sRGB → image linear sRGB.
     dark_level : float
@@ -135,7 +144,8 @@ class SynthParams:
     thickness: tuple = (ThicknessComponent(1.0, 51.0, 1.0),)
     region_size_um: float = 25.0
     thickness_fine_sd_nm: float = 0.3
-    thickness_facet_sd_nm: float = 1.5
+    thickness_facet_sd_nm: float = 0.0
+    groove_wall_deg: float = 45.0
     thickness_fine_scale_um: float = 3.0
     exposure: float = 1.0
     dark_level: float = 0.02
@@ -168,6 +178,7 @@ class SynthParams:
              and all(c.weight > 0 and c.mean_nm >= 0 and c.sd_nm >= 0 for c in self.thickness)),
             ("region_size_um", self.region_size_um > 0),
             ("thickness_facet_sd_nm", self.thickness_facet_sd_nm >= 0),
+            ("groove_wall_deg", 0 <= self.groove_wall_deg < 90),
             ("thickness_fine_sd_nm", self.thickness_fine_sd_nm >= 0),
             ("exposure", self.exposure > 0), ("bit_depth", self.bit_depth in (8, 16)),
             ("read_noise", self.read_noise >= 0),
@@ -209,6 +220,9 @@ PRESETS: dict[str, SynthParams] = {
                 thickness=(ThicknessComponent(1.0, 130.0, 2.0),)),
     # Very thin film (< 20 nm): pale, low saturation, little colour information.
     "thin": _p("thin", thickness=(ThicknessComponent(1.0, 14.0, 1.0),)),
+    # Per-facet thickness offsets (1.5 nm): colour cannot separate tilt from thickness.
+    "grainy": _p("grainy", tilt_lobes=(TiltLobe(0.6, 3.0), TiltLobe(0.4, 9.0)),
+                 thickness=(ThicknessComponent(1.0, 130.0, 3.0),), thickness_facet_sd_nm=1.5),
     # Heavy shot and read noise.
     "noisy": _p("noisy", tilt_lobes=(TiltLobe(0.6, 3.0), TiltLobe(0.4, 9.0)),
                 thickness=(ThicknessComponent(1.0, 130.0, 3.0),), full_well_e=150.0,
@@ -253,6 +267,7 @@ class Scene:
     region_id: np.ndarray
     region_thickness_nm: np.ndarray  # per region, before fine variation
     region_component: np.ndarray     # mixture component of each region
+    groove: np.ndarray               # fraction of each pixel covered by a dark step wall
     linear_rgb: np.ndarray           # H×W×3 sharp image, linear, exposure applied, unclipped
 
 
@@ -358,9 +373,30 @@ def render_scene(p: SynthParams, *, table=None) -> Scene:
     rgb = table.linear_rgb_at(np.where(visible, tilt, 0.0), thickness).astype(np.float64)
     rgb *= p.exposure
     rgb[~visible] = p.dark_level * p.exposure
+    groove = _groove_coverage(facet, height, p)
+    rgb = rgb * (1.0 - groove[..., None]) + groove[..., None] * p.dark_level * p.exposure
     return Scene(height.astype(np.float32), tilt.astype(np.float32), azimuth.astype(np.float32),
                  thickness.astype(np.float32), visible, facet.astype(np.int32),
-                 region.astype(np.int32), region_d, comp, rgb.astype(np.float32))
+                 region.astype(np.int32), region_d, comp, groove.astype(np.float32),
+                 rgb.astype(np.float32))
+
+
+def _groove_coverage(facet, height, p):
+    """Fraction of each pixel covered by the dark wall of a step to a neighbouring facet."""
+    if p.groove_wall_deg <= 0:
+        return np.zeros(facet.shape)
+    jump = np.zeros(facet.shape)
+    for axis in (0, 1):
+        a = [slice(None)] * 2
+        b = [slice(None)] * 2
+        a[axis], b[axis] = slice(1, None), slice(None, -1)
+        a, b = tuple(a), tuple(b)
+        dh = np.where(facet[a] != facet[b], np.abs(height[a] - height[b]), 0.0)
+        jump[a] = np.maximum(jump[a], dh)
+        jump[b] = np.maximum(jump[b], dh)
+    # The wall's projected width, shared by the two pixels either side of the boundary.
+    width_px = jump / math.tan(math.radians(p.groove_wall_deg)) / p.pixel_size_um
+    return np.clip(0.5 * width_px, 0.0, 1.0)
 
 
 def _table_for(p, thickness):
@@ -440,6 +476,7 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
     Layout: ``stack.json``, ``slices/000.png`` …, ``truth/height_um.npy``,
     ``truth/tilt_deg.npy``, ``truth/azimuth_deg.npy``, ``truth/thickness_nm.npy``,
     ``truth/visible.npy``, ``truth/clipped.npy``, ``truth/region_id.npy``,
+    ``truth/groove.npy`` (fraction of each pixel covered by a dark step wall),
     ``truth/all_in_focus.png`` (noise-free sharp image) and ``truth/params.json``.
     Memory: a ladder of ~12 blurred copies of the image, independent of the slice count.
 
@@ -499,6 +536,7 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
         np.save(truth / "visible.npy", scene.visible)
         np.save(truth / "clipped.npy", clipped)
         np.save(truth / "region_id.npy", scene.region_id)
+        np.save(truth / "groove.npy", scene.groove)
         sharp = color.srgb_encode(np.clip(scene.linear_rgb, 0, 1), dtype=np.uint8)
         cv2.imwrite(str(truth / "all_in_focus.png"), np.ascontiguousarray(sharp[..., ::-1]))
         truth_meta = {

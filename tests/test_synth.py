@@ -71,7 +71,7 @@ def test_rendered_colour_is_the_thin_film_colour_of_the_truth(tmp_path):
     t = tmp_path / "s" / "truth"
     sharp = cv2.imread(str(t / "all_in_focus.png"))[..., ::-1].astype(int)
     tilt, d = np.load(t / "tilt_deg.npy"), np.load(t / "thickness_nm.npy")
-    vis = np.load(t / "visible.npy") & ~np.load(t / "clipped.npy")
+    vis = np.load(t / "visible.npy") & ~np.load(t / "clipped.npy") & (np.load(t / "groove.npy") == 0)
     rng = np.random.default_rng(0)
     idx = rng.choice(np.flatnonzero(vis), 500, replace=False)
     yy, xx = np.unravel_index(idx, vis.shape)
@@ -81,7 +81,9 @@ def test_rendered_colour_is_the_thin_film_colour_of_the_truth(tmp_path):
     rgb = color.model_xyz_to_linear_srgb(xyz, white=white) * p.exposure
     expected = color.srgb_encode(rgb, dtype=np.uint8).astype(int)
     assert np.abs(sharp[yy, xx] - expected).max() <= 1
-    # Dark facets are dark.
+    # Dark facets are dark; groove pixels are darker than their facet's colour.
+    groove = np.load(t / "groove.npy")
+    assert 0.02 < np.mean(groove > 0) < 0.6
     dark = ~np.load(t / "visible.npy")
     if dark.any():
         assert sharp[dark].max() <= color.srgb_encode(np.float32(p.dark_level * p.exposure)) + 1

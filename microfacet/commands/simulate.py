@@ -1,4 +1,17 @@
-"""``microfacet simulate``: forward angular colour maps."""
+"""``microfacet simulate``: forward angular colour / spectral reflectance maps.
+
+Two paths:
+
+* ``--thickness-nm D`` alone: the half-vector map of one film (seed Fig. 10), written
+  exactly as before (``angular_lab.npy``, ``angular_xyz.npy``, ``theta_*.npy``,
+  ``angular_map.png``, ``simulate.json``).
+* from distributions — ``--results OUT`` (an ``analyze`` results folder) or explicit
+  ``--thickness-mixture`` / ``--ndf-lobes`` — with ``--model microfacet|eq6|half-vector``:
+  adds ``spectra.npy``, ``wavelength_nm.npy``, ``angular_map.npz`` (the
+  ``microfacet-angular/1`` format of :mod:`microfacet.angular`) and ``figure.pdf``;
+  ``--compare MEASURED.npz`` adds ``delta_e.npy`` and the two mean ΔE00 values, and
+  ``--fit-exponent`` / ``--fit-exposure`` fit eq. 6's n and a global exposure first.
+"""
 
 from __future__ import annotations
 
@@ -6,35 +19,101 @@ import argparse
 
 from ._common import add_optics_options, example_epilog, optics_kwargs
 
+_EXAMPLES = (
+    "microfacet simulate --thickness-nm 51 --out sd-blue",
+    "microfacet simulate --results nd-analysis --model microfacet --out nd-sim",
+    'microfacet simulate --thickness-mixture "0.3:112:3,0.45:130:3,0.25:149:3" \\',
+    '    --ndf-lobes "0.6:3,0.4:9" --model eq6 --lobe-exponent 80 --out nd-eq6',
+    "microfacet simulate --results nd-analysis --model eq6 --compare measured.npz \\",
+    "    --fit-exponent --fit-exposure --out nd-fit",
+)
+
 
 def register(sub):
     p = sub.add_parser(
         "simulate",
-        help="angular colour map of a film (half-vector model, seed Fig. 10)",
+        help="angular colour / spectral maps (half-vector, seed eq. 6, microfacet BRDF)",
         description=(
             "Predict the interference colour over a grid of in-plane light and view zenith "
-            "angles with the half-vector thin-film model (seed §2.3-2.4): the facets that "
-            "reflect light into the view are seen at half the angle between the two. "
-            "Writes angular_lab.npy (L x V x 3), angular_xyz.npy, angular_map.png "
-            "(rows: light angle, columns: view angle) and simulate.json."),
-        epilog=example_epilog("microfacet simulate --thickness-nm 51 --out sd-blue"),
+            "angles (view positive on the mirror side; rows = light, columns = view). "
+            "With --thickness-nm alone: the half-vector thin-film model (seed §2.3-2.4) of "
+            "one film, writing angular_lab.npy (L x V x 3), angular_xyz.npy, "
+            "angular_map.png and simulate.json. With a thickness mixture and NDF lobes "
+            "(from --results or given explicitly): --model microfacet (Walter et al. 2007 "
+            "BRDF with the measured NDF, Smith masking and the thickness-averaged "
+            "thin-film Fresnel term; reflectance factor pi*f_r), eq6 (seed eq. 6, "
+            "cosine-lobe exponent --lobe-exponent) or half-vector; also writes "
+            "spectra.npy (L x V x N), wavelength_nm.npy, angular_map.npz and figure.pdf. "
+            "--compare MEASURED.npz (microfacet-angular/1: theta_light_deg, "
+            "theta_view_deg, and lab or spectra + wavelength_nm) simulates on the measured "
+            "grid and adds delta_e.npy and the mean CIEDE2000 over all cells and outside "
+            "the specular band |view - light| <= --specular-halfwidth-deg. "
+            "See docs/forward-simulation.md."),
+        epilog=example_epilog(*_EXAMPLES),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("--thickness-nm", type=float, required=True, help="oxide thickness in nm")
+    src = p.add_argument_group("what to simulate")
+    src.add_argument("--thickness-nm", type=float, default=None,
+                     help="one oxide thickness in nm (alone: the half-vector map)")
+    src.add_argument("--results", default=None, metavar="DIR",
+                     help="analysis results folder: fitted mixtures from DIR/summary.json")
+    src.add_argument("--thickness-mixture", default=None, metavar="W:MEAN:SD,...",
+                     help="thickness mixture, weight:mean_nm:sd_nm per component")
+    src.add_argument("--ndf-lobes", default=None, metavar="W:SD,...",
+                     help="NDF lobes, weight:sd_deg per zero-mean Gaussian-slope lobe")
+    src.add_argument("--model", default=None, choices=["microfacet", "eq6", "half-vector"],
+                     help="forward model (default microfacet when an NDF is known)")
+    src.add_argument("--lobe-exponent", type=float, default=None, metavar="N",
+                     help="eq. 6 cosine-lobe exponent n (default 100, or the fit)")
     p.add_argument("--out", required=True, help="output folder (must not exist)")
     p.add_argument("--theta-max-deg", type=float, default=85.0,
                    help="largest light and view zenith angle (default 85)")
     p.add_argument("--theta-step-deg", type=float, default=1.0,
                    help="angle grid step (default 1)")
-    p.add_argument("--exposure", type=float, default=1.0,
-                   help="reflectance scale for display (default 1)")
+    p.add_argument("--exposure", type=float, default=None,
+                   help="reflectance scale for display (default 1, or the results' exposure)")
+    p.add_argument("--wavelength-step-nm", type=float, default=5.0,
+                   help="spectral step over 380-780 nm of the spectra (default 5)")
+    cmp_ = p.add_argument_group("comparison with a measured map")
+    cmp_.add_argument("--compare", default=None, metavar="MEASURED.npz",
+                      help="measured angular map (microfacet-angular/1 .npz)")
+    cmp_.add_argument("--specular-halfwidth-deg", type=float, default=10.0,
+                      help="specular band |view - light| <= this is excluded from the "
+                           "diffuse mean (default 10)")
+    cmp_.add_argument("--fit-exponent", action="store_true",
+                      help="fit the eq. 6 exponent n by least mean dE00 (needs --compare)")
+    cmp_.add_argument("--fit-exposure", action="store_true",
+                      help="fit a global exposure by least mean dE00 (needs --compare)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out")
     add_optics_options(p)
     p.set_defaults(run=run)
     return p
 
 
+def _legacy(args) -> bool:
+    return (args.thickness_nm is not None and args.results is None
+            and args.thickness_mixture is None and args.ndf_lobes is None
+            and args.model is None and args.compare is None and not args.fit_exponent
+            and not args.fit_exposure and args.lobe_exponent is None)
+
+
 def run(args) -> int:
+    if _legacy(args):
+        return _run_half_vector(args)
+    return _run_distributions(args)
+
+
+def _grid(args):
+    import numpy as np
+
+    if not (0 < args.theta_max_deg < 90):
+        raise ValueError("--theta-max-deg: must be in (0, 90)")
+    if not (0 < args.theta_step_deg <= args.theta_max_deg):
+        raise ValueError("--theta-step-deg: must be > 0 and <= --theta-max-deg")
+    return np.arange(0.0, args.theta_max_deg + 1e-9, args.theta_step_deg)
+
+
+def _run_half_vector(args) -> int:
     import json
     import logging
     import time
@@ -47,14 +126,11 @@ def run(args) -> int:
 
     log = logging.getLogger("microfacet.simulate")
     opt = optics_kwargs(args)
-    if not (0 < args.theta_max_deg < 90):
-        raise ValueError("--theta-max-deg: must be in (0, 90)")
-    if not (0 < args.theta_step_deg <= args.theta_max_deg):
-        raise ValueError("--theta-step-deg: must be > 0 and <= --theta-max-deg")
+    grid = _grid(args)
+    exposure = 1.0 if args.exposure is None else args.exposure
     t0 = time.perf_counter()
-    grid = np.arange(0.0, args.theta_max_deg + 1e-9, args.theta_step_deg)
     m = angular_colour_map(args.thickness_nm, theta_light_deg=grid, theta_view_deg=grid,
-                           exposure=args.exposure, **opt)
+                           exposure=exposure, **opt)
     with atomic_output_dir(args.out, overwrite=args.overwrite) as tmp:
         np.save(tmp / "angular_lab.npy", m.lab)
         np.save(tmp / "angular_xyz.npy", m.xyz.astype(np.float32))
@@ -72,4 +148,220 @@ def run(args) -> int:
     log.info("wrote %s in %.2f s", args.out, time.perf_counter() - t0)
     if not args.quiet:
         print(f"wrote {args.out}/angular_map.png ({grid.size} x {grid.size} angles)")
+    return 0
+
+
+def parse_thickness_mixture(text, *, option="--thickness-mixture"):
+    """``"w:mean:sd,..."`` → :class:`ThicknessMixture` (ValueError naming ``option``)."""
+    from ..distributions import ThicknessMixture
+
+    return ThicknessMixture(_parse_components(text, 3, option, "weight:mean_nm:sd_nm"))
+
+
+def parse_ndf_lobes(text, *, option="--ndf-lobes"):
+    """``"w:sd_deg,..."`` → :class:`NDFMixture` (ValueError naming ``option``)."""
+    from ..distributions import NDFMixture
+
+    return NDFMixture(_parse_components(text, 2, option, "weight:sd_deg"))
+
+
+def _parse_components(text, n, option, form):
+    comps = []
+    for part in str(text).split(","):
+        if not part.strip():
+            continue
+        try:
+            vals = tuple(float(v) for v in part.split(":"))
+        except ValueError:
+            raise ValueError(f"{option}: {part.strip()!r} is not {form}") from None
+        if len(vals) != n:
+            raise ValueError(f"{option}: {part.strip()!r} is not {form}")
+        comps.append(vals)
+    try:
+        if not comps:
+            raise ValueError("no components")
+        if n == 2 and any(not (0 < c[1] < 90) for c in comps):
+            raise ValueError("sd_deg must be in (0, 90)")
+        if n == 3 and any(c[1] < 0 for c in comps):
+            raise ValueError("mean_nm must be >= 0")
+        if any(not all(map(_finite, c)) or c[0] <= 0 or c[-1] <= 0 for c in comps):
+            raise ValueError("weights and sds must be finite and > 0")
+    except ValueError as exc:
+        raise ValueError(f"{option}: {exc}") from None
+    return comps
+
+
+def _finite(x):
+    import math
+
+    return math.isfinite(x)
+
+
+def _read_results(folder):
+    import json
+    from pathlib import Path
+
+    from ..distributions import NDFMixture, ThicknessMixture
+
+    path = Path(folder) / "summary.json"
+    if not Path(folder).is_dir():
+        raise FileNotFoundError(f"--results: {folder} is not a folder")
+    if not path.is_file():
+        raise FileNotFoundError(f"--results: {path} not found")
+    try:
+        summary = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ValueError(f"--results: cannot read {path} ({exc})") from None
+    out = {}
+    try:
+        out["thickness"] = ThicknessMixture.from_json(summary["thickness"]["mixture"])
+    except (KeyError, TypeError):
+        raise ValueError(f"--results: {path} has no thickness.mixture") from None
+    except ValueError as exc:
+        raise ValueError(f"--results: {path}: {exc}") from None
+    try:
+        out["ndf"] = NDFMixture.from_json(summary["ndf"]["mixture"])
+    except (KeyError, TypeError):
+        out["ndf"] = None
+    except ValueError as exc:
+        raise ValueError(f"--results: {path}: {exc}") from None
+    for key in ("film", "substrate", "illuminant"):
+        if isinstance(summary.get(key), str):
+            out[key] = summary[key]
+    if isinstance(summary.get("exposure"), (int, float)) and summary["exposure"] > 0:
+        out["exposure"] = float(summary["exposure"])
+    return out
+
+
+def _run_distributions(args) -> int:
+    import json
+    import logging
+    import time
+
+    import numpy as np
+
+    from .. import __version__
+    from ..angular import (delta_e_map, fit_eq6, fit_exposure, load_map, mean_delta_e,
+                           plot_maps, save_map, simulate_map)
+    from ..outdir import atomic_output_dir
+
+    log = logging.getLogger("microfacet.simulate")
+    t0 = time.perf_counter()
+    res = _read_results(args.results) if args.results is not None else {}
+    if args.thickness_mixture is not None:
+        thickness = parse_thickness_mixture(args.thickness_mixture)
+    elif args.thickness_nm is not None:
+        if not (np.isfinite(args.thickness_nm) and args.thickness_nm >= 0):
+            raise ValueError("--thickness-nm: must be finite and >= 0")
+        thickness = float(args.thickness_nm)
+    elif "thickness" in res:
+        thickness = res["thickness"]
+    else:
+        raise ValueError("--thickness-mixture: give --results, --thickness-mixture or "
+                         "--thickness-nm")
+    ndf = parse_ndf_lobes(args.ndf_lobes) if args.ndf_lobes is not None else res.get("ndf")
+    model = args.model or ("microfacet" if ndf is not None else "half-vector")
+    if model != "half-vector" and ndf is None:
+        raise ValueError(f"--ndf-lobes: model {model} needs NDF lobes (or --results with "
+                         "ndf.mixture)")
+    if args.fit_exponent and model != "eq6":
+        raise ValueError("--fit-exponent: only with --model eq6")
+    if (args.fit_exponent or args.fit_exposure) and args.compare is None:
+        raise ValueError("--compare: --fit-exponent / --fit-exposure need a measured map")
+    # Optics: explicit options win over the results folder, then the defaults.
+    if args.film is None and "film" in res:
+        args.film = res["film"]
+    if args.substrate is None and "substrate" in res:
+        args.substrate = res["substrate"]
+    if args.illuminant == "D65" and "illuminant" in res:
+        args.illuminant = res["illuminant"]
+    opt = optics_kwargs(args)
+    exposure = (args.exposure if args.exposure is not None else res.get("exposure", 1.0))
+    if not (np.isfinite(exposure) and exposure > 0):
+        raise ValueError("--exposure: must be > 0")
+    n = 100.0 if args.lobe_exponent is None else float(args.lobe_exponent)
+    if not (np.isfinite(n) and n >= 0):
+        raise ValueError("--lobe-exponent: must be finite and >= 0")
+    step = args.wavelength_step_nm
+    if not (np.isfinite(step) and 0 < step <= 20):
+        raise ValueError("--wavelength-step-nm: must be in (0, 20]")
+    wl = np.linspace(380.0, 780.0, int(round(400.0 / step)) + 1)
+
+    measured = None
+    if args.compare is not None:
+        measured = load_map(args.compare)
+        tl, tv = measured.theta_light_deg, measured.theta_view_deg
+        opt["illuminant"], opt["observer"] = measured.illuminant, measured.observer
+    else:
+        tl = tv = _grid(args)
+    if not (0 < args.specular_halfwidth_deg < 90):
+        raise ValueError("--specular-halfwidth-deg: must be in (0, 90)")
+
+    fit = {}
+    if args.fit_exponent:
+        r = fit_eq6(measured, thickness=thickness, ndf=ndf, fit_exposure_too=args.fit_exposure,
+                    exposure=exposure, wavelength_nm=wl, film=opt["film"],
+                    substrate=opt["substrate"])
+        n, fit["n"], fit["mean_delta_e"] = r.n, r.n, r.mean_delta_e
+        if args.fit_exposure:
+            exposure = fit["exposure"] = r.exposure
+    kw = dict(model=model, thickness=thickness, ndf=ndf, n=n, theta_light_deg=tl,
+              theta_view_deg=tv, wavelength_nm=wl, film=opt["film"],
+              substrate=opt["substrate"], illuminant=opt["illuminant"],
+              observer=opt["observer"])
+    if args.fit_exposure and not args.fit_exponent:
+        m1 = simulate_map(exposure=1.0, **kw)
+        from .. import color
+
+        white = color.spectral_weights(wl, illuminant=opt["illuminant"],
+                                       observer=opt["observer"]).sum(axis=0)
+        exposure, fit["mean_delta_e"] = fit_exposure(m1.xyz, measured.lab, white=white)
+        fit["exposure"] = exposure
+    m = simulate_map(exposure=exposure, **kw)
+    de = stats = None
+    if measured is not None:
+        de = delta_e_map(m, measured)
+        stats = mean_delta_e(de, tl, tv, specular_halfwidth_deg=args.specular_halfwidth_deg)
+
+    meta = {
+        "format": "microfacet-simulate/2", "model": model, "exposure": float(exposure),
+        "thickness": (thickness.to_json() if hasattr(thickness, "to_json")
+                      else {"thickness_nm": thickness}),
+        "ndf": ndf.to_json() if ndf is not None else None,
+        "theta_light_deg": [float(tl[0]), float(tl[-1]), int(tl.size)],
+        "theta_view_deg": [float(tv[0]), float(tv[-1]), int(tv.size)],
+        "wavelength_nm": [float(wl[0]), float(wl[-1]), int(wl.size)],
+        "results": str(args.results) if args.results else None,
+        **opt, "version": __version__,
+    }
+    if model == "eq6":
+        meta["lobe_exponent"] = float(n)
+    if fit:
+        meta["fit"] = fit
+    if stats is not None:
+        meta["compare"] = {"measured": str(args.compare), **stats}
+    with atomic_output_dir(args.out, overwrite=args.overwrite) as tmp:
+        np.save(tmp / "spectra.npy", m.spectra.astype(np.float32))
+        np.save(tmp / "wavelength_nm.npy", wl)
+        np.save(tmp / "angular_lab.npy", m.lab)
+        np.save(tmp / "angular_xyz.npy", m.xyz.astype(np.float32))
+        np.save(tmp / "theta_light_deg.npy", tl)
+        np.save(tmp / "theta_view_deg.npy", tv)
+        save_map(tmp / "angular_map.npz", m)
+        m.save_png(tmp / "angular_map.png", scale=4)
+        title = f"{model}" + (f", n = {n:.3g}" if model == "eq6" else "") + \
+            f", exposure {exposure:.3g}"
+        plot_maps(tmp / "figure.pdf", m, measured=measured, delta_e=de, stats=stats,
+                  title=title)
+        if de is not None:
+            np.save(tmp / "delta_e.npy", de.astype(np.float32))
+        meta["timings_s"] = {**m.meta["timings_s"], "total": time.perf_counter() - t0}
+        (tmp / "simulate.json").write_text(json.dumps(meta, indent=2))
+    log.info("wrote %s in %.2f s", args.out, time.perf_counter() - t0)
+    if not args.quiet:
+        msg = f"wrote {args.out}/angular_map.png ({tl.size} x {tv.size} angles, {model})"
+        if stats is not None:
+            msg += (f"; mean dE00 {stats['mean']:.2f}, outside the specular band "
+                    f"{stats['mean_excluding_specular']:.2f}")
+        print(msg)
     return 0

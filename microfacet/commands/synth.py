@@ -6,7 +6,7 @@ import argparse
 
 from ._common import example_epilog
 
-PRESET_NAMES = ("sd", "nd", "thick", "steep", "thin", "noisy", "overexposed", "16bit")
+PRESET_NAMES = ("sd", "nd", "thick", "steep", "thin", "grainy", "noisy", "overexposed", "16bit")
 
 
 def _size(text):

@@ -1,0 +1,520 @@
+"""The whole pipeline on one stack (seed §3.3.3): focus stack → distributions.
+
+Stages
+------
+1. **Height from focus** (:mod:`microfacet.focus`) → height map, reliability, all-in-focus
+   composite; normals and per-pixel tilt from the (filled) height map.
+2. **Colour**: the composite to CIELAB (relative to the stack's illuminant); the mask of
+   pixels without colour information (:mod:`microfacet.mask`); the image colour noise.
+3. **Colour table** for the scene's range: tilts 0 … asin(NA)/2, thicknesses in
+   ``thickness_range_nm`` (:mod:`microfacet.colortable`).
+4. **Thickness per ROI** and the exposure (:mod:`microfacet.thickness`).
+5. **Per-pixel thickness and tilt**, in one of two modes:
+
+   ``"seed"`` — the paper's method: the ROI's thickness for every pixel of the ROI, and the
+   tilt of least ΔE00 per pixel at that thickness (:mod:`microfacet.tilt`).
+
+   ``"joint"`` (default) — facets segmented by colour, tilt per facet from a plane fit to the
+   height map, thickness per facet from colour at that tilt, and per-pixel tilt as the MAP
+   with the facet prior (:mod:`microfacet.joint`). It is the default because it measures
+   better on synthetic truth (docs/accuracy.md).
+6. **Distributions**: a Gaussian mixture of thickness and a mixture of zero-mean
+   Gaussian-slope lobes of tilt, components by BIC (:mod:`microfacet.mixtures`).
+
+:func:`analyze_stack` returns an :class:`AnalysisResult`; :func:`write_results` writes the
+results folder of ``docs/results-format.md`` atomically.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["AnalysisOptions", "AnalysisResult", "analyze_stack", "write_results"]
+
+log = logging.getLogger(__name__)
+
+MODES = ("joint", "seed")
+
+
+@dataclass(frozen=True)
+class AnalysisOptions:
+    """Options of :func:`analyze_stack` (all keyword; defaults follow the seed).
+
+    Attributes
+    ----------
+    mode : {"joint", "seed"}
+    roi_size_px, roi_stride_px : int
+        ROI side (seed: 255 px) and stride (default = size).
+    saturation_min, value_min : float
+        Mask thresholds on the 0-255 HSV scale (seed: saturation 15).
+    thickness_range_nm : (float, float)
+        Global thickness search range.
+    exposure : float or None
+        Overrides stack.json's ``exposure``; estimated when both are absent.
+    film, substrate, illuminant : str or None
+        Override the stack's (or the defaults).
+    facet_size_um : float
+        Expected facet diameter for the joint mode's segmentation (seed: 1-3 µm).
+    tilt_step_deg : float
+        Tilt grid step of the per-pixel search (refined below it).
+    max_components : int
+        Largest number of mixture components tried by BIC.
+    operator, window_px, align : focus options (None = the focus module's defaults).
+    seed : int
+        Random sampling in the ROI fits.
+    """
+
+    mode: str = "joint"
+    roi_size_px: int = 255
+    roi_stride_px: int | None = None
+    saturation_min: float = 15.0
+    value_min: float = 20.0
+    thickness_range_nm: tuple = (0.0, 400.0)
+    exposure: float | None = None
+    film: str | None = None
+    substrate: str | None = None
+    illuminant: str | None = None
+    facet_size_um: float = 2.0
+    tilt_step_deg: float = 0.5
+    max_components: int = 5
+    operator: str | None = None
+    window_px: int | None = None
+    align: bool | str = False
+    seed: int = 0
+
+    def validate(self):
+        if self.mode not in MODES:
+            raise ValueError(f"mode: must be one of {', '.join(MODES)}, got {self.mode!r}")
+        lo, hi = self.thickness_range_nm
+        if not (0 <= lo < hi <= 2000):
+            raise ValueError(f"thickness_range_nm: need 0 <= low < high <= 2000, got {(lo, hi)}")
+        if self.exposure is not None and not (self.exposure > 0 and math.isfinite(self.exposure)):
+            raise ValueError(f"exposure: must be > 0, got {self.exposure!r}")
+        if not self.facet_size_um > 0:
+            raise ValueError("facet_size_um: must be > 0")
+        if not 0.05 <= self.tilt_step_deg <= 5:
+            raise ValueError("tilt_step_deg: must be in [0.05, 5]")
+        if not 1 <= self.max_components <= 10:
+            raise ValueError("max_components: must be in [1, 10]")
+
+
+@dataclass
+class AnalysisResult:
+    """Everything :func:`write_results` writes (maps are H×W float32 unless noted)."""
+
+    stack: object
+    options: AnalysisOptions
+    focus: object
+    normals: np.ndarray
+    tilt_height_deg: np.ndarray
+    lab: np.ndarray
+    mask: object
+    roi: object
+    thickness_nm: np.ndarray
+    tilt_deg: np.ndarray
+    tilt_sigma_deg: np.ndarray
+    delta_e: np.ndarray
+    colour_weight: np.ndarray
+    facets: np.ndarray | None
+    thickness_fit: object
+    ndf_fit: object
+    exposure: float
+    exposure_source: str
+    noise_de: float
+    max_tilt_deg: float
+    table: object
+    optics: dict
+    timings_s: dict = field(default_factory=dict)
+
+    @property
+    def delta_e_stats(self) -> dict:
+        v = self.delta_e[np.isfinite(self.delta_e)]
+        if v.size == 0:
+            return {"mean": None, "median": None, "p95": None}
+        return {"mean": float(v.mean()), "median": float(np.median(v)),
+                "p95": float(np.percentile(v, 95))}
+
+
+def _timer(timings, name, t0):
+    t = time.perf_counter()
+    timings[name] = round(t - t0, 4)
+    return t
+
+
+def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=None
+                  ) -> AnalysisResult:
+    """Run the whole analysis on one stack.
+
+    Parameters
+    ----------
+    stack : path-like or microfacet.stack.Stack
+        A stack folder (validated before any work).
+    options : AnalysisOptions, optional
+    progress : callable, optional
+        ``progress(stage_name)`` at the start of each stage.
+
+    Returns
+    -------
+    AnalysisResult
+
+    Examples
+    --------
+    >>> from microfacet.analyze import analyze_stack
+    >>> r = analyze_stack("fixtures/stacks/nd-fixture")  # doctest: +SKIP
+    >>> r.thickness_fit.mixture.means_nm  # doctest: +SKIP
+    """
+    from . import color
+    from .colortable import build_colour_table
+    from .errors import InputError
+    from .focus import fill_missing, height_from_focus
+    from .mask import colour_mask
+    from .mixtures import fit_ndf_mixture, fit_thickness_mixture
+    from .normals import normals_from_height, tilt_azimuth_deg
+    from .optics import DEFAULT_FILM, DEFAULT_SUBSTRATE, load_set
+    from .stack import Stack, read_stack
+    from .thickness import fit_roi_thickness, nearest_roi_index, roi_grid
+
+    opt = options or AnalysisOptions()
+    opt.validate()
+    st = stack if isinstance(stack, Stack) else read_stack(stack)
+    if not st.has_slices:
+        raise InputError(f"{st.path / 'stack.json'}: a microscope export without slices is not "
+                         f"supported by analyze yet (needs 'slices' or 'tiff')")
+    film = opt.film or st.film or DEFAULT_FILM
+    substrate = opt.substrate or st.substrate or DEFAULT_SUBSTRATE
+    for key, name in (("film", film), ("substrate", substrate)):
+        try:
+            load_set(name)
+        except ValueError as exc:
+            raise ValueError(f"{key}: {exc}") from None
+    illuminant = opt.illuminant or st.illuminant or "D65"
+    na = float(st.numerical_aperture)
+    max_tilt = math.degrees(math.asin(na)) / 2.0
+    step = progress or (lambda name: None)
+    timings: dict = {}
+    t0 = t_all = time.perf_counter()
+
+    # 1. Height from focus.
+    step("height from focus")
+    kw = {}
+    if opt.operator:
+        kw["operator"] = opt.operator
+    if opt.window_px:
+        kw["window_px"] = opt.window_px
+    if st.n_slices < 3:
+        raise InputError(f"{st.path / 'stack.json'}: key 'slices': height from focus needs at "
+                         f"least 3 slices, the stack has {st.n_slices}")
+    foc = height_from_focus(st, align=opt.align, **kw)
+    t0 = _timer(timings, "height_from_focus", t0)
+    height_filled = fill_missing(foc.height_um, method="smooth") if np.isnan(
+        foc.height_um).any() else foc.height_um
+    if not np.isfinite(height_filled).any():
+        height_filled = foc.height_fit_um
+    normals = normals_from_height(height_filled, pixel_size_um=st.pixel_size_um,
+                                  smooth_sigma_px=1.0)
+    tilt_h, _ = tilt_azimuth_deg(normals)
+    t0 = _timer(timings, "normals", t0)
+
+    # 2. Colour and mask.
+    step("colour")
+    aif = foc.all_in_focus
+    if aif.ndim == 2:
+        aif = np.repeat(aif[..., None], 3, axis=-1)
+    if st.color_space == "linear-sRGB":
+        enc = color.srgb_encode(aif, dtype=np.float32)
+    else:
+        enc = aif.astype(np.float32)
+    bit_depth = 16 if st.dtype == np.uint16 else 8
+    cm = colour_mask(enc, saturation_min=opt.saturation_min, value_min=opt.value_min,
+                     bit_depth=bit_depth)
+    lab = color.srgb_to_lab(enc, illuminant=illuminant).astype(np.float32)
+    from .tilt import estimate_colour_noise
+
+    noise_de = estimate_colour_noise(lab, cm.mask)
+    t0 = _timer(timings, "colour_and_mask", t0)
+
+    # 3. Colour table for the scene.
+    step("colour table")
+    table = build_colour_table(thickness_range_nm=tuple(opt.thickness_range_nm),
+                               theta_range_deg=(0.0, max_tilt + 0.5), film=film,
+                               substrate=substrate, illuminant=illuminant)
+    t0 = _timer(timings, "colour_table", t0)
+
+    # 4. Thickness per ROI and exposure.
+    step("thickness per ROI")
+    exposure = opt.exposure if opt.exposure is not None else st.exposure
+    exposure_source = ("option" if opt.exposure is not None else
+                       "stack.json" if st.exposure is not None else "estimated")
+    rois = roi_grid(lab.shape[:2], size_px=opt.roi_size_px, stride_px=opt.roi_stride_px)
+    roi = fit_roi_thickness(lab, tilt_h, cm.mask, table, rois=rois, exposure=exposure,
+                            seed=opt.seed)
+    exposure = roi.exposure
+    ri, ci = nearest_roi_index(lab.shape[:2], *rois)
+    roi_index = ri[:, None] * len(rois[1]) + ci[None, :]
+    thick_roi_px = roi.thickness_nm[roi_index]
+    t0 = _timer(timings, "thickness_roi", t0)
+
+    # 5. Per-pixel thickness and tilt.
+    step("tilt per pixel")
+    usable = ~cm.mask & np.isfinite(thick_roi_px)
+    theta_grid = np.arange(0.0, max_tilt + 1e-9, opt.tilt_step_deg)
+    if theta_grid[-1] < max_tilt - 1e-9:
+        theta_grid = np.append(theta_grid, max_tilt)
+    H, W = lab.shape[:2]
+    thickness = np.full((H, W), np.nan, np.float32)
+    tilt = np.full((H, W), np.nan, np.float32)
+    tilt_sig = np.full((H, W), np.nan, np.float32)
+    dE = np.full((H, W), np.nan, np.float32)
+    cw = np.full((H, W), np.nan, np.float32)
+    facets = None
+    from .tilt import invert_tilt, model_lab_rows
+
+    yy, xx = np.nonzero(usable)
+    if opt.mode == "seed":
+        rows_d = np.where(np.isfinite(roi.thickness_nm), roi.thickness_nm, table.thickness_nm[0])
+        rows_lab = model_lab_rows(table, rows_d, theta_grid, exposure=exposure)
+        rix = roi_index[yy, xx]
+        inv = invert_tilt(lab[yy, xx], rows_lab, rix, theta_grid, table=table,
+                          thickness_px=rows_d[rix], exposure=exposure, noise_de=noise_de)
+        thickness[yy, xx] = rows_d[rix]
+        group_thick = roi_index
+    else:
+        from .joint import facet_thickness, fit_facet_planes, segment_facets
+
+        facets = segment_facets(lab, facet_px=opt.facet_size_um / st.pixel_size_um)
+        t0 = _timer(timings, "segmentation", t0)
+        rel = np.clip(np.nan_to_num(foc.reliability_db, nan=0.0) / 20.0, 0.0, 1.0) ** 2
+        from scipy import ndimage
+
+        edge = np.zeros((H, W), bool)
+        edge[:, 1:] |= facets[:, 1:] != facets[:, :-1]
+        edge[1:, :] |= facets[1:, :] != facets[:-1, :]
+        dist = ndimage.distance_transform_edt(~edge)
+        weight = rel * np.clip(dist / 2.0, 0.0, 1.0)
+        ff = fit_facet_planes(facets, foc.height_fit_um, weight, pixel_size_um=st.pixel_size_um,
+                              fallback_tilt_deg=tilt_h)
+        d_f, _ = facet_thickness(facets, lab, usable, np.clip(ff.tilt_deg, 0, max_tilt),
+                                 thick_roi_px, table, exposure=exposure, interior=dist >= 1.5)
+        t0 = _timer(timings, "facet_fits", t0)
+        fid = facets[yy, xx]
+        d_rows = np.where(np.isfinite(d_f), d_f, table.thickness_nm[0])
+        rows_lab = model_lab_rows(table, d_rows, theta_grid, exposure=exposure)
+        prior = np.clip(ff.tilt_deg[fid], 0, max_tilt)
+        inv = invert_tilt(lab[yy, xx], rows_lab, fid, theta_grid, table=table,
+                          thickness_px=d_rows[fid], exposure=exposure, noise_de=noise_de,
+                          prior_deg=prior, prior_sigma_deg=ff.tilt_sigma_deg[fid])
+        thickness[yy, xx] = d_rows[fid]
+        group_thick = facets
+    tilt[yy, xx] = inv.tilt_deg
+    tilt_sig[yy, xx] = inv.tilt_sigma_deg
+    dE[yy, xx] = inv.delta_e
+    cw[yy, xx] = inv.colour_weight
+    t0 = _timer(timings, "tilt_per_pixel", t0)
+
+    # 6. Distributions.
+    step("distributions")
+    ok = np.isfinite(thickness)
+    if ok.sum() >= 2:
+        tfit = fit_thickness_mixture(thickness[ok], max_components=opt.max_components,
+                                     group=group_thick[ok])
+    else:
+        tfit = None
+    okt = np.isfinite(tilt)
+    if okt.sum() >= 2:
+        nfit = fit_ndf_mixture(tilt[okt], max_components=opt.max_components,
+                               group=facets[okt] if facets is not None else None)
+    else:
+        nfit = None
+    t0 = _timer(timings, "mixtures", t0)
+    timings["total"] = round(time.perf_counter() - t_all, 4)
+    return AnalysisResult(
+        stack=st, options=opt, focus=foc, normals=normals, tilt_height_deg=tilt_h, lab=lab,
+        mask=cm, roi=roi, thickness_nm=thickness, tilt_deg=tilt, tilt_sigma_deg=tilt_sig,
+        delta_e=dE, colour_weight=cw, facets=facets, thickness_fit=tfit, ndf_fit=nfit,
+        exposure=float(exposure), exposure_source=exposure_source, noise_de=noise_de,
+        max_tilt_deg=max_tilt, table=table,
+        optics={"film": film, "substrate": substrate, "illuminant": illuminant,
+                "numerical_aperture": na},
+        timings_s=timings)
+
+
+def _versions():
+    import importlib.metadata as md
+
+    from . import __version__
+
+    out = {"microfacet": __version__}
+    for name in ("numpy", "scipy", "colour-science", "scikit-image", "scikit-learn",
+                 "opencv-contrib-python-headless"):
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:
+            pass
+    return out
+
+
+def _pdf_csv(path, header, table):
+    np.savetxt(path, table, delimiter=",", header=header, comments="", fmt="%.6g")
+
+
+def write_results(result: AnalysisResult, out, *, overwrite=False, report=True) -> Path:
+    """Write the results folder (``docs/results-format.md``) atomically.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+    out : path-like
+    overwrite : bool
+        Replace an existing folder.
+    report : bool
+        Also write ``report.pdf`` (and its PNG figures).
+    """
+    import cv2
+
+    from .mixtures import pdf_table
+    from .outdir import atomic_output_dir
+
+    r = result
+    t0 = time.perf_counter()
+    with atomic_output_dir(out, overwrite=overwrite) as tmp:
+        rel = np.isfinite(r.focus.height_um)
+        np.save(tmp / "height_um.npy", r.focus.height_um.astype(np.float32))
+        normals = np.where(rel[..., None], r.normals, np.nan).astype(np.float32)
+        np.save(tmp / "normals.npy", normals)
+        np.save(tmp / "reliability_db.npy", r.focus.reliability_db.astype(np.float32))
+        np.save(tmp / "tilt_height_deg.npy", r.tilt_height_deg.astype(np.float32))
+        np.save(tmp / "thickness_nm.npy", r.thickness_nm)
+        np.save(tmp / "tilt_deg.npy", r.tilt_deg)
+        np.save(tmp / "tilt_sigma_deg.npy", r.tilt_sigma_deg)
+        np.save(tmp / "delta_e.npy", r.delta_e)
+        np.save(tmp / "colour_weight.npy", r.colour_weight)
+        np.save(tmp / "mask.npy", r.mask.mask)
+        if r.facets is not None:
+            np.save(tmp / "facets.npy", r.facets)
+        aif = r.focus.all_in_focus
+        if r.stack.dtype == np.uint16:
+            img = np.round(np.clip(aif, 0, 1) * 65535).astype(np.uint16)
+        else:
+            img = np.round(np.clip(aif, 0, 1) * 255).astype(np.uint8)
+        if img.ndim == 3:
+            img = img[..., ::-1]
+        if not cv2.imwrite(str(tmp / "all_in_focus.png"), np.ascontiguousarray(img)):
+            raise OSError(f"cannot write {tmp / 'all_in_focus.png'}")
+
+        roi = r.roi
+        rows = np.column_stack([roi.row0, roi.col0, np.full(roi.row0.size, roi.height_px),
+                                roi.thickness_nm, roi.mean_delta_e, roi.n_pixels,
+                                np.full(roi.row0.size, roi.width_px),
+                                roi.runner_up_thickness_nm, roi.runner_up_delta_e,
+                                roi.ambiguity_delta_e])
+        np.savetxt(tmp / "thickness_roi.csv", rows, delimiter=",", comments="",
+                   header="row0,col0,size,thickness_nm,mean_delta_e,n_pixels,width,"
+                          "runner_up_thickness_nm,runner_up_delta_e,ambiguity_delta_e",
+                   fmt=["%d", "%d", "%d", "%.3f", "%.4f", "%d", "%d", "%.3f", "%.4f", "%.4f"])
+
+        th = r.thickness_nm[np.isfinite(r.thickness_nm)]
+        if th.size and r.thickness_fit is not None:
+            lo = math.floor(th.min()) - 10
+            hi = math.ceil(th.max()) + 10
+            grid = np.arange(max(lo, 0), hi + 1e-9, 0.5)
+            _pdf_csv(tmp / "thickness_pdf.csv", "thickness_nm,density,mixture_density",
+                     pdf_table(th, r.thickness_fit.mixture, grid=grid))
+        else:
+            _pdf_csv(tmp / "thickness_pdf.csv", "thickness_nm,density,mixture_density",
+                     np.empty((0, 3)))
+        tl = r.tilt_deg[np.isfinite(r.tilt_deg)]
+        if tl.size and r.ndf_fit is not None:
+            grid = np.arange(0.25, r.max_tilt_deg, 0.5)
+            _pdf_csv(tmp / "ndf_pdf.csv", "tilt_deg,density,mixture_density",
+                     pdf_table(tl, r.ndf_fit.mixture, grid=grid))
+        else:
+            _pdf_csv(tmp / "ndf_pdf.csv", "tilt_deg,density,mixture_density", np.empty((0, 3)))
+
+        summary = _summary(r)
+        summary["timings_s"]["write"] = round(time.perf_counter() - t0, 4)
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
+        if report:
+            t1 = time.perf_counter()
+            from .report import write_report
+
+            write_report(tmp, out_pdf=tmp / "report.pdf", png_dir=tmp)
+            summary["timings_s"]["report"] = round(time.perf_counter() - t1, 4)
+            (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False))
+    return Path(out)
+
+
+def _clean(x):
+    """JSON-safe: NaN/inf → None, numpy scalars → Python."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.ndarray):
+        return _clean(x.tolist())
+    return x
+
+
+def _summary(r: AnalysisResult) -> dict:
+    st = r.stack
+    roi = r.roi
+    cwt = r.colour_weight[np.isfinite(r.colour_weight)]
+    opts = dataclasses.asdict(r.options)
+    empty_mix = {"components": [], "bic": None}
+    thick_mix = r.thickness_fit.to_json() if r.thickness_fit is not None else empty_mix
+    ndf_mix = r.ndf_fit.to_json() if r.ndf_fit is not None else empty_mix
+    ok_roi = np.isfinite(roi.thickness_nm)
+    s = {
+        "format": "microfacet-results/1",
+        "mode": r.options.mode,
+        "inputs": {"stack": str(st.path), "shape": list(st.shape), "n_slices": st.n_slices,
+                   "pixel_size_um": st.pixel_size_um,
+                   "z_um_range": [float(np.min(st.z_um)), float(np.max(st.z_um))],
+                   **r.optics},
+        "parameters": opts,
+        "versions": _versions(),
+        "film": r.optics["film"], "substrate": r.optics["substrate"],
+        "illuminant": r.optics["illuminant"],
+        "thickness": {
+            "mixture": thick_mix,
+            "roi": {"count": int(roi.thickness_nm.size), "fitted": int(ok_roi.sum()),
+                    "thickness_nm_mean": float(np.mean(roi.thickness_nm[ok_roi]))
+                    if ok_roi.any() else None,
+                    "ambiguous_count": int(np.sum(roi.ambiguity_delta_e[ok_roi] < 1.0))},
+        },
+        "ndf": {"mixture": ndf_mix, "max_tilt_deg": r.max_tilt_deg,
+                "histogram": "per-pixel tilt of unmasked pixels (projected-area density)"},
+        "exposure": r.exposure,
+        "exposure_source": r.exposure_source,
+        "delta_e": r.delta_e_stats,
+        "masked_fraction": r.mask.fraction,
+        "mask": r.mask.fractions(),
+        "colour_noise_de": r.noise_de,
+        "tilt_information": {
+            "colour_weight_mean": float(cwt.mean()) if cwt.size else None,
+            "colour_dominated_fraction": float(np.mean(cwt > 0.5)) if cwt.size else None,
+            "tilt_sigma_deg_median": float(np.nanmedian(r.tilt_sigma_deg))
+            if np.isfinite(r.tilt_sigma_deg).any() else None,
+        },
+        "height": {"unreliable_fraction": float(np.mean(~np.isfinite(r.focus.height_um)))},
+        "colour_table": {"spectral_step_nm": r.table.spectral_step_nm,
+                         "spectral_error_de00": r.table.spectral_error_de00,
+                         "interp_error_de00": r.table.interp_error_de00,
+                         "theta_step_deg": r.table.theta_step_deg,
+                         "thickness_step_nm": r.table.thickness_step_nm},
+        "timings_s": dict(r.timings_s),
+    }
+    return _clean(s)

@@ -1,0 +1,116 @@
+"""Pixels that carry no colour information (seed §3.3.3 step 2).
+
+The seed masks pixels whose HSV saturation is below 15 (on the 0-255 scale): the specular
+highlights and the shadows. We also mask dark pixels (facets tilted past the objective's
+acceptance reflect outside it) and pixels with a clipped channel (their colour is not the
+film's).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["ColourMask", "colour_mask"]
+
+
+@dataclass
+class ColourMask:
+    """Per-pixel mask and its reasons (all bool, H×W; True = masked).
+
+    Attributes
+    ----------
+    mask : ndarray of bool
+        Any reason below.
+    low_saturation, dark, clipped, invalid : ndarray of bool
+        HSV saturation below the threshold; HSV value below the threshold; a channel at
+        the clip level; NaN input.
+    shadow : ndarray of bool
+        HSV value below ``shadow_ratio`` × the median value of the 9×9 neighbourhood:
+        partly shadowed pixels (the walls of the steps between facets), whose hue is the
+        film's but whose lightness is not — darkening does not lower saturation, so the
+        seed's saturation test misses them.
+    """
+
+    mask: np.ndarray
+    low_saturation: np.ndarray
+    dark: np.ndarray
+    clipped: np.ndarray
+    invalid: np.ndarray
+    shadow: np.ndarray
+
+    @property
+    def fraction(self) -> float:
+        """Fraction of masked pixels."""
+        return float(self.mask.mean()) if self.mask.size else 1.0
+
+    def fractions(self) -> dict:
+        """Masked fraction per reason (a pixel may have several)."""
+        return {k: float(getattr(self, k).mean()) for k in
+                ("low_saturation", "dark", "clipped", "invalid", "shadow")} | {
+                    "any": self.fraction}
+
+
+def colour_mask(image, *, saturation_min=15.0, value_min=20.0, clip_level=None,
+                bit_depth=8, shadow_ratio=0.75) -> ColourMask:
+    """Mask low-saturation, dark, clipped and NaN pixels of an encoded RGB image.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W, 3)
+        Encoded (sRGB) image scaled to [0, 1] (float) — e.g. the all-in-focus composite.
+    saturation_min : float
+        HSV saturation threshold on the 0-255 scale (the seed's 15).
+    value_min : float
+        HSV value (max channel) threshold on the 0-255 scale.
+    clip_level : float, optional
+        A channel at or above this (0-1 scale) is clipped. Default: the top code value of
+        ``bit_depth`` minus half a step (255 of 255 for 8-bit, 65535 for 16-bit).
+    bit_depth : int
+        Bit depth of the source images, for the default clip level.
+    shadow_ratio : float
+        Mask pixels darker than this fraction of their 9×9 neighbourhood's median value
+        (0 disables).
+
+    Returns
+    -------
+    ColourMask
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> img = np.array([[[0.5, 0.2, 0.8], [0.5, 0.5, 0.5], [1.0, 0.4, 0.2]]], np.float32)
+    >>> colour_mask(img).mask.tolist()
+    [[False, True, True]]
+    """
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim != 3 or img.shape[-1] != 3:
+        raise ValueError(f"image: expected an RGB image (H, W, 3), got shape {img.shape}")
+    if not 0 <= saturation_min <= 255:
+        raise ValueError("saturation_min: must be in [0, 255]")
+    if not 0 <= value_min <= 255:
+        raise ValueError("value_min: must be in [0, 255]")
+    if clip_level is None:
+        top = 2 ** int(bit_depth) - 1
+        clip_level = (top - 0.5) / top
+    invalid = ~np.all(np.isfinite(img), axis=-1)
+    safe = np.where(invalid[..., None], 0.0, img)
+    vmax = safe.max(axis=-1)
+    vmin = safe.min(axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sat = np.where(vmax > 0, (vmax - vmin) / vmax, 0.0) * 255.0
+    low_sat = sat < saturation_min
+    dark = vmax * 255.0 < value_min
+    clipped = vmax >= clip_level
+    if shadow_ratio > 0:
+        import cv2
+
+        v8 = np.clip(np.round(vmax * 255.0), 0, 255).astype(np.uint8)
+        local = cv2.medianBlur(v8, 9).astype(np.float32) / 255.0
+        shadow = (vmax < shadow_ratio * local) & ~invalid
+    else:
+        shadow = np.zeros(vmax.shape, bool)
+    mask = low_sat | dark | clipped | invalid | shadow
+    return ColourMask(mask, low_sat & ~invalid, dark & ~invalid, clipped & ~invalid, invalid,
+                      shadow)

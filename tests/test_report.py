@@ -1,0 +1,170 @@
+"""The PDF report of a results folder (microfacet.report)."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from microfacet.distributions import NDFMixture, ThicknessMixture
+from microfacet.report import PAGES, write_report
+
+H, W = 64, 80
+OPTIONAL = ("mask.npy", "delta_e.npy", "tilt_height_deg.npy", "angular_map.png")
+
+
+def _smooth(rng, shape, k=7):
+    a = rng.normal(size=shape)
+    ker = np.ones(k) / k
+    a = np.apply_along_axis(lambda r: np.convolve(r, ker, mode="same"), 0, a)
+    return np.apply_along_axis(lambda r: np.convolve(r, ker, mode="same"), 1, a)
+
+
+def _png(path, rgb8):
+    import cv2
+
+    assert cv2.imwrite(str(path), np.ascontiguousarray(rgb8[..., ::-1]))
+
+
+def _csv(path, header, columns):
+    rows = "".join(",".join(f"{v:.6g}" for v in r) + "\n" for r in zip(*columns))
+    path.write_text(header + "\n" + rows)
+
+
+def make_results(folder, *, seed=0):
+    """A small, plausible results folder (64 × 80 pixels) with every optional file."""
+    rng = np.random.default_rng(seed)
+    folder.mkdir(parents=True, exist_ok=True)
+    thick = ThicknessMixture([(0.25, 112.0, 4.0), (0.5, 130.0, 5.0), (0.25, 146.0, 3.5)])
+    ndf = NDFMixture([(0.6, 3.0), (0.4, 9.0)])
+
+    height = (0.4 * _smooth(rng, (H, W)) + 5.0).astype(np.float32)
+    height[:3, :5] = np.nan
+    mask = np.zeros((H, W), bool)
+    mask[40:50, 10:22] = True
+    mask |= rng.random((H, W)) < 0.03
+    comp = rng.choice(3, size=(H, W), p=thick.weights)
+    thickness = (thick.means_nm[comp] + thick.sds_nm[comp] * rng.normal(size=(H, W)))
+    thickness = np.where(mask, np.nan, thickness).astype(np.float32)
+    lobe = rng.choice(2, size=(H, W), p=ndf.weights)
+    slope = ndf.slope_sd[lobe] * np.hypot(rng.normal(size=(H, W)), rng.normal(size=(H, W)))
+    tilt = np.where(mask, np.nan, np.degrees(np.arctan(slope))).astype(np.float32)
+    tilt_h = np.clip(tilt + rng.normal(0, 1.5, (H, W)), 0, None).astype(np.float32)
+    sigma = np.where(mask, np.nan, 0.5 + rng.random((H, W))).astype(np.float32)
+    delta_e = np.where(mask, np.nan, rng.gamma(3.0, 1.6, (H, W))).astype(np.float32)
+    for name, a in [("height_um", height), ("thickness_nm", thickness), ("tilt_deg", tilt),
+                    ("tilt_sigma_deg", sigma), ("delta_e", delta_e), ("tilt_height_deg", tilt_h),
+                    ("mask", mask)]:
+        np.save(folder / f"{name}.npy", a)
+    np.save(folder / "normals.npy", np.dstack([np.zeros((H, W, 2)), np.ones((H, W, 1))])
+            .astype(np.float32))
+    aif = np.clip(np.dstack([150 + 120 * _smooth(rng, (H, W)), np.full((H, W), 110.0),
+                             200 - (np.nan_to_num(thickness, nan=130.0) - 130.0) * 3]), 0, 255)
+    _png(folder / "all_in_focus.png", aif.astype(np.uint8))
+    ang = rng.integers(0, 255, (13, 13, 3), dtype=np.uint8).repeat(4, 0).repeat(4, 1)
+    _png(folder / "angular_map.png", ang)
+
+    edges = np.arange(90.0, 171.0, 1.0)
+    x = 0.5 * (edges[1:] + edges[:-1])
+    d, _ = np.histogram(thickness[np.isfinite(thickness)], bins=edges, density=True)
+    _csv(folder / "thickness_pdf.csv", "thickness_nm,density,mixture_density",
+         [x, d, thick.pdf(x)])
+    edges = np.arange(0.0, 36.1, 0.5)
+    x = 0.5 * (edges[1:] + edges[:-1])
+    d, _ = np.histogram(tilt[np.isfinite(tilt)], bins=edges, density=True)
+    _csv(folder / "ndf_pdf.csv", "tilt_deg,density,mixture_density", [x, d, ndf.tilt_pdf(x)])
+    roi = [(0, 0, 32, 118.4, 4.1, 1000), (0, 40, 32, 131.0, 3.7, 990),
+           (32, 40, 32, 144.2, 5.2, 1012)]
+    _csv(folder / "thickness_roi.csv", "row0,col0,size,thickness_nm,mean_delta_e,n_pixels",
+         list(zip(*roi)))
+    summary = {
+        "format": "microfacet-results/1",
+        "inputs": {"stack": "/data/stacks/sample-1", "pixel_size_um": 0.216},
+        "thickness": {"mixture": {**thick.to_json(), "bic": 41234.5}},
+        "ndf": {"mixture": {**ndf.to_json(), "bic": 30012.25}},
+        "exposure": 1.07,
+        "delta_e": {"mean": float(np.nanmean(delta_e)), "median": float(np.nanmedian(delta_e))},
+        "masked_fraction": float(mask.mean()),
+        "timings_s": {"total": 12.5, "focus": 3.2, "thickness": 6.1, "tilt": 2.9},
+        "versions": {"microfacet": "0.1.0"},
+    }
+    (folder / "summary.json").write_text(json.dumps(summary, indent=1))
+    return folder
+
+
+def pdf_pages(path):
+    """Number of page objects in a PDF written by matplotlib (no object streams)."""
+    return len(re.findall(rb"/Type\s*/Page\b(?!s)", path.read_bytes()))
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    return make_results(tmp_path_factory.mktemp("res") / "run")
+
+
+def test_full_folder_gives_four_pages_and_pngs(results, tmp_path):
+    out = write_report(results, png_dir=tmp_path / "png")
+    assert out == results / "report.pdf" and out.is_file()
+    assert out.read_bytes().startswith(b"%PDF") and pdf_pages(out) == len(PAGES) == 4
+    assert out.stat().st_size < 2_000_000
+    pngs = sorted(p.name for p in (tmp_path / "png").iterdir())
+    assert pngs == [f"report_{i}_{n}.png" for i, n in enumerate(PAGES, start=1)]
+    assert not [p for p in results.iterdir() if p.name.startswith(".report.pdf")]
+
+
+def test_missing_optional_files_are_tolerated(tmp_path):
+    folder = make_results(tmp_path / "r", seed=1)
+    for name in OPTIONAL:
+        (folder / name).unlink()
+    out = write_report(folder, out_pdf=tmp_path / "elsewhere.pdf")
+    assert out == tmp_path / "elsewhere.pdf" and pdf_pages(out) == 4
+    assert not (folder / "report.pdf").exists()
+
+
+def test_only_summary_json_is_needed_even_without_fits(tmp_path):
+    """summary.json alone, with the empty mixtures the analysis writes when it cannot fit."""
+    folder = make_results(tmp_path / ".run.partial-abc123", seed=2)
+    for p in folder.iterdir():
+        if p.name != "summary.json":
+            p.unlink()
+    s = json.loads((folder / "summary.json").read_text())
+    s["ndf"]["mixture"] = {"components": [], "bic": None}
+    (folder / "summary.json").write_text(json.dumps(s))
+    out = write_report(folder)
+    assert pdf_pages(out) == 4
+    title = out.read_bytes().split(b"/Title (", 1)[1].split(b") >>", 1)[0]
+    assert title.decode("utf-16").endswith("run")  # the folder's final name, not .partial-
+
+
+def test_missing_summary_names_the_file(tmp_path):
+    folder = make_results(tmp_path / "r", seed=3)
+    (folder / "summary.json").unlink()
+    with pytest.raises(FileNotFoundError, match="summary.json"):
+        write_report(folder)
+    with pytest.raises(FileNotFoundError, match="nowhere"):
+        write_report(tmp_path / "nowhere")
+    assert not (folder / "report.pdf").exists()
+
+
+@pytest.mark.parametrize("name, text, where", [
+    ("summary.json", "{not json", "summary.json"),
+    ("summary.json", json.dumps({"thickness": {"mixture": {"components": [
+        {"weight": 1.0, "mean_nm": 130.0, "sd_nm": 0.0}]}}}), "summary.json"),
+    ("ndf_pdf.csv", "tilt_deg,density\n1,0.1\n", "ndf_pdf.csv"),
+])
+def test_malformed_files_are_value_errors_naming_them(tmp_path, name, text, where):
+    folder = make_results(tmp_path / "r", seed=4)
+    (folder / name).write_text(text)
+    with pytest.raises(ValueError, match=re.escape(where)):
+        write_report(folder)
+    assert not [p for p in folder.iterdir() if "report.pdf" in p.name]
+
+
+def test_import_does_not_import_matplotlib():
+    code = "import sys, microfacet.report; print('matplotlib' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
