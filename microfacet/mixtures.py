@@ -8,25 +8,34 @@ Facet normals (:func:`fit_ndf_mixture`)
     A mixture of zero-mean Gaussian-slope lobes (:class:`~microfacet.distributions.NDFMixture`).
     The slope magnitude ``m = tan θ`` of a pixel is then a mixture of Rayleigh
     distributions, ``f(m) = Σ w_k (m / σ_k²) exp(−m² / 2σ_k²)``, fitted by EM:
-    responsibilities ``r_k ∝ w_k σ_k⁻² exp(−m² / 2σ_k²)``, ``σ_k² = Σ r_k m² / (2 Σ r_k)``,
-    ``w_k = Σ r_k / n``. Several deterministic starts (quantile blocks, a geometric spread,
-    and the K − 1 solution plus one lobe), K = 1 … ``max_components`` by BIC with
-    ``p = 2K − 1`` parameters.
+    responsibilities ``r_k ∝ w_k σ_k⁻² exp(−m² / 2σ_k²)``,
+    ``σ_k² = Σ r_k m² / (2 Σ r_k)``, ``w_k = Σ r_k / n``. Several deterministic starts
+    (quantile blocks, a geometric spread, the K − 1 solution plus a wide or a narrow
+    lobe, or with its heaviest lobe split), each run briefly, the best one to
+    convergence; K = 1 … ``max_components`` by BIC with ``p = 2K − 1`` parameters.
 
 Model choice and correlated samples (both fitters)
     ``BIC = −2 (n_eff / n_fit) ℓ + p log n_eff``, where ℓ is the log-likelihood of the
-    ``n_fit`` samples the mixture was fitted to. Without ``group`` the samples are taken as
-    independent, ``n_eff = n_fit``, and this is the usual BIC. **Per-pixel values are not
-    independent**: a grain or facet of thousands of pixels shares one thickness/tilt, so
-    the usual BIC, with n in the hundreds of thousands, rewards a component for every
-    large region and overfits badly. Pass ``group`` (a region/facet id per sample): the
-    mixture is still fitted to the pixel samples, but the BIC counts the number of
-    distinct groups as the number of independent observations — the log-likelihood is
-    scaled by ``n_groups / n_fit`` (each group contributes its average per-pixel
-    log-likelihood) and the penalty is ``p log n_groups``. This is an effective-sample-size
-    heuristic, not an exact likelihood. In either case K is limited so that the model has
-    no more parameters than effective observations (``p ≤ n_eff``), and to the number of
-    distinct values.
+    ``n_fit`` samples the mixture was fitted to (all finite samples, or a reproducible
+    subsample of ``max_samples``), and ``p`` the number of free parameters (3K − 1 for
+    the thickness, 2K − 1 for the NDF). Without ``group`` the samples are taken as
+    independent, ``n_eff = n_fit`` (the Kish effective size ``(Σw)² / Σw²`` with
+    thickness ``weights``), and this is the usual BIC.
+
+    **Per-pixel values are not independent**: a grain or facet of thousands of pixels
+    shares one thickness/tilt, so the usual BIC, with n in the tens of thousands, rewards
+    a narrow component for every large region and overfits badly. Pass ``group`` (a
+    region/facet id per sample): the mixture is still fitted to the pixel samples (so it
+    describes the per-pixel, i.e. area-weighted, distribution), but the BIC counts the
+    distinct groups (among all finite samples) as the independent observations,
+    ``n_eff = n_groups``: the log-likelihood is scaled by ``n_groups / n_fit`` (with equal
+    group sizes, each group contributes its average per-pixel log-likelihood) and the
+    penalty is ``p log n_groups``. This is an effective-sample-size heuristic, not an
+    exact likelihood; it needs enough groups (a few tens) to resolve several components.
+
+    In either case K is also limited to the number of distinct values and so that the
+    model has no more parameters than effective observations (``p ≤ n_eff``); the
+    ``degenerate`` field of the result says when that limit was applied.
 
 Histograms (:func:`histogram_density`, :func:`pdf_table`, :func:`ndf_D_from_tilt_histogram`)
     A histogram of per-pixel tilts counts projected area (one pixel = one unit of
@@ -89,6 +98,9 @@ class MixtureFit:
         distinct value fitted as one component with the floor sd).
     n_fit : int
         Samples the mixture was actually fitted to (≤ ``max_samples``).
+    log_likelihood_by_k : dict of int to float
+        Log-likelihood of the ``n_fit`` samples for each K (thickness density per nm, or
+        tilt density per degree), before the ``n_eff / n_fit`` scaling.
     """
 
     mixture: object
@@ -250,7 +262,9 @@ def fit_thickness_mixture(thickness_nm, *, max_components=5, weights=None, group
     sd_floor_nm : float, optional
         Smallest component sd, nm (added as a variance regulariser ``sd_floor_nm²``).
         A single distinct value is returned as one component with this sd, and
-        ``degenerate`` says so.
+        ``degenerate`` says so. Thickness quantised to a grid (e.g. a lookup table with a
+        1 nm step) with few distinct values invites a spike per grid value: set the floor
+        to about the step.
 
     Returns
     -------
@@ -288,12 +302,17 @@ def fit_thickness_mixture(thickness_nm, *, max_components=5, weights=None, group
                           f"single value {v:g} nm: one component with floor sd "
                           f"{sd_floor_nm:g} nm", n_fit, {1: ll})
 
+    import warnings
+
+    from sklearn.exceptions import ConvergenceWarning
     from sklearn.mixture import GaussianMixture
 
     k_max = _k_max(max_components, uniq.size, n_eff, 3, -1)
     X = x[:, None]
     fits, bics, lls = {}, {}, {}
-    with _single_thread():
+    with _single_thread(), warnings.catch_warnings():
+        # an unconverged over-sized K only loses in the BIC; no need to warn
+        warnings.simplefilter("ignore", ConvergenceWarning)
         for k in range(1, k_max + 1):
             # two starts: k-means (seeded) and the k quantiles; keep the higher likelihood
             q = np.quantile(x, (np.arange(k) + 0.5) / k)[:, None]
@@ -330,6 +349,9 @@ def _k_note(k_max, max_components, n_unique, n_eff, what):
 # -------------------------------------------------------------------------------- NDF
 
 
+_S2_CEIL = math.tan(88.9 * _DEG) ** 2  # NDFMixture needs sd_deg < 89
+
+
 def _rayleigh_em(m2, w, s2, s2_floor, max_iter=1000, tol=1e-4):
     """EM for a zero-mean Rayleigh mixture on squared slopes ``m2``; returns (w, s2, ℓ′).
 
@@ -339,7 +361,7 @@ def _rayleigh_em(m2, w, s2, s2_floor, max_iter=1000, tol=1e-4):
     """
     n = m2.size
     w = np.asarray(w, dtype=np.float64) / np.sum(w)
-    s2 = np.maximum(np.asarray(s2, dtype=np.float64), s2_floor)
+    s2 = np.clip(np.asarray(s2, dtype=np.float64), s2_floor, _S2_CEIL)
     m2c = m2[:, None]
     prev = -np.inf
     ll = -np.inf
@@ -356,7 +378,7 @@ def _rayleigh_em(m2, w, s2, s2_floor, max_iter=1000, tol=1e-4):
         nk = r.sum(axis=0)
         w = np.maximum(nk / n, 1e-300)
         w = w / w.sum()
-        s2 = np.maximum((m2 @ r) / np.maximum(2.0 * nk, 1e-300), s2_floor)
+        s2 = np.clip((m2 @ r) / np.maximum(2.0 * nk, 1e-300), s2_floor, _S2_CEIL)
     return w, s2, ll
 
 
@@ -392,8 +414,9 @@ def fit_ndf_mixture(tilt_deg, *, max_components=5, group=None, random_state=0,
     max_samples : int, optional
         Larger inputs are subsampled reproducibly to this many values.
     sd_floor_deg : float, optional
-        Smallest lobe sd, degrees. All-zero tilts give one lobe with this sd and
-        ``degenerate`` says so.
+        Smallest lobe sd, degrees (lobe sds are also capped at 88.9°). All-zero tilts
+        give one lobe with this sd and ``degenerate`` says so. Many tilts of exactly 0
+        (flat pixels) are a real spike at 0 and may be fitted as a lobe at the floor.
 
     Returns
     -------

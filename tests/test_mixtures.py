@@ -188,7 +188,8 @@ def test_ndf_all_zero_is_degenerate_and_zeros_tolerated():
 def test_ndf_group():
     rng = np.random.default_rng(10)
     # 8 facets, each with one tilt (from 2 lobes) plus a little scatter
-    centre = np.concatenate([_tilt_samples(rng, [(1.0, 3.0)], 4), _tilt_samples(rng, [(1.0, 9.0)], 4)])
+    centre = np.concatenate([_tilt_samples(rng, [(1.0, 3.0)], 4),
+                             _tilt_samples(rng, [(1.0, 9.0)], 4)])
     tilt = np.clip(centre[:, None] + rng.normal(0, 0.1, (8, 1500)), 0, None)
     g = np.repeat(np.arange(8), 1500).reshape(8, 1500)
     naive = fit_ndf_mixture(tilt, max_components=4)

@@ -71,7 +71,8 @@ def register(sub):
     p.add_argument("--theta-step-deg", type=float, default=1.0,
                    help="angle grid step (default 1)")
     p.add_argument("--exposure", type=float, default=None,
-                   help="reflectance scale for display (default 1, or the results' exposure)")
+                   help="reflectance scale for display (default: auto, the 98th percentile "
+                        "of Y at 0.9 of white; 1 for --thickness-nm)")
     p.add_argument("--wavelength-step-nm", type=float, default=5.0,
                    help="spectral step over 380-780 nm of the spectra (default 5)")
     cmp_ = p.add_argument_group("comparison with a measured map")
@@ -228,8 +229,7 @@ def _read_results(folder):
     for key in ("film", "substrate", "illuminant"):
         if isinstance(summary.get(key), str):
             out[key] = summary[key]
-    if isinstance(summary.get("exposure"), (int, float)) and summary["exposure"] > 0:
-        out["exposure"] = float(summary["exposure"])
+    # summary["exposure"] is the microscope camera's scale, not a gonio map's: not used.
     return out
 
 
@@ -276,7 +276,8 @@ def _run_distributions(args) -> int:
     if args.illuminant == "D65" and "illuminant" in res:
         args.illuminant = res["illuminant"]
     opt = optics_kwargs(args)
-    exposure = (args.exposure if args.exposure is not None else res.get("exposure", 1.0))
+    auto_exposure = args.exposure is None and not args.fit_exposure and model != "half-vector"
+    exposure = 1.0 if args.exposure is None else args.exposure
     if not (np.isfinite(exposure) and exposure > 0):
         raise ValueError("--exposure: must be > 0")
     n = 100.0 if args.lobe_exponent is None else float(args.lobe_exponent)
@@ -317,6 +318,18 @@ def _run_distributions(args) -> int:
                                        observer=opt["observer"]).sum(axis=0)
         exposure, fit["mean_delta_e"] = fit_exposure(m1.xyz, measured.lab, white=white)
         fit["exposure"] = exposure
+    if auto_exposure and not args.fit_exponent:
+        # Display scale: the 98th percentile of Y maps to 0.9 of white (the specular peak
+        # of a BRDF is far above 1 and would otherwise clip the whole map to white).
+        m1 = simulate_map(exposure=1.0, **kw)
+        from .. import color
+
+        white = color.spectral_weights(wl, illuminant=opt["illuminant"],
+                                       observer=opt["observer"]).sum(axis=0)
+        y = m1.xyz[..., 1][np.isfinite(m1.xyz[..., 1])] / white[1]
+        p98 = float(np.percentile(y, 98)) if y.size else 0.0
+        exposure = 0.9 / p98 if p98 > 0 else 1.0
+        fit["auto_exposure"] = exposure
     m = simulate_map(exposure=exposure, **kw)
     de = stats = None
     if measured is not None:
