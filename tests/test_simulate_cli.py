@@ -27,7 +27,8 @@ def _results(tmp_path, **extra):
 def test_from_an_analyze_results_folder(tmp_path):
     res = _results(tmp_path, film="TiO2_Jolivet2023_amorphous")
     out = tmp_path / "sim"
-    assert main(["simulate", "--results", str(res), "--out", str(out)] + SMALL) == 0
+    assert main(["simulate", "--results", str(res), "--out", str(out), "--exposure", "0.25"]
+                + SMALL) == 0
     names = {p.name for p in out.iterdir()}
     assert {"spectra.npy", "wavelength_nm.npy", "angular_lab.npy", "angular_map.png",
             "angular_map.npz", "figure.pdf", "simulate.json"} <= names
@@ -42,6 +43,17 @@ def test_from_an_analyze_results_folder(tmp_path):
     np.testing.assert_allclose(spectra, ref.spectra, rtol=1e-5)
     m = load_map(out / "angular_map.npz")
     np.testing.assert_array_equal(m.lab, np.load(out / "angular_lab.npy"))
+    # Without --exposure the display scale is automatic (the camera exposure of the analysis
+    # is not a gonio-map scale): the 98th percentile of Y lands at 0.9 of white.
+    out2 = tmp_path / "sim-auto"
+    assert main(["simulate", "--results", str(res), "--out", str(out2)] + SMALL) == 0
+    meta2 = json.loads((out2 / "simulate.json").read_text())
+    y = np.load(out2 / "angular_xyz.npy")[..., 1]
+    from microfacet import color
+
+    white = color.spectral_weights(np.linspace(380, 780, 81)).sum(axis=0)
+    assert meta2["exposure"] != 0.25
+    assert np.percentile(y / white[1], 98) == pytest.approx(0.9, rel=1e-3)
 
 
 def test_explicit_parameters_eq6_and_compare(tmp_path, capsys):
