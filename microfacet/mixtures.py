@@ -390,7 +390,7 @@ def _rayleigh_em_multistart(m2, starts, s2_floor, *, burn_in=25):
 
 
 def fit_ndf_mixture(tilt_deg, *, max_components=5, group=None, random_state=0,
-                    max_samples=200000, sd_floor_deg=0.05) -> MixtureFit:
+                    max_samples=50000, sd_floor_deg=0.05) -> MixtureFit:
     """Mixture of zero-mean Gaussian-slope lobes fitted to per-pixel tilts, K by BIC.
 
     The slope magnitude ``m = tan θ`` of a Gaussian-slope lobe is Rayleigh with parameter
