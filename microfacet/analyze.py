@@ -301,8 +301,14 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
         weight = rel * np.clip(dist / 2.0, 0.0, 1.0)
         ff = fit_facet_planes(facets, foc.height_fit_um, weight, pixel_size_um=st.pixel_size_um,
                               fallback_tilt_deg=tilt_h)
-        d_f, _ = facet_thickness(facets, lab, usable, np.clip(ff.tilt_deg, 0, max_tilt),
-                                 thick_roi_px, table, exposure=exposure, interior=dist >= 1.5)
+        tilt_f = np.clip(ff.tilt_deg, 0, max_tilt)
+        if exposure_source == "estimated":
+            exposure = _refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px,
+                                                  table, exposure, interior=dist >= 1.5,
+                                                  seed=opt.seed)
+            log.info("exposure refined on facets: %.4f", exposure)
+        d_f, _ = facet_thickness(facets, lab, usable, tilt_f, thick_roi_px, table,
+                                 exposure=exposure, interior=dist >= 1.5)
         t0 = _timer(timings, "facet_fits", t0)
         fid = facets[yy, xx]
         d_rows = np.where(np.isfinite(d_f), d_f, table.thickness_nm[0])
@@ -344,6 +350,38 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
         optics={"film": film, "substrate": substrate, "illuminant": illuminant,
                 "numerical_aperture": na},
         timings_s=timings)
+
+
+def _refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table, exposure, *,
+                               interior, seed=0, n_facets=2000):
+    """Exposure of least median facet ΔE00, each facet's thickness re-solved per candidate.
+
+    Facets are homogeneous (one tilt, one thickness), unlike ROIs that span several
+    thickness regions, so they pin the exposure down better than the ROI fit did.
+    """
+    from scipy.optimize import minimize_scalar
+
+    from .joint import facet_thickness
+
+    S = int(facets.max()) + 1
+    rng = np.random.default_rng(seed)
+    cnt = np.bincount(facets[usable & interior], minlength=S)
+    cand = np.flatnonzero(cnt >= 4)
+    if cand.size < 10:
+        return exposure
+    pick = np.zeros(S, bool)
+    pick[rng.choice(cand, min(n_facets, cand.size), replace=False)] = True
+    sel = usable & pick[facets]
+
+    def objective(log_e):
+        _, de = facet_thickness(facets, lab, sel, tilt_f, thick_roi_px, table,
+                                exposure=math.exp(log_e), interior=interior)
+        return float(np.nanmedian(de))
+
+    lo, hi = math.log(exposure / 1.5), math.log(exposure * 1.5)
+    opt = minimize_scalar(objective, bounds=(lo, hi), method="bounded",
+                          options={"xatol": 0.005})
+    return float(math.exp(opt.x)) if opt.fun <= objective(math.log(exposure)) else exposure
 
 
 def _versions():

@@ -163,6 +163,22 @@ def _curve(xyz_s, lab_s, exposure, white, stat="mean"):
     return de.mean(axis=0) if stat == "mean" else np.median(de, axis=0)
 
 
+def _consensus(curves, grid, half_width_nm):
+    """Thickness band shared by the ROIs: argmin over d of Σ_roi min_{|d'−d|≤w} curve(d').
+
+    Returns the band centre and the objective value (NaN-safe; curves (R, D))."""
+    from scipy.ndimage import minimum_filter1d
+
+    step = grid[1] - grid[0] if grid.size > 1 else 1.0
+    k = max(1, int(round(half_width_nm / step)))
+    c = np.where(np.isfinite(curves), curves, np.nanmax(curves) if np.isfinite(curves).any()
+                 else 0.0)
+    m = minimum_filter1d(c, size=2 * k + 1, axis=1, mode="nearest")
+    total = m.sum(axis=0)
+    j = int(np.argmin(total))
+    return float(grid[j]), float(total[j] / max(len(curves), 1))
+
+
 def _local_minima(curve):
     c = np.where(np.isfinite(curve), curve, np.inf)
     padded = np.concatenate([[np.inf], c, [np.inf]])
@@ -183,6 +199,7 @@ def _parabola(x, y, i):
 
 def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
                       grid_step_nm=1.0, sample_px=256, refine_px=8000, min_pixels=20,
+                      consensus_half_width_nm=35.0, order_margin_de=2.0,
                       seed=0) -> RoiFit:
     """Thickness of least mean ΔE00 per ROI, and the exposure if not given.
 
@@ -206,6 +223,12 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
         Pixels per ROI used for the global scan / for the refinement.
     min_pixels : int
         ROIs with fewer unmasked pixels get NaN.
+    consensus_half_width_nm, order_margin_de : float
+        Interference-order consensus: the band of ±``consensus_half_width_nm`` (less than
+        half the ~110 nm spacing of the orders) that minimises the ROIs' summed best mean ΔE
+        within it is the sample's order; each ROI takes its best minimum inside the band,
+        unless a minimum outside is better by more than ``order_margin_de`` (a sample that
+        really spans two orders). 0 disables the consensus.
 
     Returns
     -------
@@ -239,7 +262,8 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
     valid = [s for s in samples if s is not None]
     estimated = exposure is None
     if estimated:
-        exposure = _estimate_exposure(valid, white) if valid else 1.0
+        exposure = (_estimate_exposure(valid, white, grid, consensus_half_width_nm)
+                    if valid else 1.0)
         log.info("estimated exposure %.4f", exposure)
     elif not (np.isfinite(exposure) and exposure > 0):
         raise ValueError(f"exposure: must be > 0, got {exposure!r}")
@@ -249,13 +273,27 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
     npx = np.zeros(n, dtype=np.int64)
     curves = np.full((n, grid.size), np.nan, dtype=np.float32)
     for i, s in enumerate(samples):
+        if s is not None:
+            curves[i] = _curve(s[0], s[1], exposure, white)
+    band = None
+    if consensus_half_width_nm > 0 and np.isfinite(curves).any() and grid.size > 2:
+        centre, _ = _consensus(curves[np.isfinite(curves).all(axis=1)], grid,
+                               consensus_half_width_nm)
+        band = (centre - consensus_half_width_nm, centre + consensus_half_width_nm)
+        log.info("interference-order consensus: %.1f-%.1f nm", *band)
+    for i, s in enumerate(samples):
         if s is None:
             continue
         xyz, lab_s, yy, xx = s
         npx[i] = yy.size
-        curve = _curve(xyz, lab_s, exposure, white)
-        curves[i] = curve
+        curve = curves[i]
         minima = _local_minima(curve)
+        chosen_by_consensus = False
+        if band is not None and minima.size:
+            inside = minima[(grid[minima] >= band[0]) & (grid[minima] <= band[1])]
+            if inside.size and curve[minima[0]] >= curve[inside[0]] - order_margin_de:
+                minima = np.concatenate([inside[:1], minima[minima != inside[0]]])
+                chosen_by_consensus = True
         # Refine the two best minima on a larger sample at 0.05 nm.
         pick = rng.choice(yy.size, min(refine_px, yy.size), replace=False)
         yr, xr = yy[pick], xx[pick]
@@ -270,7 +308,8 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
             de_best = float(_curve(table.xyz_at(tilt[yr, xr], d_best)[:, None, :].astype(
                 np.float32), lab[yr, xr], exposure, white)[0])
             res.append((de_best, d_best))
-        res.sort()
+        if not chosen_by_consensus:
+            res.sort()
         out["de"][i], out["d"][i] = res[0]
         if len(res) > 1:
             out["de2"][i], out["d2"][i] = res[1]
@@ -280,21 +319,24 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
                   out["de2"] - out["de"], npx, float(exposure), estimated, grid, curves)
 
 
-def _estimate_exposure(samples, white):
-    """Exposure minimising the mean over ROIs of each ROI's best mean ΔE (sampled pixels)."""
+def _estimate_exposure(samples, white, grid, half_width_nm):
+    """Exposure minimising the ROIs' mean best median ΔE within a shared order band."""
     from scipy.optimize import minimize_scalar
 
     sub = [(xyz[:128], lab_s[:128]) for xyz, lab_s, _, _ in samples]
 
     def objective(log_e):
         e = math.exp(log_e)
-        return float(np.mean([np.min(_curve(x, l, e, white, "median")) for x, l in sub]))
+        curves = np.array([_curve(x, l, e, white, "median") for x, l in sub])
+        if half_width_nm > 0 and grid.size > 2:
+            return _consensus(curves, grid, half_width_nm)[1]
+        return float(np.mean(curves.min(axis=1)))
 
-    grid = np.linspace(math.log(0.25), math.log(4.0), 25)
-    vals = np.array([objective(g) for g in grid])
+    log_grid = np.linspace(math.log(0.25), math.log(4.0), 25)
+    vals = np.array([objective(g) for g in log_grid])
     i = int(np.argmin(vals))
-    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    lo, hi = log_grid[max(i - 1, 0)], log_grid[min(i + 1, log_grid.size - 1)]
     opt = minimize_scalar(objective, bounds=(lo, hi), method="bounded",
                           options={"xatol": 0.003})
-    best = opt.x if opt.fun <= vals[i] else grid[i]
+    best = opt.x if opt.fun <= vals[i] else log_grid[i]
     return float(math.exp(best))
