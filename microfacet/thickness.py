@@ -8,6 +8,18 @@ step. Interference colours repeat with order, so the search is global and the re
 reports the gap to the best *other* local minimum (``ambiguity_delta_e``): a small gap
 means the order is uncertain.
 
+Interference order
+------------------
+ROIs that span several thickness regions fit no single thickness well, and a free exposure
+makes the orders nearly equally good. The order is therefore chosen first, for all ROIs
+together and independently of the exposure: in CIELAB's cube-root regime an exposure
+scales L*, a*, b* together, so comparing the model's Lab rescaled to each pixel's L* with
+the pixel (hue and chroma only) is exposure-invariant. Each pixel may take its own
+thickness inside a candidate band of ±35 nm (ROIs span several thickness regions); the band
+whose mean per-pixel best invariant ΔE is least is the sample's order. Each ROI then takes
+its best minimum in it unless one outside is better by more than 2 ΔE00. The exposure is
+fitted the same way: each pixel at its best thickness in the band, median over pixels.
+
 Exposure
 --------
 Image brightness is not calibrated: the model's XYZ are scaled by one global exposure
@@ -179,6 +191,29 @@ def _consensus(curves, grid, half_width_nm):
     return float(grid[j]), float(total[j] / max(len(curves), 1))
 
 
+def _band_curve(xyz_s, lab_s, white, grid, half_width_nm, exposure=None):
+    """Band score: mean over pixels of each pixel's best ΔE00 within ±half_width of d.
+
+    Each pixel may take its own thickness inside the band (ROIs span several thickness
+    regions). With ``exposure=None`` the model's Lab is rescaled to each pixel's L*: in
+    CIELAB's cube-root regime an exposure e scales L*, a*, b* together by e^(1/3), so this
+    compares hue and chroma only, whatever the exposure.
+    """
+    from scipy.ndimage import minimum_filter1d
+
+    from . import color
+
+    if exposure is None:
+        model = _model_lab(xyz_s, 1.0, white)
+        model = model * (lab_s[:, None, 0:1] / np.maximum(model[..., 0:1], 1e-3))
+    else:
+        model = _model_lab(xyz_s, exposure, white)
+    de = color.delta_e_2000(model, lab_s[:, None, :])
+    step = grid[1] - grid[0] if grid.size > 1 else 1.0
+    k = max(1, int(round(half_width_nm / step)))
+    return minimum_filter1d(de, size=2 * k + 1, axis=1, mode="nearest").mean(axis=0)
+
+
 def _local_minima(curve):
     c = np.where(np.isfinite(curve), curve, np.inf)
     padded = np.concatenate([[np.inf], c, [np.inf]])
@@ -260,10 +295,17 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
             samples.append((xyz, lab[ys, xs], yy, xx))
 
     valid = [s for s in samples if s is not None]
+    band = None
+    if consensus_half_width_nm > 0 and valid and grid.size > 2:
+        # The interference order, from hue and chroma alone (before the exposure is known).
+        score = np.mean([_band_curve(x[:128], l[:128], white, grid, consensus_half_width_nm)
+                         for x, l, _, _ in valid], axis=0)
+        centre = float(grid[int(np.argmin(score))])
+        band = (centre - consensus_half_width_nm, centre + consensus_half_width_nm)
+        log.info("interference-order consensus (exposure-invariant): %.1f-%.1f nm", *band)
     estimated = exposure is None
     if estimated:
-        exposure = (_estimate_exposure(valid, white, grid, consensus_half_width_nm)
-                    if valid else 1.0)
+        exposure = _estimate_exposure(valid, white, grid, band) if valid else 1.0
         log.info("estimated exposure %.4f", exposure)
     elif not (np.isfinite(exposure) and exposure > 0):
         raise ValueError(f"exposure: must be > 0, got {exposure!r}")
@@ -275,12 +317,6 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
     for i, s in enumerate(samples):
         if s is not None:
             curves[i] = _curve(s[0], s[1], exposure, white)
-    band = None
-    if consensus_half_width_nm > 0 and np.isfinite(curves).any() and grid.size > 2:
-        centre, _ = _consensus(curves[np.isfinite(curves).all(axis=1)], grid,
-                               consensus_half_width_nm)
-        band = (centre - consensus_half_width_nm, centre + consensus_half_width_nm)
-        log.info("interference-order consensus: %.1f-%.1f nm", *band)
     for i, s in enumerate(samples):
         if s is None:
             continue
@@ -319,18 +355,25 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
                   out["de2"] - out["de"], npx, float(exposure), estimated, grid, curves)
 
 
-def _estimate_exposure(samples, white, grid, half_width_nm):
-    """Exposure minimising the ROIs' mean best median ΔE within a shared order band."""
+def _estimate_exposure(samples, white, grid, band):
+    """Exposure minimising the ROIs' mean best median ΔE (within the order band, if any)."""
     from scipy.optimize import minimize_scalar
 
+    from . import color
+
     sub = [(xyz[:128], lab_s[:128]) for xyz, lab_s, _, _ in samples]
+    inside = (np.ones(grid.size, bool) if band is None
+              else (grid >= band[0]) & (grid <= band[1]))
 
     def objective(log_e):
+        # Each pixel at its best thickness in the band; the median over pixels (robust to
+        # partly shadowed pixels), averaged over ROIs.
         e = math.exp(log_e)
-        curves = np.array([_curve(x, l, e, white, "median") for x, l in sub])
-        if half_width_nm > 0 and grid.size > 2:
-            return _consensus(curves, grid, half_width_nm)[1]
-        return float(np.mean(curves.min(axis=1)))
+        vals = []
+        for x, l in sub:
+            de = color.delta_e_2000(_model_lab(x[:, inside], e, white), l[:, None, :])
+            vals.append(np.median(de.min(axis=1)))
+        return float(np.mean(vals))
 
     log_grid = np.linspace(math.log(0.25), math.log(4.0), 25)
     vals = np.array([objective(g) for g in log_grid])
