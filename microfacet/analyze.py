@@ -419,8 +419,7 @@ def write_results(result: AnalysisResult, out, *, overwrite=False, report=True) 
     report : bool
         Also write ``report.pdf`` (and its PNG figures).
     """
-    import cv2
-
+    from .images import write_image
     from .mixtures import pdf_table
     from .outdir import atomic_output_dir
 
@@ -441,15 +440,8 @@ def write_results(result: AnalysisResult, out, *, overwrite=False, report=True) 
         np.save(tmp / "mask.npy", r.mask.mask)
         if r.facets is not None:
             np.save(tmp / "facets.npy", r.facets)
-        aif = r.focus.all_in_focus
-        if r.stack.dtype == np.uint16:
-            img = np.round(np.clip(aif, 0, 1) * 65535).astype(np.uint16)
-        else:
-            img = np.round(np.clip(aif, 0, 1) * 255).astype(np.uint8)
-        if img.ndim == 3:
-            img = img[..., ::-1]
-        if not cv2.imwrite(str(tmp / "all_in_focus.png"), np.ascontiguousarray(img)):
-            raise OSError(f"cannot write {tmp / 'all_in_focus.png'}")
+        write_image(tmp / "all_in_focus.png", r.focus.all_in_focus,
+                    bit_depth=16 if r.stack.dtype == np.uint16 else 8)
 
         roi = r.roi
         rows = np.column_stack([roi.row0, roi.col0, np.full(roi.row0.size, roi.height_px),

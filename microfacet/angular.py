@@ -109,13 +109,11 @@ class AngularMap:
 
     def save_png(self, path, *, scale=4):
         """Write the sRGB image, each cell ``scale`` × ``scale`` pixels, light angle down."""
-        import cv2
+        from .images import write_image
 
         img = self.srgb if self.srgb is not None else _lab_to_srgb8(self.lab, self.illuminant,
                                                                     self.observer)
-        img = np.repeat(np.repeat(img, int(scale), axis=0), int(scale), axis=1)
-        if not cv2.imwrite(str(path), np.ascontiguousarray(img[..., ::-1])):
-            raise OSError(f"could not write {path}")
+        write_image(path, np.repeat(np.repeat(img, int(scale), axis=0), int(scale), axis=1))
 
 
 def _lab_to_srgb8(lab, illuminant, observer):

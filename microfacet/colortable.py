@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .optics import DEFAULT_FILM, DEFAULT_SUBSTRATE, optical_constants
+from .optics import DEFAULT_FILM, DEFAULT_SUBSTRATE, resolve_index
 
 __all__ = [
     "ColourTable",
@@ -52,22 +52,6 @@ def _wavelengths(step_nm):
     lo, hi = WAVELENGTH_RANGE_NM
     n = int(round((hi - lo) / step_nm)) + 1
     return np.linspace(lo, hi, n)
-
-
-@dataclass(frozen=True)
-class _Optics:
-    film: str | complex
-    substrate: str | complex
-    illuminant: str
-    observer: str
-    n_ambient: float
-
-    def indices(self, wl):
-        n1 = optical_constants(self.film, wl) if isinstance(self.film, str) else np.full(
-            wl.shape, complex(self.film))
-        n2 = optical_constants(self.substrate, wl) if isinstance(self.substrate, str) else (
-            np.full(wl.shape, complex(self.substrate)))
-        return n1, n2
 
 
 def direct_xyz(theta_deg, thickness_nm, *, spectral_step_nm=1.0, film=DEFAULT_FILM,
@@ -94,9 +78,8 @@ def direct_xyz(theta_deg, thickness_nm, *, spectral_step_nm=1.0, film=DEFAULT_FI
     from . import color
     from .thinfilm import reflectance
 
-    o = _Optics(film, substrate, illuminant, observer, n_ambient)
     wl = _wavelengths(spectral_step_nm)
-    n1, n2 = o.indices(wl)
+    n1, n2 = resolve_index(film, wl), resolve_index(substrate, wl)
     w = color.spectral_weights(wl, illuminant=illuminant, observer=observer)
     th = np.asarray(theta_deg, dtype=np.float64)[..., None]
     d = np.asarray(thickness_nm, dtype=np.float64)[..., None]
@@ -208,7 +191,7 @@ class ColourTable:
         return (float(self.thickness_nm[1] - self.thickness_nm[0])
                 if self.thickness_nm.size > 1 else 0.0)
 
-    def _coords(self, values, grid, name):
+    def _coords(self, values, grid):
         v = np.asarray(values, dtype=np.float64)
         if grid.size == 1:
             inside = np.abs(v - grid[0]) <= 1e-9
@@ -236,8 +219,8 @@ class ColourTable:
         th, d = np.broadcast_arrays(np.asarray(theta_deg, np.float64),
                                     np.asarray(thickness_nm, np.float64))
         with np.errstate(invalid="ignore"):
-            i, fi, ok_i = self._coords(th, self.theta_deg, "theta_deg")
-            j, fj, ok_j = self._coords(d, self.thickness_nm, "thickness_nm")
+            i, fi, ok_i = self._coords(th, self.theta_deg)
+            j, fj, ok_j = self._coords(d, self.thickness_nm)
         t = self.xyz
         if self.theta_deg.size == 1:
             row0 = t[0]
@@ -317,7 +300,8 @@ def build_colour_table(*, thickness_range_nm=(0.0, 400.0), theta_range_deg=(0.0,
         raise ValueError("theta_range_deg: the upper limit must be < 90 degrees")
     kw = dict(film=film, substrate=substrate, illuminant=illuminant, observer=observer,
               n_ambient=n_ambient)
-    _Optics(**kw).indices(_wavelengths(1.0))  # validates names and wavelength coverage now
+    for value in (film, substrate):  # validates names and wavelength coverage now
+        resolve_index(value, _wavelengths(1.0))
 
     if spectral_step_nm is None:
         spectral_step_nm, spectral_err, tried = choose_spectral_step(

@@ -183,11 +183,9 @@ class AngularColourMap:
 
     def save_png(self, path, *, scale: int = 4):
         """Write the sRGB map as a PNG, each cell ``scale`` × ``scale`` pixels, light angle down."""
-        import cv2
+        from .images import write_image
 
-        img = np.repeat(np.repeat(self.srgb, scale, axis=0), scale, axis=1)
-        if not cv2.imwrite(str(path), img[..., ::-1]):
-            raise OSError(f"could not write {path}")
+        write_image(path, np.repeat(np.repeat(self.srgb, scale, axis=0), scale, axis=1))
 
 
 def angular_colour_map(thickness_nm, *, theta_light_deg=None, theta_view_deg=None,

@@ -30,7 +30,7 @@ import numpy as np
 __all__ = ["FacetFit", "facet_thickness", "fit_facet_planes", "segment_facets"]
 
 
-def segment_facets(lab, *, facet_px, compactness=2.0, seed=0):
+def segment_facets(lab, *, facet_px, compactness=2.0):
     """Superpixel segmentation of a Lab image into facets.
 
     Parameters

@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .distributions import NDF_FORM, NDFMixture, ThicknessMixture
+from .distributions import NDFMixture, ThicknessMixture
 
 __all__ = [
     "MixtureFit",

@@ -863,10 +863,10 @@ def write_stack(folder, images, *, pixel_size_um: float, z_um: Sequence[float] |
                 tifffile.imwrite(folder / name, img,
                                  photometric="rgb" if img.ndim == 3 else "minisblack")
             else:
-                bgr = cv2.cvtColor(img, cv2.COLOR_RGB2BGR) if img.ndim == 3 else img
-                params = [cv2.IMWRITE_JPEG_QUALITY, 95] if fmt == "jpg" else []
-                if not cv2.imwrite(str(folder / name), bgr, params):
-                    raise OSError(f"cannot write {folder / name}")
+                from .images import write_image
+
+                write_image(folder / name, img,
+                            params=[cv2.IMWRITE_JPEG_QUALITY, 95] if fmt == "jpg" else ())
             names.append(name)
         kw = {"slices": names}
     return write_stack_json(folder, pixel_size_um=pixel_size_um, z_um=z_um, z_step_um=z_step_um,

@@ -485,9 +485,8 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
     >>> from microfacet.synth import generate_stack, preset
     >>> r = generate_stack("/tmp/nd-demo", preset("nd", seed=1), overwrite=True)  # doctest: +SKIP
     """
-    import cv2
-
     from . import color
+    from .images import write_image
     from .outdir import atomic_output_dir
     from .stack import write_stack_json
 
@@ -507,7 +506,6 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
     ladder = _blur_ladder(scene.linear_rgb, sigmas)
     rng_noise = np.random.default_rng([p.seed, 1])
     rows, cols = np.indices(scene.height_um.shape)
-    max_code = 255 if p.bit_depth == 8 else 65535
     dtype = np.uint8 if p.bit_depth == 8 else np.uint16
     clipped = np.any(scene.linear_rgb >= 1.0, axis=-1)
     names = [f"slices/{k:03d}.png" for k in range(p.n_slices)]
@@ -523,8 +521,7 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
             img = ladder[i0, rows, cols] * (1 - f) + ladder[i0 + 1, rows, cols] * f
             img = _sensor(img, p, rng_noise)
             code = color.srgb_encode(img, dtype=dtype)
-            if not cv2.imwrite(str(tmp / names[k]), np.ascontiguousarray(code[..., ::-1])):
-                raise OSError(f"could not write {tmp / names[k]}")
+            write_image(tmp / names[k], code)
             if progress is not None:
                 progress(k + 1, p.n_slices)
         t_slices = time.perf_counter() - t0 - t_scene
@@ -538,7 +535,7 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
         np.save(truth / "region_id.npy", scene.region_id)
         np.save(truth / "groove.npy", scene.groove)
         sharp = color.srgb_encode(np.clip(scene.linear_rgb, 0, 1), dtype=np.uint8)
-        cv2.imwrite(str(truth / "all_in_focus.png"), np.ascontiguousarray(sharp[..., ::-1]))
+        write_image(truth / "all_in_focus.png", sharp)
         truth_meta = {
             "format": "microfacet-synth-truth/1",
             "params": p.to_json(),

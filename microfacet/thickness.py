@@ -164,31 +164,12 @@ def _model_lab(xyz, exposure, white):
                             white=white.astype(np.float32))
 
 
-def _curve(xyz_s, lab_s, exposure, white, stat="mean"):
-    """Mean (or median) ΔE00 over the sample for every grid thickness.
-
-    xyz_s (n, D, 3), lab_s (n, 3) → (D,).
-    """
+def _curve(xyz_s, lab_s, exposure, white):
+    """Mean ΔE00 over the sample for every grid thickness: xyz_s (n, D, 3), lab_s (n, 3) → (D,)."""
     from . import color
 
     de = color.delta_e_2000(_model_lab(xyz_s, exposure, white), lab_s[:, None, :])
-    return de.mean(axis=0) if stat == "mean" else np.median(de, axis=0)
-
-
-def _consensus(curves, grid, half_width_nm):
-    """Thickness band shared by the ROIs: argmin over d of Σ_roi min_{|d'−d|≤w} curve(d').
-
-    Returns the band centre and the objective value (NaN-safe; curves (R, D))."""
-    from scipy.ndimage import minimum_filter1d
-
-    step = grid[1] - grid[0] if grid.size > 1 else 1.0
-    k = max(1, int(round(half_width_nm / step)))
-    c = np.where(np.isfinite(curves), curves, np.nanmax(curves) if np.isfinite(curves).any()
-                 else 0.0)
-    m = minimum_filter1d(c, size=2 * k + 1, axis=1, mode="nearest")
-    total = m.sum(axis=0)
-    j = int(np.argmin(total))
-    return float(grid[j]), float(total[j] / max(len(curves), 1))
+    return de.mean(axis=0)
 
 
 def _band_curve(xyz_s, lab_s, white, grid, half_width_nm, exposure=None):

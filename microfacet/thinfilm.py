@@ -157,12 +157,6 @@ class FresnelProducts:
             c2=np.abs(c) ** 2,
         )
 
-    def reflectance(self, zr, zi, zz):
-        """R for ``z = zr + i zi`` with ``zz = |z|²`` (arrays that broadcast)."""
-        num = self.a2 + self.b2 * zz + 2.0 * (self.ab.real * zr - self.ab.imag * zi)
-        den = 1.0 + self.c2 * zz + 2.0 * (self.c.real * zr - self.c.imag * zi)
-        return num / den
-
 
 def reflectance(
     wavelength_nm,

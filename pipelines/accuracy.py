@@ -14,6 +14,8 @@ mode and the joint mode, then scores against the truth:
   says otherwise), time.
 
 Run:  python pipelines/accuracy.py [--size 512] [--slices 24] [--presets nd sd ...]
+      python pipelines/accuracy.py --stack fixtures/stacks/nd-fixture   (an existing synthetic
+      stack, scored against its own truth/)
 Prints a markdown table (docs/accuracy.md).
 """
 
@@ -76,23 +78,39 @@ def main(argv=None):
     ap.add_argument("--slices", type=int, default=24)
     ap.add_argument("--seed", type=int, default=11)
     ap.add_argument("--presets", nargs="+", default=list(PRESETS))
+    ap.add_argument("--stack", default=None,
+                    help="score this existing synthetic stack (with truth/) instead")
     args = ap.parse_args(argv)
-    print(f"{args.size}x{args.size} px, {args.slices} slices, seed {args.seed}\n")
+    if args.stack:
+        import json
+
+        meta = json.loads((Path(args.stack) / "truth" / "params.json").read_text())["params"]
+        p = preset(meta["preset"], seed=meta["seed"], height_px=meta["height_px"],
+                   width_px=meta["width_px"], n_slices=meta["n_slices"])
+        jobs = [(meta["preset"], Path(args.stack), p)]
+        print(f"{args.stack}: {p.height_px}x{p.width_px} px, {p.n_slices} slices, seed {p.seed}\n")
+    else:
+        jobs = None
+        print(f"{args.size}x{args.size} px, {args.slices} slices, seed {args.seed}\n")
     print("| preset | mode | ROI thickness MAE (nm) | components found/true | worst mean error (nm) "
           "| tilt median abs err (deg) | NDF W1 (deg) | dE00 mean / median | masked | exposure "
           "(true) | time (s) |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
-        for name in args.presets:
-            p = preset(name, seed=args.seed, height_px=args.size, width_px=args.size,
-                       n_slices=args.slices)
-            generate_stack(Path(tmp) / name, p)
-            t = Path(tmp) / name / "truth"
+        if jobs is None:
+            jobs = []
+            for name in args.presets:
+                p = preset(name, seed=args.seed, height_px=args.size, width_px=args.size,
+                           n_slices=args.slices)
+                generate_stack(Path(tmp) / name, p)
+                jobs.append((name, Path(tmp) / name, p))
+        for name, folder, p in jobs:
+            t = folder / "truth"
             truth = {k: np.load(t / f"{k}.npy") for k in
                      ("thickness_nm", "tilt_deg", "visible")}
             for mode in ("seed", "joint"):
                 t0 = time.perf_counter()
-                r = analyze_stack(Path(tmp) / name, AnalysisOptions(mode=mode))
+                r = analyze_stack(folder, AnalysisOptions(mode=mode))
                 dt = time.perf_counter() - t0
                 s = score(r, truth, p)
                 print(f"| {name} | {mode} | {s['roi_mae_nm']:.2f} | {s['k']} | "

@@ -33,5 +33,19 @@ def optics_kwargs(args) -> dict:
                 observer=args.observer)
 
 
+def pair_type(sep: str, cast, example: str):
+    """argparse type for two values joined by ``sep`` (e.g. ``512x512``, ``0:400``)."""
+
+    def parse(text):
+        try:
+            a, b = (cast(v) for v in text.lower().split(sep))
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected two values as {example}, got {text!r}") from None
+        return a, b
+
+    return parse
+
+
 def example_epilog(*lines: str) -> str:
     return "example:\n" + "\n".join(f"  {line}" for line in lines)

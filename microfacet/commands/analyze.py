@@ -4,15 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import example_epilog
-
-
-def _range(text):
-    try:
-        lo, hi = (float(v) for v in text.split(":"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected LOW:HIGH in nm, got {text!r}") from None
-    return lo, hi
+from ._common import example_epilog, pair_type
 
 
 def register(sub):
@@ -37,7 +29,8 @@ def register(sub):
     p.add_argument("--roi-stride-px", type=int, default=None, help="ROI stride (default: size)")
     p.add_argument("--saturation-min", type=float, default=15.0,
                    help="mask HSV saturation below this, 0-255 scale (default 15)")
-    p.add_argument("--thickness-range-nm", type=_range, default=(0.0, 400.0), metavar="LOW:HIGH",
+    p.add_argument("--thickness-range-nm", type=pair_type(":", float, "LOW:HIGH in nm"),
+                   default=(0.0, 400.0), metavar="LOW:HIGH",
                    help="global thickness search range (default 0:400)")
     p.add_argument("--exposure", type=float, default=None,
                    help="known exposure (default: stack.json's, else estimated)")

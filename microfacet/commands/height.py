@@ -101,12 +101,12 @@ def run(args) -> int:
     import time
     from pathlib import Path
 
-    import cv2
     import numpy as np
 
     from .. import __version__
     from ..errors import InputError
     from ..focus import height_from_focus
+    from ..images import write_image
     from ..normals import normals_from_height, tilt_azimuth_deg
     from ..outdir import atomic_output_dir
     from ..progress import Progress
@@ -144,18 +144,11 @@ def run(args) -> int:
         np.save(tmp / "height_um.npy", res.height_um.astype(np.float32))
         np.save(tmp / "normals.npy", normals.astype(np.float32))
         np.save(tmp / "reliability_db.npy", res.reliability_db.astype(np.float32))
-        aif = res.all_in_focus
-        if stack.dtype == np.uint16:
-            img = np.round(np.clip(aif, 0, 1) * 65535).astype(np.uint16)
-        else:
-            img = np.round(np.clip(aif, 0, 1) * 255).astype(np.uint8)
-        if img.ndim == 3:
-            img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR)
-        if not cv2.imwrite(str(tmp / "all_in_focus.png"), img):
-            raise OSError(f"cannot write {tmp / 'all_in_focus.png'}")
+        write_image(tmp / "all_in_focus.png", res.all_in_focus,
+                    bit_depth=16 if stack.dtype == np.uint16 else 8)
         rel8 = np.round(np.clip(res.reliability_db, 0, 40) / 40 * 255).astype(np.uint8)
-        cv2.imwrite(str(tmp / "reliability.png"), rel8)
-        cv2.imwrite(str(tmp / "height.png"), _height_png(res.height_um))
+        write_image(tmp / "reliability.png", rel8)
+        write_image(tmp / "height.png", _height_png(res.height_um)[..., ::-1])  # BGR → RGB
         h = res.height_um
         ok = np.isfinite(h)
         summary = {

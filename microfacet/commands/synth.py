@@ -4,17 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import example_epilog
+from ._common import example_epilog, pair_type
 
 PRESET_NAMES = ("sd", "nd", "thick", "steep", "thin", "grainy", "noisy", "overexposed", "16bit")
-
-
-def _size(text):
-    try:
-        h, w = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected HxW, e.g. 512x512, got {text!r}") from None
-    return h, w
 
 
 def register(sub):
@@ -35,7 +27,8 @@ def register(sub):
     p.add_argument("out", metavar="OUT", help="output stack folder")
     p.add_argument("--preset", required=True, choices=PRESET_NAMES)
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--size", type=_size, default=None, metavar="HxW",
+    p.add_argument("--size", type=pair_type("x", int, "HxW, e.g. 512x512"), default=None,
+                   metavar="HxW",
                    help="image size in pixels (default 256x256)")
     p.add_argument("--slices", type=int, default=None, metavar="K",
                    help="number of focal planes (default 24)")
