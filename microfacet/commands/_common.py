@@ -49,3 +49,55 @@ def pair_type(sep: str, cast, example: str):
 
 def example_epilog(*lines: str) -> str:
     return "example:\n" + "\n".join(f"  {line}" for line in lines)
+
+
+def add_analysis_options(p: argparse.ArgumentParser) -> None:
+    """The options of :class:`microfacet.analyze.AnalysisOptions` (``analyze``, ``batch``)."""
+    g = p.add_argument_group("analysis")
+    g.add_argument("--mode", choices=("joint", "seed"), default="joint",
+                   help="joint: facet planes + colour (default); seed: the paper's method")
+    g.add_argument("--roi-size-px", type=int, default=255, help="ROI side (default 255)")
+    g.add_argument("--roi-stride-px", type=int, default=None, help="ROI stride (default: size)")
+    g.add_argument("--saturation-min", type=float, default=15.0,
+                   help="mask HSV saturation below this, 0-255 scale (default 15)")
+    g.add_argument("--thickness-range-nm", type=pair_type(":", float, "LOW:HIGH in nm"),
+                   default=(0.0, 400.0), metavar="LOW:HIGH",
+                   help="global thickness search range (default 0:400)")
+    g.add_argument("--exposure", type=float, default=None,
+                   help="known exposure (default: stack.json's, else estimated)")
+    g.add_argument("--facet-size-um", type=float, default=2.0,
+                   help="expected facet diameter for the joint mode (default 2)")
+    g.add_argument("--max-components", type=int, default=5,
+                   help="largest number of mixture components tried by BIC (default 5)")
+    g.add_argument("--align", nargs="?", const="ecc", choices=("ecc", "phase"), default=None,
+                   help="register slices before measuring focus")
+    g.add_argument("--film", default=None, metavar="NAME", help="override the stack's film set")
+    g.add_argument("--substrate", default=None, metavar="NAME",
+                   help="override the stack's substrate set")
+
+
+def analysis_options(args):
+    """:class:`~microfacet.analyze.AnalysisOptions` from the parsed options, validated; a
+    ``ValueError`` names the command-line option."""
+    from ..analyze import AnalysisOptions
+
+    opts = AnalysisOptions(
+        mode=args.mode, roi_size_px=args.roi_size_px, roi_stride_px=args.roi_stride_px,
+        saturation_min=args.saturation_min, thickness_range_nm=tuple(args.thickness_range_nm),
+        exposure=args.exposure, facet_size_um=args.facet_size_um,
+        max_components=args.max_components, align=args.align or False, film=args.film,
+        substrate=args.substrate)
+    try:
+        opts.validate()
+    except ValueError as exc:
+        name, _, reason = str(exc).partition(":")
+        raise ValueError(f"--{name.strip().replace('_', '-')}: {reason.strip()}") from None
+    for opt, value in (("--film", args.film), ("--substrate", args.substrate)):
+        if value is not None:
+            from ..optics import load_set
+
+            try:
+                load_set(value)
+            except ValueError as exc:
+                raise ValueError(f"{opt}: {exc}") from None
+    return opts

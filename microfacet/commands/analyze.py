@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import example_epilog, pair_type
+from ._common import add_analysis_options, analysis_options, example_epilog
 
 
 def register(sub):
@@ -23,26 +23,7 @@ def register(sub):
     )
     p.add_argument("stack", metavar="STACK", help="stack folder (microfacet-stack/1)")
     p.add_argument("--out", required=True, metavar="OUT", help="results folder (must not exist)")
-    p.add_argument("--mode", choices=("joint", "seed"), default="joint",
-                   help="joint: facet planes + colour (default); seed: the paper's method")
-    p.add_argument("--roi-size-px", type=int, default=255, help="ROI side (default 255)")
-    p.add_argument("--roi-stride-px", type=int, default=None, help="ROI stride (default: size)")
-    p.add_argument("--saturation-min", type=float, default=15.0,
-                   help="mask HSV saturation below this, 0-255 scale (default 15)")
-    p.add_argument("--thickness-range-nm", type=pair_type(":", float, "LOW:HIGH in nm"),
-                   default=(0.0, 400.0), metavar="LOW:HIGH",
-                   help="global thickness search range (default 0:400)")
-    p.add_argument("--exposure", type=float, default=None,
-                   help="known exposure (default: stack.json's, else estimated)")
-    p.add_argument("--facet-size-um", type=float, default=2.0,
-                   help="expected facet diameter for the joint mode (default 2)")
-    p.add_argument("--max-components", type=int, default=5,
-                   help="largest number of mixture components tried by BIC (default 5)")
-    p.add_argument("--align", nargs="?", const="ecc", choices=("ecc", "phase"), default=None,
-                   help="register slices before measuring focus")
-    p.add_argument("--film", default=None, metavar="NAME", help="override the stack's film set")
-    p.add_argument("--substrate", default=None, metavar="NAME",
-                   help="override the stack's substrate set")
+    add_analysis_options(p)
     p.add_argument("--no-report", action="store_true", help="skip report.pdf")
     p.add_argument("--overwrite", action="store_true", help="replace an existing OUT")
     p.set_defaults(run=run)
@@ -54,7 +35,7 @@ def run(args) -> int:
     import time
     from pathlib import Path
 
-    from ..analyze import AnalysisOptions, analyze_stack, write_results
+    from ..analyze import analyze_stack, write_results
     from ..errors import InputError
     from ..progress import Progress
     from ..stack import read_stack
@@ -62,18 +43,7 @@ def run(args) -> int:
     out = Path(args.out)
     if out.exists() and not args.overwrite:
         raise InputError(f"{out}: already exists (use --overwrite to replace it)")
-    opts = AnalysisOptions(
-        mode=args.mode, roi_size_px=args.roi_size_px, roi_stride_px=args.roi_stride_px,
-        saturation_min=args.saturation_min, thickness_range_nm=args.thickness_range_nm,
-        exposure=args.exposure, facet_size_um=args.facet_size_um,
-        max_components=args.max_components, align=args.align or False, film=args.film,
-        substrate=args.substrate)
-    try:
-        opts.validate()
-    except ValueError as exc:
-        name = str(exc).split(":")[0]
-        raise ValueError(f"--{name.replace('_', '-')}: {str(exc).split(':', 1)[1].strip()}") \
-            from None
+    opts = analysis_options(args)
     t0 = time.perf_counter()
     stack = read_stack(args.stack)  # validates everything before any work
     stages = ["height from focus", "colour", "colour table", "thickness per ROI",
