@@ -14,7 +14,8 @@ def add_optics_options(p: argparse.ArgumentParser) -> None:
                    help=f"optical-constant set of the oxide film (default {DEFAULT_FILM})")
     g.add_argument("--substrate", default=None, metavar="NAME",
                    help=f"optical-constant set of the metal (default {DEFAULT_SUBSTRATE})")
-    g.add_argument("--illuminant", default="D65", help="illuminant name (default D65)")
+    g.add_argument("--illuminant", default="D65", metavar="NAME",
+                   help="illuminant name (default D65)")
     g.add_argument("--observer", default="2", choices=["2", "10"],
                    help="CIE standard observer in degrees (default 2)")
 
@@ -56,18 +57,18 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("analysis")
     g.add_argument("--mode", choices=("joint", "seed"), default="joint",
                    help="joint: facet planes + colour (default); seed: the paper's method")
-    g.add_argument("--roi-size-px", type=int, default=255, help="ROI side (default 255)")
-    g.add_argument("--roi-stride-px", type=int, default=None, help="ROI stride (default: size)")
-    g.add_argument("--saturation-min", type=float, default=15.0,
+    g.add_argument("--roi-size-px", type=int, default=255, metavar="PX", help="ROI side (default 255)")
+    g.add_argument("--roi-stride-px", type=int, default=None, metavar="PX", help="ROI stride (default: size)")
+    g.add_argument("--saturation-min", type=float, default=15.0, metavar="S",
                    help="mask HSV saturation below this, 0-255 scale (default 15)")
     g.add_argument("--thickness-range-nm", type=pair_type(":", float, "LOW:HIGH in nm"),
                    default=(0.0, 400.0), metavar="LOW:HIGH",
                    help="global thickness search range (default 0:400)")
-    g.add_argument("--exposure", type=float, default=None,
+    g.add_argument("--exposure", type=float, default=None, metavar="E",
                    help="known exposure (default: stack.json's, else estimated)")
-    g.add_argument("--facet-size-um", type=float, default=2.0,
+    g.add_argument("--facet-size-um", type=float, default=2.0, metavar="UM",
                    help="expected facet diameter for the joint mode (default 2)")
-    g.add_argument("--max-components", type=int, default=5,
+    g.add_argument("--max-components", type=int, default=5, metavar="K",
                    help="largest number of mixture components tried by BIC (default 5)")
     g.add_argument("--align", nargs="?", const="ecc", choices=("ecc", "phase"), default=None,
                    help="register slices before measuring focus")
@@ -101,3 +102,21 @@ def analysis_options(args):
             except ValueError as exc:
                 raise ValueError(f"{opt}: {exc}") from None
     return opts
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Wraps description paragraphs (split at blank lines) to the terminal width, and keeps
+    indented lines (examples) as written."""
+
+    def _fill_text(self, text, width, indent):
+        import textwrap
+
+        out = []
+        for para in text.split("\n\n"):
+            lines = para.splitlines()
+            if lines and all(line.startswith(" ") or line.endswith(":") for line in lines):
+                out.append("\n".join(indent + line for line in lines))
+            else:
+                out.append(textwrap.fill(" ".join(para.split()), width,
+                                         initial_indent=indent, subsequent_indent=indent))
+        return "\n\n".join(out)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_analysis_options, analysis_options, example_epilog
+from ._common import HelpFormatter, add_analysis_options, analysis_options, example_epilog
 
 
 def register(sub):
@@ -19,7 +19,7 @@ def register(sub):
             "tilt_sigma_deg.npy, thickness_roi.csv, thickness_pdf.csv, ndf_pdf.csv, report.pdf."),
         epilog=example_epilog("microfacet analyze fixtures/stacks/nd-fixture --out out/nd",
                               "microfacet analyze my-stack --out res --mode seed --roi-size-px 128"),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("stack", metavar="STACK", help="stack folder (microfacet-stack/1)")
     p.add_argument("--out", required=True, metavar="OUT", help="results folder (must not exist)")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_analysis_options, analysis_options, example_epilog
+from ._common import HelpFormatter, add_analysis_options, analysis_options, example_epilog
 
 #: Exit status when the batch ran but at least one stack failed.
 EXIT_SOME_FAILED = 1
@@ -29,7 +29,7 @@ def register(sub):
             "microfacet batch drawer/* --out results --jobs 4",
             "microfacet batch --stacks-from list.txt --out results --scheduler tcp://head:8786",
             "microfacet batch drawer/* --out results --mode seed --overwrite"),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("stacks", nargs="*", metavar="STACK", help="stack folders")
     p.add_argument("--stacks-from", metavar="FILE", default=None,

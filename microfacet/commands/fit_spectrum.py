@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_optics_options, example_epilog, optics_kwargs
+from ._common import HelpFormatter, add_optics_options, example_epilog, optics_kwargs, pair_type
 
 
 def register(sub):
@@ -20,13 +20,14 @@ def register(sub):
         epilog=example_epilog("microfacet fit-spectrum sample2.csv --angle-deg 8",
                               "(CSV columns: wavelength_nm,reflectance; reflectance as a "
                               "fraction or in percent)"),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("spectrum", metavar="SPECTRUM.csv", help="wavelength_nm,reflectance CSV")
-    p.add_argument("--angle-deg", type=float, default=0.0,
+    p.add_argument("--angle-deg", type=float, default=0.0, metavar="DEG",
                    help="angle of incidence on the film in degrees (default 0)")
-    p.add_argument("--min-thickness-nm", type=float, default=0.0)
-    p.add_argument("--max-thickness-nm", type=float, default=1000.0)
+    p.add_argument("--thickness-range-nm", type=pair_type(":", float, "LOW:HIGH in nm"),
+                   default=(0.0, 1000.0), metavar="LOW:HIGH",
+                   help="thickness search range in nm (default 0:1000)")
     p.add_argument("--fit-scale", action="store_true",
                    help="also fit a multiplicative scale of the measured spectrum")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
@@ -45,7 +46,7 @@ def run(args) -> int:
     try:
         fit = fit_thickness(wl, R, angle_deg=args.angle_deg, film=opt["film"],
                             substrate=opt["substrate"], fit_scale=args.fit_scale,
-                            thickness_range_nm=(args.min_thickness_nm, args.max_thickness_nm))
+                            thickness_range_nm=tuple(args.thickness_range_nm))
     except ValueError as exc:
         raise ValueError(f"{args.spectrum}: {exc}") from None
     result = {

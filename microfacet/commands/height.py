@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 
+from ._common import HelpFormatter
+
 EPILOG = """examples:
   microfacet height my-stack --out my-stack-height
   microfacet height my-stack --out h --operator sml --window-px 9 --fill --overwrite
@@ -25,7 +27,7 @@ def register(subparsers) -> argparse.ArgumentParser:
             "Height from focus: for every pixel the stage height where it is sharpest "
             "(sub-slice least-squares peak fit), a Pertuz-style reliability map in dB, unit "
             "normals from the height and the pixel size, and the all-in-focus composite."),
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+        epilog=EPILOG, formatter_class=HelpFormatter)
     from ..focus import (DEFAULT_FIT_RADIUS, DEFAULT_INTERPOLATION, DEFAULT_OPERATOR,
                          DEFAULT_WINDOW, DEFAULT_WINDOW_PX, INTERPOLATIONS, OPERATORS)
 

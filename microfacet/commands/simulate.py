@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_optics_options, example_epilog, optics_kwargs
+from ._common import HelpFormatter, add_optics_options, example_epilog, optics_kwargs
 
 _EXAMPLES = (
     "microfacet simulate --thickness-nm 51 --out sd-blue",
@@ -50,10 +50,10 @@ def register(sub):
             "the specular band |view - light| <= --specular-halfwidth-deg. "
             "See docs/forward-simulation.md."),
         epilog=example_epilog(*_EXAMPLES),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     src = p.add_argument_group("what to simulate")
-    src.add_argument("--thickness-nm", type=float, default=None,
+    src.add_argument("--thickness-nm", type=float, default=None, metavar="NM",
                      help="one oxide thickness in nm (alone: the half-vector map)")
     src.add_argument("--results", default=None, metavar="DIR",
                      help="analysis results folder: fitted mixtures from DIR/summary.json")
@@ -65,27 +65,27 @@ def register(sub):
                      help="forward model (default microfacet when an NDF is known)")
     src.add_argument("--lobe-exponent", type=float, default=None, metavar="N",
                      help="eq. 6 cosine-lobe exponent n (default 100, or the fit)")
-    p.add_argument("--out", required=True, help="output folder (must not exist)")
-    p.add_argument("--theta-max-deg", type=float, default=85.0,
+    p.add_argument("--out", required=True, metavar="OUT", help="output folder (must not exist)")
+    p.add_argument("--theta-max-deg", type=float, default=85.0, metavar="DEG",
                    help="largest light and view zenith angle (default 85)")
-    p.add_argument("--theta-step-deg", type=float, default=1.0,
+    p.add_argument("--theta-step-deg", type=float, default=1.0, metavar="DEG",
                    help="angle grid step (default 1)")
-    p.add_argument("--exposure", type=float, default=None,
+    p.add_argument("--exposure", type=float, default=None, metavar="E",
                    help="reflectance scale for display (default: auto, the 98th percentile "
                         "of Y at 0.9 of white; 1 for --thickness-nm)")
-    p.add_argument("--wavelength-step-nm", type=float, default=5.0,
+    p.add_argument("--spectral-step-nm", type=float, default=5.0, metavar="NM",
                    help="spectral step over 380-780 nm of the spectra (default 5)")
     cmp_ = p.add_argument_group("comparison with a measured map")
     cmp_.add_argument("--compare", default=None, metavar="MEASURED.npz",
                       help="measured angular map (microfacet-angular/1 .npz)")
-    cmp_.add_argument("--specular-halfwidth-deg", type=float, default=10.0,
+    cmp_.add_argument("--specular-halfwidth-deg", type=float, default=10.0, metavar="DEG",
                       help="specular band |view - light| <= this is excluded from the "
                            "diffuse mean (default 10)")
     cmp_.add_argument("--fit-exponent", action="store_true",
                       help="fit the eq. 6 exponent n by least mean dE00 (needs --compare)")
     cmp_.add_argument("--fit-exposure", action="store_true",
                       help="fit a global exposure by least mean dE00 (needs --compare)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing --out")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing OUT")
     add_optics_options(p)
     p.set_defaults(run=run)
     return p
@@ -283,9 +283,9 @@ def _run_distributions(args) -> int:
     n = 100.0 if args.lobe_exponent is None else float(args.lobe_exponent)
     if not (np.isfinite(n) and n >= 0):
         raise ValueError("--lobe-exponent: must be finite and >= 0")
-    step = args.wavelength_step_nm
+    step = args.spectral_step_nm
     if not (np.isfinite(step) and 0 < step <= 20):
-        raise ValueError("--wavelength-step-nm: must be in (0, 20]")
+        raise ValueError("--spectral-step-nm: must be in (0, 20]")
     wl = np.linspace(380.0, 780.0, int(round(400.0 / step)) + 1)
 
     measured = None

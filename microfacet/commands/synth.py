@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import example_epilog, pair_type
+from ._common import HelpFormatter, example_epilog, pair_type
 
 PRESET_NAMES = ("sd", "nd", "thick", "steep", "thin", "grainy", "noisy", "overexposed", "16bit")
 
@@ -22,7 +22,7 @@ def register(sub):
             + "."),
         epilog=example_epilog("microfacet synth nd-demo --preset nd --seed 1 --size 512x512 "
                               "--slices 32"),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     p.add_argument("out", metavar="OUT", help="output stack folder")
     p.add_argument("--preset", required=True, choices=PRESET_NAMES)
