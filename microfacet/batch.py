@@ -271,23 +271,42 @@ def _local_results(tasks, jobs):
     yield from parallel(delayed(_analyse_one)(*t, threads=1) for t in tasks)
 
 
-def _dask_client(scheduler, timeout_s):
+def _dask_client(scheduler, timeout_s, jobs=None):
+    """``(client, cluster)``: a Client of the scheduler at ``scheduler``, or of a new
+    LocalCluster for ``"local"`` (``cluster`` is None for an existing scheduler)."""
     try:
-        from distributed import Client
+        from distributed import Client, LocalCluster
     except ImportError:
-        raise ValueError("scheduler: needs dask.distributed (pip install 'dask[distributed]')"
-                         ) from None
+        raise ValueError("scheduler: needs dask.distributed (pip install 'dask[distributed]' "
+                         "or microfacet[cluster])") from None
+    if not log.isEnabledFor(logging.DEBUG):  # Dask's INFO chatter only with -vv
+        logging.getLogger("distributed").setLevel(logging.WARNING)
+    if scheduler == "local":
+        # workers are processes with one thread each; the cluster closes with the client
+        cluster = LocalCluster(n_workers=jobs or os.cpu_count() or 1, threads_per_worker=1,
+                               processes=True, host="127.0.0.1", dashboard_address=":0")
+        log.info("Dask LocalCluster at %s, dashboard %s", cluster.scheduler_address,
+                 cluster.dashboard_link)
+        return Client(cluster, set_as_default=False), cluster
     try:
-        return Client(scheduler, timeout=timeout_s, set_as_default=False)
+        return Client(scheduler, timeout=timeout_s, set_as_default=False), None
     except (OSError, TimeoutError, ValueError) as exc:
         raise ValueError(f"scheduler: cannot connect to {scheduler} "
                          f"({' '.join(str(exc).split())})") from None
 
 
-def _dask_results(tasks, client):
-    """Yield rows as stacks finish on the Dask cluster of ``client``; closes the client."""
+def _close(dask):
+    client, cluster = dask
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+def _dask_results(tasks, dask):
+    """Yield rows as stacks finish on the Dask cluster; closes the client (and cluster)."""
     from distributed import as_completed
 
+    client = dask[0]
     try:
         futures = {client.submit(_analyse_one, *t, threads=1, pure=False,
                                  key=f"microfacet-{i}-{os.getpid()}-{time.time_ns()}"): t
@@ -303,7 +322,7 @@ def _dask_results(tasks, client):
                        "reason": f"{type(exc).__name__}: {' '.join(str(exc).split())}",
                        "traceback": traceback.format_exc(), "time_s": None, "worker": ""}
     finally:
-        client.close()
+        _close(dask)
 
 
 def run_batch(stacks, out_dir, *, options=None, jobs=None, scheduler=None, overwrite=False,
@@ -321,9 +340,11 @@ def run_batch(stacks, out_dir, *, options=None, jobs=None, scheduler=None, overw
         The same for every stack.
     jobs : int, optional
         Local worker processes (default: the CPU count, at most the number of stacks);
-        1 runs in this process. Ignored with ``scheduler``.
+        1 runs in this process. With ``scheduler="local"``: the cluster's workers.
     scheduler : str, optional
         Address of a Dask distributed scheduler; the stacks run as tasks there.
+        ``"local"`` starts a Dask ``LocalCluster`` on this machine (loopback only) for the
+        batch and closes it afterwards.
     overwrite : bool
         Re-analyse stacks whose results exist.
     report : bool
@@ -356,7 +377,8 @@ def run_batch(stacks, out_dir, *, options=None, jobs=None, scheduler=None, overw
     out_dir = Path(os.path.abspath(out_dir))
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"{out_dir}: exists and is not a folder")
-    client = _dask_client(scheduler, connect_timeout_s) if scheduler else None  # before writing
+    dask = (_dask_client(scheduler, connect_timeout_s, jobs) if scheduler  # before writing
+            else None)
     names = result_names(stacks)
     out_dir.mkdir(parents=True, exist_ok=True)
 
@@ -405,8 +427,8 @@ def run_batch(stacks, out_dir, *, options=None, jobs=None, scheduler=None, overw
 
     _write_summary(summary_csv, [r for r in rows if r is not None])
     if tasks:
-        if client is not None:
-            results = _dask_results(tasks, client)
+        if dask is not None:
+            results = _dask_results(tasks, dask)
         else:
             n = min(jobs or os.cpu_count() or 1, len(tasks))
             results = _local_results(tasks, n)
@@ -420,7 +442,7 @@ def run_batch(stacks, out_dir, *, options=None, jobs=None, scheduler=None, overw
                     finish({"stack": stack, "results": str(out_dir / names[i]),
                             "status": "failed", "reason": f"not finished: {reason}",
                             "traceback": traceback.format_exc()})
-    elif client is not None:
-        client.close()
+    elif dask is not None:
+        _close(dask)
     _write_summary(summary_csv, rows)
     return BatchResult(rows=rows, summary_csv=summary_csv, elapsed_s=time.perf_counter() - t0)

@@ -173,3 +173,12 @@ def test_stacks_from_file(drawer, tmp_path):
     assert main(["batch", "--stacks-from", str(lst), "--out", str(out), "--jobs", "1",
                  *FAST]) == 0
     assert [Path(r["stack"]).name for r in _rows(out)] == ["a"]
+
+
+def test_scheduler_local_starts_and_closes_a_local_cluster(drawer, tmp_path):
+    pytest.importorskip("distributed")
+    out = tmp_path / "res"
+    assert main(["batch", str(drawer / "a"), "--out", str(out), "--scheduler", "local",
+                 "--jobs", "1", *FAST]) == 0
+    row = _rows(out)[0]
+    assert row["status"] == "done" and results_complete(row["results"])[0]

@@ -27,6 +27,7 @@ def register(sub):
             "summary), 2 for bad arguments."),
         epilog=example_epilog(
             "microfacet batch drawer/* --out results --jobs 4",
+            "microfacet batch drawer/* --out results --scheduler local --jobs 2",
             "microfacet batch --stacks-from list.txt --out results --scheduler tcp://head:8786",
             "microfacet batch drawer/* --out results --mode seed --overwrite"),
         formatter_class=HelpFormatter,
@@ -41,7 +42,8 @@ def register(sub):
                        help="local worker processes (default: CPU count); 1 = in this process")
     run_g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="run on the Dask distributed scheduler at ADDRESS "
-                            "(e.g. tcp://10.0.0.5:8786) instead of local processes")
+                            "(e.g. tcp://10.0.0.5:8786) instead of local processes; 'local' "
+                            "starts a Dask LocalCluster of --jobs workers on this machine")
     add_analysis_options(p)
     p.add_argument("--no-report", action="store_true", help="skip each report.pdf")
     p.add_argument("--overwrite", action="store_true",
