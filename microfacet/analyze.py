@@ -104,6 +104,11 @@ class AnalysisOptions:
             raise ValueError("tilt_step_deg: must be in [0.05, 5]")
         if not 1 <= self.max_components <= 10:
             raise ValueError("max_components: must be in [1, 10]")
+        if not self.roi_size_px >= 8:
+            raise ValueError(f"roi_size_px: must be >= 8, got {self.roi_size_px!r}")
+        if self.roi_stride_px is not None and not 1 <= self.roi_stride_px <= self.roi_size_px:
+            raise ValueError(f"roi_stride_px: must be in [1, roi_size_px], "
+                             f"got {self.roi_stride_px!r}")
 
 
 @dataclass
@@ -165,6 +170,24 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
     -------
     AnalysisResult
 
+    Raises
+    ------
+    InputError
+        A stack that breaks the format (:func:`microfacet.stack.read_stack`), fewer than 3
+        slices, or no colour information: every pixel masked (grey, dark or clipped images)
+        or too few unmasked pixels in every ROI. The message names stack.json, the key and
+        the masked fraction per reason.
+    ValueError
+        Bad options (the message names the option).
+
+    Notes
+    -----
+    Hard cases with a result rather than an error: slices without focus information
+    (identical or featureless) give a height map that is NaN everywhere
+    (``summary.json`` ``height.unreliable_fraction`` = 1, a logged warning); the surface is
+    then taken as flat (``tilt_height_deg`` = 0, no facet-plane fits), so the tilts come
+    from colour alone. A ROI larger than the image is one ROI of the image's size.
+
     Examples
     --------
     >>> from microfacet.analyze import analyze_stack
@@ -214,10 +237,19 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
                          f"least 3 slices, the stack has {st.n_slices}")
     foc = height_from_focus(st, align=opt.align, **kw)
     t0 = _timer(timings, "height_from_focus", t0)
-    height_filled = fill_missing(foc.height_um, method="smooth") if np.isnan(
-        foc.height_um).any() else foc.height_um
-    if not np.isfinite(height_filled).any():
-        height_filled = foc.height_fit_um
+    no_focus = not foc.reliable.any()
+    if no_focus:
+        # No focus information (e.g. identical or featureless slices): the fitted height is
+        # rounding noise, so the surface is taken as flat and the facet planes get no
+        # weight; tilts come from colour alone. summary.json: height.unreliable_fraction 1.
+        log.warning("%s: no pixel has a reliable height (the slices carry no focus "
+                    "information); the surface is taken as flat and facet tilts come from "
+                    "colour alone", st.path)
+        height_filled = np.zeros(foc.height_um.shape, np.float32)
+    elif np.isnan(foc.height_um).any():
+        height_filled = fill_missing(foc.height_um, method="smooth")
+    else:
+        height_filled = foc.height_um
     normals = normals_from_height(height_filled, pixel_size_um=st.pixel_size_um,
                                   smooth_sigma_px=1.0)
     tilt_h, _ = tilt_azimuth_deg(normals)
@@ -240,6 +272,8 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
 
     noise_de = estimate_colour_noise(lab, cm.mask)
     t0 = _timer(timings, "colour_and_mask", t0)
+    if cm.mask.all():
+        raise InputError(_no_colour_message(st, cm, opt, "every pixel is masked"))
 
     # 3. Colour table for the scene.
     step("colour table")
@@ -256,6 +290,10 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
     rois = roi_grid(lab.shape[:2], size_px=opt.roi_size_px, stride_px=opt.roi_stride_px)
     roi = fit_roi_thickness(lab, tilt_h, cm.mask, table, rois=rois, exposure=exposure,
                             seed=opt.seed)
+    if not np.isfinite(roi.thickness_nm).any():
+        raise InputError(_no_colour_message(
+            st, cm, opt, f"only {int((~cm.mask).sum())} unmasked pixels, too few in every "
+                         f"region of interest"))
     exposure = roi.exposure
     ri, ci = nearest_roi_index(lab.shape[:2], *rois)
     roi_index = ri[:, None] * len(rois[1]) + ci[None, :]
@@ -265,9 +303,10 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
     # 5. Per-pixel thickness and tilt.
     step("tilt per pixel")
     usable = ~cm.mask & np.isfinite(thick_roi_px)
-    theta_grid = np.arange(0.0, max_tilt + 1e-9, opt.tilt_step_deg)
-    if theta_grid[-1] < max_tilt - 1e-9:
-        theta_grid = np.append(theta_grid, max_tilt)
+    # invert_tilt needs a uniform grid (its parabola refinement and sensitivities use one
+    # step): equal steps of at most tilt_step_deg ending at max_tilt, at least 3 nodes.
+    n_steps = max(2, math.ceil(max_tilt / opt.tilt_step_deg - 1e-9))
+    theta_grid = np.linspace(0.0, max_tilt, n_steps + 1)
     H, W = lab.shape[:2]
     thickness = np.full((H, W), np.nan, np.float32)
     tilt = np.full((H, W), np.nan, np.float32)
@@ -298,7 +337,7 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
         edge[:, 1:] |= facets[:, 1:] != facets[:, :-1]
         edge[1:, :] |= facets[1:, :] != facets[:-1, :]
         dist = ndimage.distance_transform_edt(~edge)
-        weight = rel * np.clip(dist / 2.0, 0.0, 1.0)
+        weight = rel * np.clip(dist / 2.0, 0.0, 1.0) if not no_focus else np.zeros((H, W))
         ff = fit_facet_planes(facets, foc.height_fit_um, weight, pixel_size_um=st.pixel_size_um,
                               fallback_tilt_deg=tilt_h)
         tilt_f = np.clip(ff.tilt_deg, 0, max_tilt)
@@ -354,6 +393,17 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
         optics={"film": film, "substrate": substrate, "illuminant": illuminant,
                 "numerical_aperture": na},
         timings_s=timings)
+
+
+def _no_colour_message(st, cm, opt, what):
+    """One-line InputError text for a stack without usable colour, with the mask reasons."""
+    key = "tiff" if st.tiff_path is not None else "slices"
+    f = cm.fractions()
+    reasons = ", ".join(f"{name.replace('_', ' ')} {100 * f[name]:.0f}%" for name in
+                        ("low_saturation", "dark", "clipped", "invalid", "shadow"))
+    return (f"{st.path / 'stack.json'}: key {key!r}: no colour information to analyse, "
+            f"{what} ({reasons}; saturation_min {opt.saturation_min:g}, value_min "
+            f"{opt.value_min:g} on the 0-255 scale)")
 
 
 def _refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table, exposure, *,
@@ -420,7 +470,7 @@ def write_results(result: AnalysisResult, out, *, overwrite=False, report=True) 
         Also write ``report.pdf`` (and its PNG figures).
     """
     from .images import write_image
-    from .mixtures import pdf_table
+    from .mixtures import _cells, pdf_table
     from .outdir import atomic_output_dir
 
     r = result
@@ -466,7 +516,14 @@ def write_results(result: AnalysisResult, out, *, overwrite=False, report=True) 
                      np.empty((0, 3)))
         tl = r.tilt_deg[np.isfinite(r.tilt_deg)]
         if tl.size and r.ndf_fit is not None:
-            grid = np.arange(0.25, r.max_tilt_deg, 0.5)
+            # Equal cells of <= 0.5° exactly covering [0, max_tilt] (tilts lie there), at
+            # least two (pdf_table's minimum) even for a tiny numerical aperture.
+            n_cells = max(2, math.ceil(r.max_tilt_deg / 0.5 - 1e-9))
+            grid = (np.arange(n_cells) + 0.5) * (r.max_tilt_deg / n_cells)
+            # Tilts at 0 or max_tilt may fall a rounding error outside the outer cell edges
+            # (float32 map, edges from the grid): clip them onto those edges.
+            _, edges = _cells(grid)
+            tl = np.clip(tl.astype(np.float64), edges[0], edges[-1])
             _pdf_csv(tmp / "ndf_pdf.csv", "tilt_deg,density,mixture_density",
                      pdf_table(tl, r.ndf_fit.mixture, grid=grid))
         else:

@@ -938,8 +938,9 @@ def _pair(lab1: Any, lab2: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]
     n = math.prod(shape[:-1])
     p1 = np.empty((3, n), dtype=dtype)
     p2 = np.empty((3, n), dtype=dtype)
-    p1.reshape((3,) + shape[:-1])[...] = np.moveaxis(x1, -1, 0)
-    p2.reshape((3,) + shape[:-1])[...] = np.moveaxis(x2, -1, 0)
+    # broadcast first: moving the channel axis of a (3,) colour would misalign it
+    p1.reshape((3,) + shape[:-1])[...] = np.moveaxis(np.broadcast_to(x1, shape), -1, 0)
+    p2.reshape((3,) + shape[:-1])[...] = np.moveaxis(np.broadcast_to(x2, shape), -1, 0)
     return p1, p2, shape[:-1], dtype
 
 
@@ -1086,7 +1087,7 @@ def delta_e_2000(lab1: Any, lab2: Any) -> np.ndarray:
     f2 = np.broadcast_to(x2, shape).reshape(-1, 3)
     n = f1.shape[0]
     out = np.empty(n, dtype=dtype)
-    m = min(_CHUNK, n)
+    m = max(1, min(_CHUNK, n))  # n = 0 (no pairs): an empty result, not a zero step
     inp = np.empty((6, m), dtype=dtype)
     work = np.empty((16, m), dtype=dtype)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):

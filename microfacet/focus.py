@@ -211,12 +211,16 @@ def peak_fit(values: np.ndarray, x: np.ndarray, *, weighted: bool = True, dtype=
     coef : ndarray of ``dtype``, shape (3, ...)
         ``(a, b, c)`` of ``log F ≈ a x² + b x + c``.
     ok : ndarray of bool, shape (...)
-        True where the fit has a maximum (``a < 0``).
+        True where the fit has a maximum (``a < 0``). A flat curve (all valid values equal
+        to 1e-6 relative, e.g. identical slices) has none, whatever the sign of the
+        rounding-level ``a``.
     """
     v = np.asarray(values, dtype=dtype)
     x = np.asarray(x, dtype=dtype)
     valid = np.isfinite(v) & np.isfinite(x) & (v > 0)
     vmax = np.max(np.where(valid, v, 0.0), axis=0)
+    vmin = np.min(np.where(valid, v, np.inf), axis=0)
+    flat = vmax - vmin <= 1e-6 * vmax  # a's sign is rounding noise there: no maximum
     tiny = np.finfo(np.float32).tiny
     L = np.log(np.where(valid, np.maximum(v, tiny), 1.0))
     if weighted:
@@ -243,7 +247,7 @@ def peak_fit(values: np.ndarray, x: np.ndarray, *, weighted: bool = True, dtype=
     a = np.where(good, da / safe, 0.0)
     b = np.where(good, db / safe, 0.0)
     c = np.where(good, dc / safe, 0.0)
-    ok = good & (a < 0)
+    ok = good & (a < 0) & ~flat
     off = np.where(ok, -b / (2.0 * np.where(ok, a, -1.0)), 0.0)
     lo = np.min(np.where(valid, x, np.inf), axis=0)
     hi = np.max(np.where(valid, x, -np.inf), axis=0)

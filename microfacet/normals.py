@@ -68,6 +68,7 @@ def gradient_nan(height: np.ndarray, spacing: float = 1.0):
     Parameters
     ----------
     height : ndarray, shape (H, W)
+        NaN or ±inf marks unknown pixels (both are treated as missing).
     spacing : float
         Sample spacing (e.g. the pixel size in µm).
 
@@ -75,9 +76,12 @@ def gradient_nan(height: np.ndarray, spacing: float = 1.0):
     -------
     d_row, d_col : ndarray of float64, shape (H, W)
         ``∂h/∂row`` and ``∂h/∂col`` per unit of ``spacing``: central differences where both
-        neighbours are finite, one-sided where one is, NaN where none is (or h is NaN).
+        neighbours are finite, one-sided where one is, NaN where none is (or h is not finite).
     """
     h = np.asarray(height, dtype=np.float64)
+    finite = np.isfinite(h)
+    if not finite.all():
+        h = np.where(finite, h, np.nan)  # ±inf is missing too (and inf − inf warns)
     out = []
     for axis in (0, 1):
         fwd = np.full_like(h, np.nan)
@@ -107,7 +111,7 @@ def normals_from_height(height_um: np.ndarray, *, pixel_size_um: float,
     Parameters
     ----------
     height_um : ndarray, shape (H, W)
-        Height in µm; NaN marks unknown pixels.
+        Height in µm; NaN (or ±inf) marks unknown pixels.
     pixel_size_um : float, keyword-only
         Lateral pixel size on the sample, µm (> 0).
     smooth_sigma_px : float, keyword-only
@@ -147,7 +151,8 @@ def tilt_azimuth_deg(normals: np.ndarray):
     Parameters
     ----------
     normals : ndarray, shape (..., 3)
-        ``(nx, ny, nz)``, z up (need not be exactly unit length).
+        ``(nx, ny, nz)``, z up (need not be exactly unit length). A normal with a NaN or
+        infinite component is unknown.
 
     Returns
     -------
@@ -156,11 +161,14 @@ def tilt_azimuth_deg(normals: np.ndarray):
     azimuth_deg : ndarray of float32, shape (...)
         Direction of the normal's projection on the sample plane, degrees counter-clockwise
         from +x (image right) towards +y (image up), in (-180, 180]; 0 where the tilt is 0.
-        NaN in, NaN out.
+        NaN (or inf) in, NaN out.
     """
     n = np.asarray(normals, dtype=np.float64)
     if n.shape[-1] != 3:
         raise ValueError(f"normals must have shape (..., 3), got {n.shape}")
+    bad = ~np.all(np.isfinite(n), axis=-1)
+    if bad.any():
+        n = np.where(bad[..., None], np.nan, n)
     r = np.sqrt(np.sum(n * n, axis=-1))
     with np.errstate(invalid="ignore", divide="ignore"):
         tilt = np.degrees(np.arccos(np.clip(n[..., 2] / r, -1.0, 1.0)))

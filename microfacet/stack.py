@@ -37,11 +37,13 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
 import os
 import struct
+import threading
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -217,6 +219,30 @@ def _to_rgb_or_grey(img: np.ndarray) -> np.ndarray:
     return img
 
 
+_cv_log_lock = threading.Lock()
+_cv_log_state = {"active": 0, "level": None}
+
+
+@contextlib.contextmanager
+def _opencv_warnings_off(cv2):
+    """OpenCV writes its decoders' warnings about corrupt data straight to stderr (fd 2);
+    a failed decode is reported as one InputError naming the slice instead. Thread-safe:
+    the user's log level is restored when the last concurrent decode ends."""
+    with _cv_log_lock:
+        if _cv_log_state["active"] == 0:
+            _cv_log_state["level"] = cv2.utils.logging.getLogLevel()
+            cv2.utils.logging.setLogLevel(min(_cv_log_state["level"],
+                                              cv2.utils.logging.LOG_LEVEL_ERROR))
+        _cv_log_state["active"] += 1
+    try:
+        yield
+    finally:
+        with _cv_log_lock:
+            _cv_log_state["active"] -= 1
+            if _cv_log_state["active"] == 0:
+                cv2.utils.logging.setLogLevel(_cv_log_state["level"])
+
+
 def _decode(path: Path, where: str, page: int | None = None) -> np.ndarray:
     """Decode one image to its native dtype, grey ``(H, W)`` or RGB ``(H, W, 3)``."""
     suffix = path.suffix.lower()
@@ -228,7 +254,8 @@ def _decode(path: Path, where: str, page: int | None = None) -> np.ndarray:
             return _to_rgb_or_grey(np.asarray(img))
         import cv2
 
-        img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION)
+        with _opencv_warnings_off(cv2):
+            img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION)
         if img is None:
             raise InputError(f"{where}: cannot decode image")
         if img.ndim == 3:
