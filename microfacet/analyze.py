@@ -208,9 +208,6 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
     opt = options or AnalysisOptions()
     opt.validate()
     st = stack if isinstance(stack, Stack) else read_stack(stack)
-    if not st.has_slices:
-        raise InputError(f"{st.path / 'stack.json'}: a microscope export without slices is not "
-                         f"supported by analyze yet (needs 'slices' or 'tiff')")
     film = opt.film or st.film or DEFAULT_FILM
     substrate = opt.substrate or st.substrate or DEFAULT_SUBSTRATE
     for key, name in (("film", film), ("substrate", substrate)):
@@ -232,10 +229,13 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
         kw["operator"] = opt.operator
     if opt.window_px:
         kw["window_px"] = opt.window_px
-    if st.n_slices < 3:
+    if not st.has_slices:
+        foc = _export_as_focus(st)  # the microscope's own height map and composite
+    elif st.n_slices < 3:
         raise InputError(f"{st.path / 'stack.json'}: key 'slices': height from focus needs at "
                          f"least 3 slices, the stack has {st.n_slices}")
-    foc = height_from_focus(st, align=opt.align, **kw)
+    else:
+        foc = height_from_focus(st, align=opt.align, **kw)
     t0 = _timer(timings, "height_from_focus", t0)
     no_focus = not foc.reliable.any()
     if no_focus:
@@ -406,6 +406,25 @@ def _no_colour_message(st, cm, opt, what):
             f"{opt.value_min:g} on the 0-255 scale)")
 
 
+def _export_as_focus(st):
+    """A :class:`~microfacet.focus.FocusResult` from a microscope export (``height_um`` +
+    ``image`` in stack.json): the height map as given (non-finite = unreliable), the export
+    image as the all-in-focus composite, no focus measure (reliability NaN)."""
+    from .focus import FocusResult
+
+    t0 = time.perf_counter()
+    h = st.read_export_height()
+    img = st.read_export_image()
+    reliable = np.isfinite(h)
+    shape = h.shape
+    return FocusResult(
+        height_um=h, height_fit_um=h.copy(), reliability_db=np.full(shape, np.nan, np.float32),
+        reliable=reliable, best_index=np.zeros(shape, np.int32),
+        focus_max=np.full(shape, np.nan, np.float32), all_in_focus=img,
+        z_um=np.zeros(0), params={"source": "microscope export"},
+        timings_s={"total": round(time.perf_counter() - t0, 4)})
+
+
 def _refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table, exposure, *,
                                interior, seed=0, n_facets=2000):
     """Exposure of least median facet ΔE00, each facet's thickness re-solved per candidate.
@@ -573,7 +592,9 @@ def _summary(r: AnalysisResult) -> dict:
         "mode": r.options.mode,
         "inputs": {"stack": str(st.path), "shape": list(st.shape), "n_slices": st.n_slices,
                    "pixel_size_um": st.pixel_size_um,
-                   "z_um_range": [float(np.min(st.z_um)), float(np.max(st.z_um))],
+                   "z_um_range": ([float(np.min(st.z_um)), float(np.max(st.z_um))]
+                                  if st.n_slices else None),
+                   "height_source": "focus stack" if st.n_slices else "microscope export",
                    **r.optics},
         "parameters": opts,
         "versions": _versions(),

@@ -1,6 +1,7 @@
 """The whole pipeline on the bundled synthetic stack: results format and truth."""
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -111,3 +112,28 @@ def test_write_results_refuses_existing_folder(both_modes, tmp_path):
 
     with pytest.raises(InputError, match="already exists"):
         write_results(both_modes["seed"], out, report=False)
+
+
+def test_microscope_export_is_analysed_without_slices(tmp_path):
+    """A stack of `height_um` + `image` (a microscope export) skips height from focus; with
+    the synthetic truth as the export, thickness and height tilts match the truth."""
+    truth = FIXTURE / "truth"
+    st = tmp_path / "export"
+    st.mkdir()
+    shutil.copy(truth / "height_um.npy", st / "height_um.npy")
+    shutil.copy(truth / "all_in_focus.png", st / "image.png")
+    (st / "stack.json").write_text(json.dumps({
+        "format": "microfacet-stack/1", "pixel_size_um": 0.216,
+        "height_um": "height_um.npy", "image": "image.png"}))
+    out = tmp_path / "res"
+    assert main(["analyze", str(st), "--out", str(out), "--no-report", "-q"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["inputs"]["height_source"] == "microscope export" and s["inputs"]["n_slices"] == 0
+    d = np.load(out / "thickness_nm.npy")
+    d_true = np.load(truth / "thickness_nm.npy")
+    ok = np.isfinite(d)
+    assert ok.mean() > 0.8
+    assert np.median(np.abs(d[ok] - d_true[ok])) < 0.5
+    t_h = np.load(out / "tilt_height_deg.npy")
+    vis = np.load(truth / "visible.npy") & np.isfinite(t_h)
+    assert np.median(np.abs(t_h[vis] - np.load(truth / "tilt_deg.npy")[vis])) < 2.5
