@@ -28,6 +28,7 @@ results folder of ``docs/results-format.md`` atomically.
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import json
 import logging
 import math
@@ -589,6 +590,7 @@ def _summary(r: AnalysisResult) -> dict:
     ok_roi = np.isfinite(roi.thickness_nm)
     s = {
         "format": "microfacet-results/1",
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "mode": r.options.mode,
         "inputs": {"stack": str(st.path), "shape": list(st.shape), "n_slices": st.n_slices,
                    "pixel_size_um": st.pixel_size_um,

@@ -2,7 +2,7 @@
 
 Generates N synthetic stacks (``microfacet.synth``) cycling over the presets, each with its
 own seed, a sensor noise drawn log-uniformly (full well 150 … 20,000 e⁻, i.e. relative noise
-0.4 % … 4.6 % at a linear signal of 0.3) and its tilt lobes scaled by a factor drawn
+1.5 % … 15 % at a linear signal of 0.3) and its tilt lobes scaled by a factor drawn
 uniformly in 0.5 … 2 (each lobe capped at 20°). Analyses them all with
 :func:`microfacet.batch.run_batch` (local processes, or ``--scheduler`` a Dask cluster) and
 scores every results folder against its truth:
@@ -141,6 +141,7 @@ def plot(rows, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
     metrics = (("thickness_mae_nm", "thickness MAE (nm)"),
                ("tilt_median_err_deg", "tilt median |error| (°)"),
@@ -162,7 +163,13 @@ def plot(rows, path: Path) -> None:
                     ax.scatter(x, y, s=22, color=colours[name], label=name, alpha=0.85)
             if logx:
                 ax.set_xscale("log")
+                ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+                ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+                ax.xaxis.set_minor_formatter(NullFormatter())
             ax.set_yscale("log")
+            ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+            ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+            ax.yaxis.set_minor_formatter(NullFormatter())
             ax.grid(True, which="both", alpha=0.3)
             if j == 0:
                 ax.set_ylabel(label)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 import subprocess
 import sys
 
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 from microfacet.distributions import NDFMixture, ThicknessMixture
-from microfacet.report import PAGES, write_report
+from microfacet.report import NO_VALUE, PAGES, parameter_tables, write_report
 
 H, W = 64, 80
 OPTIONAL = ("mask.npy", "delta_e.npy", "tilt_height_deg.npy", "angular_map.png")
@@ -84,6 +85,7 @@ def make_results(folder, *, seed=0):
     summary = {
         "format": "microfacet-results/1",
         "inputs": {"stack": "/data/stacks/sample-1", "pixel_size_um": 0.216},
+        "mode": "joint",
         "thickness": {"mixture": {**thick.to_json(), "bic": 41234.5}},
         "ndf": {"mixture": {**ndf.to_json(), "bic": 30012.25}},
         "exposure": 1.07,
@@ -96,9 +98,69 @@ def make_results(folder, *, seed=0):
     return folder
 
 
+def make_empty_results(folder):
+    """What the analysis writes when every pixel is masked: NaN maps, header-only CSVs,
+    empty mixtures and null statistics."""
+    folder.mkdir(parents=True, exist_ok=True)
+    nan = np.full((H, W), np.nan, np.float32)
+    for name in ("height_um", "thickness_nm", "tilt_deg", "tilt_sigma_deg", "delta_e",
+                 "colour_weight"):
+        np.save(folder / f"{name}.npy", nan)
+    np.save(folder / "tilt_height_deg.npy", np.zeros((H, W), np.float32))
+    np.save(folder / "mask.npy", np.ones((H, W), bool))
+    _png(folder / "all_in_focus.png", np.full((H, W, 3), 128, np.uint8))
+    (folder / "thickness_pdf.csv").write_text("thickness_nm,density,mixture_density\n")
+    (folder / "ndf_pdf.csv").write_text("tilt_deg,density,mixture_density\n")
+    (folder / "thickness_roi.csv").write_text(
+        "row0,col0,size,thickness_nm,mean_delta_e,n_pixels\n0,0,64,nan,nan,0\n")
+    empty = {"components": [], "bic": None}
+    summary = {
+        "format": "microfacet-results/1", "mode": "joint",
+        "inputs": {"stack": "/data/stacks/grey", "pixel_size_um": 0.5,
+                   "numerical_aperture": 0.8},
+        "thickness": {"mixture": empty, "roi": {"count": 1, "fitted": 0,
+                                                "thickness_nm_mean": None}},
+        "ndf": {"mixture": empty, "max_tilt_deg": 26.57},
+        "exposure": 1.0, "delta_e": {"mean": None, "median": None, "p95": None},
+        "masked_fraction": 1.0, "timings_s": {"total": 1.5},
+    }
+    (folder / "summary.json").write_text(json.dumps(summary))
+    return folder
+
+
 def pdf_pages(path):
     """Number of page objects in a PDF written by matplotlib (no object streams)."""
     return len(re.findall(rb"/Type\s*/Page\b(?!s)", path.read_bytes()))
+
+
+def read_png(path):
+    """RGB uint8 array of a PNG (asserts it decodes)."""
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    assert img is not None, f"{path} is not a readable image"
+    return img[..., ::-1]
+
+
+def check_pngs(folder):
+    """Every page PNG exists, decodes, is A4 landscape at ~110 dpi and is not blank."""
+    names = [f"report_{i}_{n}.png" for i, n in enumerate(PAGES, start=1)]
+    for name in names:
+        img = read_png(folder / name)
+        h, w = img.shape[:2]
+        assert 1200 <= w <= 1400 and abs(w / h - 11.69 / 8.27) < 0.01, (name, img.shape)
+        assert img.std() > 10, f"{name} looks blank"
+    return names
+
+
+def pdf_text(path, page):
+    """Text of one PDF page by pdftotext (poppler), or skip if it is not installed."""
+    exe = shutil.which("pdftotext")
+    if exe is None:
+        pytest.skip("pdftotext not installed")
+    out = subprocess.run([exe, "-f", str(page), "-l", str(page), "-layout", str(path), "-"],
+                         capture_output=True, text=True, check=True)
+    return out.stdout
 
 
 @pytest.fixture(scope="module")
@@ -106,14 +168,78 @@ def results(tmp_path_factory):
     return make_results(tmp_path_factory.mktemp("res") / "run")
 
 
-def test_full_folder_gives_four_pages_and_pngs(results, tmp_path):
-    out = write_report(results, png_dir=tmp_path / "png")
+@pytest.fixture(scope="module")
+def report(results, tmp_path_factory):
+    png = tmp_path_factory.mktemp("png")
+    return write_report(results, png_dir=png), png
+
+
+def test_full_folder_gives_five_pages_and_pngs(results, report):
+    out, png = report
+    assert PAGES == ("overview", "maps", "distributions", "parameters", "angular")
     assert out == results / "report.pdf" and out.is_file()
-    assert out.read_bytes().startswith(b"%PDF") and pdf_pages(out) == len(PAGES) == 4
+    assert out.read_bytes().startswith(b"%PDF") and pdf_pages(out) == len(PAGES)
     assert out.stat().st_size < 2_000_000
-    pngs = sorted(p.name for p in (tmp_path / "png").iterdir())
-    assert pngs == [f"report_{i}_{n}.png" for i, n in enumerate(PAGES, start=1)]
+    assert sorted(p.name for p in png.iterdir()) == check_pngs(png)
     assert not [p for p in results.iterdir() if p.name.startswith(".report.pdf")]
+
+
+def test_masked_pixels_are_drawn_in_the_no_value_grey(report):
+    _, png = report
+    grey = tuple(int(NO_VALUE[i:i + 2], 16) for i in (1, 3, 5))
+    maps = read_png(png / "report_2_maps.png")
+    n = int(np.all(maps == grey, axis=-1).sum())
+    assert n > 500  # the 10 x 12 masked block and the scattered pixels, on five maps
+    # the histogram page has no maps: the grey is only on map pages
+    dist = read_png(png / "report_3_distributions.png")
+    assert int(np.all(dist == grey, axis=-1).sum()) < n / 10
+
+
+def test_header_and_units_are_on_the_pages(report):
+    out, _ = report
+    p1 = pdf_text(out, 1)
+    assert "microfacet report — sample-1" in p1 and "microfacet 0.1.0" in p1
+    assert "height (µm)" in p1 and "x (µm)" in p1
+    p2 = pdf_text(out, 2)
+    for label in ("thickness (nm)", "tilt from optical axis (°)", "tilt 1σ (°)", "CIEDE2000",
+                  "no value"):
+        assert label in p2, label
+    p3 = pdf_text(out, 3)
+    for label in ("oxide thickness (nm)", "probability density (1/nm)",
+                  "probability density (1/°)", "D(θ) (1/sr)", "fitted mixture",
+                  "weight 0.25, mean 112.0 nm, SD 4.00 nm", "weight 0.60, slope SD 3.00°"):
+        assert label in p3, label
+    p5 = pdf_text(out, 5)
+    assert "microfacet thin-film BRDF" in p5 and "light zenith" in p5
+
+
+def test_parameter_table_matches_summary(results, report):
+    summary = json.loads((results / "summary.json").read_text())
+    t = parameter_tables(results)
+    comps = summary["thickness"]["mixture"]["components"]
+    assert t["thickness"]["rows"] == [
+        [str(i + 1), f"{c['weight']:.3f}", f"{c['mean_nm']:.1f}", f"{c['sd_nm']:.2f}"]
+        for i, c in enumerate(comps)]
+    lobes = summary["ndf"]["mixture"]["components"]
+    assert [r[:3] for r in t["ndf"]["rows"]] == [
+        [str(i + 1), f"{c['weight']:.3f}", f"{c['sd_deg']:.2f}"] for i, c in enumerate(lobes)]
+    for r, c in zip(t["ndf"]["rows"], lobes):  # tan σ and Beckmann α = √2 tan σ
+        assert float(r[3]) == pytest.approx(np.tan(np.radians(c["sd_deg"])), abs=1e-4)
+        assert float(r[4]) == pytest.approx(np.sqrt(2) * float(r[3]), abs=2e-4)
+    analysis = dict(t["analysis"]["rows"])
+    assert analysis["exposure"] == f"{summary['exposure']:.4g}"
+    de = summary["delta_e"]
+    de_row = f"{de['mean']:.2f} / {de['median']:.2f} / —"  # no p95 in this summary
+    assert analysis["ΔE₀₀ mean / median / p95"] == de_row
+    assert analysis["masked fraction"] == f"{100 * summary['masked_fraction']:.1f} %"
+    timings = dict(t["timings"]["rows"])
+    assert timings["total analysis"] == "12.5 s" and timings["thickness"] == "6.1 s"
+    assert "BIC (41234.5" in t["thickness"]["note"] and "BIC (30012.2" in t["ndf"]["note"]
+    # ... and the PDF's parameter page prints them
+    text = pdf_text(report[0], 4)
+    for row in t["thickness"]["rows"] + t["ndf"]["rows"]:
+        assert re.search(r"\s+".join(map(re.escape, row)), text), row
+    assert f"{de['mean']:.2f} / {de['median']:.2f}" in text
 
 
 def test_missing_optional_files_are_tolerated(tmp_path):
@@ -121,8 +247,22 @@ def test_missing_optional_files_are_tolerated(tmp_path):
     for name in OPTIONAL:
         (folder / name).unlink()
     out = write_report(folder, out_pdf=tmp_path / "elsewhere.pdf")
-    assert out == tmp_path / "elsewhere.pdf" and pdf_pages(out) == 4
+    assert out == tmp_path / "elsewhere.pdf" and pdf_pages(out) == len(PAGES)
     assert not (folder / "report.pdf").exists()
+    assert dict(parameter_tables(folder)["run"]["rows"])["not in the folder"] == \
+        "mask.npy, delta_e.npy, tilt_height_deg.npy"
+
+
+def test_all_masked_folder_without_fits_still_renders(tmp_path, capsys):
+    folder = make_empty_results(tmp_path / "empty")
+    out = write_report(folder, png_dir=tmp_path / "png")
+    assert pdf_pages(out) == len(PAGES)
+    check_pngs(tmp_path / "png")
+    t = parameter_tables(folder)
+    assert t["thickness"]["rows"] == [] and t["ndf"]["rows"] == []
+    assert t["thickness"]["note"].startswith("no fit")
+    assert dict(t["analysis"]["rows"])["masked fraction"] == "100.0 %"
+    assert capsys.readouterr() == ("", "")  # library code prints nothing
 
 
 def test_only_summary_json_is_needed_even_without_fits(tmp_path):
@@ -135,7 +275,7 @@ def test_only_summary_json_is_needed_even_without_fits(tmp_path):
     s["ndf"]["mixture"] = {"components": [], "bic": None}
     (folder / "summary.json").write_text(json.dumps(s))
     out = write_report(folder)
-    assert pdf_pages(out) == 4
+    assert pdf_pages(out) == len(PAGES)
     title = out.read_bytes().split(b"/Title (", 1)[1].split(b") >>", 1)[0]
     assert title.decode("utf-16").endswith("run")  # the folder's final name, not .partial-
 
