@@ -331,7 +331,10 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
 
         facets = segment_facets(lab, facet_px=opt.facet_size_um / st.pixel_size_um)
         t0 = _timer(timings, "segmentation", t0)
-        rel = np.clip(np.nan_to_num(foc.reliability_db, nan=0.0) / 20.0, 0.0, 1.0) ** 2
+        if st.has_slices:
+            rel = np.clip(np.nan_to_num(foc.reliability_db, nan=0.0) / 20.0, 0.0, 1.0) ** 2
+        else:  # a microscope export's height is trusted where it is finite
+            rel = np.isfinite(foc.height_fit_um).astype(np.float64)
         from scipy import ndimage
 
         edge = np.zeros((H, W), bool)
