@@ -269,9 +269,15 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
     cm = colour_mask(enc, saturation_min=opt.saturation_min, value_min=opt.value_min,
                      bit_depth=bit_depth)
     lab = color.srgb_to_lab(enc, illuminant=illuminant).astype(np.float32)
-    from .tilt import estimate_colour_noise
+    from .tilt import estimate_colour_noise, quantization_noise_de
 
     noise_de = estimate_colour_noise(lab, cm.mask)
+    noise_floor = quantization_noise_de(enc, cm.mask, bit_depth=bit_depth,
+                                        illuminant=illuminant)
+    if np.isfinite(noise_floor) and not noise_de >= noise_floor:
+        log.info("colour noise %.4g below the quantization floor; using %.4g ΔE00",
+                 noise_de, noise_floor)
+        noise_de = noise_floor
     t0 = _timer(timings, "colour_and_mask", t0)
     if cm.mask.all():
         raise InputError(_no_colour_message(st, cm, opt, "every pixel is masked"))
