@@ -1,6 +1,6 @@
 """The analysis report: a multi-page PDF (and PNGs) drawn from a results folder.
 
-:func:`write_report` reads a results folder (``/work/shared/spec/results-format.md``) and
+:func:`write_report` reads a results folder (``docs/results-format.md``) and
 draws five A4-landscape pages, each with a header (stack name, analysis mode, optics, date,
 microfacet version) and a footer (results folder, page number):
 
@@ -1398,7 +1398,7 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
     Parameters
     ----------
     results_dir : path-like
-        A results folder (``/work/shared/spec/results-format.md``). ``summary.json`` is
+        A results folder (``docs/results-format.md``). ``summary.json`` is
         required; every other file is optional and a missing one skips its panel:
         ``all_in_focus.png``, ``height_um.npy``, ``thickness_nm.npy``, ``tilt_deg.npy``,
         ``tilt_sigma_deg.npy``, ``thickness_pdf.csv``, ``ndf_pdf.csv``,
