@@ -237,9 +237,9 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
         Step of the global thickness scan (the minima are ≥ 20 nm apart).
     sample_px, refine_px : int
         Pixels per ROI used for the global scan (and the interference-order consensus) /
-        for the refinement. With 128 pixels the order consensus picked the wrong order in
-        1 of 42 synthetic stacks at 12 % image noise (docs/accuracy.md, synthetic sweep);
-        512 fixes it at ~0.03 s per ROI.
+        for the refinement. 512 rather than 128 for the order consensus: fewer pixels make
+        its score noisier (at 12-15 % image noise the synthetic sweep of docs/accuracy.md
+        has 1 stack in 42 with the wrong order either way, flagged as ambiguous).
     min_pixels : int
         ROIs with fewer unmasked pixels get NaN.
     consensus_half_width_nm, order_margin_de : float
