@@ -214,7 +214,7 @@ def _parabola(x, y, i):
 
 
 def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
-                      grid_step_nm=1.0, sample_px=512, refine_px=8000, min_pixels=20,
+                      grid_step_nm=1.0, sample_px=256, refine_px=8000, min_pixels=20,
                       consensus_half_width_nm=35.0, order_margin_de=2.0,
                       seed=0) -> RoiFit:
     """Thickness of least mean ΔE00 per ROI, and the exposure if not given.
@@ -236,10 +236,11 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
     grid_step_nm : float
         Step of the global thickness scan (the minima are ≥ 20 nm apart).
     sample_px, refine_px : int
-        Pixels per ROI used for the global scan (and the interference-order consensus) /
-        for the refinement. 512 rather than 128 for the order consensus: fewer pixels make
-        its score noisier (at 12-15 % image noise the synthetic sweep of docs/accuracy.md
-        has 1 stack in 42 with the wrong order either way, flagged as ambiguous).
+        Pixels per ROI used for the global scan / for the refinement. The order consensus
+        uses 128 of them. More does not make the order choice robust: at 12-15 % image
+        noise a different 1 of 42 synthetic stacks gets the wrong order with 128 and with
+        512, always flagged (``ambiguity_delta_e`` < 1), and 512 made mixed-population ROIs
+        worse (docs/accuracy.md).
     min_pixels : int
         ROIs with fewer unmasked pixels get NaN.
     consensus_half_width_nm, order_margin_de : float
@@ -282,7 +283,7 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
     band = None
     if consensus_half_width_nm > 0 and valid and grid.size > 2:
         # The interference order, from hue and chroma alone (before the exposure is known).
-        score = np.mean([_band_curve(x, l, white, grid, consensus_half_width_nm)
+        score = np.mean([_band_curve(x[:128], l[:128], white, grid, consensus_half_width_nm)
                          for x, l, _, _ in valid], axis=0)
         centre = float(grid[int(np.argmin(score))])
         band = (centre - consensus_half_width_nm, centre + consensus_half_width_nm)
