@@ -65,7 +65,9 @@ class AnalysisOptions:
     facet_size_um : float
         Expected facet diameter for the joint mode's segmentation (seed: 1-3 µm).
     tilt_step_deg : float
-        Tilt grid step of the per-pixel search (refined below it).
+        Tilt grid step of the per-pixel search (refined below it). 1-2° steps measure as
+        accurate at half the time (docs/speed-vs-error.md §3c); whether tilt from colour
+        means anything for a film: docs/conditioning.md.
     max_components : int
         Largest number of mixture components tried by BIC.
     operator, window_px, align : focus options (None = the focus module's defaults).

@@ -76,7 +76,8 @@ log = logging.getLogger(__name__)
 
 OPERATORS = ("tenengrad", "sml", "glv")
 INTERPOLATIONS = ("lsq", "gauss3", "none")
-#: Defaults, chosen from the accuracy table in docs/height-from-focus.md.
+#: Defaults, chosen from the accuracy table in docs/height-from-focus.md; their cost against
+#: the alternatives: docs/speed-vs-error.md §4.
 DEFAULT_OPERATOR = "tenengrad"
 DEFAULT_WINDOW_PX = 7
 DEFAULT_WINDOW = "gaussian"

@@ -234,7 +234,8 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
     exposure : float, optional
         Known exposure; estimated when None.
     grid_step_nm : float
-        Step of the global thickness scan (the minima are ≥ 20 nm apart).
+        Step of the global thickness scan (the minima are ≥ 20 nm apart). The time is set
+        by ``refine_px``; a coarser scan is slower, not faster (docs/speed-vs-error.md §3a).
     sample_px, refine_px : int
         Pixels per ROI used for the global scan / for the refinement. The order consensus
         uses 128 of them. More does not make the order choice robust: at 12-15 % image
