@@ -46,6 +46,8 @@ import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .outdir import current_umask
+
 __all__ = ["BatchResult", "SUMMARY_COLUMNS", "result_names", "run_batch", "results_complete"]
 
 log = logging.getLogger(__name__)
@@ -239,14 +241,8 @@ def _write_summary(path: Path, rows: list[dict]) -> None:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     with os.fdopen(fd, "w", newline="") as fh:
         fh.write(buf.getvalue())
-    os.chmod(tmp, 0o666 & ~_umask())
+    os.chmod(tmp, 0o666 & ~current_umask())
     os.replace(tmp, path)
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def _csv_value(v):

@@ -10,7 +10,14 @@ from pathlib import Path
 
 from .errors import InputError
 
-__all__ = ["atomic_output_dir"]
+__all__ = ["atomic_output_dir", "current_umask"]
+
+
+def current_umask() -> int:
+    """The process's file-creation mask (read without changing it)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 @contextlib.contextmanager
@@ -44,9 +51,7 @@ def atomic_output_dir(out, *, overwrite=False):
     except OSError as exc:
         raise InputError(f"{out}: cannot create parent folder ({exc.strerror})") from None
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=parent))
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes 0700; results follow the user's umask
+    os.chmod(tmp, 0o777 & ~current_umask())  # mkdtemp makes 0700; results follow the umask
     try:
         yield tmp
         if out.exists():
