@@ -155,7 +155,7 @@ def results_complete(folder, options=None) -> tuple[bool, str]:
 
 def _row_from_summary(summary: dict) -> dict:
     """The numbers of one results folder's summary.json for batch_summary.csv."""
-    import math
+    from .distributions import NDFMixture, ThicknessMixture
 
     row = {}
     shape = summary.get("inputs", {}).get("shape") or [None, None]
@@ -166,26 +166,21 @@ def _row_from_summary(summary: dict) -> dict:
     de = summary.get("delta_e") or {}
     row["delta_e_mean"] = de.get("mean")
     row["delta_e_median"] = de.get("median")
-    comps = (summary.get("thickness", {}).get("mixture") or {}).get("components") or []
+    thick = (summary.get("thickness", {}).get("mixture") or {})
+    comps = thick.get("components") or []
     row["thickness_components"] = len(comps)
     if comps:
-        w = [c["weight"] for c in comps]
-        tot = sum(w)
-        mean = sum(c["weight"] * c["mean_nm"] for c in comps) / tot
-        var = sum(c["weight"] * (c["sd_nm"] ** 2 + (c["mean_nm"] - mean) ** 2)
-                  for c in comps) / tot
-        row["thickness_mean_nm"], row["thickness_sd_nm"] = mean, math.sqrt(var)
+        mix = ThicknessMixture.from_json(thick)
+        row["thickness_mean_nm"], row["thickness_sd_nm"] = mix.mean_nm, mix.sd_nm
     for k, c in enumerate(comps, 1):
         row[f"thickness_{k}_weight"] = c["weight"]
         row[f"thickness_{k}_mean_nm"] = c["mean_nm"]
         row[f"thickness_{k}_sd_nm"] = c["sd_nm"]
-    lobes = (summary.get("ndf", {}).get("mixture") or {}).get("components") or []
+    ndf = (summary.get("ndf", {}).get("mixture") or {})
+    lobes = ndf.get("components") or []
     row["ndf_components"] = len(lobes)
     if lobes:
-        tot = sum(c["weight"] for c in lobes)
-        # rms slope of a mixture of zero-mean Gaussian-slope lobes, as an angle
-        row["ndf_rms_slope_deg"] = math.sqrt(
-            sum(c["weight"] * c["sd_deg"] ** 2 for c in lobes) / tot)
+        row["ndf_rms_slope_deg"] = NDFMixture.from_json(ndf).rms_sd_deg
     for k, c in enumerate(lobes, 1):
         row[f"ndf_{k}_weight"] = c["weight"]
         row[f"ndf_{k}_sd_deg"] = c["sd_deg"]

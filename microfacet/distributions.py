@@ -93,6 +93,17 @@ class ThicknessMixture:
     def sds_nm(self):
         return np.array([c[2] for c in self.components])
 
+    @property
+    def mean_nm(self) -> float:
+        """Mean thickness of the whole mixture, nm."""
+        return float(np.sum(self.weights * self.means_nm))
+
+    @property
+    def sd_nm(self) -> float:
+        """Standard deviation of the whole mixture (within and between components), nm."""
+        var = np.sum(self.weights * (self.sds_nm ** 2 + (self.means_nm - self.mean_nm) ** 2))
+        return float(math.sqrt(var))
+
     def pdf(self, thickness_nm):
         """Density per nm at ``thickness_nm`` (any shape)."""
         d = np.asarray(thickness_nm, dtype=np.float64)[..., None]
@@ -151,6 +162,11 @@ class NDFMixture:
     @property
     def sds_deg(self):
         return np.array([c[1] for c in self.components])
+
+    @property
+    def rms_sd_deg(self) -> float:
+        """Weighted rms of the lobes' ``sd_deg``: one roughness angle for the mixture."""
+        return float(math.sqrt(np.sum(self.weights * self.sds_deg ** 2)))
 
     @property
     def slope_sd(self):

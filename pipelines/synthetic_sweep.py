@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import dataclasses
 import json
 import math
 import re
@@ -39,6 +38,7 @@ import numpy as np
 
 from microfacet.analyze import AnalysisOptions
 from microfacet.batch import run_batch
+from microfacet.distributions import NDFMixture
 from microfacet.mixtures import wasserstein1
 from microfacet.synth import TiltLobe, generate_stack, preset
 from microfacet.thickness import nearest_roi_index, roi_grid
@@ -74,9 +74,7 @@ def noise_pct(p) -> float:
 
 def rms_slope_deg(lobes) -> float:
     """rms slope angle of a mixture of zero-mean Gaussian-slope lobes (weights normalised)."""
-    w = np.array([l[0] for l in lobes], float)
-    sd = np.array([l[1] for l in lobes], float)
-    return float(math.sqrt(np.sum(w * sd ** 2) / np.sum(w)))
+    return NDFMixture(lobes).rms_sd_deg
 
 
 def score(results: Path, truth_dir: Path, p) -> dict:
