@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 
 from ._common import HelpFormatter, add_analysis_options, analysis_options, example_epilog
 

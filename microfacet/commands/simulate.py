@@ -15,7 +15,6 @@ Two paths:
 
 from __future__ import annotations
 
-import argparse
 
 from ._common import HelpFormatter, add_optics_options, example_epilog, optics_kwargs
 

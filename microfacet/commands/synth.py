@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 
 from ._common import HelpFormatter, example_epilog, pair_type
 
