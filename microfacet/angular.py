@@ -191,6 +191,23 @@ def _positive(x, name):
     return v
 
 
+def simulate_memory_bytes(*, model: str, n_light: int, n_view: int, n_wavelengths: int,
+                          max_tilt_deg: float = 60.0, theta_m_step_deg: float = 0.5) -> float:
+    """Rough peak memory of :func:`simulate_map` for a grid (bytes), to refuse before
+    allocating.
+
+    The spectra (L·V·N float64) and their lookup temporaries dominate the microfacet and
+    half-vector models; eq. 6 adds per-pair tables over the θ_m grid and a pair × table-row
+    matrix (up to 4096 rows).
+    """
+    cells = float(n_light) * float(n_view)
+    need = 8.0 * cells * n_wavelengths * 6
+    if model == "eq6":
+        k = 2.0 * max_tilt_deg / max(theta_m_step_deg, 1e-3) + 1
+        need += 8.0 * cells * (k * 6 + 4096)
+    return need + (64 << 20)
+
+
 def simulate_map(*, model="microfacet", thickness, ndf=None, n=None, theta_light_deg=None,
                  theta_view_deg=None, exposure=1.0, wavelength_nm=None, film=DEFAULT_FILM,
                  substrate=DEFAULT_SUBSTRATE, illuminant="D65", observer="2", n_ambient=1.0,

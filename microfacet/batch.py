@@ -46,7 +46,7 @@ import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .outdir import current_umask
+from .outdir import OutputFolder, check_output, current_umask, sweep_stale
 
 __all__ = ["BatchResult", "SUMMARY_COLUMNS", "result_names", "run_batch", "results_complete"]
 
@@ -149,7 +149,7 @@ def results_complete(folder, options=None) -> tuple[bool, str]:
         diff = sorted(k for k in want if have.get(k) != want[k])
         if diff:
             return False, (f"{summary}: made with different parameters ({', '.join(diff)}); "
-                           f"use --overwrite to re-analyse")
+                           f"re-analysed only with overwrite")
     return True, ""
 
 
@@ -366,27 +366,50 @@ def run_batch(stacks, out_dir, *, options=None, jobs=None, scheduler=None, overw
     if jobs is not None and jobs < 1:
         raise ValueError(f"jobs: must be >= 1, got {jobs}")
     out_dir = Path(os.path.abspath(out_dir))
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(f"{out_dir}: exists and is not a folder")
+    # the batch folder is reused, never replaced: an existing batch output is fine
+    check_output(out_dir, kind="batch", inputs=stacks, overwrite=True)
+    names = result_names(stacks)
     dask = (_dask_client(scheduler, connect_timeout_s, jobs) if scheduler  # before writing
             else None)
-    names = result_names(stacks)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        claim = OutputFolder(out_dir, kind="batch", inputs=stacks, overwrite=True)
+        with claim:
+            return _run_claimed(stacks, names, out_dir, options, dask, jobs, overwrite, report,
+                                progress, t0)
+    except BaseException:
+        if dask is not None:
+            _close(dask)
+        raise
+
+
+def _run_claimed(stacks, names, out_dir, options, dask, jobs, overwrite, report, progress, t0):
+    """:func:`run_batch` once the output folder is claimed (no other run writes it)."""
+    from .errors import InputError
+
+    out_dir.mkdir(exist_ok=True)
+    for p in sweep_stale(out_dir):
+        log.info("removed %s, left by an interrupted run", p)
 
     rows: list[dict | None] = [None] * len(stacks)
     tasks, index = [], {}
     for i, (stack, name) in enumerate(zip(stacks, names)):
         out = str(out_dir / name)
         complete, why = results_complete(out, options)
+        refused = ""
+        try:  # an existing folder that is not a results folder is never replaced
+            check_output(out, kind="results", inputs=[stack], overwrite=True)
+        except InputError as exc:
+            refused = exc.reason
         if complete and not overwrite:
             summary = json.loads((Path(out) / "summary.json").read_text())
             rows[i] = {"stack": stack, "results": out, "status": "skipped",
                        "reason": "complete results exist", "worker": "",
                        "time_s": (summary.get("timings_s") or {}).get("total"),
                        **_row_from_summary(summary)}
-        elif why and Path(out).exists() and not overwrite:
-            rows[i] = {"stack": stack, "results": out, "status": "failed", "reason": why}
-            log.warning("%s: failed: %s", stack, why)
+        elif refused or (why and Path(out).exists() and not overwrite):
+            rows[i] = {"stack": stack, "results": out, "status": "failed",
+                       "reason": refused or why}
+            log.warning("%s: failed: %s", stack, refused or why)
         else:
             index[stack] = i
             tasks.append((stack, out, options, overwrite, report))

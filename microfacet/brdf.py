@@ -105,6 +105,9 @@ _DEG = math.pi / 180.0
 _MAX_EXACT_ANGLES = 4096
 #: Step of the fallback incidence-angle table (degrees), linear interpolation.
 _TABLE_STEP_DEG = 0.05
+#: Most quadrature nodes of a thickness density (a mixture whose widest component spans
+#: thousands of its narrowest SD needs more; it is refused, not allocated).
+MAX_THICKNESS_NODES = 20_000
 
 
 def default_wavelengths():
@@ -152,7 +155,12 @@ def thickness_nodes(thickness, *, n_sd=5.0, max_step_nm=2.0):
     if isinstance(thickness, ThicknessMixture):
         lo, hi = thickness.support_nm(n_sd=n_sd)
         step = min(float(max_step_nm), float(np.min(thickness.sds_nm)) / 2.0)
-        n = max(3, int(math.ceil((hi - lo) / step)) + 1)
+        n_f = (hi - lo) / step + 1 if step > 0 else math.inf
+        if not n_f <= MAX_THICKNESS_NODES:
+            raise ValueError(f"thickness: the mixture spans {lo:g}-{hi:g} nm with a narrowest "
+                             f"SD of {np.min(thickness.sds_nm):g} nm: {n_f:,.0f} quadrature "
+                             f"nodes, more than the limit of {MAX_THICKNESS_NODES:,}")
+        n = max(3, int(math.ceil(n_f - 1)) + 1)
         d = np.linspace(lo, hi, n)
         w = thickness.pdf(d) * _trapezoid_weights(d)
     elif isinstance(thickness, tuple) and len(thickness) == 2:

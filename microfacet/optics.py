@@ -138,8 +138,8 @@ def optical_constants(name: str, wavelength_nm) -> np.ndarray:
     Examples
     --------
     >>> from microfacet.optics import optical_constants
-    >>> optical_constants("TiO2_Jolivet2023_amorphous", 550.0).real.round(2)
-    array(2.45)
+    >>> round(float(optical_constants("TiO2_Jolivet2023_amorphous", 550.0).real), 2)
+    2.45
     """
     s = load_set(name)
     wl = np.asarray(wavelength_nm, dtype=np.float64)

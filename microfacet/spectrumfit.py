@@ -13,13 +13,28 @@ user sees how ambiguous the answer is.
 from __future__ import annotations
 
 import csv
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, one_line
+from .limits import MAX_SPECTRUM_ROWS
 from .optics import DEFAULT_FILM, DEFAULT_SUBSTRATE
+
+log = logging.getLogger(__name__)
+
+#: Thickest film searched (anodic films are < 1 µm; beyond ~10 µm a spectrometer no longer
+#: resolves the fringes and the coherent model does not apply).
+MAX_THICKNESS_NM = 10_000.0
+#: Fewest distinct wavelengths a fit accepts, and below how many it warns.
+MIN_WAVELENGTHS = 3
+FEW_WAVELENGTHS = 10
+#: A measured spectrum whose largest value is below this is implausible for anodized titanium
+#: (its reflectance maxima are 0.2-0.6): warned about as a unit or scale mistake.
+PLAUSIBLE_MAX_REFLECTANCE = 0.05
+_SCAN_ELEMENTS = 1 << 21   # thickness x wavelength evaluations per block of the scan
 
 __all__ = ["SpectrumFit", "fit_thickness", "read_spectrum_csv"]
 
@@ -116,9 +131,13 @@ def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FIL
     if keep.sum() < 3:
         raise ValueError("reflectance: need at least 3 finite samples")
     wl, y = wl[keep], y[keep]
+    if np.unique(wl).size < MIN_WAVELENGTHS:
+        raise ValueError(f"wavelength_nm: the spectrum has {np.unique(wl).size} distinct "
+                         f"wavelength(s); a thickness fit needs at least {MIN_WAVELENGTHS}")
     lo, hi = (float(v) for v in thickness_range_nm)
-    if not (0 <= lo < hi and np.isfinite(hi)):
-        raise ValueError(f"thickness_range_nm: need 0 <= low < high, got {thickness_range_nm!r}")
+    if not (0 <= lo < hi <= MAX_THICKNESS_NM):
+        raise ValueError(f"thickness_range_nm: need 0 <= low < high <= {MAX_THICKNESS_NM:g} "
+                         f"nm, got {thickness_range_nm!r}")
     if not (0 < grid_step_nm <= 10):
         raise ValueError("grid_step_nm: must be in (0, 10] nm so no minimum is skipped")
     if not (0 <= angle_deg < 90):
@@ -127,7 +146,11 @@ def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FIL
     n2 = resolve_index(substrate, wl)
 
     grid = np.linspace(lo, hi, int(np.ceil((hi - lo) / grid_step_nm)) + 1)
-    res, _ = _residual(_model(wl, angle_deg, grid, n1, n2), y, fit_scale)
+    res = np.empty(grid.size)
+    block = max(1, _SCAN_ELEMENTS // wl.size)   # bounded memory whatever the range
+    for b in range(0, grid.size, block):
+        res[b:b + block], _ = _residual(_model(wl, angle_deg, grid[b:b + block], n1, n2), y,
+                                        fit_scale)
 
     # Local minima of the scan (ends count when lower than their neighbour).
     padded = np.concatenate([[np.inf], res, [np.inf]])
@@ -165,8 +188,11 @@ def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FIL
 def read_spectrum_csv(path):
     """Read a ``wavelength_nm,reflectance`` CSV (header required; extra columns ignored).
 
-    Reflectance may be a fraction (0-1) or a percentage (0-100, detected when any value
-    exceeds 1.5 and none exceeds 100, and divided by 100).
+    Reflectance may be a fraction (0-1) or a percentage: a column with a value above 1 (which
+    no fraction has) is read as percent and divided by 100 (logged). A spectrum that never
+    exceeds :data:`PLAUSIBLE_MAX_REFLECTANCE` is accepted with a warning (anodized titanium
+    reflects 20-60 % at its maxima: a unit or scale mistake). A UTF-8 byte-order mark is
+    accepted.
 
     Returns
     -------
@@ -175,41 +201,61 @@ def read_spectrum_csv(path):
     Raises
     ------
     InputError
-        Naming the file, and the line for a bad value.
+        Naming the file, and the line for a bad value; also for more than
+        :data:`~microfacet.limits.MAX_SPECTRUM_ROWS` rows or fewer than
+        :data:`MIN_WAVELENGTHS` distinct wavelengths.
     """
     path = Path(path)
+    shown = one_line(path)
     if not path.is_file():
-        raise InputError(f"{path}: no such file")
+        raise InputError(f"{shown}: no such file")
+    rows = []
     try:
-        with path.open(newline="") as f:
-            rows = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read ({exc})") from None
-    rows = [r for r in rows if r and any(c.strip() for c in r)]
+        with path.open(newline="", encoding="utf-8-sig") as f:
+            for row in csv.reader(f):
+                if row and any(c.strip() for c in row):
+                    rows.append(row)
+                    if len(rows) > MAX_SPECTRUM_ROWS + 1:
+                        raise InputError(f"{shown}: more than {MAX_SPECTRUM_ROWS:,} rows; a "
+                                         f"spectrum has a few thousand at most")
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"{shown}: cannot read ({exc})") from None
     if not rows:
-        raise InputError(f"{path}: empty file")
+        raise InputError(f"{shown}: empty file")
     header = [c.strip() for c in rows[0]]
     for key in ("wavelength_nm", "reflectance"):
         if key not in header:
-            raise InputError(f"{path}: missing column {key!r} (header is {','.join(header)})")
+            raise InputError(f"{shown}: missing column {key!r} (header is {','.join(header)})")
     iw, ir = header.index("wavelength_nm"), header.index("reflectance")
     wl, R = [], []
     for lineno, row in enumerate(rows[1:], start=2):
         try:
             w, r = float(row[iw]), float(row[ir])
         except (ValueError, IndexError):
-            raise InputError(f"{path}: line {lineno}: expected numbers in columns "
-                             f"wavelength_nm and reflectance, got {','.join(row)!r}") from None
+            raise InputError(f"{shown}: line {lineno}: expected numbers in columns "
+                             f"wavelength_nm and reflectance, got "
+                             f"{one_line(','.join(row))[:80]!r}") from None
         if not (np.isfinite(w) and np.isfinite(r)):
-            raise InputError(f"{path}: line {lineno}: non-finite value")
+            raise InputError(f"{shown}: line {lineno}: non-finite value")
         wl.append(w)
         R.append(r)
-    if len(wl) < 3:
-        raise InputError(f"{path}: need at least 3 spectral samples, found {len(wl)}")
     wl, R = np.array(wl), np.array(R)
-    if R.max() > 1.5 and R.max() <= 100:
+    distinct = np.unique(wl).size
+    if distinct < MIN_WAVELENGTHS:
+        raise InputError(f"{shown}: column 'wavelength_nm': {distinct} distinct wavelength(s) "
+                         f"in {len(wl)} rows; a thickness fit needs at least {MIN_WAVELENGTHS}")
+    if distinct < FEW_WAVELENGTHS:
+        log.warning("%s: only %d distinct wavelengths; interference minima of different orders "
+                    "may fit equally well (compare the runner-up)", shown, distinct)
+    if 1.0 + 1e-6 < R.max() <= 100:  # a reflectance above 1 cannot be a fraction
+        log.info("%s: reflectance read as percent (largest value %g) and divided by 100",
+                 shown, R.max())
         R = R / 100.0
     if R.min() < 0 or R.max() > 1.0 + 1e-6:
-        raise InputError(f"{path}: column 'reflectance' must be a fraction 0-1 or a percentage")
+        raise InputError(f"{shown}: column 'reflectance' must be a fraction 0-1 or a percentage")
+    if R.max() < PLAUSIBLE_MAX_REFLECTANCE:
+        log.warning("%s: the largest reflectance is %.3g (%.2g %%); anodized titanium reflects "
+                    "20-60 %% at its maxima: check the file's unit (fraction or percent) or its "
+                    "scale (fit_scale fits one)", shown, R.max(), 100 * R.max())
     order = np.argsort(wl)
     return wl[order], R[order]

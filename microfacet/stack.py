@@ -38,10 +38,12 @@ Examples
 from __future__ import annotations
 
 import contextlib
+import difflib
 import json
 import logging
 import math
 import os
+import stat
 import struct
 import threading
 from collections.abc import Iterator, Sequence
@@ -50,7 +52,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, one_line
+from .jsonfile import read_json
+from .limits import Limits
 
 __all__ = [
     "FORMAT",
@@ -70,6 +74,13 @@ FORMAT = "microfacet-stack/1"
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
 _DEFAULT_ILLUMINATION = {"geometry": "coaxial", "numerical_aperture": 0.8}
 _COLOR_SPACES = ("sRGB", "linear-sRGB")
+#: The keys of stack.json this format defines (others are kept in ``meta`` with a warning).
+KNOWN_KEYS = ("format", "pixel_size_um", "slices", "tiff", "z_um", "z_step_um", "color_space",
+              "illuminant", "illumination", "film", "substrate", "exposure", "height_um",
+              "image", "synthetic")
+_ILLUMINATION_KEYS = ("geometry", "numerical_aperture")
+#: Pixel sizes outside this range (µm) are almost surely a unit mistake: warned about.
+PLAUSIBLE_PIXEL_SIZE_UM = (0.01, 100.0)
 
 
 # --------------------------------------------------------------------------------------------
@@ -243,8 +254,20 @@ def _opencv_warnings_off(cv2):
                 cv2.utils.logging.setLogLevel(_cv_log_state["level"])
 
 
-def _decode(path: Path, where: str, page: int | None = None) -> np.ndarray:
-    """Decode one image to its native dtype, grey ``(H, W)`` or RGB ``(H, W, 3)``."""
+def _decode(path: Path, where: str, page: int | None = None, *,
+            channels: int | None = None) -> np.ndarray:
+    """Decode one image to its native dtype, grey ``(H, W)`` or RGB ``(H, W, 3)``.
+
+    ``channels`` is what the header said: a grey image with alpha comes back from OpenCV as
+    four equal-grey channels and is returned grey.
+    """
+    img = _decode_raw(path, where, page)
+    if channels == 1 and img.ndim == 3:
+        img = img[..., 0]
+    return img
+
+
+def _decode_raw(path: Path, where: str, page: int | None) -> np.ndarray:
     suffix = path.suffix.lower()
     try:
         if suffix in (".tif", ".tiff"):
@@ -268,6 +291,46 @@ def _decode(path: Path, where: str, page: int | None = None) -> np.ndarray:
         raise
     except Exception as exc:
         raise InputError(f"{where}: cannot decode image ({exc})") from None
+
+
+class _MultiPageTiff:
+    """One multi-page TIFF kept open while its pages are read: each page is found once, so a
+    pass over the stack is linear in the number of pages (``tifffile.imread(key=i)`` walks
+    the page chain from the start every time: quadratic). Thread-safe."""
+
+    def __init__(self, path: Path, uniform: bool):
+        self.path = path
+        self.uniform = uniform  # every page encoded like page 0: light TiffFrames suffice
+        self._tf = None
+        self._lock = threading.Lock()
+
+    def read(self, index: int, where: str, channels: int) -> np.ndarray:
+        try:
+            with self._lock:
+                if self._tf is None:
+                    import tifffile
+
+                    tf = tifffile.TiffFile(self.path)
+                    tf.pages.cache = False
+                    tf.pages.useframes = self.uniform
+                    self._tf = tf
+                img = self._tf.pages[index].asarray()
+        except Exception as exc:
+            raise InputError(f"{where}: cannot decode image ({exc})") from None
+        img = _to_rgb_or_grey(np.asarray(img))
+        if channels == 1 and img.ndim == 3:
+            img = img[..., 0]
+        return img
+
+    def close(self):
+        with self._lock:
+            if self._tf is not None:
+                self._tf.close()
+                self._tf = None
+
+    def __del__(self):  # pragma: no cover - best effort
+        with contextlib.suppress(Exception):
+            self.close()
 
 
 # --------------------------------------------------------------------------------------------
@@ -330,6 +393,11 @@ class Stack:
     export_height_path: Path | None = None
     export_image_path: Path | None = None
     meta: dict = field(default_factory=dict)
+    tiff_uniform: bool = field(default=False, repr=False)
+
+    def __post_init__(self):
+        reader = _MultiPageTiff(self.tiff_path, self.tiff_uniform) if self.tiff_path else None
+        object.__setattr__(self, "_tiff", reader)
 
     # -- properties ----------------------------------------------------------------------
     @property
@@ -382,11 +450,11 @@ class Stack:
         """
         if not 0 <= index < self.n_slices:
             raise IndexError(f"slice index {index} out of range 0..{self.n_slices - 1}")
-        where = f"slice {index} ({self.slice_name(index)})"
-        if self.tiff_path is not None:
-            raw = _decode(self.tiff_path, where, page=index)
+        where = f"slice {index} ({one_line(self.slice_name(index))})"
+        if self._tiff is not None:
+            raw = self._tiff.read(index, where, self.channels)
         else:
-            raw = _decode(self.slice_paths[index], where)
+            raw = _decode(self.slice_paths[index], where, channels=self.channels)
         if raw.shape[:2] != self.shape or raw.dtype != self.dtype or (
                 (raw.ndim == 3) != (self.channels == 3)):
             raise InputError(f"{where}: decoded image {raw.shape} {raw.dtype} does not match "
@@ -429,14 +497,16 @@ class Stack:
             h = tifffile.imread(p)
         h = np.asarray(h, dtype=np.float32)
         h[~np.isfinite(h)] = np.nan
+        _warn_height_unit(h, self.pixel_size_um, self.path / "stack.json")
         return h
 
     def read_export_image(self, dtype=np.float32) -> np.ndarray:
         """The microscope export's all-in-focus image, (H, W) or (H, W, 3), see :meth:`read_slice`."""
         if self.export_image_path is None:
             raise InputError(f"{self.path / 'stack.json'}: key 'image': the stack has no export")
-        return _convert(_decode(self.export_image_path, f"export image ({self.export_image_path})"),
-                        dtype)
+        return _convert(_decode(self.export_image_path,
+                                f"export image ({one_line(self.export_image_path)})",
+                                channels=self.channels), dtype)
 
 
 def _convert(raw: np.ndarray, dtype) -> np.ndarray:
@@ -452,22 +522,41 @@ def _convert(raw: np.ndarray, dtype) -> np.ndarray:
 
 
 def _is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+    """A JSON number that fits a float (a 400-digit integer does not)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        float(v)
+    except OverflowError:
+        return False
+    return True
 
 
 def _resolve_inside(root: Path, rel, where: str) -> Path:
     if not isinstance(rel, str) or not rel:
         raise InputError(f"{where}: must be a non-empty relative path string, got {rel!r}")
+    if "\x00" in rel:
+        raise InputError(f"{where}: {rel!r} contains a NUL byte")
     if os.path.isabs(rel) or rel.startswith(("/", "\\")):
         raise InputError(f"{where}: {rel!r} is an absolute path; paths must be relative "
                          f"to the stack folder")
-    p = (root / rel).resolve()
+    try:
+        p = (root / rel).resolve(strict=False)
+    except (RuntimeError, OSError) as exc:  # a symlink loop (RuntimeError up to Python 3.12)
+        why = getattr(exc, "strerror", None) or "symbolic link loop"
+        raise InputError(f"{where}: {rel!r} cannot be opened ({why})") from None
     try:
         p.relative_to(root)
     except ValueError:
-        raise InputError(f"{where}: {rel!r} escapes the stack folder {root}") from None
-    if not p.is_file():
-        raise InputError(f"{where}: file not found: {p}")
+        raise InputError(f"{where}: {rel!r} escapes the stack folder {one_line(root)}") from None
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise InputError(f"{where}: file not found: {one_line(p)}") from None
+    except OSError as exc:
+        raise InputError(f"{where}: {rel!r} cannot be opened ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError(f"{where}: {rel!r} is not a file")
     return p
 
 
@@ -490,13 +579,16 @@ def _npy_info(path: Path, where: str) -> tuple[tuple[int, ...], np.dtype]:
     return tuple(int(s) for s in shape), dtype
 
 
-def read_stack(path) -> Stack:
+def read_stack(path, *, limits: Limits | None = None) -> Stack:
     """Read and validate a stack folder (or its ``stack.json``).
 
     Parameters
     ----------
     path : str or Path
         The stack folder, or the ``stack.json`` file inside it.
+    limits : Limits, optional
+        Largest image and stack, checked from the headers before anything is decoded
+        (default :class:`microfacet.limits.Limits`).
 
     Returns
     -------
@@ -507,9 +599,18 @@ def read_stack(path) -> Stack:
     ------
     InputError
         For every breach of the format, with one message naming the file and the key or
-        slice at fault.
+        slice at fault; also for images over ``limits``.
+
+    Notes
+    -----
+    Keys this format does not define are kept in ``Stack.meta`` and logged as a warning
+    naming the nearest known key (``colour_space`` → ``color_space``). Values that are valid
+    but almost surely a unit mistake (a pixel size outside 0.01-100 µm, z in nm) are logged as
+    warnings.
     """
     path = Path(path)
+    if "\x00" in str(path):
+        raise InputError(f"{one_line(path)}: the path contains a NUL byte")
     if path.is_file() and path.name == "stack.json":
         path = path.parent
     if not path.exists():
@@ -519,16 +620,11 @@ def read_stack(path) -> Stack:
     root = path.resolve()
     jpath = root / "stack.json"
     if not jpath.is_file():
-        raise InputError(f"{jpath}: missing stack.json")
-    try:
-        meta = json.loads(jpath.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{jpath}: cannot read ({exc})") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{jpath}: invalid JSON ({exc})") from None
+        raise InputError(f"{one_line(jpath)}: missing stack.json")
+    meta = read_json(jpath)
     if not isinstance(meta, dict):
-        raise InputError(f"{jpath}: must hold a JSON object")
-    return _stack_from_meta(root, meta, jpath)
+        raise InputError(f"{one_line(jpath)}: must hold a JSON object")
+    return _stack_from_meta(root, meta, jpath, limits or Limits())
 
 
 def _natural_key(name: str):
@@ -538,7 +634,8 @@ def _natural_key(name: str):
 
 
 def stack_from_images(folder, *, pixel_size_um: float, z_step_um: float | None = None,
-                      z_um: Sequence[float] | None = None) -> Stack:
+                      z_um: Sequence[float] | None = None, limits: Limits | None = None
+                      ) -> Stack:
     """A validated stack from a plain folder of images that has no stack.json.
 
     The images (``.png``, ``.tif``, ``.tiff``, ``.jpg``, ``.jpeg``, any case) are taken in
@@ -568,12 +665,113 @@ def stack_from_images(folder, *, pixel_size_um: float, z_step_um: float | None =
         meta["z_step_um"] = z_step_um
     if z_um is not None:
         meta["z_um"] = list(z_um)
-    return _stack_from_meta(root, meta, root / "(no stack.json)")
+    return _stack_from_meta(root, meta, root / "(no stack.json)", limits or Limits())
 
 
-def _stack_from_meta(root: Path, meta: dict, jpath: Path) -> Stack:
+#: Median |slope| of a height map above which its unit is almost surely wrong (real
+#: surfaces, even roll-dull or sand-blasted, have median slopes well below 1, i.e. 45°).
+_IMPLAUSIBLE_MEDIAN_SLOPE = 5.0
+
+
+def _warn_height_unit(h: np.ndarray, pixel_size_um: float, jpath: Path) -> None:
+    """Warn when a height map in µm has slopes no surface has (heights in nm, most likely)."""
+    step = max(1, min(h.shape) // 256)
+    sub = h[::step, ::step]
+    d = np.abs(np.diff(sub, axis=1)) / (pixel_size_um * step)
+    d = d[np.isfinite(d)]
+    if d.size and float(np.median(d)) > _IMPLAUSIBLE_MEDIAN_SLOPE:
+        log.warning("%s: key 'height_um': the median surface slope is %.3g (%.2f°), which no "
+                    "surface has; if the heights are in nm, divide them by 1000 (or check "
+                    "pixel_size_um)", one_line(jpath), float(np.median(d)),
+                    float(np.degrees(np.arctan(np.median(d)))))
+
+
+def _check_consistent(shown, name, info, ref_name, ref_info) -> None:
+    if info.shape != ref_info.shape:
+        raise InputError(f"{shown}: {name}: size {info.shape[1]}x{info.shape[0]} differs from "
+                         f"{ref_name} {ref_info.shape[1]}x{ref_info.shape[0]}")
+    if info.dtype != ref_info.dtype:
+        raise InputError(f"{shown}: {name}: bit depth {info.dtype.itemsize * 8} differs from "
+                         f"{ref_name} ({ref_info.dtype.itemsize * 8}-bit); mixed bit depths")
+    if info.channels != ref_info.channels:
+        raise InputError(f"{shown}: {name}: {info.channels} channel(s) differ from "
+                         f"{ref_name} ({ref_info.channels}); mixed grey and colour slices")
+
+
+_TIFF_CODING = ("compression", "predictor", "planarconfig", "photometric", "bitspersample",
+                "samplesperpixel", "fillorder", "sampleformat")
+
+
+def _tiff_headers(tiff_path: Path, where: str, add) -> bool:
+    """Read every page header of a multi-page TIFF in one pass (linear in the pages) and
+    ``add(name, where, info)`` each; True when every page is encoded like the first."""
+    import tifffile
+
+    name = one_line(tiff_path.name)
+    fsize = tiff_path.stat().st_size
+    uniform = True
+    try:
+        with tifffile.TiffFile(tiff_path) as tf:
+            tf.pages.cache = False          # one page object alive at a time
+            tf.pages.useframes = False      # full headers: every page is checked
+            coding0 = None
+            for k, page in enumerate(tf.pages):
+                wk = f"{where} ({name} page {k})"
+                add(f"{one_line(tiff_path)} page {k}", wk, _tiff_page_info(page, wk, fsize))
+                coding = tuple(getattr(page, a, None) for a in _TIFF_CODING)
+                coding0 = coding if coding0 is None else coding0
+                uniform &= coding == coding0 and not page.is_tiled
+    except InputError:
+        raise
+    except Exception as exc:
+        raise InputError(f"{where} ({name}): unreadable TIFF ({exc})") from None
+    return uniform
+
+
+def _warn_unknown_keys(meta: dict, jpath: Path) -> None:
+    for key in meta:
+        if key not in KNOWN_KEYS:
+            near = difflib.get_close_matches(key, KNOWN_KEYS, n=1, cutoff=0.6)
+            hint = f"; did you mean {near[0]!r}?" if near else " (kept, not used)"
+            log.warning("%s: unknown key %r%s", one_line(jpath), key, hint)
+    illum = meta.get("illumination")
+    if isinstance(illum, dict):
+        for key in illum:
+            if key not in _ILLUMINATION_KEYS:
+                near = difflib.get_close_matches(key, _ILLUMINATION_KEYS, n=1, cutoff=0.6)
+                hint = f"; did you mean {near[0]!r}?" if near else " (not used)"
+                log.warning("%s: key 'illumination': unknown key %r%s", one_line(jpath), key,
+                            hint)
+
+
+def _warn_implausible(jpath: Path, pixel_size_um: float, z_um: np.ndarray, shape) -> None:
+    """Valid values that are almost surely a unit mistake (warnings, not errors)."""
+    lo, hi = PLAUSIBLE_PIXEL_SIZE_UM
+    if not lo <= pixel_size_um <= hi:
+        log.warning("%s: key 'pixel_size_um': %g µm per pixel is outside %g-%g µm, where "
+                    "optical microscopes are; check the unit (µm)", one_line(jpath),
+                    pixel_size_um, lo, hi)
+    if z_um.size >= 2:
+        zs = np.sort(z_um)
+        span = float(zs[-1] - zs[0])
+        step = float(np.median(np.diff(zs)))
+        field_um = max(shape) * pixel_size_um
+        if span > field_um:
+            log.warning("%s: key 'z_um': the slices span %g µm, more than the field of view "
+                        "(%g µm wide); if z is in nm, divide it by 1000", one_line(jpath),
+                        span, field_um)
+        elif step < 1e-3:
+            log.warning("%s: key 'z_um': slices %g µm apart is below any focus drive's "
+                        "step; if z is in mm, multiply it by 1000", one_line(jpath), step)
+
+
+def _stack_from_meta(root: Path, meta: dict, jpath: Path, limits: Limits) -> Stack:
+    shown = one_line(jpath)
+
     def where(key):
-        return f"{jpath}: key {key!r}"
+        return f"{shown}: key {key!r}"
+
+    _warn_unknown_keys(meta, jpath)
 
     fmt = meta.get("format")
     if fmt is None:
@@ -654,8 +852,11 @@ def _stack_from_meta(root: Path, meta: dict, jpath: Path) -> Stack:
             raise InputError(f"{wh}: height map must be a TIFF or .npy file")
         if len(hshape) != 2:
             raise InputError(f"{wh}: height map must be 2-D, got shape {hshape}")
+        limits.check_image(hshape, wh)
         export_image = _resolve_inside(root, meta["image"], where("image"))
-        info = _image_info(export_image, f"{where('image')} ({export_image.name})")
+        wi = f"{where('image')} ({one_line(export_image.name)})"
+        info = _image_info(export_image, wi)
+        limits.check_image(info.shape, wi)
         if info.shape != hshape:
             raise InputError(f"{where('image')} ({export_image.name}): size {info.shape} does not "
                              f"match the height map {hshape}")
@@ -670,7 +871,6 @@ def _stack_from_meta(root: Path, meta: dict, jpath: Path) -> Stack:
                          f"'height_um' + 'image')")
     slice_paths: list[Path] = []
     tiff_path = None
-    infos: list[tuple[str, _ImageInfo]] = []
     if has_slices:
         sl = meta["slices"]
         if not isinstance(sl, list) or not sl:
@@ -695,25 +895,22 @@ def _stack_from_meta(root: Path, meta: dict, jpath: Path) -> Stack:
         if not has_z and not has_step:
             raise InputError(f"{where('z_um')}: missing (give 'z_um' or 'z_step_um')")
 
-    # multi-page TIFF headers (needs n before the z check)
-    if tiff_path is not None:
-        import tifffile
+    # headers, each checked against the limits and against the first as soon as it is read
+    infos: list[tuple[str, _ImageInfo]] = []
 
-        fsize = tiff_path.stat().st_size
-        try:
-            with tifffile.TiffFile(tiff_path) as tf:
-                pages = tf.pages
-                for k, page in enumerate(pages):
-                    infos.append((f"{tiff_path} page {k}",
-                                  _tiff_page_info(page, f"{where('tiff')} ({tiff_path.name} page {k})",
-                                                  fsize)))
-        except InputError:
-            raise
-        except Exception as exc:
-            raise InputError(f"{where('tiff')} ({tiff_path.name}): unreadable TIFF ({exc})") from None
+    def add(name, where_text, info):
+        limits.check_image(info.shape, where_text)
+        if infos:
+            _check_consistent(shown, name, info, *infos[0])
+        infos.append((name, info))
+
+    tiff_uniform = False
+    if tiff_path is not None:
+        tiff_uniform = _tiff_headers(tiff_path, where("tiff"), add)
         n = len(infos)
         if n == 0:
             raise InputError(f"{where('tiff')} ({tiff_path.name}): TIFF has no pages")
+        limits.check_stack(n, infos[0][1].shape, where("tiff"))
 
     if n:
         if "z_um" in meta:
@@ -740,25 +937,15 @@ def _stack_from_meta(root: Path, meta: dict, jpath: Path) -> Stack:
 
     if has_slices:
         for i, p in enumerate(slice_paths):
-            infos.append((f"slices[{i}] ({p.name})",
-                          _image_info(p, f"{where('slices')}[{i}] ({p.name})")))
+            wt = f"{where('slices')}[{i}] ({one_line(p.name)})"
+            add(f"slices[{i}] ({one_line(p.name)})", wt, _image_info(p, wt))
+        limits.check_stack(n, infos[0][1].shape, where("slices"))
 
-    # consistency
     ref_info = infos[0][1] if infos else export_shape
-    ref_name = infos[0][0] if infos else "the export image"
-    for name, info in infos[1:]:
-        if info.shape != ref_info.shape:
-            raise InputError(f"{jpath}: {name}: size {info.shape[1]}x{info.shape[0]} differs from "
-                             f"{ref_name} {ref_info.shape[1]}x{ref_info.shape[0]}")
-        if info.dtype != ref_info.dtype:
-            raise InputError(f"{jpath}: {name}: bit depth {info.dtype.itemsize * 8} differs from "
-                             f"{ref_name} ({ref_info.dtype.itemsize * 8}-bit); mixed bit depths")
-        if info.channels != ref_info.channels:
-            raise InputError(f"{jpath}: {name}: {info.channels} channel(s) differ from "
-                             f"{ref_name} ({ref_info.channels}); mixed grey and colour slices")
     if infos and export_shape is not None and export_shape.shape != ref_info.shape:
         raise InputError(f"{where('image')}: export size {export_shape.shape} differs from the "
                          f"slices {ref_info.shape}")
+    _warn_implausible(jpath, float(ps), z_um, ref_info.shape)
 
     stack = Stack(
         path=root,
@@ -778,6 +965,7 @@ def _stack_from_meta(root: Path, meta: dict, jpath: Path) -> Stack:
         export_height_path=export_height,
         export_image_path=export_image,
         meta=meta,
+        tiff_uniform=tiff_uniform,
     )
     log.debug("read stack %s: %d slices %s %s x%d", root, stack.n_slices, stack.shape,
               stack.dtype, stack.channels)

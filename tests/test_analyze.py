@@ -105,13 +105,30 @@ def test_bad_inputs_exit_2_and_leave_nothing(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_write_results_refuses_existing_folder(both_modes, tmp_path):
-    out = tmp_path / "r"
-    out.mkdir()
+def test_write_results_replaces_only_its_own_kind(both_modes, tmp_path):
+    """An empty folder is used; an earlier results folder needs overwrite; anything else is
+    never replaced, with or without overwrite."""
     from microfacet.errors import InputError
 
+    res = both_modes["seed"]
+    out = tmp_path / "r"
+    out.mkdir()
+    write_results(res, out, report=False)                   # empty: nothing to lose
+    assert (out / "summary.json").is_file()
     with pytest.raises(InputError, match="already exists"):
-        write_results(both_modes["seed"], out, report=False)
+        write_results(res, out, report=False)
+    (out / "note.txt").write_text("mine")
+    write_results(res, out, overwrite=True, report=False)   # a results folder: replaced
+    assert not (out / "note.txt").exists()
+    other = tmp_path / "photos"
+    other.mkdir()
+    (other / "cat.jpg").write_bytes(b"\xff\xd8")
+    for overwrite in (False, True):
+        with pytest.raises(InputError, match="never replaced") as err:
+            write_results(res, other, overwrite=overwrite, report=False)
+        assert err.value.param == "out"
+    assert (other / "cat.jpg").read_bytes() == b"\xff\xd8"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["photos", "r"]
 
 
 def test_microscope_export_is_analysed_without_slices(tmp_path):

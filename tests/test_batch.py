@@ -93,7 +93,7 @@ def test_results_made_with_other_parameters_are_not_mixed_in(drawer, tmp_path):
     # other options: refused (with the differing key named) until --overwrite
     assert main(["batch", a, "--out", str(out), "--jobs", "1", "--mode", "seed", *FAST]) == 1
     row = _rows(out)[0]
-    assert row["status"] == "failed" and "mode" in row["reason"] and "--overwrite" in row["reason"]
+    assert row["status"] == "failed" and "mode" in row["reason"] and "overwrite" in row["reason"]
     assert json.loads((out / "a" / "summary.json").read_text())["mode"] == "joint"
     assert main(["batch", a, "--out", str(out), "--jobs", "1", "--mode", "seed", "--overwrite",
                  *FAST]) == 0

@@ -56,7 +56,7 @@ def test_fit_spectrum_prints_thickness_and_runner_up(tmp_path, capsys):
     (["fit-spectrum", "missing.csv"], "missing.csv"),
     (["fit-spectrum", "{spec}", "--film", "Nope"], "--film"),
     (["fit-spectrum", "{spec}", "--angle-deg", "95"], "angle_deg"),
-    (["simulate", "--thickness-nm", "-5", "--out", "{tmp}/o"], "thickness_nm"),
+    (["simulate", "--thickness-nm", "-5", "--out", "{tmp}/o"], "--thickness-nm"),
     (["simulate", "--thickness-nm", "50", "--out", "{tmp}/o", "--theta-max-deg", "90"],
      "--theta-max-deg"),
 ])

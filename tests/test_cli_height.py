@@ -65,16 +65,24 @@ def test_outputs(small_stack, tmp_path, capsys):
 
 
 def test_refuses_existing_out_and_overwrites(small_stack, tmp_path, capsys):
+    """A folder that is not a height folder is never replaced, not even with --overwrite; an
+    earlier height folder is replaced only with --overwrite."""
     d, _ = small_stack
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "keep.txt").write_text("x")
+    for extra in ([], ["--overwrite"]):
+        assert main(["height", str(d), "--out", str(mine)] + extra) == 2
+        assert "never replaced" in capsys.readouterr().err
+    assert (mine / "keep.txt").read_text() == "x"
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "keep.txt").write_text("x")
+    assert main(["height", str(d), "--out", str(out), "-q"]) == 0
+    (out / "note.txt").write_text("x")
     assert main(["height", str(d), "--out", str(out)]) == 2
-    assert "already exists" in capsys.readouterr().err
-    assert (out / "keep.txt").exists()
+    assert "already exists" in capsys.readouterr().err and (out / "note.txt").exists()
     assert main(["height", str(d), "--out", str(out), "--overwrite", "--operator", "sml",
                  "--window-px", "5", "--fill"]) == 0
-    assert not (out / "keep.txt").exists()
+    assert not (out / "note.txt").exists()
     hu = np.load(out / "height_um.npy")
     assert np.isfinite(hu).all()
     assert json.loads((out / "height.json").read_text())["parameters"]["operator"] == "sml"

@@ -34,6 +34,27 @@ def optics_kwargs(args) -> dict:
                 observer=args.observer)
 
 
+def add_limit_options(p: argparse.ArgumentParser) -> None:
+    """``--max-megapixels``, ``--max-stack-megapixels`` (see :mod:`microfacet.limits`)."""
+    from ..limits import DEFAULT_MAX_MEGAPIXELS, DEFAULT_MAX_STACK_MEGAPIXELS
+
+    g = p.add_argument_group("limits (checked from the image headers before any work)")
+    g.add_argument("--max-megapixels", type=float, default=DEFAULT_MAX_MEGAPIXELS, metavar="MP",
+                   help=f"largest image, megapixels (default {DEFAULT_MAX_MEGAPIXELS:g})")
+    g.add_argument("--max-stack-megapixels", type=float, default=DEFAULT_MAX_STACK_MEGAPIXELS,
+                   metavar="MP", help="largest total of all slices of a stack, megapixels "
+                                      f"(default {DEFAULT_MAX_STACK_MEGAPIXELS:g})")
+
+
+def limits_from_args(args):
+    """:class:`~microfacet.limits.Limits` from ``--max-megapixels`` and
+    ``--max-stack-megapixels``."""
+    from ..limits import Limits
+
+    return Limits(max_megapixels=args.max_megapixels,
+                  max_stack_megapixels=args.max_stack_megapixels)
+
+
 def pair_type(sep: str, cast, example: str):
     """argparse type for two values joined by ``sep`` (e.g. ``512x512``, ``0:400``)."""
 

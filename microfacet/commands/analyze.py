@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 
-from ._common import HelpFormatter, add_analysis_options, analysis_options, example_epilog
+from ._common import (HelpFormatter, add_analysis_options, add_limit_options, analysis_options,
+                      example_epilog, limits_from_args)
 
 
 def register(sub):
@@ -21,10 +22,14 @@ def register(sub):
         formatter_class=HelpFormatter,
     )
     p.add_argument("stack", metavar="STACK", help="stack folder (microfacet-stack/1)")
-    p.add_argument("--out", required=True, metavar="OUT", help="results folder (must not exist)")
+    p.add_argument("--out", required=True, metavar="OUT",
+                   help="results folder (new, empty, or an earlier results folder with "
+                        "--overwrite; never an input or a folder holding one)")
     add_analysis_options(p)
+    add_limit_options(p)
     p.add_argument("--no-report", action="store_true", help="skip report.pdf")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing OUT")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace OUT if it is an earlier microfacet results folder")
     p.set_defaults(run=run)
     return p
 
@@ -34,20 +39,23 @@ def run(args) -> int:
     import time
     from pathlib import Path
 
-    from ..analyze import analyze_stack, write_results
-    from ..errors import InputError
+    from ..analyze import analyze_stack, check_analysis_memory, results_size_bytes, write_results
+    from ..outdir import OutputFolder, check_output
     from ..progress import Progress
     from ..stack import read_stack
 
     out = Path(args.out)
-    if out.exists() and not args.overwrite:
-        raise InputError(f"{out}: already exists (use --overwrite to replace it)")
+    check_output(out, kind="results", inputs=[args.stack], overwrite=args.overwrite)
     opts = analysis_options(args)
     t0 = time.perf_counter()
-    stack = read_stack(args.stack)  # validates everything before any work
+    stack = read_stack(args.stack, limits=limits_from_args(args))  # validates before any work
+    check_analysis_memory(stack)
     stages = ["height from focus", "colour", "colour table", "thickness per ROI",
               "tilt per pixel", "distributions"]
-    with Progress("analyze", total=len(stages) + 1, unit="stages", quiet=args.quiet) as bar:
+    with OutputFolder(out, kind="results", inputs=[stack.path], overwrite=args.overwrite,
+                      expected_bytes=results_size_bytes(stack.shape,
+                                                        report=not args.no_report)), \
+            Progress("analyze", total=len(stages) + 1, unit="stages", quiet=args.quiet) as bar:
         def progress(name):
             bar.update(stages.index(name) if name in stages else 0)
 

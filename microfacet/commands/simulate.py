@@ -97,7 +97,21 @@ def _legacy(args) -> bool:
             and not args.fit_exposure and args.lobe_exponent is None)
 
 
+#: Finest angle step and spectral step accepted (finer grids change no colour measurably:
+#: docs/speed-vs-error.md), largest exposure, cosine-lobe exponent, thickness and mixture SD.
+MIN_THETA_STEP_DEG = 0.05
+SPECTRAL_STEP_RANGE_NM = (0.5, 20.0)
+EXPOSURE_RANGE = (1e-6, 1e6)
+MAX_LOBE_EXPONENT = 1e6
+MAX_THICKNESS_NM = 5000.0
+MAX_THICKNESS_SD_NM = 1000.0
+
+
 def run(args) -> int:
+    from ..outdir import check_output
+
+    inputs = [x for x in (args.results, args.compare) if x]
+    check_output(args.out, kind="simulate", inputs=inputs, overwrite=args.overwrite)
     if _legacy(args):
         return _run_half_vector(args)
     return _run_distributions(args)
@@ -108,9 +122,45 @@ def _grid(args):
 
     if not (0 < args.theta_max_deg < 90):
         raise ValueError("--theta-max-deg: must be in (0, 90)")
-    if not (0 < args.theta_step_deg <= args.theta_max_deg):
-        raise ValueError("--theta-step-deg: must be > 0 and <= --theta-max-deg")
+    if not (MIN_THETA_STEP_DEG <= args.theta_step_deg <= args.theta_max_deg):
+        raise ValueError(f"--theta-step-deg: must be >= {MIN_THETA_STEP_DEG:g} and <= "
+                         f"--theta-max-deg, got {args.theta_step_deg:g}")
     return np.arange(0.0, args.theta_max_deg + 1e-9, args.theta_step_deg)
+
+
+def _check_grid_memory(model, n_light, n_view, n_wl, what):
+    from ..angular import simulate_memory_bytes
+    from ..limits import check_memory
+
+    check_memory(simulate_memory_bytes(model=model, n_light=n_light, n_view=n_view,
+                                       n_wavelengths=n_wl),
+                 f"{n_light} x {n_view} angles x {n_wl} wavelengths ({what})")
+
+
+def _check_outcome(xyz, model):
+    """Refuse an exposure or lobe exponent that makes every colour infinite or zero."""
+    import numpy as np
+
+    from ..errors import InputError
+
+    finite = np.isfinite(xyz)
+    if not finite.any():
+        raise InputError("every predicted colour is infinite; use a smaller exposure",
+                         param="exposure")
+    if not np.any(xyz[finite] > 0):
+        param = "lobe_exponent" if model == "eq6" else "exposure"
+        raise InputError("every predicted colour is black (zero); the value is far outside "
+                         "what the model can show", param=param)
+
+
+def _check_thickness_nm(value):
+    import math
+
+    from ..errors import InputError
+
+    if value is not None and not (math.isfinite(value) and 0 <= value <= MAX_THICKNESS_NM):
+        raise InputError(f"must be in [0, {MAX_THICKNESS_NM:g}] nm, got {value:g}",
+                         param="thickness_nm")
 
 
 def _run_half_vector(args) -> int:
@@ -127,11 +177,19 @@ def _run_half_vector(args) -> int:
     log = logging.getLogger("microfacet.simulate")
     opt = optics_kwargs(args)
     grid = _grid(args)
+    _check_thickness_nm(args.thickness_nm)
     exposure = 1.0 if args.exposure is None else args.exposure
+    if not (np.isfinite(exposure) and EXPOSURE_RANGE[0] <= exposure <= EXPOSURE_RANGE[1]):
+        raise ValueError(f"--exposure: must be in [{EXPOSURE_RANGE[0]:g}, "
+                         f"{EXPOSURE_RANGE[1]:g}], got {exposure:g}")
+    _check_grid_memory("half-vector", grid.size, grid.size, 81,
+                       f"--theta-step-deg {args.theta_step_deg:g}")
     t0 = time.perf_counter()
     m = angular_colour_map(args.thickness_nm, theta_light_deg=grid, theta_view_deg=grid,
                            exposure=exposure, **opt)
-    with atomic_output_dir(args.out, overwrite=args.overwrite) as tmp:
+    _check_outcome(m.xyz, "half-vector")
+    with atomic_output_dir(args.out, kind="simulate", overwrite=args.overwrite,
+                           inputs=[]) as tmp:
         np.save(tmp / "angular_lab.npy", m.lab)
         np.save(tmp / "angular_xyz.npy", m.xyz.astype(np.float32))
         np.save(tmp / "theta_light_deg.npy", m.theta_light_deg)
@@ -182,8 +240,10 @@ def _parse_components(text, n, option, form):
             raise ValueError("no components")
         if n == 2 and any(not (0 < c[1] < 90) for c in comps):
             raise ValueError("sd_deg must be in (0, 90)")
-        if n == 3 and any(c[1] < 0 for c in comps):
-            raise ValueError("mean_nm must be >= 0")
+        if n == 3 and any(not 0 <= c[1] <= MAX_THICKNESS_NM for c in comps):
+            raise ValueError(f"mean_nm must be in [0, {MAX_THICKNESS_NM:g}]")
+        if n == 3 and any(c[2] > MAX_THICKNESS_SD_NM for c in comps):
+            raise ValueError(f"sd_nm must be <= {MAX_THICKNESS_SD_NM:g}")
         if any(not all(map(_finite, c)) or c[0] <= 0 or c[-1] <= 0 for c in comps):
             raise ValueError("weights and sds must be finite and > 0")
     except ValueError as exc:
@@ -242,6 +302,7 @@ def _run_distributions(args) -> int:
     from .. import __version__
     from ..angular import (delta_e_map, fit_eq6, fit_exposure, load_map, mean_delta_e,
                            plot_maps, save_map, simulate_map)
+    from ..errors import InputError
     from ..outdir import atomic_output_dir
 
     log = logging.getLogger("microfacet.simulate")
@@ -250,8 +311,7 @@ def _run_distributions(args) -> int:
     if args.thickness_mixture is not None:
         thickness = parse_thickness_mixture(args.thickness_mixture)
     elif args.thickness_nm is not None:
-        if not (np.isfinite(args.thickness_nm) and args.thickness_nm >= 0):
-            raise ValueError("--thickness-nm: must be finite and >= 0")
+        _check_thickness_nm(args.thickness_nm)
         thickness = float(args.thickness_nm)
     elif "thickness" in res:
         thickness = res["thickness"]
@@ -277,14 +337,16 @@ def _run_distributions(args) -> int:
     opt = optics_kwargs(args)
     auto_exposure = args.exposure is None and not args.fit_exposure and model != "half-vector"
     exposure = 1.0 if args.exposure is None else args.exposure
-    if not (np.isfinite(exposure) and exposure > 0):
-        raise ValueError("--exposure: must be > 0")
+    if not (np.isfinite(exposure) and EXPOSURE_RANGE[0] <= exposure <= EXPOSURE_RANGE[1]):
+        raise ValueError(f"--exposure: must be in [{EXPOSURE_RANGE[0]:g}, "
+                         f"{EXPOSURE_RANGE[1]:g}], got {exposure:g}")
     n = 100.0 if args.lobe_exponent is None else float(args.lobe_exponent)
-    if not (np.isfinite(n) and n >= 0):
-        raise ValueError("--lobe-exponent: must be finite and >= 0")
+    if not (np.isfinite(n) and 0 <= n <= MAX_LOBE_EXPONENT):
+        raise ValueError(f"--lobe-exponent: must be in [0, {MAX_LOBE_EXPONENT:g}]")
     step = args.spectral_step_nm
-    if not (np.isfinite(step) and 0 < step <= 20):
-        raise ValueError("--spectral-step-nm: must be in (0, 20]")
+    lo_step, hi_step = SPECTRAL_STEP_RANGE_NM
+    if not (np.isfinite(step) and lo_step <= step <= hi_step):
+        raise ValueError(f"--spectral-step-nm: must be in [{lo_step:g}, {hi_step:g}]")
     wl = np.linspace(380.0, 780.0, int(round(400.0 / step)) + 1)
 
     measured = None
@@ -296,6 +358,16 @@ def _run_distributions(args) -> int:
         tl = tv = _grid(args)
     if not (0 < args.specular_halfwidth_deg < 90):
         raise ValueError("--specular-halfwidth-deg: must be in (0, 90)")
+    _check_grid_memory(model, tl.size, tv.size, wl.size,
+                       f"--theta-step-deg {args.theta_step_deg:g}, --spectral-step-nm {step:g}")
+    try:
+        from ..brdf import thickness_nodes
+
+        thickness_nodes(thickness)
+    except ValueError as exc:
+        raise InputError(str(exc).partition(": ")[2],
+                         param="thickness_mixture" if args.thickness_mixture else "results"
+                         ) from None
 
     fit = {}
     if args.fit_exponent:
@@ -330,6 +402,7 @@ def _run_distributions(args) -> int:
         exposure = 0.9 / p98 if p98 > 0 else 1.0
         fit["auto_exposure"] = exposure
     m = simulate_map(exposure=exposure, **kw)
+    _check_outcome(m.xyz, model)
     de = stats = None
     if measured is not None:
         de = delta_e_map(m, measured)
@@ -352,7 +425,9 @@ def _run_distributions(args) -> int:
         meta["fit"] = fit
     if stats is not None:
         meta["compare"] = {"measured": str(args.compare), **stats}
-    with atomic_output_dir(args.out, overwrite=args.overwrite) as tmp:
+    inputs = [x for x in (args.results, args.compare) if x]
+    with atomic_output_dir(args.out, kind="simulate", overwrite=args.overwrite,
+                           inputs=inputs) as tmp:
         np.save(tmp / "spectra.npy", m.spectra.astype(np.float32))
         np.save(tmp / "wavelength_nm.npy", wl)
         np.save(tmp / "angular_lab.npy", m.lab)

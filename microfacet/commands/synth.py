@@ -34,7 +34,8 @@ def register(sub):
     p.add_argument("--bit-depth", type=int, choices=(8, 16), default=None)
     p.add_argument("--write-exposure", action="store_true",
                    help="write the true exposure into stack.json (else it must be estimated)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing OUT")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace OUT if it is an earlier synthetic stack")
     p.set_defaults(run=run)
     return p
 
@@ -42,6 +43,7 @@ def register(sub):
 def run(args) -> int:
     import sys
 
+    from ..errors import InputError
     from ..progress import Progress
     from ..synth import generate_stack, preset
 
@@ -61,7 +63,13 @@ def run(args) -> int:
         flag = {"height_px": "--size", "width_px": "--size", "n_slices": "--slices"}.get(name)
         raise ValueError(f"{flag}: {exc}" if flag else str(exc)) from None
     with Progress("synth", total=params.n_slices, unit="slices", quiet=args.quiet) as bar:
-        res = generate_stack(args.out, params, overwrite=args.overwrite, progress=bar.update)
+        try:
+            res = generate_stack(args.out, params, overwrite=args.overwrite,
+                                 progress=bar.update)
+        except InputError as exc:
+            if exc.param in ("height_px", "width_px"):
+                raise InputError(exc.reason, param="size") from None
+            raise
     if not args.quiet:
         print(f"wrote {res.path} ({params.n_slices} slices {params.height_px}x{params.width_px},"
               f" {res.timings_s['total']:.1f} s)", file=sys.stderr)
