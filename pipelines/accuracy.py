@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from microfacet.analyze import AnalysisOptions, analyze_stack
-from microfacet.mixtures import wasserstein1
-from microfacet.synth import PRESETS, generate_stack, preset
-from microfacet.thickness import nearest_roi_index, roi_grid
+from microfacet.analysis.pipeline import AnalysisOptions, analyze_stack
+from microfacet.analysis.mixtures import wasserstein1
+from microfacet.forward.synth import PRESETS, generate_stack, preset
+from microfacet.analysis.roi import nearest_roi_index, roi_grid
 
 
 def score(r, truth, p):

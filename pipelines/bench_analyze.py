@@ -25,9 +25,9 @@ def main(argv=None):
     ap.add_argument("--slices", type=int, default=40)
     args = ap.parse_args(argv)
 
-    from microfacet.analyze import AnalysisOptions, analyze_stack, write_results
-    from microfacet.stack import read_stack
-    from microfacet.synth import generate_stack, preset
+    from microfacet.analysis.pipeline import AnalysisOptions, analyze_stack, write_results
+    from microfacet.io.stack import read_stack
+    from microfacet.forward.synth import generate_stack, preset
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "s"

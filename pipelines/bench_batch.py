@@ -15,9 +15,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from microfacet.analyze import AnalysisOptions
-from microfacet.batch import run_batch
-from microfacet.synth import generate_stack, preset
+from microfacet.analysis.pipeline import AnalysisOptions
+from microfacet.batch.runner import run_batch
+from microfacet.forward.synth import generate_stack, preset
 
 
 def main(argv=None):

@@ -1,4 +1,4 @@
-"""Benchmark of the height-from-focus step (microfacet.focus).
+"""Benchmark of the height-from-focus step (microfacet.focus.height).
 
 Writes a synthetic RGB JPEG stack (a random texture blurred by a depth-dependent defocus) of
 ``--size`` pixels with 10 and 40 slices into a temporary folder, then measures in the same run:
@@ -33,7 +33,7 @@ import numpy as np
 def make_stack(folder: Path, n: int, size: int, seed: int = 0) -> Path:
     import cv2
 
-    from microfacet.stack import write_stack
+    from microfacet.io.stack import write_stack
 
     rng = np.random.default_rng(seed)
     tex = cv2.GaussianBlur(rng.random((size, size, 3)).astype(np.float32), (0, 0), 1.0)
@@ -64,8 +64,8 @@ def child_memory(folder: str) -> None:
     import resource
     import tracemalloc
 
-    from microfacet.focus import height_from_focus
-    from microfacet.stack import read_stack
+    from microfacet.focus.height import height_from_focus
+    from microfacet.io.stack import read_stack
 
     st = read_stack(folder)
     tracemalloc.start()
@@ -87,8 +87,8 @@ def main(argv=None) -> int:
         child_memory(args.child)
         return 0
 
-    from microfacet.focus import OPERATORS, height_from_focus
-    from microfacet.stack import read_stack
+    from microfacet.focus.height import OPERATORS, height_from_focus
+    from microfacet.io.stack import read_stack
 
     out = {"size": args.size, "cpus": os.cpu_count(), "runs": {}}
     with tempfile.TemporaryDirectory() as tmp:

@@ -18,13 +18,13 @@ import time
 
 import numpy as np
 
-from microfacet.angular import simulate_map
-from microfacet.brdf import (_theta_m_grid, default_wavelengths, microfacet_geometry,
+from microfacet.forward.angular import simulate_map
+from microfacet.forward.brdf import (_theta_m_grid, default_wavelengths, microfacet_geometry,
                              thickness_nodes)
-from microfacet.distributions import NDFMixture, ThicknessMixture
-from microfacet.halfvector import in_plane_directions
+from microfacet.core.distributions import NDFMixture, ThicknessMixture
+from microfacet.forward.halfvector import in_plane_directions
 from microfacet.optics import DEFAULT_FILM, DEFAULT_SUBSTRATE
-from microfacet.thinfilm import reflectance
+from microfacet.optics.thinfilm import reflectance
 
 G3 = ThicknessMixture([(0.3, 112.0, 3.0), (0.45, 130.0, 3.0), (0.25, 149.0, 3.0)])
 F2 = NDFMixture([(0.6, 3.0), (0.4, 9.0)])

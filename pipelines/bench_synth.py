@@ -17,7 +17,7 @@ import tempfile
 
 CHILD = r"""
 import json, resource, sys, time
-from microfacet.synth import generate_stack, preset
+from microfacet.forward.synth import generate_stack, preset
 name, h, w, k, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
 t0 = time.perf_counter()
 r = generate_stack(out, preset(name, seed=1, height_px=h, width_px=w, n_slices=k))

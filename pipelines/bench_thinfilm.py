@@ -40,7 +40,7 @@ def main(argv=None):
     import tmm
 
     from microfacet.optics import DEFAULT_FILM, DEFAULT_SUBSTRATE, optical_constants
-    from microfacet.thinfilm import num_threads, reflectance
+    from microfacet.optics.thinfilm import num_threads, reflectance
 
     wl = np.linspace(380.0, 780.0, 81)
     theta = np.linspace(0.0, 89.0, 90)
@@ -90,9 +90,9 @@ def main(argv=None):
     t_tmm, r_tmm = best_time(run_tmm, 1)
     rows = []
     for name, fn, full in [
-        ("microfacet.thinfilm.reflectance (float64, 1 thread)", run_microfacet_1thread, True),
-        (f"microfacet.thinfilm.reflectance (float64, {num_threads()} threads)", run_microfacet, True),
-        ("microfacet.thinfilm.reflectance (float32 out)", run_microfacet_f32, True),
+        ("microfacet.optics.thinfilm.reflectance (float64, 1 thread)", run_microfacet_1thread, True),
+        (f"microfacet.optics.thinfilm.reflectance (float64, {num_threads()} threads)", run_microfacet, True),
+        ("microfacet.optics.thinfilm.reflectance (float32 out)", run_microfacet_f32, True),
         ("colour.phenomena.thin_film_tmm 0.4.7", run_colour, True),
     ]:
         t, R = best_time(fn, args.repeat)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 
-from microfacet.colortable import build_colour_table, choose_spectral_step
+from microfacet.colour.table import build_colour_table, choose_spectral_step
 
 SCENES = [
     ("very thin film (sub-20 nm)", (0.0, 20.0), (0.0, 26.6)),

@@ -12,7 +12,7 @@ every oxide thickness d of the analysis range this script computes
   noise σ_n (ΔE00 per Lab component, as ``tilt.estimate_colour_noise`` reports it) of 0.5, 1
   and 2 ΔE00, capped at the tilt range; and with a thickness uncertainty σ_d:
   σ_tilt = sqrt(σ_n² + (K σ_d)²) / J;
-* a Monte-Carlo check: uniform 64 × 64 patches at (θ, d) rendered like ``microfacet.synth``
+* a Monte-Carlo check: uniform 64 × 64 patches at (θ, d) rendered like ``microfacet.forward.synth``
   (colour table, exposure 1, shot + read noise, 8-bit sRGB), inverted with
   ``tilt.invert_tilt`` at the true thickness (0.5° grid, no prior): the measured spread of
   the recovered tilts against σ_n / J and against the σ ``invert_tilt`` reports;
@@ -41,8 +41,8 @@ ROW_D = (10, 25, 51, 75, 100, 112, 130, 149, 175, 200, 235, 260, 300, 350, 400)
 
 
 def lab_direct(th, d):
-    from microfacet import color
-    from microfacet.colortable import direct_xyz
+    from microfacet.colour import colorimetry as color
+    from microfacet.colour.table import direct_xyz
 
     white = color.spectral_weights(np.linspace(380.0, 780.0, 401)).sum(axis=0)
     return color.xyz_to_lab(direct_xyz(th, d, spectral_step_nm=1.0), white=white)
@@ -50,7 +50,7 @@ def lab_direct(th, d):
 
 def sensitivities(d, tilts, h_deg=0.25, h_nm=0.25):
     """J (ΔE00/°) and K (ΔE00/nm), shape (len(tilts), len(d))."""
-    from microfacet.color import delta_e_2000
+    from microfacet.colour.colorimetry import delta_e_2000
 
     th = np.asarray(tilts, float)[:, None]
     dd = np.asarray(d, float)[None, :]
@@ -63,8 +63,8 @@ def sensitivities(d, tilts, h_deg=0.25, h_nm=0.25):
 
 def table_sensitivity(table, d, tilts, max_tilt, step=0.5):
     """J as invert_tilt computes it: central differences of the table rows on its θ grid."""
-    from microfacet.color import delta_e_2000
-    from microfacet.tilt import model_lab_rows
+    from microfacet.colour.colorimetry import delta_e_2000
+    from microfacet.analysis.tilt import model_lab_rows
 
     g = np.arange(0.0, max_tilt + 1e-9, step)
     rl = model_lab_rows(table, np.asarray(d, float), g, exposure=1.0).astype(np.float32)
@@ -78,8 +78,8 @@ def table_sensitivity(table, d, tilts, max_tilt, step=0.5):
 
 def patch_lab(table, theta, d, *, full_well, read_noise, rng, size=64):
     """Uniform patch at (θ, d) through the synthetic sensor, as Lab (float32)."""
-    from microfacet import color
-    from microfacet.synth import SynthParams, _sensor
+    from microfacet.colour import colorimetry as color
+    from microfacet.forward.synth import SynthParams, _sensor
 
     p = SynthParams(full_well_e=full_well, read_noise=read_noise)
     rgb = table.linear_rgb_at(np.full((size, size), theta), np.full((size, size), d))
@@ -89,8 +89,8 @@ def patch_lab(table, theta, d, *, full_well, read_noise, rng, size=64):
 
 
 def monte_carlo(table, max_tilt, thicknesses, tilts, sensors, J_at):
-    from microfacet.mask import colour_mask
-    from microfacet.tilt import estimate_colour_noise, invert_tilt, model_lab_rows
+    from microfacet.analysis.mask import colour_mask
+    from microfacet.analysis.tilt import estimate_colour_noise, invert_tilt, model_lab_rows
 
     g = np.arange(0.0, max_tilt + 1e-9, 0.5)
     if g[-1] < max_tilt - 1e-9:
@@ -122,10 +122,10 @@ def monte_carlo(table, max_tilt, thicknesses, tilts, sensors, J_at):
 
 def scene_noise(size=256):
     """estimate_colour_noise on the nd and noisy presets' sharp noisy images (texture incl.)."""
-    from microfacet import color
-    from microfacet.mask import colour_mask
-    from microfacet.synth import _sensor, preset, render_scene
-    from microfacet.tilt import estimate_colour_noise
+    from microfacet.colour import colorimetry as color
+    from microfacet.analysis.mask import colour_mask
+    from microfacet.forward.synth import _sensor, preset, render_scene
+    from microfacet.analysis.tilt import estimate_colour_noise
 
     out = {}
     for name in ("nd", "noisy"):
@@ -204,7 +204,7 @@ def f2(x):
 
 
 def main(argv=None):
-    from microfacet.colortable import build_colour_table
+    from microfacet.colour.table import build_colour_table
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2 nm thickness step, fewer patches")

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from microfacet.focus import height_from_focus
-from microfacet.stack import read_stack
+from microfacet.focus.height import height_from_focus
+from microfacet.io.stack import read_stack
 
 COU = Path(__file__).resolve().parent.parent / "fixtures" / "focus-stacks" / "cou2023-synthetic-rough"
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from microfacet.synth import generate_stack, preset
+from microfacet.forward.synth import generate_stack, preset
 
 CASES = [
     ("grooves (default), no facet offset", dict()),

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from microfacet import color
-from microfacet.colortable import _wavelengths, _white, direct_xyz
+from microfacet.colour import colorimetry as color
+from microfacet.colour.table import _wavelengths, _white, direct_xyz
 from microfacet.optics import DEFAULT_FILM, DEFAULT_SUBSTRATE
 
 FILMS = ["TiO2_Jolivet2023_amorphous", "TiO2_Sarkar2019_amorphous", "TiO2_Franta2015_amorphous",

@@ -16,7 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from microfacet.synth import PRESETS, generate_stack, preset
+from microfacet.forward.synth import PRESETS, generate_stack, preset
 
 
 def _map(a, lo, hi):

@@ -46,7 +46,7 @@ ROOT = Path(__file__).resolve().parent.parent
 COU = ROOT / "fixtures" / "focus-stacks" / "cou2023-synthetic-rough"
 NA = 0.8
 MAX_TILT = math.degrees(math.asin(NA)) / 2.0          # 26.57°: the microscope's tilt range
-THETA_RANGE = (0.0, MAX_TILT + 0.5)                   # as microfacet.analyze builds its table
+THETA_RANGE = (0.0, MAX_TILT + 0.5)                   # as microfacet.analysis.pipeline builds its table
 RANGES = [(0.0, 200.0), (0.0, 400.0), (0.0, 800.0)]
 SECTIONS = ("spectral", "table", "inversion", "focus", "eq6")
 FORMULAS = ("CIE76", "CIE94", "CIEDE2000")
@@ -232,7 +232,7 @@ def pareto_plot(path, panels, *, xlabel, ylabel, suptitle=None, logx=True, logy=
 @contextlib.contextmanager
 def delta_e_formula(name):
     """Swap the ΔE formula used inside microfacet's searches (they call color.delta_e_2000)."""
-    from microfacet import color
+    from microfacet.colour import colorimetry as color
 
     orig = color.delta_e_2000
     fn = {"CIE76": color.delta_e_76, "CIE94": color.delta_e_94, "CIEDE2000": orig}[name]
@@ -268,12 +268,12 @@ def library_defaults():
     """The defaults as the installed library defines them (labels follow the code)."""
     import inspect
 
-    from microfacet import focus
-    from microfacet.analyze import AnalysisOptions
-    from microfacet.angular import simulate_map
-    from microfacet.brdf import thickness_nodes
-    from microfacet.joint import facet_thickness
-    from microfacet.thickness import fit_roi_thickness
+    from microfacet.focus import height as focus
+    from microfacet.analysis.pipeline import AnalysisOptions
+    from microfacet.forward.angular import simulate_map
+    from microfacet.forward.brdf import thickness_nodes
+    from microfacet.analysis.facets import facet_thickness
+    from microfacet.analysis.roi import fit_roi_thickness
 
     def dflt(fn, name):
         return inspect.signature(fn).parameters[name].default
@@ -296,8 +296,8 @@ DEF = None  # filled in main()
 
 def lab_direct(th, d, step):
     """Lab by direct spectral integration at ``step`` nm (white of the same grid)."""
-    from microfacet import color
-    from microfacet.colortable import direct_xyz
+    from microfacet.colour import colorimetry as color
+    from microfacet.colour.table import direct_xyz
 
     n = int(round(400.0 / step)) + 1
     white = color.spectral_weights(np.linspace(380.0, 780.0, n)).sum(axis=0)
@@ -306,8 +306,8 @@ def lab_direct(th, d, step):
 
 # --------------------------------------------------------------------------- 1. spectral
 def run_spectral(cfg, doc, img):
-    from microfacet import color
-    from microfacet.colortable import choose_spectral_step
+    from microfacet.colour import colorimetry as color
+    from microfacet.colour.table import choose_spectral_step
 
     steps = (1.0, 2.0, 5.0, 10.0, 20.0)
     n_err, n_time = cfg["n_points"], cfg["n_time"]
@@ -393,8 +393,8 @@ def run_spectral(cfg, doc, img):
 
 # ------------------------------------------------------------------------------ 2. table
 def run_table(cfg, doc, img, spectral):
-    from microfacet import color
-    from microfacet.colortable import build_colour_table, choose_spectral_step
+    from microfacet.colour import colorimetry as color
+    from microfacet.colour.table import build_colour_table, choose_spectral_step
 
     d_steps, t_steps = cfg["d_steps"], cfg["t_steps"]
     emit("\n## 2. Colour-table resolution\n", doc)
@@ -526,10 +526,10 @@ def run_table(cfg, doc, img, spectral):
 # -------------------------------------------------------------------------- 3. inversion
 def make_scene(size, seed=11):
     """nd preset, sharp image with the preset's sensor noise, 8-bit sRGB → Lab, mask."""
-    from microfacet import color
-    from microfacet.mask import colour_mask
-    from microfacet.synth import _sensor, preset, render_scene
-    from microfacet.tilt import estimate_colour_noise
+    from microfacet.colour import colorimetry as color
+    from microfacet.analysis.mask import colour_mask
+    from microfacet.forward.synth import _sensor, preset, render_scene
+    from microfacet.analysis.tilt import estimate_colour_noise
 
     p = preset("nd", seed=seed, height_px=size, width_px=size)
     sc = render_scene(p)
@@ -541,11 +541,11 @@ def make_scene(size, seed=11):
 
 
 def run_inversion(cfg, doc, img):
-    from microfacet import color
-    from microfacet.colortable import build_colour_table
-    from microfacet.joint import facet_thickness
-    from microfacet.thickness import fit_roi_thickness, nearest_roi_index, roi_grid
-    from microfacet.tilt import invert_tilt, model_lab_rows
+    from microfacet.colour import colorimetry as color
+    from microfacet.colour.table import build_colour_table
+    from microfacet.analysis.facets import facet_thickness
+    from microfacet.analysis.roi import fit_roi_thickness, nearest_roi_index, roi_grid
+    from microfacet.analysis.tilt import invert_tilt, model_lab_rows
 
     rep = cfg["repeat"]
     p, sc, lab, mask, noise = make_scene(cfg["scene_px"])
@@ -930,8 +930,8 @@ def run_inversion(cfg, doc, img):
 
 # ------------------------------------------------------------------------------ 4. focus
 def run_focus(cfg, doc, img):
-    from microfacet.focus import height_from_focus
-    from microfacet.stack import read_stack
+    from microfacet.focus.height import height_from_focus
+    from microfacet.io.stack import read_stack
 
     stacks = {}
     for s in cfg["focus_stacks"]:
@@ -1070,9 +1070,9 @@ def run_focus(cfg, doc, img):
 
 # -------------------------------------------------------------------------------- 5. eq6
 def run_eq6(cfg, doc, img):
-    from microfacet import color
-    from microfacet.angular import simulate_map
-    from microfacet.distributions import NDFMixture, ThicknessMixture
+    from microfacet.colour import colorimetry as color
+    from microfacet.forward.angular import simulate_map
+    from microfacet.core.distributions import NDFMixture, ThicknessMixture
 
     g3 = ThicknessMixture([(0.3, 112.0, 3.0), (0.45, 130.0, 3.0), (0.25, 149.0, 3.0)])
     f2 = NDFMixture([(0.6, 3.0), (0.4, 9.0)])

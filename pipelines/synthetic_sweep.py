@@ -1,10 +1,10 @@
 """Accuracy across many synthetic stacks: error against image noise and surface roughness.
 
-Generates N synthetic stacks (``microfacet.synth``) cycling over the presets, each with its
+Generates N synthetic stacks (``microfacet.forward.synth``) cycling over the presets, each with its
 own seed, a sensor noise drawn log-uniformly (full well 150 … 20,000 e⁻, i.e. relative noise
 1.5 % … 15 % at a linear signal of 0.3) and its tilt lobes scaled by a factor drawn
 uniformly in 0.5 … 2 (each lobe capped at 20°). Analyses them all with
-:func:`microfacet.batch.run_batch` (local processes, or ``--scheduler`` a Dask cluster) and
+:func:`microfacet.batch.runner.run_batch` (local processes, or ``--scheduler`` a Dask cluster) and
 scores every results folder against its truth:
 
 * ``thickness_mae_nm``: mean |estimated − true| per-pixel thickness (unmasked, finite);
@@ -36,12 +36,12 @@ from pathlib import Path
 
 import numpy as np
 
-from microfacet.analyze import AnalysisOptions
-from microfacet.batch import run_batch
-from microfacet.distributions import NDFMixture
-from microfacet.mixtures import wasserstein1
-from microfacet.synth import TiltLobe, generate_stack, preset
-from microfacet.thickness import nearest_roi_index, roi_grid
+from microfacet.analysis.pipeline import AnalysisOptions
+from microfacet.batch.runner import run_batch
+from microfacet.core.distributions import NDFMixture
+from microfacet.analysis.mixtures import wasserstein1
+from microfacet.forward.synth import TiltLobe, generate_stack, preset
+from microfacet.analysis.roi import nearest_roi_index, roi_grid
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_PRESETS = ("sd", "nd", "thick", "steep", "thin", "grainy", "16bit")

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from microfacet.analyze import AnalysisOptions, analyze_stack, write_results
+from microfacet.analysis.pipeline import AnalysisOptions, analyze_stack, write_results
 from microfacet.cli import main
 
 FIXTURE = Path(__file__).resolve().parent.parent / "fixtures" / "stacks" / "nd-fixture"
@@ -63,7 +63,7 @@ def both_modes():
 
 
 def test_joint_mode_beats_the_seed_method_on_truth(both_modes):
-    from microfacet.mixtures import wasserstein1
+    from microfacet.analysis.mixtures import wasserstein1
 
     d_true = np.load(TRUTH / "thickness_nm.npy")
     t_true = np.load(TRUTH / "tilt_deg.npy")
@@ -108,7 +108,7 @@ def test_bad_inputs_exit_2_and_leave_nothing(tmp_path, capsys):
 def test_write_results_replaces_only_its_own_kind(both_modes, tmp_path):
     """An empty folder is used; an earlier results folder needs overwrite; anything else is
     never replaced, with or without overwrite."""
-    from microfacet.errors import InputError
+    from microfacet.core.errors import InputError
 
     res = both_modes["seed"]
     out = tmp_path / "r"

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from microfacet import color
-from microfacet.angular import (
+from microfacet.colour import colorimetry as color
+from microfacet.forward.angular import (
     AngularMap,
     colours_from_spectra,
     delta_e_map,
@@ -16,8 +16,8 @@ from microfacet.angular import (
     simulate_map,
     specular_mask,
 )
-from microfacet.distributions import NDFMixture, ThicknessMixture
-from microfacet.halfvector import angular_colour_map
+from microfacet.core.distributions import NDFMixture, ThicknessMixture
+from microfacet.forward.halfvector import angular_colour_map
 
 G3 = ThicknessMixture([(0.3, 112.0, 3.0), (0.45, 130.0, 3.0), (0.25, 149.0, 3.0)])
 F2 = NDFMixture([(0.6, 3.0), (0.4, 9.0)])

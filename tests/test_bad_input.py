@@ -9,7 +9,7 @@ before and after).
 (test_bad_stack_json, test_truncated_image, test_mismatched_sizes_depths_channels, ...), and
 a few through ``height`` in tests/test_cli_height.py; this is the complete CLI suite. The
 mutations start from one small valid stack (64×64 px RGB, 5 slices) written with
-:func:`microfacet.stack.write_stack`.
+:func:`microfacet.io.stack.write_stack`.
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 
 from microfacet.cli import main
-from microfacet.images import write_image
-from microfacet.stack import read_stack, write_stack
+from microfacet.io.images import write_image
+from microfacet.io.stack import read_stack, write_stack
 
 H = W = 64
 N = 5
@@ -206,7 +206,7 @@ def test_broken_stack_in_a_fresh_process(tmp_path, launcher, command, case):
     stack, parent, before = _broken(tmp_path, mutate)
     out = parent / "out"
     if launcher == "module":
-        argv = [sys.executable, "-m", "microfacet.cli"]
+        argv = [sys.executable, "-m", "microfacet"]
     else:
         script = Path(sys.executable).with_name("microfacet")
         if not script.exists():

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from microfacet.batch import result_names, results_complete, run_batch
+from microfacet.batch.runner import result_names, results_complete, run_batch
 from microfacet.cli import main
 
 FAST = ["--roi-size-px", "48", "--no-report", "-q"]
@@ -126,7 +126,7 @@ def test_batch_through_a_dask_local_cluster(drawer, tmp_path):
 
 def test_batch_api_and_local_results_match_the_single_stack_command(drawer, tmp_path):
     """The batch row and results folder are those of `microfacet analyze` on the stack."""
-    from microfacet.analyze import AnalysisOptions
+    from microfacet.analysis.pipeline import AnalysisOptions
 
     single = tmp_path / "single"
     assert main(["analyze", str(drawer / "b"), "--out", str(single), *FAST]) == 0

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from microfacet import color
-from microfacet.brdf import (
+from microfacet.colour import colorimetry as color
+from microfacet.forward.brdf import (
     FilmAverage,
     eq6_reflectance,
     eq6_reflectance_inplane,
@@ -16,10 +16,10 @@ from microfacet.brdf import (
     microfacet_geometry,
     thickness_nodes,
 )
-from microfacet.distributions import NDFMixture, ThicknessMixture
-from microfacet.halfvector import angular_colour_map, in_plane_directions, spectra
+from microfacet.core.distributions import NDFMixture, ThicknessMixture
+from microfacet.forward.halfvector import angular_colour_map, in_plane_directions, spectra
 from microfacet.optics import DEFAULT_FILM, DEFAULT_SUBSTRATE
-from microfacet.thinfilm import reflectance
+from microfacet.optics.thinfilm import reflectance
 
 G3 = ThicknessMixture([(0.3, 112.0, 3.0), (0.45, 130.0, 3.0), (0.25, 149.0, 3.0)])
 F2 = NDFMixture([(0.6, 3.0), (0.4, 9.0)])

@@ -8,20 +8,20 @@ import numpy as np
 import pytest
 
 from microfacet.cli import main
-from microfacet.thinfilm import reflectance
+from microfacet.optics.thinfilm import reflectance
 
 HEAVY = ("colour", "sklearn", "matplotlib", "scipy", "skimage", "cv2")
 
 
 def test_help_does_not_import_heavy_modules():
-    code = ("import sys\nfrom microfacet.cli import build_parser\nbuild_parser()\n"
+    code = ("import sys\nfrom microfacet.cli.main import build_parser\nbuild_parser()\n"
             f"print([m for m in {HEAVY!r} if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 
 
 def test_every_registered_command_has_help_with_an_example(capsys):
-    from microfacet.cli import build_parser
+    from microfacet.cli.main import build_parser
 
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from microfacet.cli import main
-from microfacet.normals import normals_from_height
-from microfacet.stack import write_stack
+from microfacet.focus.normals import normals_from_height
+from microfacet.io.stack import write_stack
 
 COU = Path(__file__).resolve().parent.parent / "fixtures" / "focus-stacks" / "cou2023-synthetic-rough"
 

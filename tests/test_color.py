@@ -1,4 +1,4 @@
-"""Tests of microfacet.color against independent references.
+"""Tests of microfacet.colour.colorimetry against independent references.
 
 References: Sharma, Wu & Dalal (2005) Table 1 (fixtures/ciede2000_sharma2005.csv) and
 colour-science (sd_to_XYZ, XYZ_to_Lab, Lab_to_XYZ, cctf_encoding/decoding,
@@ -18,7 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-import microfacet.color as mc
+import microfacet.colour.colorimetry as mc
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "ciede2000_sharma2005.csv"
 WL = np.arange(360.0, 831.0)
@@ -42,7 +42,7 @@ def sharma():
 
 def test_import_is_light():
     code = (
-        "import sys, microfacet.color; "
+        "import sys, microfacet.colour.colorimetry; "
         "bad = [m for m in ('colour', 'scipy', 'sklearn', 'matplotlib') if m in sys.modules]; "
         "print(bad)"
     )

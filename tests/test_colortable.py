@@ -3,15 +3,15 @@
 import numpy as np
 import pytest
 
-from microfacet import color
-from microfacet.colortable import (
+from microfacet.colour import colorimetry as color
+from microfacet.colour.table import (
     _wavelengths,
     build_colour_table,
     choose_spectral_step,
     direct_xyz,
 )
 from microfacet.optics import DEFAULT_FILM, DEFAULT_SUBSTRATE, optical_constants
-from microfacet.thinfilm import reflectance
+from microfacet.optics.thinfilm import reflectance
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Tests of height from focus (microfacet.focus).
+"""Tests of height from focus (microfacet.focus.height).
 
 Accuracy against ground truth on the Cou & Guennebaud (2023) synthetic stacks copied to
 fixtures/focus-stacks/cou2023-synthetic-rough (see its README for units and registration),
@@ -14,15 +14,15 @@ import cv2
 import numpy as np
 import pytest
 
-from microfacet.errors import InputError
-from microfacet.focus import (
+from microfacet.core.errors import InputError
+from microfacet.focus.height import (
     DEFAULT_MIN_RELIABILITY_DB,
     fill_missing,
     focus_measure,
     height_from_focus,
     peak_fit,
 )
-from microfacet.stack import read_stack, write_stack
+from microfacet.io.stack import read_stack, write_stack
 
 COU = Path(__file__).resolve().parent.parent / "fixtures" / "focus-stacks" / "cou2023-synthetic-rough"
 
@@ -285,7 +285,7 @@ def test_pcb_alignment_scales_and_sharp_composite():
     assert auto.params["alignment"]["reference"] == 9
     # sharp everywhere: in each 64-px tile the composite is nearly as sharp as the sharpest
     # aligned slice there
-    from microfacet.align import warp_to_reference
+    from microfacet.focus.align import warp_to_reference
 
     aif = focus_measure(auto.all_in_focus, operator="tenengrad", window_px=1)
     warps = [np.array(w, np.float32) for w in auto.params["alignment"]["warps"]]

@@ -5,8 +5,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from microfacet import color
-from microfacet.halfvector import (
+from microfacet.colour import colorimetry as color
+from microfacet.forward.halfvector import (
     angular_colour_map,
     half_angle_deg,
     half_angle_from_vectors,
@@ -14,7 +14,7 @@ from microfacet.halfvector import (
     in_plane_directions,
     spectra,
 )
-from microfacet.thinfilm import reflectance
+from microfacet.optics.thinfilm import reflectance
 
 angle = st.floats(-89.0, 89.0)
 

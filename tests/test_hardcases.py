@@ -50,13 +50,13 @@ import warnings
 import numpy as np
 import pytest
 
-from microfacet import color
-from microfacet.analyze import AnalysisOptions, analyze_stack, write_results
+from microfacet.colour import colorimetry as color
+from microfacet.analysis.pipeline import AnalysisOptions, analyze_stack, write_results
 from microfacet.cli import main
-from microfacet.errors import InputError
-from microfacet.stack import read_stack, write_stack
-from microfacet.synth import generate_stack, preset
-from microfacet.thinfilm import reflectance
+from microfacet.core.errors import InputError
+from microfacet.io.stack import read_stack, write_stack
+from microfacet.forward.synth import generate_stack, preset
+from microfacet.optics.thinfilm import reflectance
 
 tmm = pytest.importorskip("tmm")
 
@@ -145,14 +145,14 @@ def test_film_with_the_ambient_index_is_invisible_at_every_thickness(n_ambient):
 
 @pytest.fixture(scope="module")
 def thin_table():
-    from microfacet.colortable import build_colour_table
+    from microfacet.colour.table import build_colour_table
 
     return build_colour_table(thickness_range_nm=(0.0, 5.0), theta_range_deg=(0.0, 27.0))
 
 
 def _direct_lab(theta, d, white):
     """Lab from the reflectance spectrum integrated at 1 nm (independent of any table)."""
-    from microfacet.colortable import direct_xyz
+    from microfacet.colour.table import direct_xyz
 
     return color.xyz_to_lab(direct_xyz(theta, d, spectral_step_nm=1.0), white=white)
 
@@ -175,15 +175,15 @@ def test_colour_table_of_a_film_thinner_than_5_nm(thin_table):
 
 @pytest.fixture(scope="module")
 def fit_table():
-    from microfacet.colortable import build_colour_table
+    from microfacet.colour.table import build_colour_table
 
     return build_colour_table(thickness_range_nm=(0.0, 100.0), theta_range_deg=(0.0, 27.0))
 
 
 @pytest.mark.parametrize("d_true", [0.5, 2.0, 4.5])
 def test_thickness_fit_of_a_film_thinner_than_5_nm(fit_table, d_true):
-    from microfacet.mixtures import fit_thickness_mixture
-    from microfacet.thickness import fit_roi_thickness, roi_grid
+    from microfacet.analysis.mixtures import fit_thickness_mixture
+    from microfacet.analysis.roi import fit_roi_thickness, roi_grid
 
     rng = np.random.default_rng(1)
     H = W = 40
@@ -276,7 +276,7 @@ def _grey_stack(path, *, patch=None, dtype=np.uint8):
 
 
 def test_every_pixel_masked_is_a_clear_input_error(tmp_path, capsys):
-    from microfacet.mask import colour_mask
+    from microfacet.analysis.mask import colour_mask
 
     imgs = _grey_stack(tmp_path / "grey")
     # independent check of the premise: every slice has saturation 0 everywhere
@@ -342,7 +342,7 @@ def test_fewer_than_three_slices_is_a_clear_input_error(tmp_path, capsys, sd, n)
 def test_identical_slices_give_no_height_and_colour_only_tilts(sd, tmp_path, caplog):
     write_stack(tmp_path / "same", [sd["slices"][2]] * N_SLICES, z_step_um=0.5,
                 pixel_size_um=sd["stack"].pixel_size_um)
-    with caplog.at_level(logging.WARNING, logger="microfacet.analyze"):
+    with caplog.at_level(logging.WARNING, logger="microfacet.analysis.pipeline"):
         r = analyze_stack(tmp_path / "same", AnalysisOptions(roi_size_px=10_000))
     assert "no pixel has a reliable height" in caplog.text
     assert np.isnan(r.focus.height_um).all() and not r.focus.reliable.any()
@@ -360,7 +360,7 @@ def test_identical_slices_give_no_height_and_colour_only_tilts(sd, tmp_path, cap
 
 
 def test_peak_fit_of_a_flat_focus_curve_has_no_maximum():
-    from microfacet.focus import peak_fit
+    from microfacet.focus.height import peak_fit
 
     # constant focus values of many magnitudes, with and without missing neighbours: the
     # rounding-level curvature must not become a peak clipped to the window's edge
@@ -461,7 +461,7 @@ def test_single_thickness_value_end_to_end(sd, tmp_path):
 
 
 def test_all_zero_tilts_give_a_finite_ndf_table():
-    from microfacet.mixtures import fit_ndf_mixture, pdf_table
+    from microfacet.analysis.mixtures import fit_ndf_mixture, pdf_table
 
     fit = fit_ndf_mixture(np.zeros(500))
     max_tilt = math.degrees(math.asin(0.8)) / 2.0
@@ -480,8 +480,8 @@ def test_all_zero_tilts_give_a_finite_ndf_table():
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
 @pytest.mark.parametrize("smooth", [0.0, 1.5])
 def test_non_finite_heights_propagate_to_the_normals_without_warnings(bad, smooth):
-    from microfacet.focus import fill_missing
-    from microfacet.normals import normals_from_height, tilt_azimuth_deg
+    from microfacet.focus.height import fill_missing
+    from microfacet.focus.normals import normals_from_height, tilt_azimuth_deg
 
     rows, cols = np.mgrid[0:24, 0:30]
     h = (0.1 * cols + 0.05 * rows).astype(np.float32)
@@ -502,7 +502,7 @@ def test_non_finite_heights_propagate_to_the_normals_without_warnings(bad, smoot
 
 
 def test_all_non_finite_height_map_and_non_finite_normals():
-    from microfacet.normals import normals_from_height, tilt_azimuth_deg
+    from microfacet.focus.normals import normals_from_height, tilt_azimuth_deg
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -516,7 +516,7 @@ def test_all_non_finite_height_map_and_non_finite_normals():
 
 
 def test_facet_planes_ignore_non_finite_heights():
-    from microfacet.joint import fit_facet_planes
+    from microfacet.analysis.facets import fit_facet_planes
 
     rows, cols = np.mgrid[0:20, 0:20]
     h = 0.1 * cols * 0.5       # dh/dx = 0.1 with 0.5 µm pixels

@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 
 from microfacet.cli import main
-from microfacet.stack import read_stack, write_stack
+from microfacet.io.stack import read_stack, write_stack
 
 H = W = 48
 N = 5
@@ -232,7 +232,7 @@ def test_a_second_run_on_the_same_out_is_refused_while_the_first_writes(tmp_path
     holder = subprocess.Popen(
         [sys.executable, "-c", textwrap.dedent(f"""
             import sys, time
-            from microfacet.outdir import OutputFolder
+            from microfacet.io.outdir import OutputFolder
             with OutputFolder({str(out)!r}, kind="height"):
                 print("locked", flush=True)
                 time.sleep(60)
@@ -276,8 +276,8 @@ def test_a_results_folder_caught_between_its_two_renames_is_put_back(tmp_path):
 
 
 def test_batch_resume_sweeps_what_killed_workers_left(tmp_path):
-    from microfacet.analyze import AnalysisOptions
-    from microfacet.batch import run_batch
+    from microfacet.analysis.pipeline import AnalysisOptions
+    from microfacet.batch.runner import run_batch
 
     s = _stack(tmp_path / "a")
     out = tmp_path / "res"
@@ -473,7 +473,7 @@ def test_read_only_output_folder_is_one_line_before_the_work(tmp_path, capfd, mo
             raise OSError(errno.EROFS, "Read-only file system", str(path))
         return real_open(path, *a, **k)
 
-    import microfacet.outdir as outdir
+    import microfacet.io.outdir as outdir
 
     monkeypatch.setattr(outdir.os, "open", ro)
     line = _err_line(capfd, main(["analyze", str(s), "--out", str(tmp_path / "ro" / "o")]))
@@ -483,7 +483,7 @@ def test_read_only_output_folder_is_one_line_before_the_work(tmp_path, capfd, mo
 def test_full_disk_is_one_line_before_the_work(tmp_path, capfd, monkeypatch):
     import shutil
 
-    import microfacet.outdir as outdir
+    import microfacet.io.outdir as outdir
 
     s = _stack(tmp_path / "s")
     monkeypatch.setattr(outdir.shutil, "disk_usage",
@@ -494,7 +494,7 @@ def test_full_disk_is_one_line_before_the_work(tmp_path, capfd, monkeypatch):
 
 
 def test_disk_full_while_writing_leaves_nothing(tmp_path, capfd, monkeypatch):
-    import microfacet.analyze as analyze
+    import microfacet.analysis.pipeline as analyze
 
     s = _stack(tmp_path / "s")
     calls = []
@@ -537,7 +537,7 @@ def test_pathological_json(tmp_path, capfd, text, pattern):
 
 
 def test_memory_error_is_one_line(tmp_path, capfd, monkeypatch):
-    import microfacet.analyze as analyze
+    import microfacet.analysis.pipeline as analyze
 
     def boom(*a, **k):
         raise MemoryError()
@@ -550,7 +550,7 @@ def test_memory_error_is_one_line(tmp_path, capfd, monkeypatch):
 
 
 def test_an_internal_error_is_one_line_with_exit_1_and_a_hint(tmp_path, capfd, monkeypatch):
-    import microfacet.analyze as analyze
+    import microfacet.analysis.pipeline as analyze
 
     def bug(*a, **k):
         raise TypeError("unsupported operand")
@@ -591,7 +591,7 @@ def test_export_height_in_nanometres_is_warned(tmp_path, caplog):
     s.mkdir()
     yy, xx = np.mgrid[0:H, 0:W]
     np.save(s / "h.npy", (1000.0 * (0.1 * xx + 0.05 * yy)).astype(np.float32))  # nm, 0.25 µm px
-    from microfacet.images import write_image
+    from microfacet.io.images import write_image
 
     write_image(s / "img.png", np.full((H, W, 3), 120, np.uint8))
     (s / "stack.json").write_text(json.dumps({"format": "microfacet-stack/1",
@@ -614,7 +614,7 @@ def test_spectrum_at_one_wavelength_is_refused_and_few_are_warned(tmp_path, capf
     csv.write_text("wavelength_nm,reflectance\n" + "550,0.3\n" * 20)
     line = _err_line(capfd, main(["fit-spectrum", str(csv)]))
     assert re.search(r"1 distinct wavelength\(s\) in 20 rows", line), line
-    from microfacet.spectrumfit import read_spectrum_csv
+    from microfacet.optics.spectrumfit import read_spectrum_csv
 
     csv.write_text("wavelength_nm,reflectance\n450,0.3\n550,0.2\n650,0.4\n650,0.41\n")
     assert read_spectrum_csv(csv)[0].size == 4
@@ -622,7 +622,7 @@ def test_spectrum_at_one_wavelength_is_refused_and_few_are_warned(tmp_path, capf
 
 
 def test_percent_reflectances_below_1_5_are_warned(tmp_path, caplog):
-    from microfacet.spectrumfit import read_spectrum_csv
+    from microfacet.optics.spectrumfit import read_spectrum_csv
 
     csv = tmp_path / "dark.csv"
     csv.write_text("wavelength_nm,reflectance\n" + "".join(   # 0.4-1.2, in percent
@@ -650,7 +650,7 @@ def test_grey_export_image_blames_the_image_before_any_work(tmp_path, capfd):
     s = tmp_path / "s"
     s.mkdir()
     np.save(s / "h.npy", np.zeros((H, W), np.float32))
-    from microfacet.images import write_image
+    from microfacet.io.images import write_image
 
     write_image(s / "img.png", np.full((H, W), 120, np.uint8))
     (s / "stack.json").write_text(json.dumps({"format": "microfacet-stack/1",
@@ -694,7 +694,7 @@ def test_utf8_bom_in_stack_json_and_csv_is_accepted(tmp_path):
     s = _stack(tmp_path / "s")
     (s / "stack.json").write_bytes(b"\xef\xbb\xbf" + (s / "stack.json").read_bytes())
     assert read_stack(s).n_slices == N
-    from microfacet.spectrumfit import read_spectrum_csv
+    from microfacet.optics.spectrumfit import read_spectrum_csv
 
     csv = tmp_path / "excel.csv"
     csv.write_bytes(b"\xef\xbb\xbfwavelength_nm,reflectance\r\n" + b"".join(

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from microfacet.mask import colour_mask
+from microfacet.analysis.mask import colour_mask
 
 
 def test_each_reason_is_detected_and_named():

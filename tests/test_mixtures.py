@@ -1,4 +1,4 @@
-"""Tests of microfacet.mixtures: mixture recovery, BIC with correlated samples, tables."""
+"""Tests of microfacet.analysis.mixtures: mixture recovery, BIC with correlated samples, tables."""
 
 import json
 import math
@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from microfacet.distributions import NDFMixture, ThicknessMixture
-from microfacet.mixtures import (
+from microfacet.core.distributions import NDFMixture, ThicknessMixture
+from microfacet.analysis.mixtures import (
     MixtureFit,
     fit_ndf_mixture,
     fit_thickness_mixture,

@@ -1,4 +1,4 @@
-"""Analytic checks of microfacet.normals."""
+"""Analytic checks of microfacet.focus.normals."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from microfacet.normals import normals_from_height, tilt_azimuth_deg
+from microfacet.focus.normals import normals_from_height, tilt_azimuth_deg
 
 
 def angle_deg(a, b):

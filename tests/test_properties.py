@@ -23,8 +23,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-import microfacet.color as mc
-from microfacet.thinfilm import fresnel_reflectance, reflectance
+import microfacet.colour.colorimetry as mc
+from microfacet.optics.thinfilm import fresnel_reflectance, reflectance
 
 FAST = settings(max_examples=60, deadline=None)
 

@@ -1,4 +1,4 @@
-"""The PDF report of a results folder (microfacet.report)."""
+"""The PDF report of a results folder (microfacet.report.writer)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import sys
 import numpy as np
 import pytest
 
-from microfacet.distributions import NDFMixture, ThicknessMixture
-from microfacet.report import NO_VALUE, PAGES, parameter_tables, write_report
+from microfacet.core.distributions import NDFMixture, ThicknessMixture
+from microfacet.report.writer import NO_VALUE, PAGES, parameter_tables, write_report
 
 H, W = 64, 80
 OPTIONAL = ("mask.npy", "delta_e.npy", "tilt_height_deg.npy", "angular_map.png")
@@ -305,6 +305,6 @@ def test_malformed_files_are_value_errors_naming_them(tmp_path, name, text, wher
 
 
 def test_import_does_not_import_matplotlib():
-    code = "import sys, microfacet.report; print('matplotlib' in sys.modules)"
+    code = "import sys, microfacet.report.writer; print('matplotlib' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"

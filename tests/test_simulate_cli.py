@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from microfacet.angular import load_map, save_map, simulate_map
-from microfacet.cli import build_parser, main
-from microfacet.distributions import NDFMixture, ThicknessMixture
+from microfacet.forward.angular import load_map, save_map, simulate_map
+from microfacet.cli.main import build_parser, main
+from microfacet.core.distributions import NDFMixture, ThicknessMixture
 
 G3 = ThicknessMixture([(0.3, 112.0, 3.0), (0.45, 130.0, 3.0), (0.25, 149.0, 3.0)])
 F2 = NDFMixture([(0.6, 3.0), (0.4, 9.0)])
@@ -49,7 +49,7 @@ def test_from_an_analyze_results_folder(tmp_path):
     assert main(["simulate", "--results", str(res), "--out", str(out2)] + SMALL) == 0
     meta2 = json.loads((out2 / "simulate.json").read_text())
     y = np.load(out2 / "angular_xyz.npy")[..., 1]
-    from microfacet import color
+    from microfacet.colour import colorimetry as color
 
     white = color.spectral_weights(np.linspace(380, 780, 81)).sum(axis=0)
     assert meta2["exposure"] != 0.25

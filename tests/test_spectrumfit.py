@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from microfacet.errors import InputError
-from microfacet.spectrumfit import fit_thickness, read_spectrum_csv
-from microfacet.thinfilm import reflectance
+from microfacet.core.errors import InputError
+from microfacet.optics.spectrumfit import fit_thickness, read_spectrum_csv
+from microfacet.optics.thinfilm import reflectance
 
 FILM, SUB = "TiO2_Jolivet2023_amorphous", "Ti_JohnsonChristy1974"
 WL = np.arange(400.0, 751.0, 5.0)

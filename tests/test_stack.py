@@ -1,4 +1,4 @@
-"""Tests of the stack reader (microfacet.stack) on small stacks written in tmp_path."""
+"""Tests of the stack reader (microfacet.io.stack) on small stacks written in tmp_path."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import tifffile
 
-from microfacet.errors import InputError
-from microfacet.stack import FORMAT, read_stack, write_stack, write_stack_json
+from microfacet.core.errors import InputError
+from microfacet.io.stack import FORMAT, read_stack, write_stack, write_stack_json
 
 H, W = 12, 17
 

@@ -7,10 +7,10 @@ import cv2
 import numpy as np
 import pytest
 
-from microfacet import color
-from microfacet.colortable import _wavelengths, _white, direct_xyz
-from microfacet.stack import read_stack
-from microfacet.synth import PRESETS, defocus_sigma_px, generate_stack, preset
+from microfacet.colour import colorimetry as color
+from microfacet.colour.table import _wavelengths, _white, direct_xyz
+from microfacet.io.stack import read_stack
+from microfacet.forward.synth import PRESETS, defocus_sigma_px, generate_stack, preset
 
 
 def _digest(folder):
@@ -50,7 +50,7 @@ def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path):
 
 
 def test_thickness_regions_follow_the_mixture_and_tilts_the_lobes():
-    from microfacet.synth import render_scene
+    from microfacet.forward.synth import render_scene
 
     p = preset("nd", seed=2, height_px=512, width_px=512)
     s = render_scene(p)

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from microfacet import color
-from microfacet.colortable import build_colour_table
-from microfacet.thickness import fit_roi_thickness, nearest_roi_index, roi_grid
+from microfacet.colour import colorimetry as color
+from microfacet.colour.table import build_colour_table
+from microfacet.analysis.roi import fit_roi_thickness, nearest_roi_index, roi_grid
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from microfacet.thinfilm import (
+from microfacet.optics.thinfilm import (
     fresnel_reflectance,
     normal_wavevector,
     reflectance,

@@ -1,0 +1,196 @@
+"""Facet tilt per pixel from its colour at a known thickness (seed §3.3.3 step 3).
+
+With the thickness fixed (per ROI in the seed's method, per facet in the joint mode), the
+tilt of a pixel is the incidence angle θ in [0, θ_max] whose modelled Lab is nearest the
+pixel's by CIEDE2000. The search runs on a θ grid for all pixels at once (each pixel
+compares with the model row of its ROI or facet), is refined by a parabola through the
+three grid values around the minimum, and the ΔE00 is evaluated exactly (table
+interpolation, no grid) at the final θ.
+
+Uncertainty
+-----------
+For which films and tilts colour carries tilt information at all, per thickness:
+docs/conditioning.md (``python pipelines/conditioning.py``).
+Colour is a weak function of tilt (0.03-0.3 ΔE00 per degree), so the 1-σ uncertainty is
+reported per pixel: with image colour noise σ_n (ΔE00 per Lab component) and the local
+sensitivity J = |dLab/dθ| (ΔE00 per degree, from the model at the solution),
+σ_θ = σ_n / J, capped at the search range. With a prior N(θ_p, σ_p²) (the joint mode uses
+the tilt of the facet's plane fitted on the height map), the objective is
+ΔE²/σ_n² + (θ − θ_p)²/σ_p², σ_θ = (J²/σ_n² + 1/σ_p²)^(-1/2), and the colour's share of the
+information ``J²/σ_n² / (J²/σ_n² + 1/σ_p²)`` says which information dominated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["TiltInversion", "estimate_colour_noise", "invert_tilt", "model_lab_rows"]
+
+
+@dataclass
+class TiltInversion:
+    """Per-pixel results (1-D, one entry per inverted pixel).
+
+    Attributes
+    ----------
+    tilt_deg, tilt_sigma_deg, delta_e : ndarray of float32
+        Tilt, its 1-σ uncertainty, and the exact ΔE00 at the chosen tilt.
+    colour_weight : ndarray of float32
+        Share of the tilt information that came from colour (1 without a prior).
+    sensitivity_de_per_deg : ndarray of float32
+        J, ΔE00 per degree at the solution.
+    """
+
+    tilt_deg: np.ndarray
+    tilt_sigma_deg: np.ndarray
+    delta_e: np.ndarray
+    colour_weight: np.ndarray
+    sensitivity_de_per_deg: np.ndarray
+
+
+def model_lab_rows(table, thickness_nm, theta_grid_deg, *, exposure):
+    """Model Lab for each thickness (rows) over a θ grid: shape (R, K, 3), float32."""
+    from ..colour import colorimetry as color
+
+    d = np.asarray(thickness_nm, dtype=np.float64)
+    xyz = table.xyz_at(np.asarray(theta_grid_deg)[None, :], d[:, None]) * exposure
+    return color.xyz_to_lab(xyz.astype(np.float32), white=table.white_xyz.astype(np.float32))
+
+
+def estimate_colour_noise(lab, mask):
+    """Per-component colour noise σ_n in ΔE00 units from neighbouring pixels.
+
+    The ΔE00 between horizontally adjacent unmasked pixels is, for noise alone, the norm of
+    a 3-D Gaussian of per-component SD σ√2, whose median is 2.18 σ. Texture inflates the
+    estimate, so it is an upper bound (conservative uncertainties).
+    """
+    from ..colour import colorimetry as color
+
+    lab = np.asarray(lab, dtype=np.float32)
+    m = ~np.asarray(mask, bool)
+    ok = m[:, 1:] & m[:, :-1]
+    if ok.sum() < 10:
+        return float("nan")
+    de = color.delta_e_2000(lab[:, 1:][ok], lab[:, :-1][ok])
+    return float(np.median(de) / 2.18)
+
+
+def quantization_noise_de(encoded_srgb, mask, *, bit_depth, illuminant="D65", n_sample=4096,
+                          seed=0):
+    """Colour noise (ΔE00 per component, as :func:`estimate_colour_noise`) that the image's
+    quantization alone implies: the floor of the colour noise.
+
+    An image without visible noise (a synthetic composite, a denoised export) has a
+    neighbour-difference noise of 0, which would make colour look infinitely precise; its
+    code values are still rounded to ±½ LSB. Measured on up to ``n_sample`` unmasked pixels
+    by re-rounding them by uniform ±½ LSB: about 0.08 ΔE00 for 8-bit images, 0.0003 for
+    16-bit.
+
+    Parameters
+    ----------
+    encoded_srgb : ndarray, shape (H, W, 3)
+        The encoded image in [0, 1].
+    mask : ndarray of bool, shape (H, W)
+        True where a pixel is not used.
+    bit_depth : {8, 16}
+    """
+    from ..colour import colorimetry as color
+
+    img = np.asarray(encoded_srgb, dtype=np.float32)[~np.asarray(mask, bool)]
+    if img.shape[0] == 0:
+        return float("nan")
+    rng = np.random.default_rng(seed)
+    if img.shape[0] > n_sample:
+        img = img[rng.choice(img.shape[0], n_sample, replace=False)]
+    lsb = np.float32(1.0 / (2 ** bit_depth - 1))
+    moved = np.clip(img + rng.uniform(-0.5, 0.5, img.shape).astype(np.float32) * lsb, 0, 1)
+    de = color.delta_e_2000(color.srgb_to_lab(img, illuminant=illuminant),
+                            color.srgb_to_lab(moved, illuminant=illuminant))
+    # |difference| of one pixel from its re-rounded self: the norm of a 3-D error of
+    # per-component SD sigma has median ~1.54 sigma
+    return float(np.median(de) / 1.54)
+
+
+def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness_px,
+                exposure, noise_de, prior_deg=None, prior_sigma_deg=None,
+                chunk=65536) -> TiltInversion:
+    """Tilt of least ΔE00 (or MAP with a prior) for each pixel.
+
+    Parameters
+    ----------
+    lab_px : ndarray, shape (n, 3)
+        The pixels' Lab.
+    rows_lab : ndarray, shape (R, K, 3)
+        Model Lab of each row (ROI or facet thickness) on ``theta_grid_deg``
+        (:func:`model_lab_rows`).
+    row_index : ndarray of int, shape (n,)
+        The row of each pixel.
+    theta_grid_deg : ndarray, shape (K,)
+        Uniform tilt grid from 0 to θ_max.
+    table : ColourTable
+        For the exact ΔE at the solution.
+    thickness_px : ndarray, shape (n,)
+        Thickness used for each pixel (its row's).
+    exposure : float
+    noise_de : float
+        Image colour noise per Lab component, ΔE00 units.
+    prior_deg, prior_sigma_deg : ndarray, shape (n,), optional
+        Gaussian prior on the tilt (joint mode).
+
+    Returns
+    -------
+    TiltInversion
+    """
+    from ..colour import colorimetry as color
+
+    lab_px = np.asarray(lab_px, dtype=np.float32)
+    th = np.asarray(theta_grid_deg, dtype=np.float64)
+    step = th[1] - th[0]
+    n, K = lab_px.shape[0], th.size
+    out_t = np.empty(n, np.float32)
+    out_s = np.empty(n, np.float32)
+    out_w = np.empty(n, np.float32)
+    out_j = np.empty(n, np.float32)
+    noise = max(float(noise_de), 1e-3) if np.isfinite(noise_de) else 1.0
+    # Sensitivity per row and grid node (central differences; one-sided at the ends).
+    rl = rows_lab.astype(np.float32)
+    sens_rows = np.empty(rl.shape[:2], np.float32)  # ΔE00 per degree
+    sens_rows[:, 1:-1] = color.delta_e_2000(rl[:, 2:], rl[:, :-2]) / (2 * step)
+    sens_rows[:, 0] = color.delta_e_2000(rl[:, 1], rl[:, 0]) / step
+    sens_rows[:, -1] = color.delta_e_2000(rl[:, -1], rl[:, -2]) / step
+    for a in range(0, n, chunk):
+        b = min(n, a + chunk)
+        ri = row_index[a:b]
+        de = color.delta_e_2000(rows_lab[ri], lab_px[a:b, None, :])  # (m, K)
+        q = (de.astype(np.float64) / noise) ** 2
+        if prior_deg is not None:
+            q += ((th[None, :] - prior_deg[a:b, None]) / prior_sigma_deg[a:b, None]) ** 2
+        k = np.argmin(q, axis=1)
+        km = np.clip(k, 1, K - 2)
+        rr = np.arange(b - a)
+        y0, y1, y2 = q[rr, km - 1], q[rr, km], q[rr, km + 1]
+        den = y0 - 2 * y1 + y2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            off = np.where(den > 0, 0.5 * (y0 - y2) / den, 0.0)
+        off = np.where(k == km, np.clip(off, -1, 1), 0.0)  # no extrapolation at the ends
+        t = th[k] + off * step
+        j = sens_rows[ri, k]
+        info_c = (j / noise) ** 2
+        if prior_deg is not None:
+            info_p = 1.0 / prior_sigma_deg[a:b] ** 2
+            sig = 1.0 / np.sqrt(info_c + info_p)
+            w = info_c / (info_c + info_p)
+        else:
+            with np.errstate(divide="ignore"):
+                sig = np.where(j > 0, noise / j, np.inf)
+            w = np.ones_like(sig)
+        out_t[a:b] = t
+        out_s[a:b] = np.minimum(sig, th[-1] - th[0])
+        out_w[a:b] = w
+        out_j[a:b] = j
+    exact = color.delta_e_2000(
+        color.xyz_to_lab((table.xyz_at(out_t, thickness_px) * exposure).astype(np.float32),
+                         white=table.white_xyz.astype(np.float32)), lab_px)
+    return TiltInversion(out_t, out_s, exact.astype(np.float32), out_w, out_j)

@@ -1,0 +1,143 @@
+"""Options shared by several subcommands."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_optics_options(p: argparse.ArgumentParser) -> None:
+    """``--film``, ``--substrate``, ``--illuminant``, ``--observer``."""
+    from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
+
+    g = p.add_argument_group("optics")
+    g.add_argument("--film", default=None, metavar="NAME",
+                   help=f"optical-constant set of the oxide film (default {DEFAULT_FILM})")
+    g.add_argument("--substrate", default=None, metavar="NAME",
+                   help=f"optical-constant set of the metal (default {DEFAULT_SUBSTRATE})")
+    g.add_argument("--illuminant", default="D65", metavar="NAME",
+                   help="illuminant name (default D65)")
+    g.add_argument("--observer", default="2", choices=["2", "10"],
+                   help="CIE standard observer in degrees (default 2)")
+
+
+def optics_kwargs(args) -> dict:
+    from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, load_set
+
+    film = args.film or DEFAULT_FILM
+    substrate = args.substrate or DEFAULT_SUBSTRATE
+    for opt, name in (("--film", film), ("--substrate", substrate)):
+        try:
+            load_set(name)
+        except ValueError as exc:
+            raise ValueError(f"{opt}: {exc}") from None
+    return dict(film=film, substrate=substrate, illuminant=args.illuminant,
+                observer=args.observer)
+
+
+def add_limit_options(p: argparse.ArgumentParser) -> None:
+    """``--max-megapixels``, ``--max-stack-megapixels`` (see :mod:`microfacet.io.limits`)."""
+    from ..io.limits import DEFAULT_MAX_MEGAPIXELS, DEFAULT_MAX_STACK_MEGAPIXELS
+
+    g = p.add_argument_group("limits (checked from the image headers before any work)")
+    g.add_argument("--max-megapixels", type=float, default=DEFAULT_MAX_MEGAPIXELS, metavar="MP",
+                   help=f"largest image, megapixels (default {DEFAULT_MAX_MEGAPIXELS:g})")
+    g.add_argument("--max-stack-megapixels", type=float, default=DEFAULT_MAX_STACK_MEGAPIXELS,
+                   metavar="MP", help="largest total of all slices of a stack, megapixels "
+                                      f"(default {DEFAULT_MAX_STACK_MEGAPIXELS:g})")
+
+
+def limits_from_args(args):
+    """:class:`~microfacet.io.limits.Limits` from ``--max-megapixels`` and
+    ``--max-stack-megapixels``."""
+    from ..io.limits import Limits
+
+    return Limits(max_megapixels=args.max_megapixels,
+                  max_stack_megapixels=args.max_stack_megapixels)
+
+
+def pair_type(sep: str, cast, example: str):
+    """argparse type for two values joined by ``sep`` (e.g. ``512x512``, ``0:400``)."""
+
+    def parse(text):
+        try:
+            a, b = (cast(v) for v in text.lower().split(sep))
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected two values as {example}, got {text!r}") from None
+        return a, b
+
+    return parse
+
+
+def example_epilog(*lines: str) -> str:
+    return "example:\n" + "\n".join(f"  {line}" for line in lines)
+
+
+def add_analysis_options(p: argparse.ArgumentParser) -> None:
+    """The options of :class:`microfacet.analysis.pipeline.AnalysisOptions` (``analyze``, ``batch``)."""
+    g = p.add_argument_group("analysis")
+    g.add_argument("--mode", choices=("joint", "seed"), default="joint",
+                   help="joint: facet planes + colour (default); seed: the paper's method")
+    g.add_argument("--roi-size-px", type=int, default=255, metavar="PX", help="ROI side (default 255)")
+    g.add_argument("--roi-stride-px", type=int, default=None, metavar="PX", help="ROI stride (default: size)")
+    g.add_argument("--saturation-min", type=float, default=15.0, metavar="S",
+                   help="mask HSV saturation below this, 0-255 scale (default 15)")
+    g.add_argument("--thickness-range-nm", type=pair_type(":", float, "LOW:HIGH in nm"),
+                   default=(0.0, 400.0), metavar="LOW:HIGH",
+                   help="global thickness search range (default 0:400)")
+    g.add_argument("--exposure", type=float, default=None, metavar="E",
+                   help="known exposure (default: stack.json's, else estimated)")
+    g.add_argument("--facet-size-um", type=float, default=2.0, metavar="UM",
+                   help="expected facet diameter for the joint mode (default 2)")
+    g.add_argument("--max-components", type=int, default=5, metavar="K",
+                   help="largest number of mixture components tried by BIC (default 5)")
+    g.add_argument("--align", nargs="?", const="ecc", choices=("ecc", "phase"), default=None,
+                   help="register slices before measuring focus")
+    g.add_argument("--film", default=None, metavar="NAME", help="override the stack's film set")
+    g.add_argument("--substrate", default=None, metavar="NAME",
+                   help="override the stack's substrate set")
+
+
+def analysis_options(args):
+    """:class:`~microfacet.analysis.pipeline.AnalysisOptions` from the parsed options, validated; a
+    ``ValueError`` names the command-line option."""
+    from ..analysis.pipeline import AnalysisOptions
+
+    opts = AnalysisOptions(
+        mode=args.mode, roi_size_px=args.roi_size_px, roi_stride_px=args.roi_stride_px,
+        saturation_min=args.saturation_min, thickness_range_nm=tuple(args.thickness_range_nm),
+        exposure=args.exposure, facet_size_um=args.facet_size_um,
+        max_components=args.max_components, align=args.align or False, film=args.film,
+        substrate=args.substrate)
+    try:
+        opts.validate()
+    except ValueError as exc:
+        name, _, reason = str(exc).partition(":")
+        raise ValueError(f"--{name.strip().replace('_', '-')}: {reason.strip()}") from None
+    for opt, value in (("--film", args.film), ("--substrate", args.substrate)):
+        if value is not None:
+            from ..optics.constants import load_set
+
+            try:
+                load_set(value)
+            except ValueError as exc:
+                raise ValueError(f"{opt}: {exc}") from None
+    return opts
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Wraps description paragraphs (split at blank lines) to the terminal width, and keeps
+    indented lines (examples) as written."""
+
+    def _fill_text(self, text, width, indent):
+        import textwrap
+
+        out = []
+        for para in text.split("\n\n"):
+            lines = para.splitlines()
+            if lines and all(line.startswith(" ") or line.endswith(":") for line in lines):
+                out.append("\n".join(indent + line for line in lines))
+            else:
+                out.append(textwrap.fill(" ".join(para.split()), width,
+                                         initial_indent=indent, subsequent_indent=indent))
+        return "\n\n".join(out)

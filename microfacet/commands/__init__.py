@@ -1,1 +1,0 @@
-"""Subcommands of the ``microfacet`` command line, one module each (see :mod:`microfacet.cli`)."""

@@ -1,0 +1,261 @@
+"""Oxide thickness from a measured spectral reflectance (seed §2.5, Table 1 method).
+
+The thickness d minimises the mean squared difference between the measured spectrum and
+the thin-film model R(λ; θ, d). Interference colours repeat with order, so the residual
+has several local minima: a local optimiser alone lands in whichever is nearest its
+start. We therefore scan a global thickness grid fine enough to resolve every minimum
+(the minima are about λ/(4n) ≈ 40 nm apart at the shortest wavelengths; a 1 nm grid
+samples each several dozen times), then refine the best few minima with a bounded scalar
+search, and report the best and the runner-up (the best *other* local minimum), so a
+user sees how ambiguous the answer is.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import InputError, one_line
+from ..io.limits import MAX_SPECTRUM_ROWS
+from .constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
+
+log = logging.getLogger(__name__)
+
+#: Thickest film searched (anodic films are < 1 µm; beyond ~10 µm a spectrometer no longer
+#: resolves the fringes and the coherent model does not apply).
+MAX_THICKNESS_NM = 10_000.0
+#: Fewest distinct wavelengths a fit accepts, and below how many it warns.
+MIN_WAVELENGTHS = 3
+FEW_WAVELENGTHS = 10
+#: A measured spectrum whose largest value is below this is implausible for anodized titanium
+#: (its reflectance maxima are 0.2-0.6): warned about as a unit or scale mistake.
+PLAUSIBLE_MAX_REFLECTANCE = 0.05
+_SCAN_ELEMENTS = 1 << 21   # thickness x wavelength evaluations per block of the scan
+
+__all__ = ["SpectrumFit", "fit_thickness", "read_spectrum_csv"]
+
+
+@dataclass
+class SpectrumFit:
+    """Result of :func:`fit_thickness`.
+
+    Attributes
+    ----------
+    thickness_nm : float
+        Best thickness.
+    residual_rms : float
+        RMS of (model − measured) reflectance at the best thickness (reflectance units).
+    runner_up_thickness_nm : float
+        The best other local minimum (NaN if the grid has only one).
+    runner_up_residual_rms : float
+    scale : float
+        Multiplier applied to the model (1 unless ``fit_scale``).
+    grid_thickness_nm, grid_residual_rms : ndarray
+        The global scan.
+    """
+
+    thickness_nm: float
+    residual_rms: float
+    runner_up_thickness_nm: float
+    runner_up_residual_rms: float
+    scale: float
+    angle_deg: float
+    grid_thickness_nm: np.ndarray
+    grid_residual_rms: np.ndarray
+
+
+def _model(wl, angle, d, n1, n2):
+    from .thinfilm import reflectance
+
+    return reflectance(wl, angle, np.asarray(d, dtype=np.float64)[..., None], n1, n2)
+
+
+def _residual(model, meas, fit_scale):
+    if fit_scale:
+        # Least-squares scale per thickness: s = <m, y> / <m, m>.
+        s = np.sum(model * meas, axis=-1) / np.maximum(np.sum(model * model, axis=-1), 1e-300)
+        model = model * s[..., None]
+    else:
+        s = np.ones(model.shape[:-1])
+    return np.sqrt(np.mean((model - meas) ** 2, axis=-1)), s
+
+
+def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FILM,
+                  substrate=DEFAULT_SUBSTRATE, thickness_range_nm=(0.0, 1000.0),
+                  grid_step_nm=1.0, fit_scale=False) -> SpectrumFit:
+    """Film thickness whose modelled spectrum best matches a measured one.
+
+    Parameters
+    ----------
+    wavelength_nm : array_like (N,)
+        Wavelengths in nm, inside the range of both optical-constant sets.
+    reflectance : array_like (N,)
+        Measured reflectance (fraction, 0-1) at those wavelengths; NaN samples are ignored.
+    angle_deg : float
+        Angle of incidence (θ_d for a gonio measurement under the half-vector model).
+    film, substrate : str
+        Optical-constant set names.
+    thickness_range_nm : (float, float)
+        Global search range.
+    grid_step_nm : float
+        Step of the global scan (default 1 nm; must stay well below λ/(4n) ≈ 40 nm).
+    fit_scale : bool
+        Also fit one multiplicative scale (for spectra with an uncertain absolute level).
+
+    Returns
+    -------
+    SpectrumFit
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from microfacet.optics.thinfilm import reflectance
+    >>> wl = np.arange(400.0, 751.0, 10.0)
+    >>> R = reflectance(wl, 0.0, 121.4, "TiO2_Jolivet2023_amorphous", "Ti_JohnsonChristy1974")
+    >>> round(fit_thickness(wl, R).thickness_nm, 2)
+    121.4
+    """
+    from scipy.optimize import minimize_scalar
+
+    from .constants import resolve_index
+
+    wl = np.asarray(wavelength_nm, dtype=np.float64)
+    y = np.asarray(reflectance, dtype=np.float64)
+    if wl.ndim != 1 or y.shape != wl.shape:
+        raise ValueError("reflectance: must be 1-D and the same length as wavelength_nm")
+    keep = np.isfinite(wl) & np.isfinite(y)
+    if keep.sum() < 3:
+        raise ValueError("reflectance: need at least 3 finite samples")
+    wl, y = wl[keep], y[keep]
+    if np.unique(wl).size < MIN_WAVELENGTHS:
+        raise ValueError(f"wavelength_nm: the spectrum has {np.unique(wl).size} distinct "
+                         f"wavelength(s); a thickness fit needs at least {MIN_WAVELENGTHS}")
+    lo, hi = (float(v) for v in thickness_range_nm)
+    if not (0 <= lo < hi <= MAX_THICKNESS_NM):
+        raise ValueError(f"thickness_range_nm: need 0 <= low < high <= {MAX_THICKNESS_NM:g} "
+                         f"nm, got {thickness_range_nm!r}")
+    if not (0 < grid_step_nm <= 10):
+        raise ValueError("grid_step_nm: must be in (0, 10] nm so no minimum is skipped")
+    if not (0 <= angle_deg < 90):
+        raise ValueError("angle_deg: must satisfy 0 <= angle < 90 degrees")
+    n1 = resolve_index(film, wl)
+    n2 = resolve_index(substrate, wl)
+
+    grid = np.linspace(lo, hi, int(np.ceil((hi - lo) / grid_step_nm)) + 1)
+    res = np.empty(grid.size)
+    block = max(1, _SCAN_ELEMENTS // wl.size)   # bounded memory whatever the range
+    for b in range(0, grid.size, block):
+        res[b:b + block], _ = _residual(_model(wl, angle_deg, grid[b:b + block], n1, n2), y,
+                                        fit_scale)
+
+    # Local minima of the scan (ends count when lower than their neighbour).
+    padded = np.concatenate([[np.inf], res, [np.inf]])
+    is_min = (padded[1:-1] <= padded[:-2]) & (padded[1:-1] < padded[2:])
+    cand = np.flatnonzero(is_min)
+    cand = cand[np.argsort(res[cand])][:6]
+
+    def objective(d):
+        r, _ = _residual(_model(wl, angle_deg, np.array([d]), n1, n2), y, fit_scale)
+        return float(r[0])
+
+    refined = []
+    for i in cand:
+        a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+        if b > a:
+            opt = minimize_scalar(objective, bounds=(a, b), method="bounded",
+                                  options={"xatol": 1e-6})
+            d_best, r_best = float(opt.x), float(opt.fun)
+            if res[i] < r_best:
+                d_best, r_best = float(grid[i]), float(res[i])
+        else:
+            d_best, r_best = float(grid[i]), float(res[i])
+        refined.append((r_best, d_best))
+    refined.sort()
+    best_r, best_d = refined[0]
+    runner = next(((r, d) for r, d in refined[1:] if abs(d - best_d) > 2 * grid_step_nm),
+                  (np.nan, np.nan))
+    _, s = _residual(_model(wl, angle_deg, np.array([best_d]), n1, n2), y, fit_scale)
+    return SpectrumFit(
+        thickness_nm=best_d, residual_rms=best_r, runner_up_thickness_nm=float(runner[1]),
+        runner_up_residual_rms=float(runner[0]), scale=float(s[0]), angle_deg=float(angle_deg),
+        grid_thickness_nm=grid, grid_residual_rms=res)
+
+
+def read_spectrum_csv(path):
+    """Read a ``wavelength_nm,reflectance`` CSV (header required; extra columns ignored).
+
+    Reflectance may be a fraction (0-1) or a percentage: a column with a value above 1 (which
+    no fraction has) is read as percent and divided by 100 (logged). A spectrum that never
+    exceeds :data:`PLAUSIBLE_MAX_REFLECTANCE` is accepted with a warning (anodized titanium
+    reflects 20-60 % at its maxima: a unit or scale mistake). A UTF-8 byte-order mark is
+    accepted.
+
+    Returns
+    -------
+    wavelength_nm, reflectance : ndarray (N,), float64
+
+    Raises
+    ------
+    InputError
+        Naming the file, and the line for a bad value; also for more than
+        :data:`~microfacet.io.limits.MAX_SPECTRUM_ROWS` rows or fewer than
+        :data:`MIN_WAVELENGTHS` distinct wavelengths.
+    """
+    path = Path(path)
+    shown = one_line(path)
+    if not path.is_file():
+        raise InputError(f"{shown}: no such file")
+    rows = []
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as f:
+            for row in csv.reader(f):
+                if row and any(c.strip() for c in row):
+                    rows.append(row)
+                    if len(rows) > MAX_SPECTRUM_ROWS + 1:
+                        raise InputError(f"{shown}: more than {MAX_SPECTRUM_ROWS:,} rows; a "
+                                         f"spectrum has a few thousand at most")
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"{shown}: cannot read ({exc})") from None
+    if not rows:
+        raise InputError(f"{shown}: empty file")
+    header = [c.strip() for c in rows[0]]
+    for key in ("wavelength_nm", "reflectance"):
+        if key not in header:
+            raise InputError(f"{shown}: missing column {key!r} (header is {','.join(header)})")
+    iw, ir = header.index("wavelength_nm"), header.index("reflectance")
+    wl, R = [], []
+    for lineno, row in enumerate(rows[1:], start=2):
+        try:
+            w, r = float(row[iw]), float(row[ir])
+        except (ValueError, IndexError):
+            raise InputError(f"{shown}: line {lineno}: expected numbers in columns "
+                             f"wavelength_nm and reflectance, got "
+                             f"{one_line(','.join(row))[:80]!r}") from None
+        if not (np.isfinite(w) and np.isfinite(r)):
+            raise InputError(f"{shown}: line {lineno}: non-finite value")
+        wl.append(w)
+        R.append(r)
+    wl, R = np.array(wl), np.array(R)
+    distinct = np.unique(wl).size
+    if distinct < MIN_WAVELENGTHS:
+        raise InputError(f"{shown}: column 'wavelength_nm': {distinct} distinct wavelength(s) "
+                         f"in {len(wl)} rows; a thickness fit needs at least {MIN_WAVELENGTHS}")
+    if distinct < FEW_WAVELENGTHS:
+        log.warning("%s: only %d distinct wavelengths; interference minima of different orders "
+                    "may fit equally well (compare the runner-up)", shown, distinct)
+    if 1.0 + 1e-6 < R.max() <= 100:  # a reflectance above 1 cannot be a fraction
+        log.info("%s: reflectance read as percent (largest value %g) and divided by 100",
+                 shown, R.max())
+        R = R / 100.0
+    if R.min() < 0 or R.max() > 1.0 + 1e-6:
+        raise InputError(f"{shown}: column 'reflectance' must be a fraction 0-1 or a percentage")
+    if R.max() < PLAUSIBLE_MAX_REFLECTANCE:
+        log.warning("%s: the largest reflectance is %.3g (%.2g %%); anodized titanium reflects "
+                    "20-60 %% at its maxima: check the file's unit (fraction or percent) or its "
+                    "scale (fit_scale fits one)", shown, R.max(), 100 * R.max())
+    order = np.argsort(wl)
+    return wl[order], R[order]
