@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> None:
     import skimage
     from skimage.color import deltaE_ciede2000
 
-    from microfacet.colour.colorimetry import delta_e_2000
+    from microfacet.colour import delta_e_2000
 
     lab1, lab2 = _pairs(args.n, args.seed)
     lab1_32, lab2_32 = lab1.astype(np.float32), lab2.astype(np.float32)

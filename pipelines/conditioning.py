@@ -41,7 +41,7 @@ ROW_D = (10, 25, 51, 75, 100, 112, 130, 149, 175, 200, 235, 260, 300, 350, 400)
 
 
 def lab_direct(th, d):
-    from microfacet.colour import colorimetry as color
+    from microfacet import colour as color
     from microfacet.colour.table import direct_xyz
 
     white = color.spectral_weights(np.linspace(380.0, 780.0, 401)).sum(axis=0)
@@ -50,7 +50,7 @@ def lab_direct(th, d):
 
 def sensitivities(d, tilts, h_deg=0.25, h_nm=0.25):
     """J (ΔE00/°) and K (ΔE00/nm), shape (len(tilts), len(d))."""
-    from microfacet.colour.colorimetry import delta_e_2000
+    from microfacet.colour import delta_e_2000
 
     th = np.asarray(tilts, float)[:, None]
     dd = np.asarray(d, float)[None, :]
@@ -63,7 +63,7 @@ def sensitivities(d, tilts, h_deg=0.25, h_nm=0.25):
 
 def table_sensitivity(table, d, tilts, max_tilt, step=0.5):
     """J as invert_tilt computes it: central differences of the table rows on its θ grid."""
-    from microfacet.colour.colorimetry import delta_e_2000
+    from microfacet.colour import delta_e_2000
     from microfacet.analysis.tilt import model_lab_rows
 
     g = np.arange(0.0, max_tilt + 1e-9, step)
@@ -78,7 +78,7 @@ def table_sensitivity(table, d, tilts, max_tilt, step=0.5):
 
 def patch_lab(table, theta, d, *, full_well, read_noise, rng, size=64):
     """Uniform patch at (θ, d) through the synthetic sensor, as Lab (float32)."""
-    from microfacet.colour import colorimetry as color
+    from microfacet import colour as color
     from microfacet.forward.synth import SynthParams, _sensor
 
     p = SynthParams(full_well_e=full_well, read_noise=read_noise)
@@ -122,7 +122,7 @@ def monte_carlo(table, max_tilt, thicknesses, tilts, sensors, J_at):
 
 def scene_noise(size=256):
     """estimate_colour_noise on the nd and noisy presets' sharp noisy images (texture incl.)."""
-    from microfacet.colour import colorimetry as color
+    from microfacet import colour as color
     from microfacet.analysis.mask import colour_mask
     from microfacet.forward.synth import _sensor, preset, render_scene
     from microfacet.analysis.tilt import estimate_colour_noise

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from microfacet.colour import colorimetry as color
+from microfacet import colour as color
 from microfacet.colour.table import _wavelengths, _white, direct_xyz
 from microfacet.optics import DEFAULT_FILM, DEFAULT_SUBSTRATE
 

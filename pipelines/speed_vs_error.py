@@ -232,7 +232,7 @@ def pareto_plot(path, panels, *, xlabel, ylabel, suptitle=None, logx=True, logy=
 @contextlib.contextmanager
 def delta_e_formula(name):
     """Swap the ΔE formula used inside microfacet's searches (they call color.delta_e_2000)."""
-    from microfacet.colour import colorimetry as color
+    from microfacet import colour as color
 
     orig = color.delta_e_2000
     fn = {"CIE76": color.delta_e_76, "CIE94": color.delta_e_94, "CIEDE2000": orig}[name]
@@ -296,7 +296,7 @@ DEF = None  # filled in main()
 
 def lab_direct(th, d, step):
     """Lab by direct spectral integration at ``step`` nm (white of the same grid)."""
-    from microfacet.colour import colorimetry as color
+    from microfacet import colour as color
     from microfacet.colour.table import direct_xyz
 
     n = int(round(400.0 / step)) + 1
@@ -306,7 +306,7 @@ def lab_direct(th, d, step):
 
 # --------------------------------------------------------------------------- 1. spectral
 def run_spectral(cfg, doc, img):
-    from microfacet.colour import colorimetry as color
+    from microfacet import colour as color
     from microfacet.colour.table import choose_spectral_step
 
     steps = (1.0, 2.0, 5.0, 10.0, 20.0)
@@ -393,7 +393,7 @@ def run_spectral(cfg, doc, img):
 
 # ------------------------------------------------------------------------------ 2. table
 def run_table(cfg, doc, img, spectral):
-    from microfacet.colour import colorimetry as color
+    from microfacet import colour as color
     from microfacet.colour.table import build_colour_table, choose_spectral_step
 
     d_steps, t_steps = cfg["d_steps"], cfg["t_steps"]
@@ -526,7 +526,7 @@ def run_table(cfg, doc, img, spectral):
 # -------------------------------------------------------------------------- 3. inversion
 def make_scene(size, seed=11):
     """nd preset, sharp image with the preset's sensor noise, 8-bit sRGB → Lab, mask."""
-    from microfacet.colour import colorimetry as color
+    from microfacet import colour as color
     from microfacet.analysis.mask import colour_mask
     from microfacet.forward.synth import _sensor, preset, render_scene
     from microfacet.analysis.tilt import estimate_colour_noise
@@ -541,7 +541,7 @@ def make_scene(size, seed=11):
 
 
 def run_inversion(cfg, doc, img):
-    from microfacet.colour import colorimetry as color
+    from microfacet import colour as color
     from microfacet.colour.table import build_colour_table
     from microfacet.analysis.facets import facet_thickness
     from microfacet.analysis.roi import fit_roi_thickness, nearest_roi_index, roi_grid
@@ -1070,7 +1070,7 @@ def run_focus(cfg, doc, img):
 
 # -------------------------------------------------------------------------------- 5. eq6
 def run_eq6(cfg, doc, img):
-    from microfacet.colour import colorimetry as color
+    from microfacet import colour as color
     from microfacet.forward.angular import simulate_map
     from microfacet.core.distributions import NDFMixture, ThicknessMixture
 

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from microfacet.colour import colorimetry as color
+from microfacet import colour as color
 from microfacet.forward.brdf import (
     FilmAverage,
     eq6_reflectance,

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from microfacet.colour import colorimetry as color
+from microfacet import colour as color
 from microfacet.colour.table import (
     _wavelengths,
     build_colour_table,

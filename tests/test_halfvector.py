@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from microfacet.colour import colorimetry as color
+from microfacet import colour as color
 from microfacet.forward.halfvector import (
     angular_colour_map,
     half_angle_deg,

@@ -50,7 +50,7 @@ import warnings
 import numpy as np
 import pytest
 
-from microfacet.colour import colorimetry as color
+from microfacet import colour as color
 from microfacet.analysis.pipeline import AnalysisOptions, analyze_stack, write_results
 from microfacet.cli import main
 from microfacet.core.errors import InputError

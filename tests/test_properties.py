@@ -23,7 +23,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-import microfacet.colour.colorimetry as mc
+import microfacet.colour as mc
 from microfacet.optics.thinfilm import fresnel_reflectance, reflectance
 
 FAST = settings(max_examples=60, deadline=None)

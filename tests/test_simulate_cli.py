@@ -49,7 +49,7 @@ def test_from_an_analyze_results_folder(tmp_path):
     assert main(["simulate", "--results", str(res), "--out", str(out2)] + SMALL) == 0
     meta2 = json.loads((out2 / "simulate.json").read_text())
     y = np.load(out2 / "angular_xyz.npy")[..., 1]
-    from microfacet.colour import colorimetry as color
+    from microfacet import colour as color
 
     white = color.spectral_weights(np.linspace(380, 780, 81)).sum(axis=0)
     assert meta2["exposure"] != 0.25

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from microfacet.colour import colorimetry as color
+from microfacet import colour as color
 from microfacet.colour.table import _wavelengths, _white, direct_xyz
 from microfacet.io.stack import read_stack
 from microfacet.forward.synth import PRESETS, defocus_sigma_px, generate_stack, preset

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from microfacet.colour import colorimetry as color
+from microfacet import colour as color
 from microfacet.colour.table import build_colour_table
 from microfacet.analysis.roi import fit_roi_thickness, nearest_roi_index, roi_grid
 

@@ -26,6 +26,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from ..colour.colorimetry import xyz_to_lab
+from ..colour.difference import delta_e_2000
 
 __all__ = ["FacetFit", "facet_thickness", "fit_facet_planes", "segment_facets"]
 
@@ -158,8 +160,6 @@ def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table
     thickness_nm, delta_e : ndarray, shape (S,)
         NaN for facets with no usable pixel.
     """
-    from ..colour import colorimetry as color
-
     S = int(labels.max()) + 1
     lab_flat = np.asarray(lab, dtype=np.float64).reshape(-1, 3)
     u = np.asarray(usable, bool).ravel()
@@ -185,8 +185,8 @@ def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table
         grid = np.clip(d_roi[ii, None] + off[None, :], lo, hi)
         th = np.clip(facet_tilt_deg[ii], t_lo, t_hi)[:, None]
         xyz = table.xyz_at(th, grid) * exposure
-        model = color.xyz_to_lab(xyz.astype(np.float32), white=table.white_xyz.astype(np.float32))
-        de = color.delta_e_2000(model, mean_lab[ii, None, :].astype(np.float32)).astype(np.float64)
+        model = xyz_to_lab(xyz.astype(np.float32), white=table.white_xyz.astype(np.float32))
+        de = delta_e_2000(model, mean_lab[ii, None, :].astype(np.float32)).astype(np.float64)
         k = np.argmin(de, axis=1)
         km = np.clip(k, 1, off.size - 2)
         r = np.arange(ii.size)

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from ..colour.srgb import srgb_encode, srgb_to_lab
 
 __all__ = ["AnalysisOptions", "AnalysisResult", "analyze_stack", "check_analysis_memory",
            "results_size_bytes", "write_results"]
@@ -231,7 +232,6 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
     >>> r = analyze_stack("fixtures/stacks/nd-fixture")  # doctest: +SKIP
     >>> r.thickness_fit.mixture.means_nm  # doctest: +SKIP
     """
-    from ..colour import colorimetry as color
     from ..colour.table import build_colour_table
     from ..core.errors import InputError
     from ..focus.height import fill_missing, height_from_focus
@@ -306,13 +306,13 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
     if aif.ndim == 2:
         aif = np.repeat(aif[..., None], 3, axis=-1)
     if st.color_space == "linear-sRGB":
-        enc = color.srgb_encode(aif, dtype=np.float32)
+        enc = srgb_encode(aif, dtype=np.float32)
     else:
         enc = aif.astype(np.float32)
     bit_depth = 16 if st.dtype == np.uint16 else 8
     cm = colour_mask(enc, saturation_min=opt.saturation_min, value_min=opt.value_min,
                      bit_depth=bit_depth)
-    lab = color.srgb_to_lab(enc, illuminant=illuminant).astype(np.float32)
+    lab = srgb_to_lab(enc, illuminant=illuminant).astype(np.float32)
     from .tilt import estimate_colour_noise, quantization_noise_de
 
     noise_de = estimate_colour_noise(lab, cm.mask)

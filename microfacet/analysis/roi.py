@@ -37,6 +37,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from ..colour.colorimetry import xyz_to_lab
+from ..colour.difference import delta_e_2000
 
 __all__ = ["RoiFit", "fit_roi_thickness", "nearest_roi_index", "roi_grid"]
 
@@ -158,17 +160,13 @@ class RoiFit:
 
 
 def _model_lab(xyz, exposure, white):
-    from ..colour import colorimetry as color
-
-    return color.xyz_to_lab((xyz * exposure).astype(np.float32),
+    return xyz_to_lab((xyz * exposure).astype(np.float32),
                             white=white.astype(np.float32))
 
 
 def _curve(xyz_s, lab_s, exposure, white):
     """Mean ΔE00 over the sample for every grid thickness: xyz_s (n, D, 3), lab_s (n, 3) → (D,)."""
-    from ..colour import colorimetry as color
-
-    de = color.delta_e_2000(_model_lab(xyz_s, exposure, white), lab_s[:, None, :])
+    de = delta_e_2000(_model_lab(xyz_s, exposure, white), lab_s[:, None, :])
     return de.mean(axis=0)
 
 
@@ -182,14 +180,12 @@ def _band_curve(xyz_s, lab_s, white, grid, half_width_nm, exposure=None):
     """
     from scipy.ndimage import minimum_filter1d
 
-    from ..colour import colorimetry as color
-
     if exposure is None:
         model = _model_lab(xyz_s, 1.0, white)
         model = model * (lab_s[:, None, 0:1] / np.maximum(model[..., 0:1], 1e-3))
     else:
         model = _model_lab(xyz_s, exposure, white)
-    de = color.delta_e_2000(model, lab_s[:, None, :])
+    de = delta_e_2000(model, lab_s[:, None, :])
     step = grid[1] - grid[0] if grid.size > 1 else 1.0
     k = max(1, int(round(half_width_nm / step)))
     return minimum_filter1d(de, size=2 * k + 1, axis=1, mode="nearest").mean(axis=0)
@@ -345,8 +341,6 @@ def _estimate_exposure(samples, white, grid, band):
     """Exposure minimising the ROIs' mean best median ΔE (within the order band, if any)."""
     from scipy.optimize import minimize_scalar
 
-    from ..colour import colorimetry as color
-
     sub = [(xyz[:128], lab_s[:128]) for xyz, lab_s, _, _ in samples]
     inside = (np.ones(grid.size, bool) if band is None
               else (grid >= band[0]) & (grid <= band[1]))
@@ -357,7 +351,7 @@ def _estimate_exposure(samples, white, grid, band):
         e = math.exp(log_e)
         vals = []
         for x, l in sub:
-            de = color.delta_e_2000(_model_lab(x[:, inside], e, white), l[:, None, :])
+            de = delta_e_2000(_model_lab(x[:, inside], e, white), l[:, None, :])
             vals.append(np.median(de.min(axis=1)))
         return float(np.mean(vals))
 

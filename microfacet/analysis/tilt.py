@@ -25,6 +25,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from ..colour.colorimetry import xyz_to_lab
+from ..colour.difference import delta_e_2000
+from ..colour.srgb import srgb_to_lab
 
 __all__ = ["TiltInversion", "estimate_colour_noise", "invert_tilt", "model_lab_rows"]
 
@@ -52,11 +55,9 @@ class TiltInversion:
 
 def model_lab_rows(table, thickness_nm, theta_grid_deg, *, exposure):
     """Model Lab for each thickness (rows) over a θ grid: shape (R, K, 3), float32."""
-    from ..colour import colorimetry as color
-
     d = np.asarray(thickness_nm, dtype=np.float64)
     xyz = table.xyz_at(np.asarray(theta_grid_deg)[None, :], d[:, None]) * exposure
-    return color.xyz_to_lab(xyz.astype(np.float32), white=table.white_xyz.astype(np.float32))
+    return xyz_to_lab(xyz.astype(np.float32), white=table.white_xyz.astype(np.float32))
 
 
 def estimate_colour_noise(lab, mask):
@@ -66,14 +67,12 @@ def estimate_colour_noise(lab, mask):
     a 3-D Gaussian of per-component SD σ√2, whose median is 2.18 σ. Texture inflates the
     estimate, so it is an upper bound (conservative uncertainties).
     """
-    from ..colour import colorimetry as color
-
     lab = np.asarray(lab, dtype=np.float32)
     m = ~np.asarray(mask, bool)
     ok = m[:, 1:] & m[:, :-1]
     if ok.sum() < 10:
         return float("nan")
-    de = color.delta_e_2000(lab[:, 1:][ok], lab[:, :-1][ok])
+    de = delta_e_2000(lab[:, 1:][ok], lab[:, :-1][ok])
     return float(np.median(de) / 2.18)
 
 
@@ -96,8 +95,6 @@ def quantization_noise_de(encoded_srgb, mask, *, bit_depth, illuminant="D65", n_
         True where a pixel is not used.
     bit_depth : {8, 16}
     """
-    from ..colour import colorimetry as color
-
     img = np.asarray(encoded_srgb, dtype=np.float32)[~np.asarray(mask, bool)]
     if img.shape[0] == 0:
         return float("nan")
@@ -106,8 +103,8 @@ def quantization_noise_de(encoded_srgb, mask, *, bit_depth, illuminant="D65", n_
         img = img[rng.choice(img.shape[0], n_sample, replace=False)]
     lsb = np.float32(1.0 / (2 ** bit_depth - 1))
     moved = np.clip(img + rng.uniform(-0.5, 0.5, img.shape).astype(np.float32) * lsb, 0, 1)
-    de = color.delta_e_2000(color.srgb_to_lab(img, illuminant=illuminant),
-                            color.srgb_to_lab(moved, illuminant=illuminant))
+    de = delta_e_2000(srgb_to_lab(img, illuminant=illuminant),
+                            srgb_to_lab(moved, illuminant=illuminant))
     # |difference| of one pixel from its re-rounded self: the norm of a 3-D error of
     # per-component SD sigma has median ~1.54 sigma
     return float(np.median(de) / 1.54)
@@ -143,8 +140,6 @@ def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness
     -------
     TiltInversion
     """
-    from ..colour import colorimetry as color
-
     lab_px = np.asarray(lab_px, dtype=np.float32)
     th = np.asarray(theta_grid_deg, dtype=np.float64)
     step = th[1] - th[0]
@@ -157,13 +152,13 @@ def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness
     # Sensitivity per row and grid node (central differences; one-sided at the ends).
     rl = rows_lab.astype(np.float32)
     sens_rows = np.empty(rl.shape[:2], np.float32)  # ΔE00 per degree
-    sens_rows[:, 1:-1] = color.delta_e_2000(rl[:, 2:], rl[:, :-2]) / (2 * step)
-    sens_rows[:, 0] = color.delta_e_2000(rl[:, 1], rl[:, 0]) / step
-    sens_rows[:, -1] = color.delta_e_2000(rl[:, -1], rl[:, -2]) / step
+    sens_rows[:, 1:-1] = delta_e_2000(rl[:, 2:], rl[:, :-2]) / (2 * step)
+    sens_rows[:, 0] = delta_e_2000(rl[:, 1], rl[:, 0]) / step
+    sens_rows[:, -1] = delta_e_2000(rl[:, -1], rl[:, -2]) / step
     for a in range(0, n, chunk):
         b = min(n, a + chunk)
         ri = row_index[a:b]
-        de = color.delta_e_2000(rows_lab[ri], lab_px[a:b, None, :])  # (m, K)
+        de = delta_e_2000(rows_lab[ri], lab_px[a:b, None, :])  # (m, K)
         q = (de.astype(np.float64) / noise) ** 2
         if prior_deg is not None:
             q += ((th[None, :] - prior_deg[a:b, None]) / prior_sigma_deg[a:b, None]) ** 2
@@ -190,7 +185,7 @@ def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness
         out_s[a:b] = np.minimum(sig, th[-1] - th[0])
         out_w[a:b] = w
         out_j[a:b] = j
-    exact = color.delta_e_2000(
-        color.xyz_to_lab((table.xyz_at(out_t, thickness_px) * exposure).astype(np.float32),
+    exact = delta_e_2000(
+        xyz_to_lab((table.xyz_at(out_t, thickness_px) * exposure).astype(np.float32),
                          white=table.white_xyz.astype(np.float32)), lab_px)
     return TiltInversion(out_t, out_s, exact.astype(np.float32), out_w, out_j)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 
 from .options import HelpFormatter, add_optics_options, example_epilog, optics_kwargs
+from ..colour.colorimetry import spectral_weights
 
 _EXAMPLES = (
     "microfacet simulate --thickness-nm 51 --out sd-blue",
@@ -391,9 +392,7 @@ def _run_distributions(args) -> int:
               observer=opt["observer"])
     if args.fit_exposure and not args.fit_exponent:
         m1 = simulate_map(exposure=1.0, **kw)
-        from ..colour import colorimetry as color
-
-        white = color.spectral_weights(wl, illuminant=opt["illuminant"],
+        white = spectral_weights(wl, illuminant=opt["illuminant"],
                                        observer=opt["observer"]).sum(axis=0)
         exposure, fit["mean_delta_e"] = fit_exposure(m1.xyz, measured.lab, white=white)
         fit["exposure"] = exposure
@@ -401,9 +400,7 @@ def _run_distributions(args) -> int:
         # Display scale: the 98th percentile of Y maps to 0.9 of white (the specular peak
         # of a BRDF is far above 1 and would otherwise clip the whole map to white).
         m1 = simulate_map(exposure=1.0, **kw)
-        from ..colour import colorimetry as color
-
-        white = color.spectral_weights(wl, illuminant=opt["illuminant"],
+        white = spectral_weights(wl, illuminant=opt["illuminant"],
                                        observer=opt["observer"]).sum(axis=0)
         y = m1.xyz[..., 1][np.isfinite(m1.xyz[..., 1])] / white[1]
         p98 = float(np.percentile(y, 98)) if y.size else 0.0

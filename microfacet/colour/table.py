@@ -31,6 +31,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, resolve_index
+from .colorimetry import spectral_weights, xyz_to_lab
+from .difference import delta_e_2000
+from .srgb import model_xyz_to_linear_srgb
 
 __all__ = [
     "ColourTable",
@@ -75,12 +78,11 @@ def direct_xyz(theta_deg, thickness_nm, *, spectral_step_nm=1.0, film=DEFAULT_FI
     >>> bool(0.5 < xyz[1] < 0.7)
     True
     """
-    from . import colorimetry as color
     from ..optics.thinfilm import reflectance
 
     wl = _wavelengths(spectral_step_nm)
     n1, n2 = resolve_index(film, wl), resolve_index(substrate, wl)
-    w = color.spectral_weights(wl, illuminant=illuminant, observer=observer)
+    w = spectral_weights(wl, illuminant=illuminant, observer=observer)
     th = np.asarray(theta_deg, dtype=np.float64)[..., None]
     d = np.asarray(thickness_nm, dtype=np.float64)[..., None]
     R = reflectance(wl, th, d, n1, n2, n_ambient=n_ambient)
@@ -88,9 +90,7 @@ def direct_xyz(theta_deg, thickness_nm, *, spectral_step_nm=1.0, film=DEFAULT_FI
 
 
 def _white(wl, illuminant, observer):
-    from . import colorimetry as color
-
-    return color.spectral_weights(wl, illuminant=illuminant, observer=observer).sum(axis=0)
+    return spectral_weights(wl, illuminant=illuminant, observer=observer).sum(axis=0)
 
 
 def _random_points(rng, theta_range, thickness_range, count):
@@ -124,21 +124,19 @@ def choose_spectral_step(*, thickness_range_nm=(0.0, 400.0), theta_range_deg=(0.
     errors : dict
         ``{step_nm: max ΔE00}`` for every step tried.
     """
-    from . import colorimetry as color
-
     rng = np.random.default_rng(seed)
     th, d = _random_points(rng, theta_range_deg, thickness_range_nm, samples)
     kw = dict(film=film, substrate=substrate, illuminant=illuminant, observer=observer,
               n_ambient=n_ambient)
     ref_wl = _wavelengths(1.0)
-    ref = color.xyz_to_lab(direct_xyz(th, d, spectral_step_nm=1.0, **kw),
+    ref = xyz_to_lab(direct_xyz(th, d, spectral_step_nm=1.0, **kw),
                            white=_white(ref_wl, illuminant, observer))
     errors = {1.0: 0.0}
     for step in SPECTRAL_STEPS_NM[:-1]:
         wl = _wavelengths(step)
-        lab = color.xyz_to_lab(direct_xyz(th, d, spectral_step_nm=step, **kw),
+        lab = xyz_to_lab(direct_xyz(th, d, spectral_step_nm=step, **kw),
                                white=_white(wl, illuminant, observer))
-        err = float(np.max(color.delta_e_2000(lab, ref)))
+        err = float(np.max(delta_e_2000(lab, ref)))
         errors[step] = err
         if err <= max_error_de00:
             return step, err, errors
@@ -241,16 +239,12 @@ class ColourTable:
 
     def lab_at(self, theta_deg, thickness_nm):
         """Interpolated CIELAB (float32), NaN outside the table; see :meth:`xyz_at`."""
-        from . import colorimetry as color
-
-        return color.xyz_to_lab(self.xyz_at(theta_deg, thickness_nm),
+        return xyz_to_lab(self.xyz_at(theta_deg, thickness_nm),
                                 white=self.white_xyz).astype(np.float32)
 
     def linear_rgb_at(self, theta_deg, thickness_nm):
         """Interpolated linear sRGB (float32, not clipped), white-balanced to the illuminant."""
-        from . import colorimetry as color
-
-        return color.model_xyz_to_linear_srgb(
+        return model_xyz_to_linear_srgb(
             self.xyz_at(theta_deg, thickness_nm), white=self.white_xyz,
             illuminant=self.illuminant, observer=self.observer)
 
@@ -298,8 +292,6 @@ def build_colour_table(*, thickness_range_nm=(0.0, 400.0), theta_range_deg=(0.0,
     >>> t.lab_at(0.0, 51.0).shape
     (3,)
     """
-    from . import colorimetry as color
-
     lo_d, hi_d = _check_range(thickness_range_nm, "thickness_range_nm", 0.0, np.inf)
     lo_t, hi_t = _check_range(theta_range_deg, "theta_range_deg", 0.0, 90.0)
     if hi_t >= 90.0:
@@ -325,7 +317,7 @@ def build_colour_table(*, thickness_range_nm=(0.0, 400.0), theta_range_deg=(0.0,
 
     rng = np.random.default_rng(seed + 1)
     th_chk, d_chk = _random_points(rng, (lo_t, hi_t), (lo_d, hi_d), check_samples)
-    ref_lab = color.xyz_to_lab(direct_xyz(th_chk, d_chk, spectral_step_nm=spectral_step_nm,
+    ref_lab = xyz_to_lab(direct_xyz(th_chk, d_chk, spectral_step_nm=spectral_step_nm,
                                           **kw), white=white)
 
     d_step = 2.0 if thickness_step_nm is None else float(thickness_step_nm)
@@ -338,11 +330,11 @@ def build_colour_table(*, thickness_range_nm=(0.0, 400.0), theta_range_deg=(0.0,
                          **kw)
         table = ColourTable(
             theta_deg=th_grid, thickness_nm=d_grid, xyz=xyz,
-            lab=color.xyz_to_lab(xyz, white=white).astype(np.float32), white_xyz=white,
+            lab=xyz_to_lab(xyz, white=white).astype(np.float32), white_xyz=white,
             spectral_step_nm=spectral_step_nm, spectral_error_de00=spectral_err,
             interp_error_de00=float("nan"), film=str(film), substrate=str(substrate),
             illuminant=illuminant, observer=observer, n_ambient=n_ambient)
-        err = color.delta_e_2000(table.lab_at(th_chk, d_chk).astype(np.float64), ref_lab)
+        err = delta_e_2000(table.lab_at(th_chk, d_chk).astype(np.float64), ref_lab)
         table.interp_error_de00 = float(np.max(err))
         if not adaptive or table.interp_error_de00 <= max_interp_error_de00:
             break
@@ -365,16 +357,14 @@ def build_colour_table(*, thickness_range_nm=(0.0, 400.0), theta_range_deg=(0.0,
 
 def _axis_error(table, th, d, ref_lab, axis, kw, step, white):
     """Interpolation error with exact values along the other axis (to pick which to refine)."""
-    from . import colorimetry as color
-
     # Evaluate exactly at the grid theta nearest each check point: the remaining error is
     # the thickness-axis interpolation error (plus a small theta offset, same for both).
     g = table.theta_deg
     th_near = g[np.clip(np.rint((th - g[0]) / max(table.theta_step_deg, 1e-12)), 0,
                         g.size - 1).astype(int)]
-    ref = color.xyz_to_lab(direct_xyz(th_near, d, spectral_step_nm=step, **kw), white=white)
+    ref = xyz_to_lab(direct_xyz(th_near, d, spectral_step_nm=step, **kw), white=white)
     got = table.lab_at(th_near, d).astype(np.float64)
-    return float(np.max(color.delta_e_2000(got, ref)))
+    return float(np.max(delta_e_2000(got, ref)))
 
 
 def _grid(lo, hi, step):

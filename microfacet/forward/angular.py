@@ -49,6 +49,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
+from ..colour.colorimetry import lab_to_xyz, spectral_weights, white_xyz, xyz_to_lab
+from ..colour.difference import delta_e_2000
+from ..colour.srgb import model_xyz_to_linear_srgb, srgb_encode
 
 __all__ = [
     "AngularMap",
@@ -117,14 +120,12 @@ class AngularMap:
 
 
 def _lab_to_srgb8(lab, illuminant, observer):
-    from ..colour import colorimetry as color
-
-    xyz = color.lab_to_xyz(np.nan_to_num(np.asarray(lab, np.float64)),
-                           white=color.white_xyz(illuminant=illuminant, observer=observer))
-    rgb = color.model_xyz_to_linear_srgb(xyz, white=color.white_xyz(illuminant=illuminant,
+    xyz = lab_to_xyz(np.nan_to_num(np.asarray(lab, np.float64)),
+                           white=white_xyz(illuminant=illuminant, observer=observer))
+    rgb = model_xyz_to_linear_srgb(xyz, white=white_xyz(illuminant=illuminant,
                                                                     observer=observer),
                                          illuminant=illuminant, observer=observer)
-    return color.srgb_encode(rgb, dtype=np.uint8)
+    return srgb_encode(rgb, dtype=np.uint8)
 
 
 def _grid(x, name):
@@ -163,21 +164,19 @@ def colours_from_spectra(spectra, wavelength_nm, *, exposure=1.0, illuminant="D6
     >>> [round(float(v), 3) for v in lab], rgb.tolist()
     ([100.0, 0.0, 0.0], [255, 255, 255])
     """
-    from ..colour import colorimetry as color
-
     _positive(exposure, "exposure")
     wl = np.asarray(wavelength_nm, dtype=np.float64)
     R = np.asarray(spectra, dtype=np.float64)
     if R.shape[-1:] != wl.shape:
         raise ValueError(f"spectra: last axis ({R.shape[-1:]}) must match wavelength_nm "
                          f"({wl.shape})")
-    W = color.spectral_weights(wl, illuminant=illuminant, observer=observer)
+    W = spectral_weights(wl, illuminant=illuminant, observer=observer)
     white = W.sum(axis=0)
     xyz = float(exposure) * (R @ W)
-    lab = color.xyz_to_lab(xyz, white=white).astype(np.float32)
-    rgb = color.model_xyz_to_linear_srgb(xyz, white=white, illuminant=illuminant,
+    lab = xyz_to_lab(xyz, white=white).astype(np.float32)
+    rgb = model_xyz_to_linear_srgb(xyz, white=white, illuminant=illuminant,
                                          observer=observer)
-    srgb = color.srgb_encode(np.nan_to_num(rgb), dtype=np.uint8)
+    srgb = srgb_encode(np.nan_to_num(rgb), dtype=np.uint8)
     return xyz, lab, srgb, white
 
 
@@ -330,10 +329,8 @@ def delta_e_map(predicted: AngularMap, measured: AngularMap):
     >>> delta_e_map(m, m).tolist()
     [[0.0, 0.0]]
     """
-    from ..colour import colorimetry as color
-
     _same_grid(predicted, measured)
-    return color.delta_e_2000(np.asarray(predicted.lab, np.float64),
+    return delta_e_2000(np.asarray(predicted.lab, np.float64),
                               np.asarray(measured.lab, np.float64))
 
 
@@ -439,10 +436,8 @@ def load_map(path) -> AngularMap:
 
 # ------------------------------------------------------------------------------ fitting
 def _mean_de(xyz, white, ref_lab, mask):
-    from ..colour import colorimetry as color
-
-    lab = color.xyz_to_lab(xyz[mask], white=white)
-    return float(np.mean(color.delta_e_2000(lab, ref_lab)))
+    lab = xyz_to_lab(xyz[mask], white=white)
+    return float(np.mean(delta_e_2000(lab, ref_lab)))
 
 
 def fit_exposure(xyz, measured_lab, *, white, mask=None, bounds=(1e-3, 1e3)):
@@ -539,8 +534,6 @@ def fit_eq6(measured: AngularMap, *, thickness, ndf, fit_exposure_too=True, expo
     from scipy.optimize import minimize_scalar
 
     from . import brdf
-    from ..colour import colorimetry as color
-
     if region not in ("all", "diffuse"):
         raise ValueError(f"region: expected 'all' or 'diffuse', got {region!r}")
     lo, hi = (math.log(_positive(b, "n_bounds")) for b in n_bounds)
@@ -552,7 +545,7 @@ def fit_eq6(measured: AngularMap, *, thickness, ndf, fit_exposure_too=True, expo
                                 wavelength_nm=wavelength_nm, film=film, substrate=substrate,
                                 n_ambient=n_ambient, theta_m_step_deg=theta_m_step_deg)
     tx = kern.film.xyz(illuminant=measured.illuminant, observer=measured.observer)
-    white = color.spectral_weights(kern.film.wavelength_nm, illuminant=measured.illuminant,
+    white = spectral_weights(kern.film.wavelength_nm, illuminant=measured.illuminant,
                                    observer=measured.observer).sum(axis=0)
     ref = np.asarray(measured.lab, np.float64)
     mask = np.all(np.isfinite(ref), axis=-1)

@@ -86,6 +86,7 @@ import numpy as np
 
 from ..core.distributions import NDFMixture, ThicknessMixture
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
+from ..colour.colorimetry import spectral_weights
 
 __all__ = [
     "Eq6Kernel",
@@ -302,9 +303,7 @@ class FilmAverage:
 
     def xyz(self, *, illuminant="D65", observer="2"):
         """XYZ of every row (perfect reflector Y = 1), shape (T, 3)."""
-        from ..colour import colorimetry as color
-
-        return self.spectra @ color.spectral_weights(self.wavelength_nm, illuminant=illuminant,
+        return self.spectra @ spectral_weights(self.wavelength_nm, illuminant=illuminant,
                                                      observer=observer)
 
 

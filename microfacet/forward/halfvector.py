@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
+from ..colour.colorimetry import xyz_to_lab
+from ..colour.srgb import model_xyz_to_linear_srgb, srgb_encode
 
 __all__ = [
     "AngularColourMap",
@@ -217,7 +219,6 @@ def angular_colour_map(thickness_nm, *, theta_light_deg=None, theta_view_deg=Non
     >>> m.lab.shape
     (2, 3, 3)
     """
-    from ..colour import colorimetry as color
     from ..colour.table import _wavelengths, _white, choose_spectral_step, direct_xyz
 
     d = float(thickness_nm)
@@ -238,9 +239,9 @@ def angular_colour_map(thickness_nm, *, theta_light_deg=None, theta_view_deg=Non
             theta_range_deg=(0.0, float(np.max(th_d)) + 1e-6), samples=100, **kw)
     xyz = exposure * direct_xyz(th_d, d, spectral_step_nm=spectral_step_nm, **kw)
     white = _white(_wavelengths(spectral_step_nm), illuminant, observer)
-    lab = color.xyz_to_lab(xyz, white=white).astype(np.float32)
-    rgb = color.model_xyz_to_linear_srgb(xyz, white=white, illuminant=illuminant,
+    lab = xyz_to_lab(xyz, white=white).astype(np.float32)
+    rgb = model_xyz_to_linear_srgb(xyz, white=white, illuminant=illuminant,
                                          observer=observer)
-    srgb = color.srgb_encode(rgb, dtype=np.uint8)
+    srgb = srgb_encode(rgb, dtype=np.uint8)
     return AngularColourMap(tl, tv, th_d, xyz, lab, srgb, d, float(exposure), str(film),
                             str(substrate), illuminant)

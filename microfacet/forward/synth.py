@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
+from ..colour.srgb import srgb_encode
 
 __all__ = [
     "PRESETS",
@@ -495,7 +496,6 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
     >>> from microfacet.forward.synth import generate_stack, preset
     >>> r = generate_stack("/tmp/nd-demo", preset("nd", seed=1), overwrite=True)  # doctest: +SKIP
     """
-    from ..colour import colorimetry as color
     from ..io.images import write_image
     from ..io.outdir import atomic_output_dir
     from ..io.stack import write_stack_json
@@ -536,7 +536,7 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
             f = (u - i0).astype(np.float32)[..., None]
             img = ladder[i0, rows, cols] * (1 - f) + ladder[i0 + 1, rows, cols] * f
             img = _sensor(img, p, rng_noise)
-            code = color.srgb_encode(img, dtype=dtype)
+            code = srgb_encode(img, dtype=dtype)
             write_image(tmp / names[k], code)
             if progress is not None:
                 progress(k + 1, p.n_slices)
@@ -550,7 +550,7 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
         np.save(truth / "clipped.npy", clipped)
         np.save(truth / "region_id.npy", scene.region_id)
         np.save(truth / "groove.npy", scene.groove)
-        sharp = color.srgb_encode(np.clip(scene.linear_rgb, 0, 1), dtype=np.uint8)
+        sharp = srgb_encode(np.clip(scene.linear_rgb, 0, 1), dtype=np.uint8)
         write_image(truth / "all_in_focus.png", sharp)
         truth_meta = {
             "format": "microfacet-synth-truth/1",

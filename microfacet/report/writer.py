@@ -45,6 +45,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from ..colour.colorimetry import white_xyz
 
 __all__ = ["MAX_MAP_PX", "NO_VALUE", "PAGES", "parameter_tables", "write_report"]
 
@@ -1240,7 +1241,6 @@ def _predicted_maps(ctx):
     """[(title, AngularMap, note)] of the fitted distributions; [] if there is no fit."""
     if ctx.thick is None:
         return []
-    from ..colour import colorimetry as color
     from ..forward.angular import colours_from_spectra, simulate_map
     from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, load_set
 
@@ -1252,7 +1252,7 @@ def _predicted_maps(ctx):
     try:
         load_set(film)
         load_set(substrate)
-        color.white_xyz(illuminant=illuminant)
+        white_xyz(illuminant=illuminant)
     except (ValueError, KeyError, OSError):
         film, substrate, illuminant = DEFAULT_FILM, DEFAULT_SUBSTRATE, "D65"
     wl = np.arange(380.0, 781.0, 10.0)

@@ -1,0 +1,92 @@
+"""The one mechanism for deferred imports: heavy libraries and subpackages load on first use.
+
+``import microfacet`` and ``microfacet --help`` import neither numpy's heavy companions
+(colour-science, scikit-learn, scikit-image, matplotlib, OpenCV, SciPy's submodules) nor the
+subpackages; a module that needs one names it once, at its top::
+
+    from ..core.lazy import load
+
+    cv2 = load("cv2")                 # imported when cv2.<anything> is first used
+    ndimage = load("scipy.ndimage")
+
+and a package exposes its public names without importing its modules (scikit-image's
+``lazy_loader.attach`` pattern)::
+
+    __getattr__, __dir__, __all__ = attach(__name__, submod_attrs={"thinfilm": ["reflectance"]})
+
+numpy is imported normally: it is what every module computes with.
+
+Examples
+--------
+>>> import sys
+>>> m = load("json")          # already imported by the standard library: returned as is
+>>> m is sys.modules["json"]
+True
+>>> proxy = load("this_module_does_not_exist_xyz")
+>>> try:
+...     proxy.anything
+... except ModuleNotFoundError as exc:
+...     print(exc.name)
+this_module_does_not_exist_xyz
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import types
+
+import lazy_loader
+
+__all__ = ["attach", "load"]
+
+
+class _LazyModule(types.ModuleType):
+    """A stand-in for a module that imports it on the first attribute access."""
+
+    def __init__(self, name: str):
+        super().__init__(name)
+        self.__dict__["_lazy_target"] = name
+
+    def __getattr__(self, attr):
+        module = importlib.import_module(self.__dict__["_lazy_target"])
+        value = getattr(module, attr)
+        if not attr.startswith("__"):
+            self.__dict__[attr] = value  # the next access is a plain attribute lookup
+        return value
+
+    def __repr__(self):
+        return f"<lazy module {self.__dict__['_lazy_target']!r}>"
+
+
+def load(name: str) -> types.ModuleType:
+    """The module ``name``, imported when one of its attributes is first used.
+
+    Parameters
+    ----------
+    name : str
+        Absolute module name (``"cv2"``, ``"scipy.ndimage"``, ``"sklearn.mixture"``).
+
+    Returns
+    -------
+    module
+        The module itself if it is already imported, else a proxy.
+    """
+    module = sys.modules.get(name)
+    return module if module is not None else _LazyModule(name)
+
+
+def attach(package_name: str, submodules=(), submod_attrs=None):
+    """``(__getattr__, __dir__, __all__)`` for a package whose names load on first use.
+
+    Parameters
+    ----------
+    package_name : str
+        The package's ``__name__``.
+    submodules : iterable of str
+        Submodules reachable as attributes (``microfacet.optics.thinfilm``).
+    submod_attrs : dict of str to list of str
+        Names exported from each submodule (``{"thinfilm": ["reflectance"]}``).
+    """
+    return lazy_loader.attach(package_name, submodules=list(submodules),
+                              submod_attrs=submod_attrs or {})
