@@ -4,6 +4,6 @@
 (shared/spec/api.md) and keeps working.
 """
 
-from .colour.difference import delta_e_2000, delta_e_76, delta_e_94
+from .colour.difference import delta_e_76, delta_e_94, delta_e_2000
 
 __all__ = ["delta_e_2000", "delta_e_76", "delta_e_94"]

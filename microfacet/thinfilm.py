@@ -4,8 +4,13 @@
 (shared/spec/api.md) and keeps working.
 """
 
-from .optics.thinfilm import (FresnelProducts, fresnel_reflectance, normal_wavevector,
-                              reflectance, reflectance_period_nm)
+from .optics.thinfilm import (
+                              FresnelProducts,
+                              fresnel_reflectance,
+                              normal_wavevector,
+                              reflectance,
+                              reflectance_period_nm,
+)
 
 __all__ = ["FresnelProducts", "fresnel_reflectance", "normal_wavevector", "reflectance",
            "reflectance_period_nm"]

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from microfacet.analysis.pipeline import AnalysisOptions, analyze_stack
-from microfacet.analysis.mixtures import wasserstein1
+from microfacet.core.densities import wasserstein1
 from microfacet.forward.synth import PRESETS, generate_stack, preset
 from microfacet.analysis.roi import nearest_roi_index, roi_grid
 

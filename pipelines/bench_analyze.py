@@ -25,7 +25,7 @@ def main(argv=None):
     ap.add_argument("--slices", type=int, default=40)
     args = ap.parse_args(argv)
 
-    from microfacet.analysis.pipeline import AnalysisOptions, analyze_stack, write_results
+    from microfacet.analysis import AnalysisOptions, analyze_stack, write_results
     from microfacet.io.stack import read_stack
     from microfacet.forward.synth import generate_stack, preset
 

@@ -44,7 +44,7 @@ def naive_microfacet(tl, tv, wl):
 
 def naive_eq6(tl, tv, wl, step=0.5):
     d, w = thickness_nodes(G3)
-    tm, f, step = _theta_m_grid(F2, step)
+    tm, f, step = theta_m_grid(F2, step)
     out = []
     for a, b in zip(tl, tv):
         alpha = a + tm

@@ -90,7 +90,7 @@ def patch_lab(table, theta, d, *, full_well, read_noise, rng, size=64):
 
 def monte_carlo(table, max_tilt, thicknesses, tilts, sensors, J_at):
     from microfacet.analysis.mask import colour_mask
-    from microfacet.analysis.tilt import estimate_colour_noise, invert_tilt, model_lab_rows
+    from microfacet.analysis.colour_image import estimate_colour_noise, invert_tilt, model_lab_rows
 
     g = np.arange(0.0, max_tilt + 1e-9, 0.5)
     if g[-1] < max_tilt - 1e-9:
@@ -125,7 +125,7 @@ def scene_noise(size=256):
     from microfacet import colour as color
     from microfacet.analysis.mask import colour_mask
     from microfacet.forward.synth import _sensor, preset, render_scene
-    from microfacet.analysis.tilt import estimate_colour_noise
+    from microfacet.analysis.colour_image import estimate_colour_noise
 
     out = {}
     for name in ("nd", "noisy"):

@@ -22,10 +22,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1] / "microfacet"
 
 #: The one-way order of the subpackages (lower index = lower layer); a module may import its
-#: own layer and those below it. Top-level modules (``microfacet.x``) are layer 0 helpers
-#: unless listed.
-LAYERS = ["_core", "optics", "colour", "io", "focus", "analysis", "forward", "report", "cli"]
+#: own layer and those below it.
+LAYERS = ["core", "optics", "colour", "io", "focus", "analysis", "forward", "report", "batch",
+          "cli"]
 _COMPAT = {"thinfilm", "color"}  # re-export shims of the public names in shared/spec/api.md
+_ENTRY = {"__main__"}            # ``python -m microfacet``: the command line's entry point
 
 
 def module_name(path: Path) -> str:
@@ -43,6 +44,8 @@ def layer_of(name: str) -> int | None:
     top = parts[1]
     if top in LAYERS:
         return LAYERS.index(top)
+    if top in _ENTRY:
+        return len(LAYERS)
     if top in _COMPAT:
         return None
     return 0

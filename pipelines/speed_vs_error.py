@@ -529,7 +529,7 @@ def make_scene(size, seed=11):
     from microfacet import colour as color
     from microfacet.analysis.mask import colour_mask
     from microfacet.forward.synth import _sensor, preset, render_scene
-    from microfacet.analysis.tilt import estimate_colour_noise
+    from microfacet.analysis.colour_image import estimate_colour_noise
 
     p = preset("nd", seed=seed, height_px=size, width_px=size)
     sc = render_scene(p)

@@ -39,7 +39,7 @@ import numpy as np
 from microfacet.analysis.pipeline import AnalysisOptions
 from microfacet.batch.runner import run_batch
 from microfacet.core.distributions import NDFMixture
-from microfacet.analysis.mixtures import wasserstein1
+from microfacet.core.densities import wasserstein1
 from microfacet.forward.synth import TiltLobe, generate_stack, preset
 from microfacet.analysis.roi import nearest_roi_index, roi_grid
 

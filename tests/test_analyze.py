@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from microfacet.analysis.pipeline import AnalysisOptions, analyze_stack, write_results
+from microfacet.analysis import AnalysisOptions, analyze_stack, write_results
 from microfacet.cli import main
 
 FIXTURE = Path(__file__).resolve().parent.parent / "fixtures" / "stacks" / "nd-fixture"
@@ -63,7 +63,7 @@ def both_modes():
 
 
 def test_joint_mode_beats_the_seed_method_on_truth(both_modes):
-    from microfacet.analysis.mixtures import wasserstein1
+    from microfacet.core.densities import wasserstein1
 
     d_true = np.load(TRUTH / "thickness_nm.npy")
     t_true = np.load(TRUTH / "tilt_deg.npy")
@@ -113,19 +113,19 @@ def test_write_results_replaces_only_its_own_kind(both_modes, tmp_path):
     res = both_modes["seed"]
     out = tmp_path / "r"
     out.mkdir()
-    write_results(res, out, report=False)                   # empty: nothing to lose
+    write_results(res, out)                   # empty: nothing to lose
     assert (out / "summary.json").is_file()
     with pytest.raises(InputError, match="already exists"):
-        write_results(res, out, report=False)
+        write_results(res, out)
     (out / "note.txt").write_text("mine")
-    write_results(res, out, overwrite=True, report=False)   # a results folder: replaced
+    write_results(res, out, overwrite=True)   # a results folder: replaced
     assert not (out / "note.txt").exists()
     other = tmp_path / "photos"
     other.mkdir()
     (other / "cat.jpg").write_bytes(b"\xff\xd8")
     for overwrite in (False, True):
         with pytest.raises(InputError, match="never replaced") as err:
-            write_results(res, other, overwrite=overwrite, report=False)
+            write_results(res, other, overwrite=overwrite)
         assert err.value.param == "out"
     assert (other / "cat.jpg").read_bytes() == b"\xff\xd8"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["photos", "r"]

@@ -4,33 +4,29 @@ import numpy as np
 import pytest
 
 from microfacet import colour as color
-from microfacet.forward.angular import (
-    AngularMap,
-    colours_from_spectra,
-    delta_e_map,
-    fit_eq6,
-    fit_exposure,
-    load_map,
-    mean_delta_e,
-    save_map,
-    simulate_map,
-    specular_mask,
-)
+from microfacet.colour.srgb import colours_from_spectra
+from microfacet.core.angular import AngularMap
 from microfacet.core.distributions import NDFMixture, ThicknessMixture
-from microfacet.forward.halfvector import angular_colour_map
+from microfacet.forward.angular import simulate_map
+from microfacet.forward.compare import (delta_e_map, fit_eq6, fit_exposure, mean_delta_e,
+                                        specular_mask)
+from microfacet.forward.halfvector import spectra
+from microfacet.io.angular_map import load_map, save_map
 
 G3 = ThicknessMixture([(0.3, 112.0, 3.0), (0.45, 130.0, 3.0), (0.25, 149.0, 3.0)])
 F2 = NDFMixture([(0.6, 3.0), (0.4, 9.0)])
 GRID = np.arange(0.0, 86.0, 5.0)
 
 
-def test_half_vector_map_of_one_film_equals_the_halfvector_module():
+def test_half_vector_map_of_one_film_equals_the_film_at_the_half_angle():
+    """The map (film reflectance tabulated over θ_d, averaged over g(d)) equals the film
+    evaluated directly at each cell's half angle (:func:`halfvector.spectra`)."""
     m = simulate_map(model="half-vector", thickness=51.0, theta_light_deg=GRID,
                      theta_view_deg=GRID, exposure=0.7)
-    ref = angular_colour_map(51.0, theta_light_deg=GRID, theta_view_deg=GRID, exposure=0.7,
-                             spectral_step_nm=5.0)
-    assert np.max(color.delta_e_2000(m.lab.astype(float), ref.lab.astype(float))) < 1e-3
-    assert np.abs(m.srgb.astype(int) - ref.srgb.astype(int)).max() <= 1
+    wl, R = spectra(GRID[:, None], GRID[None, :], 51.0, wavelength_nm=m.wavelength_nm)
+    _, ref_lab, ref_srgb, _ = colours_from_spectra(R, wl, exposure=0.7)
+    assert np.max(color.delta_e_2000(m.lab.astype(float), ref_lab.astype(float))) < 1e-3
+    assert np.abs(m.srgb.astype(int) - ref_srgb.astype(int)).max() <= 1
 
 
 def test_delta_e_of_identical_maps_is_zero_and_means_are_zero():

@@ -8,7 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from microfacet.batch.runner import result_names, results_complete, run_batch
+from microfacet.batch.runner import run_batch
+from microfacet.batch.summary import result_names
+from microfacet.io.results import Results
 from microfacet.cli import main
 
 FAST = ["--roi-size-px", "48", "--no-report", "-q"]
@@ -38,7 +40,7 @@ def _no_partial_folders(folder):
 def test_result_names_are_unique_and_short():
     assert result_names(["x/a", "y/b"]) == ["a", "b"]
     assert result_names(["p/x/s", "p/y/s", "q/t"]) == ["x_s", "y_s", "t"]
-    with pytest.raises(ValueError, match="STACK: given more than once"):
+    with pytest.raises(ValueError, match="stacks: given more than once"):
         result_names(["x/a", "x/a"])
 
 
@@ -101,7 +103,7 @@ def test_results_made_with_other_parameters_are_not_mixed_in(drawer, tmp_path):
     # an incomplete folder (no summary.json) is reported, not overwritten silently
     shutil.rmtree(out / "a")
     (out / "a").mkdir()
-    ok, why = results_complete(out / "a")
+    ok, why = Results.complete(out / "a")
     assert not ok and "summary.json" in why
 
 
@@ -117,7 +119,7 @@ def test_batch_through_a_dask_local_cluster(drawer, tmp_path):
         rows = _rows(out)
         assert [r["status"] for r in rows] == ["done", "done", "failed"]
         for r in rows[:2]:
-            assert results_complete(r["results"])[0]
+            assert Results.complete(r["results"])[0]
         # a rerun on the cluster skips the complete stacks
         assert main(["batch", *stacks[:2], "--out", str(out), "--scheduler",
                      cluster.scheduler_address, *FAST]) == 0
@@ -181,4 +183,4 @@ def test_scheduler_local_starts_and_closes_a_local_cluster(drawer, tmp_path):
     assert main(["batch", str(drawer / "a"), "--out", str(out), "--scheduler", "local",
                  "--jobs", "1", *FAST]) == 0
     row = _rows(out)[0]
-    assert row["status"] == "done" and results_complete(row["results"])[0]
+    assert row["status"] == "done" and Results.complete(row["results"])[0]

@@ -6,18 +6,11 @@ import numpy as np
 import pytest
 
 from microfacet import colour as color
-from microfacet.forward.brdf import (
-    FilmAverage,
-    eq6_reflectance,
-    eq6_reflectance_inplane,
-    inplane_tilt_density,
-    microfacet_brdf,
-    microfacet_brdf_inplane,
-    microfacet_geometry,
-    thickness_nodes,
-)
 from microfacet.core.distributions import NDFMixture, ThicknessMixture
-from microfacet.forward.halfvector import angular_colour_map, in_plane_directions, spectra
+from microfacet.forward.brdf import (FilmAverage, microfacet_brdf, microfacet_brdf_inplane,
+                                     microfacet_geometry, thickness_nodes)
+from microfacet.forward.eq6 import eq6_reflectance, eq6_reflectance_inplane, inplane_tilt_density
+from microfacet.forward.halfvector import in_plane_directions, spectra
 from microfacet.optics import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from microfacet.optics.thinfilm import reflectance
 
@@ -126,19 +119,19 @@ def test_narrow_ndf_albedo_is_the_flat_film_reflectance(theta_v):
 
 
 def test_colour_at_every_pair_is_the_half_vector_colour():
-    """D and G are achromatic: the chromaticity of the microfacet map is the half-vector
-    map's (an independent implementation, :func:`halfvector.angular_colour_map`)."""
+    """D and G are achromatic: the chromaticity of the microfacet map is that of the film at
+    each cell's half angle (computed directly, :func:`halfvector.spectra`)."""
     grid = np.arange(0.0, 86.0, 5.0)
-    hv = angular_colour_map(51.0, theta_light_deg=grid, theta_view_deg=grid,
-                            spectral_step_nm=5.0)
     wl = np.linspace(380, 780, 81)
+    _, R = spectra(grid[:, None], grid[None, :], 51.0, wavelength_nm=wl)
+    hv_xyz = R @ color.spectral_weights(wl)
     f = microfacet_brdf_inplane(grid[:, None], grid[None, :], thickness=51.0,
                                 ndf=NDFMixture([(1.0, 20.0)]), wavelength_nm=wl)
     xyz = f @ color.spectral_weights(wl)
     Y = xyz[..., 1]
     assert np.all(Y > 0)
     xy = xyz[..., :2] / xyz.sum(-1, keepdims=True)
-    xy_hv = hv.xyz[..., :2] / hv.xyz.sum(-1, keepdims=True)
+    xy_hv = hv_xyz[..., :2] / hv_xyz.sum(-1, keepdims=True)
     np.testing.assert_allclose(xy, xy_hv, atol=1e-10)
 
 

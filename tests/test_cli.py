@@ -77,7 +77,9 @@ def test_simulate_writes_a_complete_folder_and_refuses_to_overwrite(tmp_path, ca
     lab = np.load(out / "angular_lab.npy")
     assert lab.shape == (13, 13, 3) and lab.dtype == np.float32
     meta = json.loads((out / "simulate.json").read_text())
-    assert meta["thickness_nm"] == 51.0 and meta["film"] == "TiO2_Jolivet2023_amorphous"
+    assert meta["format"] == "microfacet-simulate/2" and meta["model"] == "half-vector"
+    assert meta["thickness"] == {"thickness_nm": 51.0} and meta["exposure"] == 1.0
+    assert meta["film"] == "TiO2_Jolivet2023_amorphous"
     assert main(argv) == 2  # exists
     assert main(argv + ["--overwrite", "--exposure", "0.5"]) == 0
     lab2 = np.load(out / "angular_lab.npy")

@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from microfacet import colour as color
+from microfacet.forward.angular import simulate_map
 from microfacet.forward.halfvector import (
-    angular_colour_map,
     half_angle_deg,
     half_angle_from_vectors,
     half_vector,
@@ -54,9 +54,10 @@ def test_spectra_use_the_half_angle():
     np.testing.assert_allclose(R, ref, rtol=1e-14)
 
 
-def test_angular_colour_map_is_constant_along_the_antidiagonal_and_blue_at_51nm():
-    m = angular_colour_map(51.0, theta_light_deg=np.arange(0, 61, 10.0),
-                           theta_view_deg=np.arange(0, 61, 10.0))
+def test_half_vector_map_is_constant_along_the_antidiagonal_and_blue_at_51nm():
+    m = simulate_map(model="half-vector", thickness=51.0,
+                     theta_light_deg=np.arange(0, 61, 10.0),
+                     theta_view_deg=np.arange(0, 61, 10.0))
     assert m.lab.shape == (7, 7, 3) and m.srgb.dtype == np.uint8
     # Cells with equal theta_light + theta_view see the film at the same angle.
     np.testing.assert_allclose(m.lab[1, 3], m.lab[3, 1], atol=1e-5)
@@ -70,8 +71,9 @@ def test_angular_map_cell_equals_colour_science_on_the_tmm_spectrum():
     tmm = pytest.importorskip("tmm")
     from microfacet.optics import optical_constants
 
-    m = angular_colour_map(120.0, theta_light_deg=[10.0], theta_view_deg=[40.0])
     wl = np.arange(380.0, 781.0, 1.0)
+    m = simulate_map(model="half-vector", thickness=120.0, theta_light_deg=[10.0],
+                     theta_view_deg=[40.0], wavelength_nm=wl)
     n1 = optical_constants("TiO2_Jolivet2023_amorphous", wl)
     n2 = optical_constants("Ti_JohnsonChristy1974", wl)
     R = [np.mean([tmm.coh_tmm(p, [1, a, b], [np.inf, 120.0, np.inf], np.deg2rad(25.0), w)["R"]
@@ -90,8 +92,11 @@ def test_angular_map_cell_equals_colour_science_on_the_tmm_spectrum():
 def test_map_png_written(tmp_path):
     import cv2
 
-    m = angular_colour_map(120.0, theta_light_deg=[0, 20], theta_view_deg=[0, 20, 40])
-    m.save_png(tmp_path / "m.png", scale=2)
+    from microfacet.io.angular_map import save_png
+
+    m = simulate_map(model="half-vector", thickness=120.0, theta_light_deg=[0, 20],
+                     theta_view_deg=[0, 20, 40])
+    save_png(tmp_path / "m.png", m, scale=2)
     img = cv2.imread(str(tmp_path / "m.png"))
     assert img.shape == (4, 6, 3)
 

@@ -51,7 +51,7 @@ import numpy as np
 import pytest
 
 from microfacet import colour as color
-from microfacet.analysis.pipeline import AnalysisOptions, analyze_stack, write_results
+from microfacet.analysis import AnalysisOptions, analyze_stack, write_results
 from microfacet.cli import main
 from microfacet.core.errors import InputError
 from microfacet.io.stack import read_stack, write_stack
@@ -225,7 +225,7 @@ def clean(sd):
 
 
 def _summary(result, out):
-    write_results(result, out, report=False)
+    write_results(result, out)
     return json.loads((out / "summary.json").read_text())
 
 
@@ -461,7 +461,8 @@ def test_single_thickness_value_end_to_end(sd, tmp_path):
 
 
 def test_all_zero_tilts_give_a_finite_ndf_table():
-    from microfacet.analysis.mixtures import fit_ndf_mixture, pdf_table
+    from microfacet.analysis.ndf_fit import fit_ndf_mixture
+    from microfacet.core.densities import pdf_table
 
     fit = fit_ndf_mixture(np.zeros(500))
     max_tilt = math.degrees(math.asin(0.8)) / 2.0
@@ -480,7 +481,7 @@ def test_all_zero_tilts_give_a_finite_ndf_table():
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
 @pytest.mark.parametrize("smooth", [0.0, 1.5])
 def test_non_finite_heights_propagate_to_the_normals_without_warnings(bad, smooth):
-    from microfacet.focus.height import fill_missing
+    from microfacet.focus.fill import fill_missing
     from microfacet.focus.normals import normals_from_height, tilt_azimuth_deg
 
     rows, cols = np.mgrid[0:24, 0:30]

@@ -494,7 +494,7 @@ def test_full_disk_is_one_line_before_the_work(tmp_path, capfd, monkeypatch):
 
 
 def test_disk_full_while_writing_leaves_nothing(tmp_path, capfd, monkeypatch):
-    import microfacet.analysis.pipeline as analyze
+    import microfacet.io.results as results
 
     s = _stack(tmp_path / "s")
     calls = []
@@ -506,7 +506,7 @@ def test_disk_full_while_writing_leaves_nothing(tmp_path, capfd, monkeypatch):
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
         return real_save(path, arr, *a, **k)
 
-    monkeypatch.setattr(analyze.np, "save", save)
+    monkeypatch.setattr(results.np, "save", save)
     line = _err_line(capfd, main(["analyze", str(s), "--out", str(tmp_path / "o"),
                                   "--no-report", "--roi-size-px", "16"]))
     assert "No space left on device" in line
@@ -537,12 +537,12 @@ def test_pathological_json(tmp_path, capfd, text, pattern):
 
 
 def test_memory_error_is_one_line(tmp_path, capfd, monkeypatch):
-    import microfacet.analysis.pipeline as analyze
+    import microfacet.batch.runner as runner
 
     def boom(*a, **k):
         raise MemoryError()
 
-    monkeypatch.setattr(analyze, "analyze_stack", boom)
+    monkeypatch.setattr(runner, "analyze_stack", boom)
     s = _stack(tmp_path / "s")
     line = _err_line(capfd, main(["analyze", str(s), "--out", str(tmp_path / "o")]))
     assert "out of memory" in line
@@ -550,12 +550,12 @@ def test_memory_error_is_one_line(tmp_path, capfd, monkeypatch):
 
 
 def test_an_internal_error_is_one_line_with_exit_1_and_a_hint(tmp_path, capfd, monkeypatch):
-    import microfacet.analysis.pipeline as analyze
+    import microfacet.batch.runner as runner
 
     def bug(*a, **k):
         raise TypeError("unsupported operand")
 
-    monkeypatch.setattr(analyze, "analyze_stack", bug)
+    monkeypatch.setattr(runner, "analyze_stack", bug)
     s = _stack(tmp_path / "s")
     cap_status = main(["analyze", str(s), "--out", str(tmp_path / "o")])
     err = capfd.readouterr().err
@@ -614,7 +614,7 @@ def test_spectrum_at_one_wavelength_is_refused_and_few_are_warned(tmp_path, capf
     csv.write_text("wavelength_nm,reflectance\n" + "550,0.3\n" * 20)
     line = _err_line(capfd, main(["fit-spectrum", str(csv)]))
     assert re.search(r"1 distinct wavelength\(s\) in 20 rows", line), line
-    from microfacet.optics.spectrumfit import read_spectrum_csv
+    from microfacet.io.spectrum import read_spectrum_csv
 
     csv.write_text("wavelength_nm,reflectance\n450,0.3\n550,0.2\n650,0.4\n650,0.41\n")
     assert read_spectrum_csv(csv)[0].size == 4
@@ -622,7 +622,7 @@ def test_spectrum_at_one_wavelength_is_refused_and_few_are_warned(tmp_path, capf
 
 
 def test_percent_reflectances_below_1_5_are_warned(tmp_path, caplog):
-    from microfacet.optics.spectrumfit import read_spectrum_csv
+    from microfacet.io.spectrum import read_spectrum_csv
 
     csv = tmp_path / "dark.csv"
     csv.write_text("wavelength_nm,reflectance\n" + "".join(   # 0.4-1.2, in percent
@@ -694,7 +694,7 @@ def test_utf8_bom_in_stack_json_and_csv_is_accepted(tmp_path):
     s = _stack(tmp_path / "s")
     (s / "stack.json").write_bytes(b"\xef\xbb\xbf" + (s / "stack.json").read_bytes())
     assert read_stack(s).n_slices == N
-    from microfacet.optics.spectrumfit import read_spectrum_csv
+    from microfacet.io.spectrum import read_spectrum_csv
 
     csv = tmp_path / "excel.csv"
     csv.write_bytes(b"\xef\xbb\xbfwavelength_nm,reflectance\r\n" + b"".join(

@@ -7,16 +7,10 @@ import numpy as np
 import pytest
 
 from microfacet.core.distributions import NDFMixture, ThicknessMixture
-from microfacet.analysis.mixtures import (
-    MixtureFit,
-    fit_ndf_mixture,
-    fit_thickness_mixture,
-    histogram_density,
-    ndf_D_from_tilt_histogram,
-    pdf_table,
-    wasserstein1,
-    wasserstein1_pdf,
-)
+from microfacet.analysis.mixtures import MixtureFit, fit_thickness_mixture
+from microfacet.analysis.ndf_fit import fit_ndf_mixture
+from microfacet.core.densities import (histogram_density, ndf_D_from_tilt_histogram, pdf_table,
+                                       wasserstein1, wasserstein1_pdf)
 
 
 def _thickness_samples(rng, comps, n):

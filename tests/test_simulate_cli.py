@@ -5,7 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from microfacet.forward.angular import load_map, save_map, simulate_map
+from microfacet.forward.angular import simulate_map
+from microfacet.io.angular_map import load_map, save_map
 from microfacet.cli.main import build_parser, main
 from microfacet.core.distributions import NDFMixture, ThicknessMixture
 

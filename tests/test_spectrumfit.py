@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from microfacet.core.errors import InputError
-from microfacet.optics.spectrumfit import fit_thickness, read_spectrum_csv
+from microfacet.io.spectrum import read_spectrum_csv
+from microfacet.optics.spectrumfit import fit_thickness
 from microfacet.optics.thinfilm import reflectance
 
 FILM, SUB = "TiO2_Jolivet2023_amorphous", "Ti_JohnsonChristy1974"

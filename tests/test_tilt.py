@@ -5,7 +5,8 @@ import pytest
 
 from microfacet import colour as color
 from microfacet.colour.table import build_colour_table
-from microfacet.analysis.tilt import estimate_colour_noise, invert_tilt, model_lab_rows
+from microfacet.analysis.colour_image import estimate_colour_noise, quantization_noise_de
+from microfacet.analysis.tilt import invert_tilt, model_lab_rows
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +59,7 @@ def test_noise_estimate_from_neighbours():
 def test_quantization_noise_floor_scales_with_the_lsb():
     """ΔE is linear for tiny colour changes, so the 8- and 16-bit floors differ by the ratio
     of their LSBs (65535/255 = 257); a masked pixel does not count."""
-    from microfacet.analysis.tilt import quantization_noise_de
+    from microfacet.analysis.colour_image import estimate_colour_noise, quantization_noise_de
 
     rng = np.random.default_rng(3)
     img = rng.uniform(0.1, 0.9, (64, 64, 3)).astype(np.float32)

@@ -23,13 +23,25 @@ what each source is good at:
 
 from __future__ import annotations
 
+import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from ..colour.colorimetry import xyz_to_lab
 from ..colour.difference import delta_e_2000
+from ..core.lazy import load
+from .tilt import PixelEstimates, invert_tilt, model_lab_rows
 
-__all__ = ["FacetFit", "facet_thickness", "fit_facet_planes", "segment_facets"]
+segmentation = load("skimage.segmentation")
+ndimage = load("scipy.ndimage")
+optimize = load("scipy.optimize")
+
+__all__ = ["FacetFit", "facet_edge_distance", "facet_thickness", "fit_facet_planes",
+           "joint_tilts", "refine_exposure_on_facets", "segment_facets", "thickness_blocks"]
+
+log = logging.getLogger(__name__)
 
 
 def segment_facets(lab, *, facet_px, compactness=2.0):
@@ -49,13 +61,11 @@ def segment_facets(lab, *, facet_px, compactness=2.0):
     ndarray of int32, shape (H, W)
         Segment labels 0..S-1.
     """
-    from skimage.segmentation import slic
-
     lab = np.asarray(lab, dtype=np.float64)
     img = np.where(np.isfinite(lab), lab, np.array([50.0, 0.0, 0.0]))
     h, w = img.shape[:2]
     n_seg = max(1, int(round(h * w / (np.pi * (max(facet_px, 2.0) / 2) ** 2))))
-    labels = slic(img, n_segments=n_seg, compactness=compactness, convert2lab=False,
+    labels = segmentation.slic(img, n_segments=n_seg, compactness=compactness, convert2lab=False,
                   channel_axis=-1, start_label=0, enforce_connectivity=True, sigma=0.5)
     _, inv = np.unique(labels, return_inverse=True)
     return inv.reshape(h, w).astype(np.int32)
@@ -197,3 +207,123 @@ def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table
         th_out[ii] = grid[r, k] + o * step_nm
         de_out[ii] = de[r, k]
     return th_out, de_out
+
+
+def refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table, exposure, *,
+                               interior, seed=0, n_facets=2000):
+    """Exposure of least median facet ΔE00, each facet's thickness re-solved per candidate.
+
+    Facets are homogeneous (one tilt, one thickness), unlike ROIs that span several
+    thickness regions, so they pin the exposure down better than the ROI fit did.
+    """
+    S = int(facets.max()) + 1
+    rng = np.random.default_rng(seed)
+    cnt = np.bincount(facets[usable & interior], minlength=S)
+    cand = np.flatnonzero(cnt >= 4)
+    if cand.size < 10:
+        return exposure
+    pick = np.zeros(S, bool)
+    pick[rng.choice(cand, min(n_facets, cand.size), replace=False)] = True
+    sel = usable & pick[facets]
+
+    def objective(log_e):
+        _, de = facet_thickness(facets, lab, sel, tilt_f, thick_roi_px, table,
+                                exposure=math.exp(log_e), interior=interior)
+        return float(np.nanmedian(de))
+
+    lo, hi = math.log(exposure / 1.5), math.log(exposure * 1.5)
+    opt = optimize.minimize_scalar(objective, bounds=(lo, hi), method="bounded",
+                          options={"xatol": 0.005})
+    return float(math.exp(opt.x)) if opt.fun <= objective(math.log(exposure)) else exposure
+
+
+def facet_edge_distance(labels) -> np.ndarray:
+    """Distance in pixels of every pixel from the nearest facet boundary (0 on it)."""
+    edge = np.zeros(labels.shape, bool)
+    edge[:, 1:] |= labels[:, 1:] != labels[:, :-1]
+    edge[1:, :] |= labels[1:, :] != labels[:-1, :]
+    return ndimage.distance_transform_edt(~edge)
+
+
+def thickness_blocks(shape, *, pixel_size_um, block_um=10.0) -> np.ndarray:
+    """Block id per pixel of square blocks of ``block_um`` (at least 4 px).
+
+    Neighbouring facets share a smooth thickness field: they are not independent samples for
+    the mixture's model choice. Blocks of ~10 µm are (docs/accuracy.md).
+    """
+    h, w = shape
+    block = max(4, int(round(block_um / pixel_size_um)))
+    by, bx = np.mgrid[0:h, 0:w]
+    return (by // block) * ((w + block - 1) // block) + bx // block
+
+
+def joint_tilts(colour, surface, roi, table, *, theta_grid_deg, max_tilt_deg, exposure,
+                estimate_exposure, facet_size_um, pixel_size_um, from_focus=True, seed=0,
+                timer=None):
+    """The joint mode's per-pixel stage: facets, their planes, their thickness, and the tilt
+    per pixel as the MAP with the facet-plane prior (see the module notes).
+
+    Parameters
+    ----------
+    colour : ColourImage
+    surface : Surface
+    roi : RoiFit
+    table : ColourTable
+    theta_grid_deg : ndarray
+        From :func:`~microfacet.analysis.tilt.tilt_grid`.
+    max_tilt_deg : float
+    exposure : float
+        From the ROI stage.
+    estimate_exposure : bool
+        Refine the exposure on facets (:func:`refine_exposure_on_facets`).
+    facet_size_um, pixel_size_um : float
+    from_focus : bool
+        The height comes from focus (weights from its reliability) rather than an export
+        (trusted where finite).
+    timer : StageTimer, optional
+        Records ``segmentation`` and ``facet_fits``.
+
+    Returns
+    -------
+    estimates : PixelEstimates
+    facets : ndarray of int32 (H, W)
+    exposure : float
+    """
+    lab = colour.lab
+    shape = lab.shape[:2]
+    foc = surface.focus
+    thick_roi_px = roi.thickness_nm[roi.index_map(shape)]
+    usable = ~colour.mask.mask & np.isfinite(thick_roi_px)
+    facets = segment_facets(lab, facet_px=facet_size_um / pixel_size_um)
+    if timer is not None:
+        timer.lap("segmentation")
+    if from_focus:
+        rel = np.clip(np.nan_to_num(foc.reliability_db, nan=0.0) / 20.0, 0.0, 1.0) ** 2
+    else:  # a microscope export's height is trusted where it is finite
+        rel = np.isfinite(foc.height_fit_um).astype(np.float64)
+    dist = facet_edge_distance(facets)
+    weight = rel * np.clip(dist / 2.0, 0.0, 1.0) if not surface.no_focus else np.zeros(shape)
+    ff = fit_facet_planes(facets, foc.height_fit_um, weight, pixel_size_um=pixel_size_um,
+                          fallback_tilt_deg=surface.tilt_deg)
+    tilt_f = np.clip(ff.tilt_deg, 0, max_tilt_deg)
+    if estimate_exposure:
+        exposure = refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table,
+                                             exposure, interior=dist >= 1.5, seed=seed)
+        log.info("exposure refined on facets: %.4f", exposure)
+    d_f, _ = facet_thickness(facets, lab, usable, tilt_f, thick_roi_px, table,
+                             exposure=exposure, interior=dist >= 1.5)
+    if timer is not None:
+        timer.lap("facet_fits")
+    yy, xx = np.nonzero(usable)
+    fid = facets[yy, xx]
+    d_rows = np.where(np.isfinite(d_f), d_f, table.thickness_nm[0])
+    rows_lab = model_lab_rows(table, d_rows, theta_grid_deg, exposure=exposure)
+    prior = np.clip(ff.tilt_deg[fid], 0, max_tilt_deg)
+    inv = invert_tilt(lab[yy, xx], rows_lab, fid, theta_grid_deg, table=table,
+                      thickness_px=d_rows[fid], exposure=exposure, noise_de=colour.noise_de,
+                      prior_deg=prior, prior_sigma_deg=ff.tilt_sigma_deg[fid])
+    out = PixelEstimates.empty(shape)
+    out.thickness_nm[yy, xx] = d_rows[fid]
+    out.fill(yy, xx, inv)
+    out.thickness_group = thickness_blocks(shape, pixel_size_um=pixel_size_um)
+    return out, facets, float(exposure)

@@ -12,6 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.lazy import load
+
+cv2 = load("cv2")
+
 __all__ = ["ColourMask", "colour_mask"]
 
 
@@ -104,8 +108,6 @@ def colour_mask(image, *, saturation_min=15.0, value_min=20.0, clip_level=None,
     dark = vmax * 255.0 < value_min
     clipped = vmax >= clip_level
     if shadow_ratio > 0:
-        import cv2
-
         v8 = np.clip(np.round(vmax * 255.0), 0, 255).astype(np.uint8)
         local = cv2.medianBlur(v8, 9).astype(np.float32) / 255.0
         shadow = (vmax < shadow_ratio * local) & ~invalid

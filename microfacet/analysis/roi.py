@@ -34,13 +34,18 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
 from ..colour.colorimetry import xyz_to_lab
 from ..colour.difference import delta_e_2000
+from ..core.lazy import load
 
-__all__ = ["RoiFit", "fit_roi_thickness", "nearest_roi_index", "roi_grid"]
+ndimage = load("scipy.ndimage")
+optimize = load("scipy.optimize")
+
+__all__ = ["RoiFit", "fit_roi_thickness", "nearest_roi_index", "roi_grid", "thickness_per_roi"]
 
 log = logging.getLogger(__name__)
 
@@ -141,6 +146,8 @@ class RoiFit:
         The global thickness grid of the scan.
     curves : ndarray, shape (n_roi, n_grid)
         Mean ΔE00 of the pixel sample of each ROI along the grid.
+    rows, cols : list of int
+        ROI origins along each axis (the ROIs are their product, row-major).
     """
 
     row0: np.ndarray
@@ -157,6 +164,14 @@ class RoiFit:
     exposure_estimated: bool
     grid_nm: np.ndarray
     curves: np.ndarray
+    rows: list = field(default_factory=list)
+    cols: list = field(default_factory=list)
+
+    def index_map(self, shape) -> np.ndarray:
+        """For every pixel of an image of ``shape``, the index of the ROI whose centre is
+        nearest (int, H×W)."""
+        ri, ci = nearest_roi_index(shape, self.rows, self.cols, (self.height_px, self.width_px))
+        return ri[:, None] * len(self.cols) + ci[None, :]
 
 
 def _model_lab(xyz, exposure, white):
@@ -178,8 +193,6 @@ def _band_curve(xyz_s, lab_s, white, grid, half_width_nm, exposure=None):
     CIELAB's cube-root regime an exposure e scales L*, a*, b* together by e^(1/3), so this
     compares hue and chroma only, whatever the exposure.
     """
-    from scipy.ndimage import minimum_filter1d
-
     if exposure is None:
         model = _model_lab(xyz_s, 1.0, white)
         model = model * (lab_s[:, None, 0:1] / np.maximum(model[..., 0:1], 1e-3))
@@ -188,7 +201,7 @@ def _band_curve(xyz_s, lab_s, white, grid, half_width_nm, exposure=None):
     de = delta_e_2000(model, lab_s[:, None, :])
     step = grid[1] - grid[0] if grid.size > 1 else 1.0
     k = max(1, int(round(half_width_nm / step)))
-    return minimum_filter1d(de, size=2 * k + 1, axis=1, mode="nearest").mean(axis=0)
+    return ndimage.minimum_filter1d(de, size=2 * k + 1, axis=1, mode="nearest").mean(axis=0)
 
 
 def _local_minima(curve):
@@ -280,8 +293,8 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
     band = None
     if consensus_half_width_nm > 0 and valid and grid.size > 2:
         # The interference order, from hue and chroma alone (before the exposure is known).
-        score = np.mean([_band_curve(x[:128], l[:128], white, grid, consensus_half_width_nm)
-                         for x, l, _, _ in valid], axis=0)
+        score = np.mean([_band_curve(x[:128], lab_s[:128], white, grid, consensus_half_width_nm)
+                         for x, lab_s, _, _ in valid], axis=0)
         centre = float(grid[int(np.argmin(score))])
         band = (centre - consensus_half_width_nm, centre + consensus_half_width_nm)
         log.info("interference-order consensus (exposure-invariant): %.1f-%.1f nm", *band)
@@ -334,13 +347,31 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
     r0s = np.repeat(np.asarray(rows), len(cols))
     c0s = np.tile(np.asarray(cols), len(rows))
     return RoiFit(r0s, c0s, rh, rw, out["d"], out["de"], out["d2"], out["de2"],
-                  out["de2"] - out["de"], npx, float(exposure), estimated, grid, curves)
+                  out["de2"] - out["de"], npx, float(exposure), estimated, grid, curves,
+                  list(rows), list(cols))
+
+
+def thickness_per_roi(colour, tilt_deg, table, *, size_px=255, stride_px=None, exposure=None,
+                      seed=0) -> RoiFit:
+    """The ROI stage: a grid of ROIs over the image and :func:`fit_roi_thickness` on it.
+
+    Parameters
+    ----------
+    colour : ColourImage
+        Lab and mask of the image (:func:`~microfacet.analysis.colour_image.measure_colour`).
+    tilt_deg : ndarray (H, W)
+        Tilt per pixel from the height map.
+    table : ColourTable
+    size_px, stride_px, exposure, seed
+        See :func:`roi_grid` and :func:`fit_roi_thickness`.
+    """
+    rois = roi_grid(colour.lab.shape[:2], size_px=size_px, stride_px=stride_px)
+    return fit_roi_thickness(colour.lab, tilt_deg, colour.mask.mask, table, rois=rois,
+                             exposure=exposure, seed=seed)
 
 
 def _estimate_exposure(samples, white, grid, band):
     """Exposure minimising the ROIs' mean best median ΔE (within the order band, if any)."""
-    from scipy.optimize import minimize_scalar
-
     sub = [(xyz[:128], lab_s[:128]) for xyz, lab_s, _, _ in samples]
     inside = (np.ones(grid.size, bool) if band is None
               else (grid >= band[0]) & (grid <= band[1]))
@@ -350,8 +381,8 @@ def _estimate_exposure(samples, white, grid, band):
         # partly shadowed pixels), averaged over ROIs.
         e = math.exp(log_e)
         vals = []
-        for x, l in sub:
-            de = delta_e_2000(_model_lab(x[:, inside], e, white), l[:, None, :])
+        for x, lab_s in sub:
+            de = delta_e_2000(_model_lab(x[:, inside], e, white), lab_s[:, None, :])
             vals.append(np.median(de.min(axis=1)))
         return float(np.mean(vals))
 
@@ -359,7 +390,7 @@ def _estimate_exposure(samples, white, grid, band):
     vals = np.array([objective(g) for g in log_grid])
     i = int(np.argmin(vals))
     lo, hi = log_grid[max(i - 1, 0)], log_grid[min(i + 1, log_grid.size - 1)]
-    opt = minimize_scalar(objective, bounds=(lo, hi), method="bounded",
+    opt = optimize.minimize_scalar(objective, bounds=(lo, hi), method="bounded",
                           options={"xatol": 0.003})
     best = opt.x if opt.fun <= vals[i] else log_grid[i]
     return float(math.exp(best))

@@ -22,14 +22,16 @@ information ``J²/σ_n² / (J²/σ_n² + 1/σ_p²)`` says which information domi
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from ..colour.colorimetry import xyz_to_lab
 from ..colour.difference import delta_e_2000
-from ..colour.srgb import srgb_to_lab
 
-__all__ = ["TiltInversion", "estimate_colour_noise", "invert_tilt", "model_lab_rows"]
+__all__ = ["PixelEstimates", "TiltInversion", "invert_tilt", "model_lab_rows", "seed_tilts",
+           "tilt_grid"]
 
 
 @dataclass
@@ -53,61 +55,87 @@ class TiltInversion:
     sensitivity_de_per_deg: np.ndarray
 
 
+@dataclass
+class PixelEstimates:
+    """Per-pixel thickness and tilt (maps H×W, float32, NaN where not estimated).
+
+    Attributes
+    ----------
+    thickness_nm, tilt_deg, tilt_sigma_deg, delta_e, colour_weight : ndarray
+        Thickness; tilt, its 1-σ uncertainty; the ΔE00 at the solution; the share of the
+        tilt information that came from colour.
+    thickness_group : ndarray of int (H, W)
+        Which pixels share one independent thickness sample (ROIs in the seed mode, blocks of
+        ~10 µm in the joint mode), for the mixture's model choice.
+    """
+
+    thickness_nm: np.ndarray
+    tilt_deg: np.ndarray
+    tilt_sigma_deg: np.ndarray
+    delta_e: np.ndarray
+    colour_weight: np.ndarray
+    thickness_group: np.ndarray
+
+    @classmethod
+    def empty(cls, shape) -> "PixelEstimates":
+        nan = [np.full(shape, np.nan, np.float32) for _ in range(5)]
+        return cls(*nan, np.zeros(shape, np.int64))
+
+    def fill(self, yy, xx, inversion: "TiltInversion") -> None:
+        """Store a :class:`TiltInversion` of the pixels ``(yy, xx)``."""
+        self.tilt_deg[yy, xx] = inversion.tilt_deg
+        self.tilt_sigma_deg[yy, xx] = inversion.tilt_sigma_deg
+        self.delta_e[yy, xx] = inversion.delta_e
+        self.colour_weight[yy, xx] = inversion.colour_weight
+
+
+def tilt_grid(max_tilt_deg, step_deg) -> np.ndarray:
+    """The uniform tilt grid :func:`invert_tilt` needs (its parabola refinement and
+    sensitivities use one step): equal steps of at most ``step_deg`` from 0 to
+    ``max_tilt_deg``, at least 3 nodes.
+
+    >>> g = tilt_grid(26.57, 0.5)
+    >>> g.size, round(float(g[1]), 4), float(g[-1])
+    (55, 0.492, 26.57)
+    """
+    n_steps = max(2, math.ceil(max_tilt_deg / step_deg - 1e-9))
+    return np.linspace(0.0, max_tilt_deg, n_steps + 1)
+
+
+def seed_tilts(colour, roi, table, *, theta_grid_deg, exposure) -> PixelEstimates:
+    """The seed's step 3 (§3.3.3): each ROI's thickness for its pixels, and per pixel the
+    tilt of least ΔE00 at that thickness (:func:`invert_tilt`, no prior).
+
+    Parameters
+    ----------
+    colour : ColourImage
+    roi : RoiFit
+    table : ColourTable
+    theta_grid_deg : ndarray
+        From :func:`tilt_grid`.
+    exposure : float
+    """
+    shape = colour.lab.shape[:2]
+    roi_index = roi.index_map(shape)
+    out = PixelEstimates.empty(shape)
+    out.thickness_group = roi_index
+    usable = ~colour.mask.mask & np.isfinite(roi.thickness_nm[roi_index])
+    yy, xx = np.nonzero(usable)
+    rows_d = np.where(np.isfinite(roi.thickness_nm), roi.thickness_nm, table.thickness_nm[0])
+    rows_lab = model_lab_rows(table, rows_d, theta_grid_deg, exposure=exposure)
+    rix = roi_index[yy, xx]
+    inv = invert_tilt(colour.lab[yy, xx], rows_lab, rix, theta_grid_deg, table=table,
+                      thickness_px=rows_d[rix], exposure=exposure, noise_de=colour.noise_de)
+    out.thickness_nm[yy, xx] = rows_d[rix]
+    out.fill(yy, xx, inv)
+    return out
+
+
 def model_lab_rows(table, thickness_nm, theta_grid_deg, *, exposure):
     """Model Lab for each thickness (rows) over a θ grid: shape (R, K, 3), float32."""
     d = np.asarray(thickness_nm, dtype=np.float64)
     xyz = table.xyz_at(np.asarray(theta_grid_deg)[None, :], d[:, None]) * exposure
     return xyz_to_lab(xyz.astype(np.float32), white=table.white_xyz.astype(np.float32))
-
-
-def estimate_colour_noise(lab, mask):
-    """Per-component colour noise σ_n in ΔE00 units from neighbouring pixels.
-
-    The ΔE00 between horizontally adjacent unmasked pixels is, for noise alone, the norm of
-    a 3-D Gaussian of per-component SD σ√2, whose median is 2.18 σ. Texture inflates the
-    estimate, so it is an upper bound (conservative uncertainties).
-    """
-    lab = np.asarray(lab, dtype=np.float32)
-    m = ~np.asarray(mask, bool)
-    ok = m[:, 1:] & m[:, :-1]
-    if ok.sum() < 10:
-        return float("nan")
-    de = delta_e_2000(lab[:, 1:][ok], lab[:, :-1][ok])
-    return float(np.median(de) / 2.18)
-
-
-def quantization_noise_de(encoded_srgb, mask, *, bit_depth, illuminant="D65", n_sample=4096,
-                          seed=0):
-    """Colour noise (ΔE00 per component, as :func:`estimate_colour_noise`) that the image's
-    quantization alone implies: the floor of the colour noise.
-
-    An image without visible noise (a synthetic composite, a denoised export) has a
-    neighbour-difference noise of 0, which would make colour look infinitely precise; its
-    code values are still rounded to ±½ LSB. Measured on up to ``n_sample`` unmasked pixels
-    by re-rounding them by uniform ±½ LSB: about 0.08 ΔE00 for 8-bit images, 0.0003 for
-    16-bit.
-
-    Parameters
-    ----------
-    encoded_srgb : ndarray, shape (H, W, 3)
-        The encoded image in [0, 1].
-    mask : ndarray of bool, shape (H, W)
-        True where a pixel is not used.
-    bit_depth : {8, 16}
-    """
-    img = np.asarray(encoded_srgb, dtype=np.float32)[~np.asarray(mask, bool)]
-    if img.shape[0] == 0:
-        return float("nan")
-    rng = np.random.default_rng(seed)
-    if img.shape[0] > n_sample:
-        img = img[rng.choice(img.shape[0], n_sample, replace=False)]
-    lsb = np.float32(1.0 / (2 ** bit_depth - 1))
-    moved = np.clip(img + rng.uniform(-0.5, 0.5, img.shape).astype(np.float32) * lsb, 0, 1)
-    de = delta_e_2000(srgb_to_lab(img, illuminant=illuminant),
-                            srgb_to_lab(moved, illuminant=illuminant))
-    # |difference| of one pixel from its re-rounded self: the norm of a 3-D error of
-    # per-component SD sigma has median ~1.54 sigma
-    return float(np.median(de) / 1.54)
 
 
 def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness_px,

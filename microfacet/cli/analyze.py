@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import sys
+import time
+from pathlib import Path
 
+from .. import batch
 from .options import (
     HelpFormatter,
     add_analysis_options,
@@ -11,6 +15,7 @@ from .options import (
     example_epilog,
     limits_from_args,
 )
+from .progress import Progress
 
 
 def register(sub):
@@ -41,44 +46,25 @@ def register(sub):
 
 
 def run(args) -> int:
-    import sys
-    import time
-    from pathlib import Path
-
-    from ..analysis.pipeline import (
-        analyze_stack,
-        check_analysis_memory,
-        results_size_bytes,
-        write_results,
-    )
-    from ..io.outdir import OutputFolder, check_output
-    from .progress import Progress
-    from ..io.stack import read_stack
-
     out = Path(args.out)
-    check_output(out, kind="results", inputs=[args.stack], overwrite=args.overwrite)
     opts = analysis_options(args)
     t0 = time.perf_counter()
-    stack = read_stack(args.stack, limits=limits_from_args(args))  # validates before any work
-    check_analysis_memory(stack)
     stages = ["height from focus", "colour", "colour table", "thickness per ROI",
-              "tilt per pixel", "distributions"]
-    with OutputFolder(out, kind="results", inputs=[stack.path], overwrite=args.overwrite,
-                      expected_bytes=results_size_bytes(stack.shape,
-                                                        report=not args.no_report)), \
-            Progress("analyze", total=len(stages) + 1, unit="stages", quiet=args.quiet) as bar:
+              "tilt per pixel", "distributions", "write", "report"]
+    with Progress("analyze", total=len(stages), unit="stages", quiet=args.quiet) as bar:
         def progress(name):
             bar.update(stages.index(name) if name in stages else 0)
 
-        result = analyze_stack(stack, opts, progress=progress)
+        result = batch.analyse_to_folder(args.stack, out, options=opts,
+                                         overwrite=args.overwrite, report=not args.no_report,
+                                         limits=limits_from_args(args), progress=progress)
         bar.update(len(stages))
-        write_results(result, out, overwrite=args.overwrite, report=not args.no_report)
-        bar.update(len(stages) + 1)
     if not args.quiet:
         fit = result.thickness_fit
         comps = ", ".join(f"{m:.1f} nm ({100 * w:.0f}%)" for w, m, _ in fit.mixture.components) \
             if fit else "none"
-        lobes = ", ".join(f"{s:.1f}° ({100 * w:.0f}%)" for w, s in result.ndf_fit.mixture.components) \
+        lobes = ", ".join(f"{s:.1f}° ({100 * w:.0f}%)"
+                          for w, s in result.ndf_fit.mixture.components) \
             if result.ndf_fit else "none"
         de = result.delta_e_stats
         print(f"wrote {out} in {time.perf_counter() - t0:.1f} s\n"

@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
 
+from ..batch.runner import run_batch
+from ..core.errors import InputError
 from .options import HelpFormatter, add_analysis_options, analysis_options, example_epilog
+from .progress import Progress
 
 #: Exit status when the batch ran but at least one stack failed.
 EXIT_SOME_FAILED = 1
@@ -52,10 +57,6 @@ def register(sub):
 
 
 def _read_list(path: str) -> list[str]:
-    from pathlib import Path
-
-    from ..core.errors import InputError
-
     try:
         text = Path(path).read_text()
     except OSError as exc:
@@ -71,11 +72,6 @@ def _read_list(path: str) -> list[str]:
 
 
 def run(args) -> int:
-    import sys
-
-    from ..batch.runner import run_batch
-    from .progress import Progress
-
     stacks = list(args.stacks)
     if args.stacks_from:
         stacks += _read_list(args.stacks_from)

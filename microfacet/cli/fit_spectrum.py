@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
 
+from ..io.spectrum import read_spectrum_csv
+from ..optics.spectrumfit import fit_thickness
 from .options import HelpFormatter, add_optics_options, example_epilog, optics_kwargs, pair_type
 
 
@@ -36,10 +39,6 @@ def register(sub):
 
 
 def run(args) -> int:
-    import json
-
-    from ..optics.spectrumfit import fit_thickness, read_spectrum_csv
-
     opt = optics_kwargs(args)
     wl, R = read_spectrum_csv(args.spectrum)
     try:

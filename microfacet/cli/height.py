@@ -9,8 +9,32 @@ temporary name beside OUT and renamed when complete.
 from __future__ import annotations
 
 import argparse
+import json
+import logging
+import time
+from pathlib import Path
 
+import numpy as np
+
+from .. import __version__
+from ..core.errors import InputError
+from ..core.lazy import load
+from ..focus.height import (
+    DEFAULT_FIT_RADIUS,
+    DEFAULT_INTERPOLATION,
+    INTERPOLATIONS,
+    check_focus_memory,
+    height_from_focus,
+)
+from ..focus.measures import DEFAULT_OPERATOR, DEFAULT_WINDOW, DEFAULT_WINDOW_PX, OPERATORS
+from ..focus.normals import normals_from_height, tilt_azimuth_deg
+from ..io.images import write_image
+from ..io.outdir import OutputFolder, check_output
+from ..io.stack import read_stack, stack_from_images
 from .options import HelpFormatter, add_limit_options, limits_from_args
+from .progress import Progress
+
+cv2 = load("cv2")
 
 EPILOG = """examples:
   microfacet height my-stack --out my-stack-height
@@ -28,15 +52,6 @@ def register(subparsers) -> argparse.ArgumentParser:
             "(sub-slice least-squares peak fit), a Pertuz-style reliability map in dB, unit "
             "normals from the height and the pixel size, and the all-in-focus composite."),
         epilog=EPILOG, formatter_class=HelpFormatter)
-    from ..focus.height import (
-        DEFAULT_FIT_RADIUS,
-        DEFAULT_INTERPOLATION,
-        DEFAULT_OPERATOR,
-        DEFAULT_WINDOW,
-        DEFAULT_WINDOW_PX,
-        INTERPOLATIONS,
-        OPERATORS,
-    )
 
     p.add_argument("stack", metavar="STACK", help="stack folder with stack.json (or its stack.json)")
     p.add_argument("--out", required=True, metavar="OUT",
@@ -72,11 +87,6 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def _load_stack(args):
-    from pathlib import Path
-
-    from ..core.errors import InputError
-    from ..io.stack import read_stack, stack_from_images
-
     path = Path(args.stack)
     folder = path.parent if path.name == "stack.json" else path
     if folder.is_dir() and not (folder / "stack.json").exists() and (
@@ -94,9 +104,6 @@ def _load_stack(args):
 
 def _height_png(h):
     """Viridis preview of a height map, NaN black; returns BGR uint8."""
-    import cv2
-    import numpy as np
-
     ok = np.isfinite(h)
     out = np.zeros(h.shape + (3,), np.uint8)
     if ok.any():
@@ -109,22 +116,6 @@ def _height_png(h):
 
 
 def run(args) -> int:
-    import json
-    import logging
-    import time
-    from pathlib import Path
-
-    import numpy as np
-
-    from .. import __version__
-    from ..core.errors import InputError
-    from ..focus.height import height_from_focus
-    from ..io.images import write_image
-    from ..focus.normals import normals_from_height, tilt_azimuth_deg
-    from ..focus.height import check_focus_memory
-    from ..io.outdir import OutputFolder, check_output
-    from .progress import Progress
-
     log = logging.getLogger("microfacet.height")
     t0 = time.perf_counter()
     out = Path(args.out)

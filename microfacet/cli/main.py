@@ -17,9 +17,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import signal
 import sys
 
 from .. import __version__
+from ..core.errors import InputError, one_line
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = (
@@ -39,8 +41,6 @@ class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors: ``microfacet analyze: error: ... (see --help)``."""
 
     def error(self, message):
-        from ..core.errors import one_line
-
         self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {one_line(message)} "
                                    f"(see {self.prog} --help)\n")
 
@@ -93,8 +93,6 @@ def _on_sigterm(signum, frame):
 
 def _user_message(exc: BaseException) -> str | None:
     """One line for an error caused by the input or the environment, None for a bug."""
-    from ..core.errors import InputError
-
     if isinstance(exc, InputError):
         return exc.cli_message()
     if isinstance(exc, OSError):
@@ -123,10 +121,6 @@ def main(argv: list[str] | None = None) -> int:
     hint to rerun with ``-v`` for the traceback); 130 after Ctrl-C and 143 after SIGTERM,
     leaving nothing half-written.
     """
-    import signal
-
-    from ..core.errors import one_line
-
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

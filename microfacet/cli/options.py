@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import textwrap
+
+from .. import analysis, optics
+from ..core.errors import InputError
+from ..io import limits
+from ..io.limits import DEFAULT_MAX_MEGAPIXELS, DEFAULT_MAX_STACK_MEGAPIXELS
+from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
 
 
 def add_optics_options(p: argparse.ArgumentParser) -> None:
     """``--film``, ``--substrate``, ``--illuminant``, ``--observer``."""
-    from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
-
     g = p.add_argument_group("optics")
     g.add_argument("--film", default=None, metavar="NAME",
                    help=f"optical-constant set of the oxide film (default {DEFAULT_FILM})")
@@ -21,23 +26,21 @@ def add_optics_options(p: argparse.ArgumentParser) -> None:
 
 
 def optics_kwargs(args) -> dict:
-    from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, load_set
-
+    """``film``, ``substrate``, ``illuminant``, ``observer`` from the options (the defaults for
+    the sets not given); an unknown set is an InputError naming the option."""
     film = args.film or DEFAULT_FILM
     substrate = args.substrate or DEFAULT_SUBSTRATE
-    for opt, name in (("--film", film), ("--substrate", substrate)):
+    for param, name in (("film", film), ("substrate", substrate)):
         try:
-            load_set(name)
+            optics.load_set(name)
         except ValueError as exc:
-            raise ValueError(f"{opt}: {exc}") from None
+            raise InputError(str(exc), param=param) from None
     return dict(film=film, substrate=substrate, illuminant=args.illuminant,
                 observer=args.observer)
 
 
 def add_limit_options(p: argparse.ArgumentParser) -> None:
     """``--max-megapixels``, ``--max-stack-megapixels`` (see :mod:`microfacet.io.limits`)."""
-    from ..io.limits import DEFAULT_MAX_MEGAPIXELS, DEFAULT_MAX_STACK_MEGAPIXELS
-
     g = p.add_argument_group("limits (checked from the image headers before any work)")
     g.add_argument("--max-megapixels", type=float, default=DEFAULT_MAX_MEGAPIXELS, metavar="MP",
                    help=f"largest image, megapixels (default {DEFAULT_MAX_MEGAPIXELS:g})")
@@ -49,9 +52,7 @@ def add_limit_options(p: argparse.ArgumentParser) -> None:
 def limits_from_args(args):
     """:class:`~microfacet.io.limits.Limits` from ``--max-megapixels`` and
     ``--max-stack-megapixels``."""
-    from ..io.limits import Limits
-
-    return Limits(max_megapixels=args.max_megapixels,
+    return limits.Limits(max_megapixels=args.max_megapixels,
                   max_stack_megapixels=args.max_stack_megapixels)
 
 
@@ -99,29 +100,15 @@ def add_analysis_options(p: argparse.ArgumentParser) -> None:
 
 
 def analysis_options(args):
-    """:class:`~microfacet.analysis.pipeline.AnalysisOptions` from the parsed options, validated; a
-    ``ValueError`` names the command-line option."""
-    from ..analysis.pipeline import AnalysisOptions
-
-    opts = AnalysisOptions(
+    """:class:`~microfacet.analysis.options.AnalysisOptions` from the parsed options, validated
+    (an :class:`~microfacet.core.errors.InputError` names the option)."""
+    opts = analysis.AnalysisOptions(
         mode=args.mode, roi_size_px=args.roi_size_px, roi_stride_px=args.roi_stride_px,
         saturation_min=args.saturation_min, thickness_range_nm=tuple(args.thickness_range_nm),
         exposure=args.exposure, facet_size_um=args.facet_size_um,
         max_components=args.max_components, align=args.align or False, film=args.film,
         substrate=args.substrate)
-    try:
-        opts.validate()
-    except ValueError as exc:
-        name, _, reason = str(exc).partition(":")
-        raise ValueError(f"--{name.strip().replace('_', '-')}: {reason.strip()}") from None
-    for opt, value in (("--film", args.film), ("--substrate", args.substrate)):
-        if value is not None:
-            from ..optics.constants import load_set
-
-            try:
-                load_set(value)
-            except ValueError as exc:
-                raise ValueError(f"{opt}: {exc}") from None
+    opts.validate()
     return opts
 
 
@@ -130,8 +117,6 @@ class HelpFormatter(argparse.HelpFormatter):
     indented lines (examples) as written."""
 
     def _fill_text(self, text, width, indent):
-        import textwrap
-
         out = []
         for para in text.split("\n\n"):
             lines = para.splitlines()

@@ -15,9 +15,28 @@ Two paths:
 
 from __future__ import annotations
 
+import json
+import logging
+import math
+import time
+from pathlib import Path
 
-from .options import HelpFormatter, add_optics_options, example_epilog, optics_kwargs
+import numpy as np
+
+from .. import __version__
 from ..colour.colorimetry import spectral_weights
+from ..core.distributions import NDFMixture, ThicknessMixture
+from ..core.errors import InputError
+from ..forward.angular import (display_exposure, simulate_map, simulate_memory_bytes,
+                               with_exposure)
+from ..forward.brdf import thickness_nodes
+from ..forward.compare import delta_e_map, fit_eq6, fit_exposure, mean_delta_e
+from ..io.angular_map import load_map, save_map, save_png
+from ..io.limits import check_memory
+from ..io.outdir import atomic_output_dir, check_output
+from ..io.results import Results
+from ..report.figures import plot_maps
+from .options import HelpFormatter, add_optics_options, example_epilog, optics_kwargs
 
 _EXAMPLES = (
     "microfacet simulate --thickness-nm 51 --out sd-blue",
@@ -91,13 +110,6 @@ def register(sub):
     return p
 
 
-def _legacy(args) -> bool:
-    return (args.thickness_nm is not None and args.results is None
-            and args.thickness_mixture is None and args.ndf_lobes is None
-            and args.model is None and args.compare is None and not args.fit_exponent
-            and not args.fit_exposure and args.lobe_exponent is None)
-
-
 #: Finest angle step and spectral step accepted (finer grids change no colour measurably:
 #: docs/speed-vs-error.md), largest exposure, cosine-lobe exponent, thickness and mixture SD.
 MIN_THETA_STEP_DEG = 0.05
@@ -109,18 +121,12 @@ MAX_THICKNESS_SD_NM = 1000.0
 
 
 def run(args) -> int:
-    from ..io.outdir import check_output
-
     inputs = [x for x in (args.results, args.compare) if x]
     check_output(args.out, kind="simulate", inputs=inputs, overwrite=args.overwrite)
-    if _legacy(args):
-        return _run_half_vector(args)
-    return _run_distributions(args)
+    return _simulate(args)
 
 
 def _grid(args):
-    import numpy as np
-
     if not (0 < args.theta_max_deg < 90):
         raise ValueError("--theta-max-deg: must be in (0, 90)")
     if not (MIN_THETA_STEP_DEG <= args.theta_step_deg <= args.theta_max_deg):
@@ -130,9 +136,6 @@ def _grid(args):
 
 
 def _check_grid_memory(model, n_light, n_view, n_wl, what):
-    from ..forward.angular import simulate_memory_bytes
-    from ..io.limits import check_memory
-
     check_memory(simulate_memory_bytes(model=model, n_light=n_light, n_view=n_view,
                                        n_wavelengths=n_wl),
                  f"{n_light} x {n_view} angles x {n_wl} wavelengths ({what})")
@@ -140,10 +143,6 @@ def _check_grid_memory(model, n_light, n_view, n_wl, what):
 
 def _check_outcome(xyz, model):
     """Refuse an exposure or lobe exponent that makes every colour infinite or zero."""
-    import numpy as np
-
-    from ..core.errors import InputError
-
     finite = np.isfinite(xyz)
     if not finite.any():
         raise InputError("every predicted colour is infinite; use a smaller exposure",
@@ -155,72 +154,18 @@ def _check_outcome(xyz, model):
 
 
 def _check_thickness_nm(value):
-    import math
-
-    from ..core.errors import InputError
-
     if value is not None and not (math.isfinite(value) and 0 <= value <= MAX_THICKNESS_NM):
         raise InputError(f"must be in [0, {MAX_THICKNESS_NM:g}] nm, got {value:g}",
                          param="thickness_nm")
 
 
-def _run_half_vector(args) -> int:
-    import json
-    import logging
-    import time
-
-    import numpy as np
-
-    from .. import __version__
-    from ..forward.halfvector import angular_colour_map
-    from ..io.outdir import atomic_output_dir
-
-    log = logging.getLogger("microfacet.simulate")
-    opt = optics_kwargs(args)
-    grid = _grid(args)
-    _check_thickness_nm(args.thickness_nm)
-    exposure = 1.0 if args.exposure is None else args.exposure
-    if not (np.isfinite(exposure) and EXPOSURE_RANGE[0] <= exposure <= EXPOSURE_RANGE[1]):
-        raise ValueError(f"--exposure: must be in [{EXPOSURE_RANGE[0]:g}, "
-                         f"{EXPOSURE_RANGE[1]:g}], got {exposure:g}")
-    _check_grid_memory("half-vector", grid.size, grid.size, 81,
-                       f"--theta-step-deg {args.theta_step_deg:g}")
-    t0 = time.perf_counter()
-    m = angular_colour_map(args.thickness_nm, theta_light_deg=grid, theta_view_deg=grid,
-                           exposure=exposure, **opt)
-    _check_outcome(m.xyz, "half-vector")
-    with atomic_output_dir(args.out, kind="simulate", overwrite=args.overwrite,
-                           inputs=[]) as tmp:
-        np.save(tmp / "angular_lab.npy", m.lab)
-        np.save(tmp / "angular_xyz.npy", m.xyz.astype(np.float32))
-        np.save(tmp / "theta_light_deg.npy", m.theta_light_deg)
-        np.save(tmp / "theta_view_deg.npy", m.theta_view_deg)
-        m.save_png(tmp / "angular_map.png", scale=4)
-        (tmp / "simulate.json").write_text(json.dumps({
-            "format": "microfacet-simulate/1", "model": "half-vector",
-            "thickness_nm": m.thickness_nm, "exposure": m.exposure,
-            "theta_light_deg": [float(grid[0]), float(grid[-1]), float(args.theta_step_deg)],
-            "theta_view_deg": [float(grid[0]), float(grid[-1]), float(args.theta_step_deg)],
-            **opt, "version": __version__,
-            "timings_s": {"total": time.perf_counter() - t0},
-        }, indent=2))
-    log.info("wrote %s in %.2f s", args.out, time.perf_counter() - t0)
-    if not args.quiet:
-        print(f"wrote {args.out}/angular_map.png ({grid.size} x {grid.size} angles)")
-    return 0
-
-
 def parse_thickness_mixture(text, *, option="--thickness-mixture"):
     """``"w:mean:sd,..."`` → :class:`ThicknessMixture` (ValueError naming ``option``)."""
-    from ..core.distributions import ThicknessMixture
-
     return ThicknessMixture(_parse_components(text, 3, option, "weight:mean_nm:sd_nm"))
 
 
 def parse_ndf_lobes(text, *, option="--ndf-lobes"):
     """``"w:sd_deg,..."`` → :class:`NDFMixture` (ValueError naming ``option``)."""
-    from ..core.distributions import NDFMixture
-
     return NDFMixture(_parse_components(text, 2, option, "weight:sd_deg"))
 
 
@@ -253,67 +198,27 @@ def _parse_components(text, n, option, form):
 
 
 def _finite(x):
-    import math
-
     return math.isfinite(x)
 
 
 def _read_results(folder):
-    import json
-    from pathlib import Path
-
-    from ..core.distributions import NDFMixture, ThicknessMixture
-
-    path = Path(folder) / "summary.json"
-    if not Path(folder).is_dir():
-        raise FileNotFoundError(f"--results: {folder} is not a folder")
-    if not path.is_file():
-        raise FileNotFoundError(f"--results: {path} not found")
+    """The fitted mixtures and optics of an analysis results folder (``--results``)."""
     try:
-        summary = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ValueError(f"--results: cannot read {path} ({exc})") from None
-    out = {}
-    try:
-        out["thickness"] = ThicknessMixture.from_json(summary["thickness"]["mixture"])
-    except (KeyError, TypeError):
-        raise ValueError(f"--results: {path} has no thickness.mixture") from None
-    except ValueError as exc:
-        raise ValueError(f"--results: {path}: {exc}") from None
-    try:
-        out["ndf"] = NDFMixture.from_json(summary["ndf"]["mixture"])
-    except (KeyError, TypeError):
-        out["ndf"] = None
-    except ValueError as exc:
-        raise ValueError(f"--results: {path}: {exc}") from None
+        res = Results(folder)
+        out = {"thickness": res.thickness_mixture(), "ndf": res.ndf_mixture()}
+    except InputError as exc:
+        raise InputError(exc.reason, param="results") from None
+    if out["thickness"] is None:
+        raise InputError(f"{Path(folder) / 'summary.json'} has no thickness.mixture",
+                         param="results")
     for key in ("film", "substrate", "illuminant"):
-        if isinstance(summary.get(key), str):
-            out[key] = summary[key]
+        if isinstance(res.summary.get(key), str):
+            out[key] = res.summary[key]
     # summary["exposure"] is the microscope camera's scale, not a gonio map's: not used.
     return out
 
 
-def _run_distributions(args) -> int:
-    import json
-    import logging
-    import time
-
-    import numpy as np
-
-    from .. import __version__
-    from ..forward.angular import (
-        delta_e_map,
-        fit_eq6,
-        fit_exposure,
-        load_map,
-        mean_delta_e,
-        plot_maps,
-        save_map,
-        simulate_map,
-    )
-    from ..core.errors import InputError
-    from ..io.outdir import atomic_output_dir
-
+def _simulate(args) -> int:
     log = logging.getLogger("microfacet.simulate")
     t0 = time.perf_counter()
     res = _read_results(args.results) if args.results is not None else {}
@@ -344,7 +249,7 @@ def _run_distributions(args) -> int:
     if args.illuminant == "D65" and "illuminant" in res:
         args.illuminant = res["illuminant"]
     opt = optics_kwargs(args)
-    auto_exposure = args.exposure is None and not args.fit_exposure and model != "half-vector"
+    auto_exposure = args.exposure is None and not args.fit_exposure
     exposure = 1.0 if args.exposure is None else args.exposure
     if not (np.isfinite(exposure) and EXPOSURE_RANGE[0] <= exposure <= EXPOSURE_RANGE[1]):
         raise ValueError(f"--exposure: must be in [{EXPOSURE_RANGE[0]:g}, "
@@ -370,8 +275,6 @@ def _run_distributions(args) -> int:
     _check_grid_memory(model, tl.size, tv.size, wl.size,
                        f"--theta-step-deg {args.theta_step_deg:g}, --spectral-step-nm {step:g}")
     try:
-        from ..forward.brdf import thickness_nodes
-
         thickness_nodes(thickness)
     except ValueError as exc:
         raise InputError(str(exc).partition(": ")[2],
@@ -397,16 +300,12 @@ def _run_distributions(args) -> int:
         exposure, fit["mean_delta_e"] = fit_exposure(m1.xyz, measured.lab, white=white)
         fit["exposure"] = exposure
     if auto_exposure and not args.fit_exponent:
-        # Display scale: the 98th percentile of Y maps to 0.9 of white (the specular peak
-        # of a BRDF is far above 1 and would otherwise clip the whole map to white).
-        m1 = simulate_map(exposure=1.0, **kw)
-        white = spectral_weights(wl, illuminant=opt["illuminant"],
-                                       observer=opt["observer"]).sum(axis=0)
-        y = m1.xyz[..., 1][np.isfinite(m1.xyz[..., 1])] / white[1]
-        p98 = float(np.percentile(y, 98)) if y.size else 0.0
-        exposure = 0.9 / p98 if p98 > 0 else 1.0
-        fit["auto_exposure"] = exposure
-    m = simulate_map(exposure=exposure, **kw)
+        # the display rule every map picture uses (forward.angular.display_exposure)
+        m = simulate_map(exposure=1.0, **kw)
+        exposure = fit["auto_exposure"] = display_exposure(m)
+        m = with_exposure(m, exposure)
+    else:
+        m = simulate_map(exposure=exposure, **kw)
     _check_outcome(m.xyz, model)
     de = stats = None
     if measured is not None:
@@ -440,7 +339,7 @@ def _run_distributions(args) -> int:
         np.save(tmp / "theta_light_deg.npy", tl)
         np.save(tmp / "theta_view_deg.npy", tv)
         save_map(tmp / "angular_map.npz", m)
-        m.save_png(tmp / "angular_map.png", scale=4)
+        save_png(tmp / "angular_map.png", m, scale=4)
         title = f"{model}" + (f", n = {n:.3g}" if model == "eq6" else "") + \
             f", exposure {exposure:.3g}"
         plot_maps(tmp / "figure.pdf", m, measured=measured, delta_e=de, stats=stats,

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import sys
 
+from ..core.errors import InputError
+from ..forward.synth import generate_stack, preset
 from .options import HelpFormatter, example_epilog, pair_type
+from .progress import Progress
 
 PRESET_NAMES = ("sd", "nd", "thick", "steep", "thin", "grainy", "noisy", "overexposed", "16bit")
 
@@ -41,12 +45,6 @@ def register(sub):
 
 
 def run(args) -> int:
-    import sys
-
-    from ..core.errors import InputError
-    from .progress import Progress
-    from ..forward.synth import generate_stack, preset
-
     over = {"seed": args.seed}
     if args.size is not None:
         over["height_px"], over["width_px"] = args.size

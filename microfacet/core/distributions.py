@@ -34,6 +34,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .lazy import load
+
+special = load("scipy.special")
+
 __all__ = ["NDF_FORM", "NDFMixture", "ThicknessMixture"]
 
 NDF_FORM = "gaussian-slope"
@@ -203,12 +207,10 @@ class NDFMixture:
 
     def smith_lambda(self, theta_deg):
         """Smith's Λ for a direction at zenith ``theta_deg`` (linear in the mixture)."""
-        from scipy.special import erf
-
         th = np.asarray(theta_deg, dtype=np.float64)[..., None] * _DEG
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             a = 1.0 / (self.beckmann_alpha * np.tan(th))
-            lam = (erf(a) - 1.0) / 2.0 + np.exp(-a * a) / (2.0 * a * math.sqrt(math.pi))
+            lam = (special.erf(a) - 1.0) / 2.0 + np.exp(-a * a) / (2.0 * a * math.sqrt(math.pi))
         lam = np.where(np.isfinite(a) & (a > 0), lam, 0.0)
         return np.sum(self.weights * np.maximum(lam, 0.0), axis=-1)
 

@@ -27,6 +27,10 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ..core.errors import InputError
+from ..core.lazy import load
+from .measures import to_grey
+
+cv2 = load("cv2")
 
 __all__ = ["estimate_warps", "warp_to_reference", "warped_loader"]
 
@@ -34,10 +38,6 @@ log = logging.getLogger(__name__)
 
 
 def _small_grey(img: np.ndarray, scale: float) -> np.ndarray:
-    import cv2
-
-    from .height import to_grey
-
     g = to_grey(img)
     if scale != 1.0:
         g = cv2.resize(g, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
@@ -46,8 +46,6 @@ def _small_grey(img: np.ndarray, scale: float) -> np.ndarray:
 
 def _pair_warp(prev: np.ndarray, cur: np.ndarray, method: str) -> np.ndarray:
     """3×3 matrix mapping prev pixel coordinates to cur pixel coordinates."""
-    import cv2
-
     W = np.eye(3, dtype=np.float64)
     if method == "phase":
         win = cv2.createHanningWindow(prev.shape[::-1], cv2.CV_32F)
@@ -146,8 +144,6 @@ def warp_to_reference(img: np.ndarray, warp: np.ndarray) -> np.ndarray:
     -------
     ndarray, same shape and dtype as ``img``
     """
-    import cv2
-
     H, W = img.shape[:2]
     return cv2.warpAffine(img, warp, (W, H), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                           borderMode=cv2.BORDER_REPLICATE)

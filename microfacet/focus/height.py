@@ -1,5 +1,5 @@
-"""Height from focus: focus measures, streaming peak search, sub-slice interpolation,
-reliability and the all-in-focus composite.
+"""Height from focus: streaming peak search, sub-slice interpolation, reliability and the
+all-in-focus composite.
 
 The stack is read **once**, slice by slice in increasing ``z``; per pixel only a fixed number
 of image-sized buffers is kept (the last ``2r+1`` focus images, the focus values of the
@@ -9,11 +9,7 @@ composite), so peak memory is ``O(H·W)`` whatever the number of slices.
 Method (defaults chosen from the measured RMSE on the Cou & Guennebaud (2023) ground-truth
 stacks, see ``docs/height-from-focus.md``):
 
-1. Focus measure per slice (``operator``): ``"tenengrad"`` (squared Sobel gradient, default),
-   ``"sml"`` (sum-modified-Laplacian, Nayar & Nakagawa 1994) or ``"glv"`` (grey-level local
-   variance), accumulated over a window of ``window_px`` pixels. ``window="gaussian"``
-   (default) uses a Gaussian window with the same standard deviation as a box of side
-   ``window_px`` (σ = window_px/√12); ``window="box"`` uses the box itself.
+1. Focus measure per slice (:mod:`microfacet.focus.measures`).
 2. Running arg-max over slices, keeping the focus values of the ``2r+1`` slices around the
    best one (``r = fit_radius``).
 3. Sub-slice peak: a weighted least-squares parabola in ``log F`` against ``z`` over those
@@ -53,136 +49,45 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.errors import InputError
+from ..core.errors import InputError, one_line
+from ..core.lazy import load
+from ..io.images import convert_samples
+from ..io.limits import check_memory
+from ..io.stack import Stack
+from .align import estimate_warps, warped_loader
+from .fill import fill_missing
+from .measures import (
+    DEFAULT_OPERATOR,
+    DEFAULT_WINDOW,
+    DEFAULT_WINDOW_PX,
+    OPERATORS,
+    check_window,
+    focus_measure,
+)
+
+cv2 = load("cv2")
+ndimage = load("scipy.ndimage")
 
 __all__ = [
     "DEFAULT_FIT_RADIUS",
     "DEFAULT_INTERPOLATION",
     "DEFAULT_MIN_RELIABILITY_DB",
-    "DEFAULT_OPERATOR",
-    "DEFAULT_WINDOW",
-    "DEFAULT_WINDOW_PX",
     "FocusResult",
     "INTERPOLATIONS",
-    "OPERATORS",
-    "fill_missing",
-    "focus_measure",
+    "check_focus_memory",
     "height_from_focus",
     "peak_fit",
-    "to_grey",
 ]
 
 log = logging.getLogger(__name__)
 
-OPERATORS = ("tenengrad", "sml", "glv")
 INTERPOLATIONS = ("lsq", "gauss3", "none")
-#: Defaults, chosen from the accuracy table in docs/height-from-focus.md; their cost against
-#: the alternatives: docs/speed-vs-error.md §4.
-DEFAULT_OPERATOR = "tenengrad"
-DEFAULT_WINDOW_PX = 7
-DEFAULT_WINDOW = "gaussian"
 DEFAULT_INTERPOLATION = "lsq"
 DEFAULT_FIT_RADIUS = 2
 #: Default reliability cut in dB per operator: above the 99.9th percentile of pure-noise
 #: (textureless) pixels and below the 1st percentile of textured ones in the synthetic
 #: check of tests/test_focus.py; see docs/height-from-focus.md.
 DEFAULT_MIN_RELIABILITY_DB = {"tenengrad": 12.0, "sml": 9.0, "glv": 11.0}
-
-_ML_KX = np.array([[-1.0, 2.0, -1.0]], dtype=np.float32)
-
-
-# --------------------------------------------------------------------------------------------
-# focus measures
-
-
-def to_grey(image: np.ndarray) -> np.ndarray:
-    """Luma of an image for focus measurement.
-
-    Parameters
-    ----------
-    image : ndarray, shape (H, W) or (H, W, 3)
-        Grey or RGB; any real dtype.
-
-    Returns
-    -------
-    ndarray of float32, shape (H, W)
-        The image itself for grey input, Rec. 601 luma (0.299 R + 0.587 G + 0.114 B) for RGB.
-    """
-    import cv2
-
-    img = np.asarray(image)
-    if img.ndim == 2:
-        return img.astype(np.float32, copy=False)
-    if img.ndim == 3 and img.shape[2] == 3:
-        return cv2.cvtColor(img.astype(np.float32, copy=False), cv2.COLOR_RGB2GRAY)
-    raise ValueError(f"image must have shape (H, W) or (H, W, 3), got {img.shape}")
-
-
-def _check_window(window_px, window):
-    if isinstance(window_px, bool) or not isinstance(window_px, (int, np.integer)) \
-            or window_px < 1 or window_px % 2 == 0:
-        raise ValueError(f"window_px must be an odd integer >= 1, got {window_px!r}")
-    if window not in ("gaussian", "box"):
-        raise ValueError(f"window must be 'gaussian' or 'box', not {window!r}")
-
-
-def _window_sum(img: np.ndarray, window_px: int, window: str) -> np.ndarray:
-    import cv2
-
-    if window_px == 1:
-        return img
-    if window == "box":
-        return cv2.boxFilter(img, -1, (window_px, window_px), normalize=True,
-                             borderType=cv2.BORDER_REFLECT)
-    sigma = window_px / math.sqrt(12.0)
-    return cv2.GaussianBlur(img, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
-
-
-def focus_measure(image: np.ndarray, *, operator: str = DEFAULT_OPERATOR,
-                  window_px: int = DEFAULT_WINDOW_PX, window: str = DEFAULT_WINDOW) -> np.ndarray:
-    """Focus measure of one slice.
-
-    Parameters
-    ----------
-    image : ndarray, shape (H, W) or (H, W, 3)
-        One slice (float, typically in [0, 1]); RGB is reduced to luma.
-    operator : {"tenengrad", "sml", "glv"}
-        ``"tenengrad"``: window mean of ``Gx² + Gy²`` (3×3 Sobel). ``"sml"``: window mean of the
-        modified Laplacian ``|2I − I(x−1) − I(x+1)| + |2I − I(y−1) − I(y+1)|`` (Nayar & Nakagawa
-        1994). ``"glv"``: local grey-level variance over the window.
-    window_px : int
-        Odd window side in pixels.
-    window : {"gaussian", "box"}
-        Window shape; the Gaussian has σ = window_px/√12 (the box's standard deviation).
-
-    Returns
-    -------
-    ndarray of float32, shape (H, W)
-        Non-negative; larger is sharper.
-    """
-    import cv2
-
-    _check_window(window_px, window)
-    g = to_grey(image)
-    border = cv2.BORDER_REFLECT
-    if operator == "tenengrad":
-        gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=border)
-        gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=border)
-        e = cv2.magnitude(gx, gy)
-        cv2.multiply(e, e, dst=e)
-        return _window_sum(e, window_px, window)
-    if operator == "sml":
-        mx = cv2.filter2D(g, cv2.CV_32F, _ML_KX, borderType=border)
-        my = cv2.filter2D(g, cv2.CV_32F, _ML_KX.T, borderType=border)
-        e = cv2.add(cv2.absdiff(mx, 0.0), cv2.absdiff(my, 0.0))
-        return _window_sum(e, window_px, window)
-    if operator == "glv":
-        m = _window_sum(g, window_px, window)
-        m2 = _window_sum(cv2.multiply(g, g), window_px, window)
-        v = cv2.subtract(m2, cv2.multiply(m, m))
-        return cv2.max(v, 0.0)
-    raise ValueError(f"operator must be one of {OPERATORS}, not {operator!r}")
-
 
 # --------------------------------------------------------------------------------------------
 # peak fit
@@ -308,58 +213,6 @@ class FocusResult:
         return float(1.0 - self.reliable.mean())
 
 
-# --------------------------------------------------------------------------------------------
-# filling
-
-
-def fill_missing(height: np.ndarray, *, method: str = "smooth") -> np.ndarray:
-    """Fill NaN pixels of a height map.
-
-    Parameters
-    ----------
-    height : ndarray, shape (H, W)
-        Height map with NaN holes.
-    method : {"smooth", "nearest"}
-        ``"nearest"``: value of the nearest valid pixel. ``"smooth"``: normalised convolution
-        with a Gaussian whose σ doubles (from 2 px) until every hole is covered, each hole
-        taking the value from the smallest σ that reaches it.
-
-    Returns
-    -------
-    ndarray of float32, shape (H, W)
-        Valid pixels unchanged; all NaN only if the input has no valid pixel.
-    """
-    import cv2
-    from scipy import ndimage
-
-    h = np.asarray(height, dtype=np.float32)
-    miss = ~np.isfinite(h)
-    if not miss.any() or miss.all():
-        return h.copy()
-    if method == "nearest":
-        idx = ndimage.distance_transform_edt(miss, return_distances=False, return_indices=True)
-        return h[idx[0], idx[1]]
-    if method != "smooth":
-        raise ValueError(f"method must be 'smooth' or 'nearest', not {method!r}")
-    out = h.copy()
-    todo = miss.copy()
-    m = (~miss).astype(np.float32)
-    hv = np.where(miss, 0.0, h).astype(np.float32)
-    sigma = 2.0
-    while todo.any():
-        if sigma > 4 * max(h.shape):
-            near = fill_missing(h, method="nearest")
-            out[todo] = near[todo]
-            break
-        num = cv2.GaussianBlur(hv, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
-        den = cv2.GaussianBlur(m, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
-        reach = todo & (den > 1e-3)
-        out[reach] = num[reach] / den[reach]
-        todo &= ~reach
-        sigma *= 2.0
-    return out
-
-
 #: Peak memory of ``microfacet height`` ≈ base + per pixel × H × W, set just above what
 #: ``/usr/bin/time -f %M`` measured on nd stacks of 16 slices: 139, 235 and 579 MB at 0.26,
 #: 1.05 and 4.2 MP (≈ 120 MB + 110 B/px; slices are streamed, so their number does not count).
@@ -369,9 +222,6 @@ MEMORY_BYTES_PER_PIXEL = 130
 
 def check_focus_memory(stack) -> None:
     """Refuse, before any work, a stack whose height from focus would not fit in memory."""
-    from ..core.errors import one_line
-    from ..io.limits import check_memory
-
     h, w = stack.shape
     check_memory(MEMORY_BASE_BYTES + MEMORY_BYTES_PER_PIXEL * h * w,
                  f"{one_line(stack.path / 'stack.json')}: height from focus of {w}x{h}-pixel "
@@ -384,8 +234,6 @@ def check_focus_memory(stack) -> None:
 
 def _slice_source(source, z_um):
     """Return (z_um file order, n, shape, channels, loader(file_index) -> image float32)."""
-    from ..io.stack import Stack, _convert
-
     if isinstance(source, Stack):
         if not source.has_slices:
             raise InputError(f"{source.path / 'stack.json'}: the stack has no slices (export only); "
@@ -416,7 +264,7 @@ def _slice_source(source, z_um):
         if img.shape != first.shape:
             raise ValueError(f"image {i} has shape {img.shape}, expected {first.shape}")
         if img.dtype in (np.uint8, np.uint16):
-            return _convert(img, np.float32)
+            return convert_samples(img, np.float32)
         return img.astype(np.float32, copy=False)
 
     return z, z.size, first.shape[:2], (3 if first.ndim == 3 else 1), load
@@ -471,12 +319,10 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
     -------
     FocusResult
     """
-    import cv2
-
     t_start = time.perf_counter()
     if operator not in OPERATORS:
         raise ValueError(f"operator must be one of {OPERATORS}, not {operator!r}")
-    _check_window(window_px, window)
+    check_window(window_px, window)
     if interpolation not in INTERPOLATIONS:
         raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, not {interpolation!r}")
     if interpolation == "lsq":
@@ -505,11 +351,9 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
 
     warps = None
     if align:
-        from . import align as _align
-
         method = "ecc" if align is True else align
-        warps, ref = _align.estimate_warps(load, order, shape, method=method, reference=reference)
-        load = _align.warped_loader(load, warps, shape)
+        warps, ref = estimate_warps(load, order, shape, method=method, reference=reference)
+        load = warped_loader(load, warps, shape)
 
     ring = np.zeros((K, H, W), np.float32)          # focus of the last K ranks
     win = np.full((K, H, W), np.nan, np.float32)   # focus around the best rank
@@ -566,7 +410,7 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
     finally:
         if pool:
             pool.shutdown(wait=True, cancel_futures=True)
-    del ring
+    ring = None  # free the K focus images before the peak fit
 
     # ---- peak fit and reliability, in row blocks (temporaries stay small) -------------
     t2 = time.perf_counter()

@@ -30,6 +30,10 @@ import math
 
 import numpy as np
 
+from ..core.lazy import load
+
+cv2 = load("cv2")
+
 __all__ = ["gradient_nan", "normals_from_height", "smooth_nan", "tilt_azimuth_deg"]
 
 
@@ -46,8 +50,6 @@ def smooth_nan(height: np.ndarray, sigma_px: float) -> np.ndarray:
     -------
     ndarray of float32, shape (H, W)
     """
-    import cv2
-
     h = np.asarray(height, dtype=np.float32)
     if sigma_px <= 0:
         return h.copy()

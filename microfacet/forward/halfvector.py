@@ -14,24 +14,20 @@ positive on the mirror side (so θ_view = θ_light is the specular direction),
 
     θ_d = |θ_light + θ_view| / 2,   tilt of h = (θ_view − θ_light) / 2.
 
-This module gives θ_d for in-plane angles and for 3-D unit vectors, the reflectance
-spectra and colours there, and angular colour maps over a (θ_light, θ_view) grid like the
-seed's Fig. 10.
+This module gives θ_d for in-plane angles and for 3-D unit vectors and the reflectance
+spectra there; angular colour maps like the seed's Fig. 10 are
+``simulate_map(model="half-vector")`` (:mod:`microfacet.forward.angular`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
-from ..colour.colorimetry import xyz_to_lab
-from ..colour.srgb import model_xyz_to_linear_srgb, srgb_encode
+from ..optics.thinfilm import reflectance
 
 __all__ = [
-    "AngularColourMap",
-    "angular_colour_map",
+    "signed_angles",
     "half_angle_deg",
     "half_angle_from_vectors",
     "half_vector",
@@ -40,7 +36,9 @@ __all__ = [
 ]
 
 
-def _angles(x, name):
+def signed_angles(x, name):
+    """``x`` as a float array of angles in (-90, 90) degrees (NaN kept); ValueError names
+    ``name``."""
     a = np.asarray(x, dtype=np.float64)
     if np.any(np.isinf(a)) or np.any(np.abs(a) >= 90):
         raise ValueError(f"{name}: zenith angles must satisfy -90 < theta < 90 degrees")
@@ -66,8 +64,8 @@ def half_angle_deg(theta_light_deg, theta_view_deg):
     >>> float(half_angle_deg(10.0, 45.0))
     27.5
     """
-    tl = _angles(theta_light_deg, "theta_light_deg")
-    tv = _angles(theta_view_deg, "theta_view_deg")
+    tl = signed_angles(theta_light_deg, "theta_light_deg")
+    tv = signed_angles(theta_view_deg, "theta_view_deg")
     return np.abs(tl + tv) / 2.0
 
 
@@ -78,8 +76,8 @@ def in_plane_directions(theta_light_deg, theta_view_deg):
     -------
     light, view : ndarray, shape broadcast + (3,)
     """
-    tl = np.deg2rad(_angles(theta_light_deg, "theta_light_deg"))
-    tv = np.deg2rad(_angles(theta_view_deg, "theta_view_deg"))
+    tl = np.deg2rad(signed_angles(theta_light_deg, "theta_light_deg"))
+    tv = np.deg2rad(signed_angles(theta_view_deg, "theta_view_deg"))
     tl, tv = np.broadcast_arrays(tl, tv)
     zero = np.zeros_like(tl)
     light = np.stack([-np.sin(tl), zero, np.cos(tl)], axis=-1)
@@ -141,8 +139,6 @@ def spectra(theta_light_deg, theta_view_deg, thickness_nm, *, wavelength_nm=None
     wavelength_nm : ndarray (N,)
     R : ndarray, shape S + (N,)
     """
-    from ..optics.thinfilm import reflectance
-
     wl = (np.arange(380.0, 781.0, 5.0) if wavelength_nm is None
           else np.asarray(wavelength_nm, dtype=np.float64))
     th = half_angle_deg(theta_light_deg, theta_view_deg)
@@ -150,98 +146,3 @@ def spectra(theta_light_deg, theta_view_deg, thickness_nm, *, wavelength_nm=None
     th, d = np.broadcast_arrays(th, d)
     R = reflectance(wl, th[..., None], d[..., None], film, substrate, n_ambient=n_ambient)
     return wl, R
-
-
-@dataclass
-class AngularColourMap:
-    """Colours over a grid of in-plane light and view zenith angles.
-
-    Attributes
-    ----------
-    theta_light_deg : ndarray (L,)
-    theta_view_deg : ndarray (V,)
-    theta_d_deg : ndarray (L, V)
-        Incidence angle on the reflecting facets.
-    xyz : ndarray (L, V, 3)
-        Perfect reflector Y = 1, times ``exposure``.
-    lab : ndarray (L, V, 3) float32
-    srgb : ndarray (L, V, 3) uint8
-        Display image (rows = light angle, columns = view angle).
-    thickness_nm : float
-    exposure : float
-    """
-
-    theta_light_deg: np.ndarray
-    theta_view_deg: np.ndarray
-    theta_d_deg: np.ndarray
-    xyz: np.ndarray
-    lab: np.ndarray
-    srgb: np.ndarray
-    thickness_nm: float
-    exposure: float
-    film: str
-    substrate: str
-    illuminant: str
-
-    def save_png(self, path, *, scale: int = 4):
-        """Write the sRGB map as a PNG, each cell ``scale`` × ``scale`` pixels, light angle down."""
-        from ..io.images import write_image
-
-        write_image(path, np.repeat(np.repeat(self.srgb, scale, axis=0), scale, axis=1))
-
-
-def angular_colour_map(thickness_nm, *, theta_light_deg=None, theta_view_deg=None,
-                       film=DEFAULT_FILM, substrate=DEFAULT_SUBSTRATE, illuminant="D65",
-                       observer="2", exposure=1.0, spectral_step_nm=None,
-                       n_ambient=1.0) -> AngularColourMap:
-    """Half-vector angular colour map (seed Fig. 10) for one film thickness.
-
-    Parameters
-    ----------
-    thickness_nm : float
-        Oxide thickness in nm.
-    theta_light_deg, theta_view_deg : array_like, optional
-        Grids of zenith angles (default 0-85° in 1° steps for both).
-    exposure : float
-        Scale applied to the reflectance before display (Lab is computed on the scaled XYZ,
-        relative to the illuminant white).
-    spectral_step_nm : float, optional
-        Spectral step; by default chosen from the measured colour error for this thickness
-        (:func:`microfacet.colour.table.choose_spectral_step`).
-
-    Returns
-    -------
-    AngularColourMap
-
-    Examples
-    --------
-    >>> m = angular_colour_map(51.0, theta_light_deg=[0, 30], theta_view_deg=[0, 30, 60])
-    >>> m.lab.shape
-    (2, 3, 3)
-    """
-    from ..colour.table import _wavelengths, _white, choose_spectral_step, direct_xyz
-
-    d = float(thickness_nm)
-    if not (np.isfinite(d) and d >= 0):
-        raise ValueError(f"thickness_nm: must be finite and >= 0, got {thickness_nm!r}")
-    if not (np.isfinite(exposure) and exposure > 0):
-        raise ValueError(f"exposure: must be > 0, got {exposure!r}")
-    tl = np.arange(0.0, 86.0) if theta_light_deg is None else np.atleast_1d(
-        np.asarray(theta_light_deg, dtype=np.float64))
-    tv = np.arange(0.0, 86.0) if theta_view_deg is None else np.atleast_1d(
-        np.asarray(theta_view_deg, dtype=np.float64))
-    th_d = half_angle_deg(tl[:, None], tv[None, :])
-    kw = dict(film=film, substrate=substrate, illuminant=illuminant, observer=observer,
-              n_ambient=n_ambient)
-    if spectral_step_nm is None:
-        spectral_step_nm, _, _ = choose_spectral_step(
-            thickness_range_nm=(max(0.0, d - 1e-6), d + 1e-6),
-            theta_range_deg=(0.0, float(np.max(th_d)) + 1e-6), samples=100, **kw)
-    xyz = exposure * direct_xyz(th_d, d, spectral_step_nm=spectral_step_nm, **kw)
-    white = _white(_wavelengths(spectral_step_nm), illuminant, observer)
-    lab = xyz_to_lab(xyz, white=white).astype(np.float32)
-    rgb = model_xyz_to_linear_srgb(xyz, white=white, illuminant=illuminant,
-                                         observer=observer)
-    srgb = srgb_encode(rgb, dtype=np.uint8)
-    return AngularColourMap(tl, tv, th_d, xyz, lab, srgb, d, float(exposure), str(film),
-                            str(substrate), illuminant)

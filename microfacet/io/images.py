@@ -1,10 +1,371 @@
-"""Writing RGB or grey images (channels last, RGB order) with OpenCV."""
+"""Image files: headers read without decoding, decoding to native samples, and writing.
+
+Validation reads image *headers* only, never pixels:
+
+* PNG: the IHDR chunk (size, bit depth, colour type); truncation is detected by requiring the
+  ``IEND`` chunk at the end of the file.
+* JPEG: the SOFn marker (size, precision, components); truncation is detected by requiring the
+  end-of-image marker ``FFD9`` near the end of the file.
+* TIFF (single or multi-page): the IFDs through :mod:`tifffile` (shape, dtype, samples); a page
+  whose strips or tiles extend past the end of the file is reported as truncated.
+* ``.npy``: the header (shape, dtype) and the file's length.
+
+Corrupt *compressed data* inside an intact container is only found when the image is decoded
+(:func:`decode_image` then raises :class:`~microfacet.core.errors.InputError` naming it).
+Multi-page TIFFs are read through :class:`MultiPageTiff`, one pass over the pages.
+
+Images are channels-last, RGB order: grey ``(H, W)`` or colour ``(H, W, 3)``; alpha is dropped.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> p = pathlib.Path(tempfile.mkdtemp()) / "a.png"
+>>> write_image(p, np.full((4, 5, 3), 0.5))
+>>> image_info(p, "a.png")
+ImageInfo(shape=(4, 5), dtype=dtype('uint8'), channels=3)
+>>> decode_image(p, "a.png")[0, 0].tolist()
+[128, 128, 128]
+"""
 
 from __future__ import annotations
 
+import contextlib
+import os
+import struct
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
 import numpy as np
 
-__all__ = ["to_code_values", "write_image"]
+from ..core.errors import InputError, one_line
+from ..core.lazy import load
+
+cv2 = load("cv2")
+tifffile = load("tifffile")
+
+__all__ = ["IMAGE_SUFFIXES", "ImageInfo", "MultiPageTiff", "convert_samples", "decode_image",
+           "image_info", "npy_info", "read_png", "read_tiff_headers", "tiff_page_info", "to_code_values",
+           "to_rgb_or_grey", "write_image"]
+
+#: File suffixes accepted for slices and export images (lower case).
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
+
+
+# ------------------------------------------------------------------------------------ headers
+
+
+@dataclass(frozen=True)
+class ImageInfo:
+    """What a header tells about one image: ``(H, W)``, numpy dtype, channels (1 or 3)."""
+
+    shape: tuple[int, int]
+    dtype: np.dtype
+    channels: int
+
+
+def _png_info(path: Path, where: str) -> ImageInfo:
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(33)
+        if len(head) < 33 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+            raise InputError(f"{where}: not a PNG file (bad signature or IHDR)")
+        w, h, bit_depth, color_type = struct.unpack(">IIBB", head[16:26])
+        fh.seek(max(0, size - 12))
+        tail = fh.read(12)
+    if tail[4:8] != b"IEND":
+        raise InputError(f"{where}: truncated PNG (no IEND chunk at the end of the file)")
+    if w == 0 or h == 0:
+        raise InputError(f"{where}: PNG has zero size {w}x{h}")
+    channels = {0: 1, 2: 3, 3: 3, 4: 1, 6: 3}.get(color_type)
+    if channels is None:
+        raise InputError(f"{where}: unsupported PNG colour type {color_type}")
+    dtype = np.dtype(np.uint16) if bit_depth == 16 else np.dtype(np.uint8)
+    return ImageInfo((h, w), dtype, channels)
+
+
+_SOF_MARKERS = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
+
+
+def _jpeg_info(path: Path, where: str) -> ImageInfo:
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        if fh.read(2) != b"\xff\xd8":
+            raise InputError(f"{where}: not a JPEG file (no SOI marker)")
+        info = None
+        while True:
+            b = fh.read(1)
+            if not b:
+                break
+            if b != b"\xff":
+                continue
+            marker = fh.read(1)
+            while marker == b"\xff":
+                marker = fh.read(1)
+            if not marker:
+                break
+            m = marker[0]
+            if m in (0x01, 0xD8) or 0xD0 <= m <= 0xD7:
+                continue
+            seglen_b = fh.read(2)
+            if len(seglen_b) < 2:
+                break
+            seglen = struct.unpack(">H", seglen_b)[0]
+            if m in _SOF_MARKERS:
+                seg = fh.read(6)
+                if len(seg) < 6:
+                    break
+                precision, h, w, ncomp = struct.unpack(">BHHB", seg)
+                info = (precision, h, w, ncomp)
+                break
+            fh.seek(seglen - 2, os.SEEK_CUR)
+        fh.seek(max(0, size - 64))
+        tail = fh.read(64)
+    if info is None:
+        raise InputError(f"{where}: truncated or corrupt JPEG (no frame header)")
+    if b"\xff\xd9" not in tail:
+        raise InputError(f"{where}: truncated JPEG (no end-of-image marker)")
+    precision, h, w, ncomp = info
+    if precision != 8:
+        raise InputError(f"{where}: {precision}-bit JPEG is not supported (8-bit only)")
+    if h == 0 or w == 0:
+        raise InputError(f"{where}: JPEG has zero size {w}x{h}")
+    if ncomp not in (1, 3):
+        raise InputError(f"{where}: JPEG with {ncomp} components is not supported (grey or RGB)")
+    return ImageInfo((h, w), np.dtype(np.uint8), ncomp)
+
+
+def tiff_page_info(page, where: str, file_size: int) -> ImageInfo:
+    shape = tuple(int(s) for s in page.shape)
+    dtype = np.dtype(page.dtype) if page.dtype is not None else None
+    if dtype not in (np.dtype(np.uint8), np.dtype(np.uint16)):
+        raise InputError(f"{where}: TIFF sample type {dtype} is not supported (8- or 16-bit)")
+    samples = int(getattr(page, "samplesperpixel", 1))
+    if len(shape) == 2:
+        channels = 1
+    elif len(shape) == 3 and shape[-1] == samples and samples in (1, 2, 3, 4):
+        channels = 1 if samples in (1, 2) else 3
+        shape = shape[:2]
+    else:
+        raise InputError(f"{where}: TIFF page of shape {shape} is not a grey or RGB image")
+    offsets = page.dataoffsets
+    counts = page.databytecounts
+    if not offsets or any(o + c > file_size for o, c in zip(offsets, counts)):
+        raise InputError(f"{where}: truncated TIFF (image data extends past the end of the file)")
+    return ImageInfo((shape[0], shape[1]), dtype, channels)
+
+
+def _tiff_info(path: Path, where: str) -> ImageInfo:
+    try:
+        with tifffile.TiffFile(path) as tf:
+            return tiff_page_info(tf.pages[0], where, path.stat().st_size)
+    except InputError:
+        raise
+    except Exception as exc:  # tifffile raises assorted errors on corrupt files
+        raise InputError(f"{where}: unreadable TIFF ({exc})") from None
+
+
+def image_info(path: Path, where: str) -> ImageInfo:
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".png":
+            return _png_info(path, where)
+        if suffix in (".jpg", ".jpeg"):
+            return _jpeg_info(path, where)
+        if suffix in (".tif", ".tiff"):
+            return _tiff_info(path, where)
+    except OSError as exc:
+        raise InputError(f"{where}: cannot read ({exc.strerror or exc})") from None
+    raise InputError(f"{where}: unsupported image type {suffix!r} "
+                     f"(expected one of {', '.join(IMAGE_SUFFIXES)})")
+
+
+# ----------------------------------------------------------------------------------- decoding
+
+
+def to_rgb_or_grey(img: np.ndarray) -> np.ndarray:
+    """Drop alpha; grey stays (H, W); colour comes back (H, W, 3)."""
+    if img.ndim == 3:
+        if img.shape[2] == 1:
+            return img[:, :, 0]
+        if img.shape[2] == 2:
+            return img[:, :, 0]
+        if img.shape[2] == 4:
+            return img[:, :, :3]
+    return img
+
+
+_cv_log_lock = threading.Lock()
+_cv_log_state = {"active": 0, "level": None}
+
+
+@contextlib.contextmanager
+def _opencv_warnings_off():
+    """OpenCV writes its decoders' warnings about corrupt data straight to stderr (fd 2);
+    a failed decode is reported as one InputError naming the slice instead. Thread-safe:
+    the user's log level is restored when the last concurrent decode ends."""
+    with _cv_log_lock:
+        if _cv_log_state["active"] == 0:
+            _cv_log_state["level"] = cv2.utils.logging.getLogLevel()
+            cv2.utils.logging.setLogLevel(min(_cv_log_state["level"],
+                                              cv2.utils.logging.LOG_LEVEL_ERROR))
+        _cv_log_state["active"] += 1
+    try:
+        yield
+    finally:
+        with _cv_log_lock:
+            _cv_log_state["active"] -= 1
+            if _cv_log_state["active"] == 0:
+                cv2.utils.logging.setLogLevel(_cv_log_state["level"])
+
+
+def decode_image(path: Path, where: str, page: int | None = None, *,
+            channels: int | None = None) -> np.ndarray:
+    """Decode one image to its native dtype, grey ``(H, W)`` or RGB ``(H, W, 3)``.
+
+    ``channels`` is what the header said: a grey image with alpha comes back from OpenCV as
+    four equal-grey channels and is returned grey.
+    """
+    img = _decode_raw(path, where, page)
+    if channels == 1 and img.ndim == 3:
+        img = img[..., 0]
+    return img
+
+
+def _decode_raw(path: Path, where: str, page: int | None) -> np.ndarray:
+    suffix = path.suffix.lower()
+    try:
+        if suffix in (".tif", ".tiff"):
+            img = tifffile.imread(path, key=0 if page is None else page)
+            return to_rgb_or_grey(np.asarray(img))
+        with _opencv_warnings_off():
+            img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION)
+        if img is None:
+            raise InputError(f"{where}: cannot decode image")
+        if img.ndim == 3:
+            if img.shape[2] == 4:
+                img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
+            elif img.shape[2] == 3:
+                img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+        return to_rgb_or_grey(img)
+    except InputError:
+        raise
+    except Exception as exc:
+        raise InputError(f"{where}: cannot decode image ({exc})") from None
+
+
+class MultiPageTiff:
+    """One multi-page TIFF kept open while its pages are read: each page is found once, so a
+    pass over the stack is linear in the number of pages (``tifffile.imread(key=i)`` walks
+    the page chain from the start every time: quadratic). Thread-safe."""
+
+    def __init__(self, path: Path, uniform: bool):
+        self.path = path
+        self.uniform = uniform  # every page encoded like page 0: light TiffFrames suffice
+        self._tf = None
+        self._lock = threading.Lock()
+
+    def read(self, index: int, where: str, channels: int) -> np.ndarray:
+        try:
+            with self._lock:
+                if self._tf is None:
+                    tf = tifffile.TiffFile(self.path)
+                    tf.pages.cache = False
+                    tf.pages.useframes = self.uniform
+                    self._tf = tf
+                img = self._tf.pages[index].asarray()
+        except Exception as exc:
+            raise InputError(f"{where}: cannot decode image ({exc})") from None
+        img = to_rgb_or_grey(np.asarray(img))
+        if channels == 1 and img.ndim == 3:
+            img = img[..., 0]
+        return img
+
+    def close(self):
+        with self._lock:
+            if self._tf is not None:
+                self._tf.close()
+                self._tf = None
+
+    def __del__(self):  # pragma: no cover - best effort
+        with contextlib.suppress(Exception):
+            self.close()
+
+
+def convert_samples(raw: np.ndarray, dtype) -> np.ndarray:
+    """Native samples → ``dtype``: floating dtypes are scaled to [0, 1] (÷255 or ÷65535),
+    integer dtypes cast.
+
+    >>> convert_samples(np.array([0, 255], np.uint8), np.float32).tolist()
+    [0.0, 1.0]
+    """
+    dtype = np.dtype(dtype)
+    if np.issubdtype(dtype, np.floating):
+        scale = 1.0 / (65535.0 if raw.dtype == np.uint16 else 255.0)
+        return np.multiply(raw, dtype.type(scale), dtype=dtype)
+    return raw.astype(dtype, copy=False)
+
+
+def npy_info(path: Path, where: str) -> tuple[tuple[int, ...], np.dtype]:
+    """``(shape, dtype)`` from a ``.npy`` header, checking the file holds that many bytes."""
+    try:
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            else:
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+            header_end = fh.tell()
+    except Exception as exc:
+        raise InputError(f"{where}: not a readable .npy file ({exc})") from None
+    if dtype.hasobject:
+        raise InputError(f"{where}: .npy holds Python objects; a float height map is required")
+    need = header_end + int(np.prod(shape)) * dtype.itemsize
+    if path.stat().st_size < need:
+        raise InputError(f"{where}: truncated .npy file")
+    return tuple(int(s) for s in shape), dtype
+
+
+_TIFF_CODING = ("compression", "predictor", "planarconfig", "photometric", "bitspersample",
+                "samplesperpixel", "fillorder", "sampleformat")
+
+
+def read_tiff_headers(tiff_path: Path, where: str, add) -> bool:
+    """Read every page header of a multi-page TIFF in one pass (linear in the pages) and
+    ``add(name, where, info)`` each; True when every page is encoded like the first."""
+    name = one_line(tiff_path.name)
+    fsize = tiff_path.stat().st_size
+    uniform = True
+    try:
+        with tifffile.TiffFile(tiff_path) as tf:
+            tf.pages.cache = False          # one page object alive at a time
+            tf.pages.useframes = False      # full headers: every page is checked
+            coding0 = None
+            for k, page in enumerate(tf.pages):
+                wk = f"{where} ({name} page {k})"
+                add(f"{one_line(tiff_path)} page {k}", wk, tiff_page_info(page, wk, fsize))
+                coding = tuple(getattr(page, a, None) for a in _TIFF_CODING)
+                coding0 = coding if coding0 is None else coding0
+                uniform &= coding == coding0 and not page.is_tiled
+    except InputError:
+        raise
+    except Exception as exc:
+        raise InputError(f"{where} ({name}): unreadable TIFF ({exc})") from None
+    return uniform
+
+
+def read_png(path) -> np.ndarray:
+    """A PNG (8- or 16-bit) as float32 in [0, 1]: RGB ``(H, W, 3)`` or grey ``(H, W)``.
+
+    Raises
+    ------
+    InputError
+        Naming the file, if it cannot be decoded.
+    """
+    return convert_samples(decode_image(Path(path), one_line(path)), np.float32)
+
+
+# ------------------------------------------------------------------------------------ writing
 
 
 def to_code_values(image, *, bit_depth=8):
@@ -32,8 +393,6 @@ def write_image(path, image, *, bit_depth=8, params=()):
     OSError
         Naming the path, if OpenCV cannot write it.
     """
-    import cv2
-
     img = to_code_values(image, bit_depth=bit_depth)
     if img.ndim == 3:
         img = img[..., ::-1]  # OpenCV writes BGR

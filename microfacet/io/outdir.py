@@ -39,17 +39,14 @@ holds the input
 from __future__ import annotations
 
 import contextlib
-import datetime
-import errno
 import json
 import os
 import shutil
-import socket
-import sys
 import tempfile
 from pathlib import Path
 
 from ..core.errors import InputError, one_line
+from .lock import acquire, current_umask, lock_path, release
 
 __all__ = ["KINDS", "OutputFolder", "atomic_output_dir", "check_output", "current_umask",
            "output_kind", "sweep_stale"]
@@ -69,13 +66,6 @@ _BATCH_HEADER = "stack,results,status"
 _WALK_LIMIT = 200_000     # entries looked at for a stack inside an existing output
 _SPACE_MARGIN = 1.2       # free space needed: expected size x margin + 16 MB
 _MB = 1 << 20
-
-
-def current_umask() -> int:
-    """The process's file-creation mask (read without changing it)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def _small_json(path: Path):
@@ -224,100 +214,6 @@ def check_output(out, *, kind: str, inputs=(), overwrite: bool = False) -> Path:
     return path
 
 
-# ------------------------------------------------------------------------------ the lock
-try:  # POSIX
-    import fcntl as _fcntl
-except ImportError:  # pragma: no cover - Windows
-    _fcntl = None
-
-#: Lock files this process holds: path -> [file descriptor, count] (re-entrant per process).
-_HELD: dict[str, list] = {}
-
-
-def _lock_file(parent: Path, name: str) -> Path:
-    return parent / f".{name}.lock"
-
-
-def _try_lock(fd) -> bool:
-    try:
-        if _fcntl is not None:
-            _fcntl.flock(fd, _fcntl.LOCK_EX | _fcntl.LOCK_NB)
-        else:  # pragma: no cover
-            import msvcrt
-
-            msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
-        return True
-    except OSError as exc:
-        if exc.errno in (errno.EAGAIN, errno.EACCES, errno.EWOULDBLOCK, errno.EDEADLK):
-            return False
-        raise
-
-
-def _holder(path: Path) -> str:
-    try:
-        info = json.loads(path.read_text(encoding="utf-8") or "{}")
-        return (f"pid {info.get('pid')} on {info.get('host')}, since {info.get('started')}")
-    except (OSError, ValueError):
-        return "another process"
-
-
-def _acquire(lock: Path, *, param: str = "out", shown: str = "") -> bool:
-    """Take the lock at ``lock``; True when newly taken (False: already ours, re-entrant).
-
-    Raises InputError when another live process holds it, or the folder is not writable.
-    """
-    key = str(lock)
-    if key in _HELD:
-        _HELD[key][1] += 1
-        return False
-    for _ in range(5):
-        try:
-            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666 & ~current_umask())
-        except OSError as exc:
-            raise InputError(f"{shown or lock.parent}: cannot write in {one_line(lock.parent)} "
-                             f"({exc.strerror})", param=param) from None
-        try:
-            if not _try_lock(fd):
-                raise InputError(f"{shown}: is being written by another microfacet run "
-                                 f"({_holder(lock)}); wait for it to finish", param=param)
-            if os.fstat(fd).st_ino != os.stat(lock).st_ino:
-                os.close(fd)  # the file we locked was removed and replaced meanwhile
-                continue
-            info = {"pid": os.getpid(), "host": socket.gethostname(),
-                    "started": datetime.datetime.now().isoformat(timespec="seconds"),
-                    "command": one_line(" ".join(sys.argv))[:300]}
-            os.ftruncate(fd, 0)
-            os.write(fd, json.dumps(info).encode())
-        except FileNotFoundError:
-            os.close(fd)
-            continue
-        except InputError:
-            os.close(fd)
-            raise
-        except OSError as exc:
-            os.close(fd)
-            raise InputError(f"{shown or lock.parent}: cannot write in {one_line(lock.parent)} "
-                             f"({exc.strerror})", param=param) from None
-        _HELD[key] = [fd, 1]
-        return True
-    raise InputError(f"{shown}: its lock file {lock} keeps changing; another run is starting",
-                     param=param)
-
-
-def _release(lock: Path) -> None:
-    key = str(lock)
-    held = _HELD.get(key)
-    if held is None:
-        return
-    held[1] -= 1
-    if held[1] > 0:
-        return
-    del _HELD[key]
-    with contextlib.suppress(OSError):
-        os.unlink(lock)
-    os.close(held[0])
-
-
 def _leftovers(parent: Path, name: str):
     prefixes = (f".{name}.partial-", f".{name}.old-")
     try:
@@ -362,16 +258,16 @@ def sweep_stale(folder) -> list[Path]:
         return []
     removed = []
     for name in sorted(names):
-        lock = _lock_file(folder, name)
+        lock = lock_path(folder, name)
         try:
-            taken = _acquire(lock, shown=str(folder / name))
+            taken = acquire(lock, shown=str(folder / name))
         except InputError:
             continue  # a live run holds it
         try:
             removed += _clean_leftovers(folder, name, None)
         finally:
             if taken:
-                _release(lock)
+                release(lock)
     return removed
 
 
@@ -427,8 +323,8 @@ class OutputFolder:
         except OSError as exc:
             raise InputError(f"{self._shown}: cannot create {one_line(parent)} "
                              f"({exc.strerror})", param="out") from None
-        lock = _lock_file(parent, self.path.name)
-        fresh = _acquire(lock, shown=self._shown)
+        lock = lock_path(parent, self.path.name)
+        fresh = acquire(lock, shown=self._shown)
         self._lock = lock
         try:
             if fresh:
@@ -438,7 +334,7 @@ class OutputFolder:
                          overwrite=self.overwrite)
             self._check_space()
         except BaseException:
-            _release(lock)
+            release(lock)
             self._lock = None
             raise
         return self
@@ -457,7 +353,7 @@ class OutputFolder:
 
     def __exit__(self, *exc):
         if self._lock is not None:
-            _release(self._lock)
+            release(self._lock)
             self._lock = None
         return False
 

@@ -12,31 +12,24 @@ user sees how ambiguous the answer is.
 
 from __future__ import annotations
 
-import csv
-import logging
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import InputError, one_line
-from ..io.limits import MAX_SPECTRUM_ROWS
-from .constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
+from ..core.lazy import load
+from .constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, resolve_index
+from .thinfilm import reflectance
 
-log = logging.getLogger(__name__)
+optimize = load("scipy.optimize")
 
 #: Thickest film searched (anodic films are < 1 µm; beyond ~10 µm a spectrometer no longer
 #: resolves the fringes and the coherent model does not apply).
 MAX_THICKNESS_NM = 10_000.0
-#: Fewest distinct wavelengths a fit accepts, and below how many it warns.
+#: Fewest distinct wavelengths a fit accepts.
 MIN_WAVELENGTHS = 3
-FEW_WAVELENGTHS = 10
-#: A measured spectrum whose largest value is below this is implausible for anodized titanium
-#: (its reflectance maxima are 0.2-0.6): warned about as a unit or scale mistake.
-PLAUSIBLE_MAX_REFLECTANCE = 0.05
 _SCAN_ELEMENTS = 1 << 21   # thickness x wavelength evaluations per block of the scan
 
-__all__ = ["SpectrumFit", "fit_thickness", "read_spectrum_csv"]
+__all__ = ["SpectrumFit", "fit_thickness"]
 
 
 @dataclass
@@ -69,8 +62,6 @@ class SpectrumFit:
 
 
 def _model(wl, angle, d, n1, n2):
-    from .thinfilm import reflectance
-
     return reflectance(wl, angle, np.asarray(d, dtype=np.float64)[..., None], n1, n2)
 
 
@@ -119,10 +110,6 @@ def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FIL
     >>> round(fit_thickness(wl, R).thickness_nm, 2)
     121.4
     """
-    from scipy.optimize import minimize_scalar
-
-    from .constants import resolve_index
-
     wl = np.asarray(wavelength_nm, dtype=np.float64)
     y = np.asarray(reflectance, dtype=np.float64)
     if wl.ndim != 1 or y.shape != wl.shape:
@@ -166,7 +153,7 @@ def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FIL
     for i in cand:
         a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
         if b > a:
-            opt = minimize_scalar(objective, bounds=(a, b), method="bounded",
+            opt = optimize.minimize_scalar(objective, bounds=(a, b), method="bounded",
                                   options={"xatol": 1e-6})
             d_best, r_best = float(opt.x), float(opt.fun)
             if res[i] < r_best:
@@ -183,79 +170,3 @@ def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FIL
         thickness_nm=best_d, residual_rms=best_r, runner_up_thickness_nm=float(runner[1]),
         runner_up_residual_rms=float(runner[0]), scale=float(s[0]), angle_deg=float(angle_deg),
         grid_thickness_nm=grid, grid_residual_rms=res)
-
-
-def read_spectrum_csv(path):
-    """Read a ``wavelength_nm,reflectance`` CSV (header required; extra columns ignored).
-
-    Reflectance may be a fraction (0-1) or a percentage: a column with a value above 1 (which
-    no fraction has) is read as percent and divided by 100 (logged). A spectrum that never
-    exceeds :data:`PLAUSIBLE_MAX_REFLECTANCE` is accepted with a warning (anodized titanium
-    reflects 20-60 % at its maxima: a unit or scale mistake). A UTF-8 byte-order mark is
-    accepted.
-
-    Returns
-    -------
-    wavelength_nm, reflectance : ndarray (N,), float64
-
-    Raises
-    ------
-    InputError
-        Naming the file, and the line for a bad value; also for more than
-        :data:`~microfacet.io.limits.MAX_SPECTRUM_ROWS` rows or fewer than
-        :data:`MIN_WAVELENGTHS` distinct wavelengths.
-    """
-    path = Path(path)
-    shown = one_line(path)
-    if not path.is_file():
-        raise InputError(f"{shown}: no such file")
-    rows = []
-    try:
-        with path.open(newline="", encoding="utf-8-sig") as f:
-            for row in csv.reader(f):
-                if row and any(c.strip() for c in row):
-                    rows.append(row)
-                    if len(rows) > MAX_SPECTRUM_ROWS + 1:
-                        raise InputError(f"{shown}: more than {MAX_SPECTRUM_ROWS:,} rows; a "
-                                         f"spectrum has a few thousand at most")
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise InputError(f"{shown}: cannot read ({exc})") from None
-    if not rows:
-        raise InputError(f"{shown}: empty file")
-    header = [c.strip() for c in rows[0]]
-    for key in ("wavelength_nm", "reflectance"):
-        if key not in header:
-            raise InputError(f"{shown}: missing column {key!r} (header is {','.join(header)})")
-    iw, ir = header.index("wavelength_nm"), header.index("reflectance")
-    wl, R = [], []
-    for lineno, row in enumerate(rows[1:], start=2):
-        try:
-            w, r = float(row[iw]), float(row[ir])
-        except (ValueError, IndexError):
-            raise InputError(f"{shown}: line {lineno}: expected numbers in columns "
-                             f"wavelength_nm and reflectance, got "
-                             f"{one_line(','.join(row))[:80]!r}") from None
-        if not (np.isfinite(w) and np.isfinite(r)):
-            raise InputError(f"{shown}: line {lineno}: non-finite value")
-        wl.append(w)
-        R.append(r)
-    wl, R = np.array(wl), np.array(R)
-    distinct = np.unique(wl).size
-    if distinct < MIN_WAVELENGTHS:
-        raise InputError(f"{shown}: column 'wavelength_nm': {distinct} distinct wavelength(s) "
-                         f"in {len(wl)} rows; a thickness fit needs at least {MIN_WAVELENGTHS}")
-    if distinct < FEW_WAVELENGTHS:
-        log.warning("%s: only %d distinct wavelengths; interference minima of different orders "
-                    "may fit equally well (compare the runner-up)", shown, distinct)
-    if 1.0 + 1e-6 < R.max() <= 100:  # a reflectance above 1 cannot be a fraction
-        log.info("%s: reflectance read as percent (largest value %g) and divided by 100",
-                 shown, R.max())
-        R = R / 100.0
-    if R.min() < 0 or R.max() > 1.0 + 1e-6:
-        raise InputError(f"{shown}: column 'reflectance' must be a fraction 0-1 or a percentage")
-    if R.max() < PLAUSIBLE_MAX_REFLECTANCE:
-        log.warning("%s: the largest reflectance is %.3g (%.2g %%); anodized titanium reflects "
-                    "20-60 %% at its maxima: check the file's unit (fraction or percent) or its "
-                    "scale (fit_scale fits one)", shown, R.max(), 100 * R.max())
-    order = np.argsort(wl)
-    return wl[order], R[order]

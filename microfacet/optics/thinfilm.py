@@ -34,9 +34,12 @@ S. J. Byrnes, "Multilayer optical calculations", arXiv:1603.02720 (the conventio
 from __future__ import annotations
 
 import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+
+from .constants import optical_constants
 
 __all__ = [
     "FresnelProducts",
@@ -312,7 +315,6 @@ def _run_blocks(fn, shape):
         for blk in blocks:
             fn(blk)
         return
-    from concurrent.futures import ThreadPoolExecutor
 
     # numpy releases the GIL inside each ufunc, so blocks run concurrently. The
     # numpy error state is thread-local: carry the caller's into the workers.
@@ -449,8 +451,6 @@ def _check_index(n, name):
 
 def _resolve(n, wavelength_nm, name):
     if isinstance(n, str):
-        from .constants import optical_constants
-
         try:
             return optical_constants(n, wavelength_nm)
         except ValueError as exc:

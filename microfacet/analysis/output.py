@@ -1,0 +1,194 @@
+"""What a results folder holds: the maps, tables and ``summary.json`` of an analysis, written
+through :mod:`microfacet.io.results` (the one module that writes and reads the folder).
+
+The report is a separate step (:func:`microfacet.report.write_report`), which the command
+line and ``batch`` run on the written folder.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import importlib.metadata
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..core.densities import cell_edges, pdf_table
+from ..io.outdir import atomic_output_dir
+from ..io.results import json_safe, write_results_files
+
+__all__ = ["build_summary", "results_size_bytes", "save_results", "write_results"]
+
+#: Bytes per pixel of the results folder (float32 maps, normals, mask, facets, PNG) and the
+#: report's size.
+_RESULT_BYTES_PER_PIXEL = 64
+_REPORT_BYTES = 8 << 20
+_ROI_COLUMNS = ["row0", "col0", "size", "thickness_nm", "mean_delta_e", "n_pixels", "width",
+                "runner_up_thickness_nm", "runner_up_delta_e", "ambiguity_delta_e"]
+_ROI_FMT = ["%d", "%d", "%d", "%.3f", "%.4f", "%d", "%d", "%.3f", "%.4f", "%.4f"]
+
+
+def results_size_bytes(shape, *, report: bool = True) -> int:
+    """Expected size of the results folder of an analysis of ``shape`` = (H, W) images."""
+    return _RESULT_BYTES_PER_PIXEL * int(shape[0]) * int(shape[1]) + (_REPORT_BYTES if report
+                                                                       else 0)
+
+
+def _versions():
+    out = {"microfacet": __version__}
+    for name in ("numpy", "scipy", "colour-science", "scikit-image", "scikit-learn",
+                 "opencv-contrib-python-headless"):
+        try:
+            out[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+def _thickness_pdf(r):
+    th = r.thickness_nm[np.isfinite(r.thickness_nm)]
+    if not th.size or r.thickness_fit is None:
+        return np.empty((0, 3))
+    lo, hi = math.floor(th.min()) - 10, math.ceil(th.max()) + 10
+    grid = np.arange(max(lo, 0), hi + 1e-9, 0.5)
+    return pdf_table(th, r.thickness_fit.mixture, grid=grid)
+
+
+def _ndf_pdf(r):
+    tl = r.tilt_deg[np.isfinite(r.tilt_deg)]
+    if not tl.size or r.ndf_fit is None:
+        return np.empty((0, 3))
+    # Equal cells of <= 0.5° exactly covering [0, max_tilt] (tilts lie there), at least two
+    # (pdf_table's minimum) even for a tiny numerical aperture.
+    n_cells = max(2, math.ceil(r.max_tilt_deg / 0.5 - 1e-9))
+    grid = (np.arange(n_cells) + 0.5) * (r.max_tilt_deg / n_cells)
+    # Tilts at 0 or max_tilt may fall a rounding error outside the outer cell edges (float32
+    # map, edges from the grid): clip them onto those edges.
+    _, edges = cell_edges(grid)
+    tl = np.clip(tl.astype(np.float64), edges[0], edges[-1])
+    return pdf_table(tl, r.ndf_fit.mixture, grid=grid)
+
+
+def save_results(result, folder) -> None:
+    """Write the results of ``result`` into the existing folder ``folder`` (normally the
+    temporary folder of an :class:`~microfacet.io.outdir.OutputFolder`)."""
+    r = result
+    t0 = time.perf_counter()
+    rel = np.isfinite(r.focus.height_um)
+    roi = r.roi
+    roi_rows = np.column_stack([roi.row0, roi.col0, np.full(roi.row0.size, roi.height_px),
+                                roi.thickness_nm, roi.mean_delta_e, roi.n_pixels,
+                                np.full(roi.row0.size, roi.width_px),
+                                roi.runner_up_thickness_nm, roi.runner_up_delta_e,
+                                roi.ambiguity_delta_e])
+    maps = {
+        "height_um": r.focus.height_um, "normals": np.where(rel[..., None], r.normals, np.nan),
+        "reliability_db": r.focus.reliability_db, "tilt_height_deg": r.tilt_height_deg,
+        "thickness_nm": r.thickness_nm, "tilt_deg": r.tilt_deg,
+        "tilt_sigma_deg": r.tilt_sigma_deg, "delta_e": r.delta_e,
+        "colour_weight": r.colour_weight, "mask": r.mask.mask, "facets": r.facets,
+    }
+    summary = build_summary(r)
+    summary["timings_s"]["write"] = round(time.perf_counter() - t0, 4)
+    write_results_files(
+        folder, summary=summary, maps=maps,
+        images={"all_in_focus": (r.focus.all_in_focus,
+                                 16 if r.stack.dtype == np.uint16 else 8)},
+        tables={"thickness_roi": (roi_rows, _ROI_COLUMNS, _ROI_FMT),
+                "thickness_pdf": (_thickness_pdf(r), ["thickness_nm", "density",
+                                                      "mixture_density"], "%.6g"),
+                "ndf_pdf": (_ndf_pdf(r), ["tilt_deg", "density", "mixture_density"], "%.6g")})
+
+
+def write_results(result, out, *, overwrite=False) -> Path:
+    """Write the results folder (``docs/results-format.md``) of ``result`` atomically.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+    out : path-like
+        The results folder: new, empty, or (with ``overwrite``) an earlier results folder;
+        never the stack or a folder that holds it (:mod:`microfacet.io.outdir`).
+    overwrite : bool
+        Replace an existing results folder.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    InputError
+        ``out`` breaks the rules of :mod:`microfacet.io.outdir`, another run is writing it, or
+        the disk is read-only or too full (checked before anything is written).
+
+    Notes
+    -----
+    The report is a separate step: ``microfacet.report.write_report(out)``.
+    """
+    with atomic_output_dir(out, kind="results", overwrite=overwrite,
+                           inputs=[result.stack.path],
+                           expected_bytes=results_size_bytes(result.stack.shape, report=False)
+                           ) as tmp:
+        save_results(result, tmp)
+    return Path(out)
+
+
+def build_summary(r) -> dict:
+    """``summary.json`` of an :class:`~microfacet.analysis.pipeline.AnalysisResult` (the
+    keys of docs/results-format.md)."""
+    st = r.stack
+    roi = r.roi
+    cwt = r.colour_weight[np.isfinite(r.colour_weight)]
+    opts = dataclasses.asdict(r.options)
+    empty_mix = {"components": [], "bic": None}
+    thick_mix = r.thickness_fit.to_json() if r.thickness_fit is not None else empty_mix
+    ndf_mix = r.ndf_fit.to_json() if r.ndf_fit is not None else empty_mix
+    ok_roi = np.isfinite(roi.thickness_nm)
+    s = {
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "mode": r.options.mode,
+        "inputs": {"stack": str(st.path), "shape": list(st.shape), "n_slices": st.n_slices,
+                   "pixel_size_um": st.pixel_size_um,
+                   "z_um_range": ([float(np.min(st.z_um)), float(np.max(st.z_um))]
+                                  if st.n_slices else None),
+                   "height_source": "focus stack" if st.n_slices else "microscope export",
+                   **r.optics},
+        "parameters": opts,
+        "versions": _versions(),
+        "film": r.optics["film"], "substrate": r.optics["substrate"],
+        "illuminant": r.optics["illuminant"],
+        "thickness": {
+            "mixture": thick_mix,
+            "roi": {"count": int(roi.thickness_nm.size), "fitted": int(ok_roi.sum()),
+                    "thickness_nm_mean": float(np.mean(roi.thickness_nm[ok_roi]))
+                    if ok_roi.any() else None,
+                    "ambiguous_count": int(np.sum(roi.ambiguity_delta_e[ok_roi] < 1.0))},
+        },
+        "ndf": {"mixture": ndf_mix, "max_tilt_deg": r.max_tilt_deg,
+                "histogram": "per-pixel tilt of unmasked pixels (projected-area density)"},
+        "exposure": r.exposure,
+        "exposure_source": r.exposure_source,
+        "delta_e": r.delta_e_stats,
+        "masked_fraction": r.mask.fraction,
+        "mask": r.mask.fractions(),
+        "colour_noise_de": r.noise_de,
+        "tilt_information": {
+            "colour_weight_mean": float(cwt.mean()) if cwt.size else None,
+            "colour_dominated_fraction": float(np.mean(cwt > 0.5)) if cwt.size else None,
+            "tilt_sigma_deg_median": float(np.nanmedian(r.tilt_sigma_deg))
+            if np.isfinite(r.tilt_sigma_deg).any() else None,
+        },
+        "height": {"unreliable_fraction": float(np.mean(~np.isfinite(r.focus.height_um)))},
+        "colour_table": {"spectral_step_nm": r.table.spectral_step_nm,
+                         "spectral_error_de00": r.table.spectral_error_de00,
+                         "interp_error_de00": r.table.interp_error_de00,
+                         "theta_step_deg": r.table.theta_step_deg,
+                         "thickness_step_nm": r.table.thickness_step_nm},
+        "timings_s": dict(r.timings_s),
+    }
+    return json_safe(s)

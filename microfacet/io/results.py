@@ -1,0 +1,347 @@
+"""The results folder (format ``microfacet-results/1``): the one module that writes and reads it.
+
+The analysis (:mod:`microfacet.analysis.output`) decides *what* a results folder holds and
+hands the arrays, tables and summary to :func:`write_results_files`; the report, ``batch``
+and ``simulate`` open a folder with :class:`Results`, which reads ``summary.json`` at once and
+every map, image and table lazily, on first use. docs/results-format.md describes every file
+and key.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> d = pathlib.Path(tempfile.mkdtemp())
+>>> write_results_files(d, summary={"thickness": {"mixture": {"components": [
+...     {"weight": 1.0, "mean_nm": 51.0, "sd_nm": 2.0}]}}},
+...     maps={"thickness_nm": np.full((2, 3), 51.0)})
+>>> r = Results(d)
+>>> r.map("thickness_nm").shape, r.map("tilt_deg") is None
+((2, 3), True)
+>>> r.thickness_mixture().means_nm.tolist()
+[51.0]
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..core.distributions import NDFMixture, ThicknessMixture
+from ..core.errors import InputError, one_line
+from .images import read_png, write_image
+from .jsonfile import read_json
+
+__all__ = ["FORMAT", "IMAGES", "MAPS", "Results", "TABLES", "json_safe",
+           "write_results_files"]
+
+FORMAT = "microfacet-results/1"
+#: Maps of a results folder: name -> (file, what it holds). Shapes are H×W (H×W×3 for the
+#: normals); floats are float32 with NaN where there is no value.
+MAPS = {
+    "height_um": ("height_um.npy", "height from focus, µm (NaN where unreliable)"),
+    "normals": ("normals.npy", "unit normals (x right, y up, z up), H×W×3"),
+    "reliability_db": ("reliability_db.npy", "focus reliability, dB"),
+    "tilt_height_deg": ("tilt_height_deg.npy", "tilt of the (filled) height map, degrees"),
+    "thickness_nm": ("thickness_nm.npy", "oxide thickness, nm (NaN where masked)"),
+    "tilt_deg": ("tilt_deg.npy", "facet tilt, degrees from the optical axis"),
+    "tilt_sigma_deg": ("tilt_sigma_deg.npy", "1-σ uncertainty of tilt_deg, degrees"),
+    "delta_e": ("delta_e.npy", "CIEDE2000 between each pixel and its model colour"),
+    "colour_weight": ("colour_weight.npy", "share of the tilt information from colour"),
+    "mask": ("mask.npy", "bool, True where the pixel carries no colour information"),
+    "facets": ("facets.npy", "int32 facet label per pixel (joint mode)"),
+}
+_NDIM = {"normals": 3}
+#: Images: name -> file.
+IMAGES = {"all_in_focus": "all_in_focus.png"}
+#: Tables: name -> (file, columns that must be there).
+TABLES = {
+    "thickness_roi": ("thickness_roi.csv",
+                      ("row0", "col0", "size", "thickness_nm", "mean_delta_e", "n_pixels")),
+    "thickness_pdf": ("thickness_pdf.csv", ("thickness_nm", "density", "mixture_density")),
+    "ndf_pdf": ("ndf_pdf.csv", ("tilt_deg", "density", "mixture_density")),
+}
+
+
+def json_safe(x):
+    """``x`` made JSON-safe: NaN and ±inf → None, numpy scalars and arrays → Python.
+
+    >>> json_safe({"a": np.float32(1.5), "b": [np.nan, np.int64(2)], "c": np.bool_(True)})
+    {'a': 1.5, 'b': [None, 2], 'c': True}
+    """
+    if isinstance(x, dict):
+        return {str(k): json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_safe(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return json_safe(x.tolist())
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(float(x)) else None
+    return x
+
+
+def _dump(path: Path, summary: dict) -> None:
+    text = json.dumps(json_safe(summary), indent=2, allow_nan=False) + "\n"
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def write_results_files(folder, *, summary: dict, maps: dict, images: dict | None = None,
+                        tables: dict | None = None) -> None:
+    """Write the files of a results folder into ``folder`` (which exists; normally the
+    temporary folder of a :class:`~microfacet.io.outdir.OutputFolder`).
+
+    Parameters
+    ----------
+    folder : path-like
+    summary : dict
+        ``summary.json`` content (made JSON-safe; ``format`` is set).
+    maps : dict of str to ndarray
+        Names of :data:`MAPS`; floats are written as float32, ``mask`` as bool, ``facets``
+        as int32. None values are skipped.
+    images : dict of str to (ndarray, int), optional
+        Names of :data:`IMAGES` → (image in [0, 1] or code values, bit depth 8 or 16).
+    tables : dict of str to (ndarray (N, C), list of str, list of str), optional
+        Names of :data:`TABLES` → (rows, column names, printf formats).
+
+    Raises
+    ------
+    ValueError
+        An unknown name.
+    """
+    folder = Path(folder)
+    for name, arr in maps.items():
+        if name not in MAPS:
+            raise ValueError(f"maps: unknown map {name!r}; known: {', '.join(MAPS)}")
+        if arr is None:
+            continue
+        a = np.asarray(arr)
+        a = (a.astype(bool) if name == "mask" else a.astype(np.int32) if name == "facets"
+             else a.astype(np.float32))
+        np.save(folder / MAPS[name][0], a)
+    for name, (img, bit_depth) in (images or {}).items():
+        if name not in IMAGES:
+            raise ValueError(f"images: unknown image {name!r}; known: {', '.join(IMAGES)}")
+        write_image(folder / IMAGES[name], img, bit_depth=bit_depth)
+    for name, (rows, columns, fmt) in (tables or {}).items():
+        if name not in TABLES:
+            raise ValueError(f"tables: unknown table {name!r}; known: {', '.join(TABLES)}")
+        rows = np.asarray(rows, dtype=np.float64).reshape(-1, len(columns))
+        np.savetxt(folder / TABLES[name][0], rows, delimiter=",", comments="",
+                   header=",".join(columns), fmt=fmt)
+    _dump(folder / "summary.json", {"format": FORMAT, **summary})
+
+
+class Results:
+    """A results folder, opened for reading: ``summary.json`` now, the rest on first use.
+
+    Parameters
+    ----------
+    folder : path-like
+        A results folder (docs/results-format.md). Only ``summary.json`` is required; a
+        missing map, image or table reads as None.
+
+    Raises
+    ------
+    InputError
+        ``folder`` or its ``summary.json`` is missing, unreadable, not an object, or of
+        another format (the message names the file).
+    """
+
+    def __init__(self, folder):
+        self.path = Path(folder)
+        f = self.path / "summary.json"
+        if not self.path.is_dir():
+            raise InputError(f"{one_line(self.path)}: results folder not found")
+        if not f.is_file():
+            raise InputError(f"{one_line(f)}: missing (not a results folder)")
+        summary = read_json(f)
+        if not isinstance(summary, dict):
+            raise InputError(f"{one_line(f)}: must hold a JSON object")
+        fmt = summary.get("format")
+        if fmt is not None and not str(fmt).startswith("microfacet-results/"):
+            raise InputError(f"{one_line(f)}: key 'format': {fmt!r} is not {FORMAT!r}")
+        self.summary = summary
+        self.summary_mtime = f.stat().st_mtime
+        self._cache: dict = {}
+
+    # -- summary ---------------------------------------------------------------------
+    def get(self, *keys):
+        """``summary[k0][k1]...``, or None where a key is missing.
+
+        >>> import tempfile, pathlib
+        >>> d = pathlib.Path(tempfile.mkdtemp())
+        >>> _ = (d / "summary.json").write_text('{"delta_e": {"mean": 1.5}}')
+        >>> Results(d).get("delta_e", "mean"), Results(d).get("ndf", "identified")
+        (1.5, None)
+        """
+        v = self.summary
+        for k in keys:
+            if not isinstance(v, dict) or k not in v:
+                return None
+            v = v[k]
+        return v
+
+    @property
+    def parameters(self) -> dict:
+        """The analysis parameters recorded in ``summary.json`` (empty if absent)."""
+        p = self.summary.get("parameters")
+        return p if isinstance(p, dict) else {}
+
+    def differing_parameters(self, parameters: dict) -> list[str]:
+        """Names of the ``parameters`` (JSON-safe values) that this folder was not made with."""
+        have = self.parameters
+        want = json_safe(parameters)
+        return sorted(k for k in want if have.get(k) != want[k])
+
+    def _mixture(self, key, cls):
+        data = self.get(key, "mixture")
+        if data is None or (isinstance(data, dict) and data.get("components") == []):
+            return None  # no fit (the analysis writes an empty component list)
+        try:
+            return cls.from_json(data)
+        except (ValueError, TypeError, AttributeError) as exc:
+            raise InputError(f"{one_line(self.path / 'summary.json')}: key "
+                             f"'{key}.mixture': {exc}") from None
+
+    def thickness_mixture(self) -> ThicknessMixture | None:
+        """The fitted thickness mixture, or None when there is none."""
+        return self._mixture("thickness", ThicknessMixture)
+
+    def ndf_mixture(self) -> NDFMixture | None:
+        """The fitted NDF lobes, or None when there are none."""
+        return self._mixture("ndf", NDFMixture)
+
+    def record(self, *keys_and_value) -> None:
+        """Set ``summary[k0]...[kn] = value`` and rewrite ``summary.json`` atomically
+        (e.g. ``record("timings_s", "report", 2.5)`` after the report step)."""
+        *keys, value = keys_and_value
+        d = self.summary
+        for k in keys[:-1]:
+            d = d.setdefault(k, {})
+        d[keys[-1]] = value
+        _dump(self.path / "summary.json", self.summary)
+
+    # -- files -----------------------------------------------------------------------
+    def _file(self, name):
+        f = self.path / name
+        return f if f.is_file() else None
+
+    def map(self, name) -> np.ndarray | None:
+        """Map ``name`` of :data:`MAPS` (float32, ``mask`` bool, ``facets`` int32), or None.
+
+        Raises
+        ------
+        InputError
+            The file is present but unreadable or of the wrong dimensions.
+        """
+        if name in self._cache:
+            return self._cache[name]
+        if name not in MAPS:
+            raise ValueError(f"name: unknown map {name!r}; known: {', '.join(MAPS)}")
+        f = self._file(MAPS[name][0])
+        a = None
+        if f is not None:
+            try:
+                a = np.load(f, allow_pickle=False)
+            except (OSError, ValueError) as exc:
+                raise InputError(f"{one_line(f)}: cannot read ({exc})") from None
+            ndim = _NDIM.get(name, 2)
+            if a.ndim != ndim or min(a.shape) < 1:
+                raise InputError(f"{one_line(f)}: expected a {ndim}-D array, got shape "
+                                 f"{a.shape}")
+            if name == "mask":
+                a = a != 0 if a.dtype != bool else a
+            elif name != "facets":
+                if not np.issubdtype(a.dtype, np.number):
+                    raise InputError(f"{one_line(f)}: expected numbers, got dtype {a.dtype}")
+                a = a.astype(np.float32, copy=False)
+        self._cache[name] = a
+        return a
+
+    def image(self, name) -> np.ndarray | None:
+        """Image ``name`` of :data:`IMAGES` as float RGB (or grey) in [0, 1], or None."""
+        if name in self._cache:
+            return self._cache[name]
+        f = self._file(IMAGES[name])
+        img = None if f is None else read_png(f)
+        self._cache[name] = img
+        return img
+
+    def table(self, name) -> dict | None:
+        """Table ``name`` of :data:`TABLES` as a dict of float columns, or None.
+
+        Raises
+        ------
+        InputError
+            The file is present but empty, lacks a required column or holds a non-number.
+        """
+        if name in self._cache:
+            return self._cache[name]
+        file, required = TABLES[name]
+        f = self._file(file)
+        out = None
+        if f is not None:
+            out = _read_table(f, required)
+        self._cache[name] = out
+        return out
+
+    # -- completeness ----------------------------------------------------------------
+    @staticmethod
+    def complete(folder, parameters: dict | None = None) -> tuple[bool, str]:
+        """Whether ``folder`` holds complete results (made with ``parameters``, if given).
+
+        Returns
+        -------
+        complete : bool
+        reason : str
+            Why not ("" when complete, or when the folder does not exist).
+        """
+        folder = Path(folder)
+        if not folder.exists():
+            return False, ""
+        try:
+            res = Results(folder)
+        except InputError as exc:
+            return False, f"{exc} (incomplete or not results)"
+        if res.summary.get("format") != FORMAT:
+            return False, f"{one_line(folder / 'summary.json')}: key 'format' is not {FORMAT}"
+        if parameters is not None:
+            diff = res.differing_parameters(parameters)
+            if diff:
+                return False, (f"{one_line(folder / 'summary.json')}: made with different "
+                               f"parameters ({', '.join(diff)}); re-analysed only with "
+                               f"overwrite")
+        return True, ""
+
+
+def _read_table(f: Path, required) -> dict:
+    try:
+        with open(f, newline="", encoding="utf-8-sig") as fh:
+            rows = list(csv.reader(fh))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"{one_line(f)}: cannot read ({exc})") from None
+    if not rows:
+        raise InputError(f"{one_line(f)}: empty (expected the header {','.join(required)})")
+    head = [h.strip() for h in rows[0]]
+    absent = [c for c in required if c not in head]
+    if absent:
+        raise InputError(f"{one_line(f)}: missing column(s) {', '.join(absent)}")
+    out = {}
+    for c in head:
+        j = head.index(c)
+        try:
+            out[c] = np.array([float(r[j]) if r[j].strip() else np.nan for r in rows[1:] if r],
+                              dtype=np.float64)
+        except (ValueError, IndexError):
+            raise InputError(f"{one_line(f)}: column {c} holds a value that is not a number") \
+                from None
+    return out

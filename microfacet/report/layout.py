@@ -1,0 +1,438 @@
+"""Page geometry and drawing helpers shared by the report's pages.
+
+A page is one A4-landscape matplotlib ``Figure`` laid out in inches (:class:`Page`): no layout
+engine, so every report has pages of identical structure and draws quickly. On it the pages
+place map panels (:func:`map_panel`, :func:`category_panel`, :func:`blank_panel`) and tables
+(:func:`draw_table`). The small helpers format numbers for tables (:func:`fmt`, :func:`pct`,
+:func:`shorten`) and prepare arrays for display (:func:`downsample`,
+:func:`colour_limits`, :func:`histogram`, :func:`quantile_range`).
+
+Colour maps are perceptually uniform and sequential (no quantity drawn is signed); a pixel
+without a value (masked, or NaN) is drawn in :data:`NO_VALUE` grey on every map, and each map
+states its share of such pixels next to a grey swatch.
+
+Importing this module does not import matplotlib; drawing does.
+
+Examples
+--------
+>>> fmt(1.23456, ".3g", "nm"), fmt(12.0, ".3g", "°"), fmt(None), pct(0.25)
+('1.23 nm', '12°', '—', 25.0)
+>>> shorten("/a/long/path/to/a/stack", 12)
+'…/to/a/stack'
+"""
+
+from __future__ import annotations
+
+import math
+import textwrap
+import warnings
+
+import numpy as np
+
+from ..core.densities import histogram_density
+from ..core.lazy import load
+
+mpl = load("matplotlib")
+mcolors = load("matplotlib.colors")
+mpatches = load("matplotlib.patches")
+mcollections = load("matplotlib.collections")
+
+__all__ = ["CMAPS", "COMPONENT_COLOURS", "DE", "Geometry", "HEIGHT_TILT", "HIST_EDGE",
+           "HIST_FILL", "MAX_MAP_PX", "NO_VALUE", "PAGE_IN", "PDF_DPI", "PNG_DPI", "Page", "RC",
+           "blank_panel", "category_panel", "colormap", "colour_limits", "colourbar",
+           "component_colour", "downsample", "draw_table", "finite", "fmt", "histogram",
+           "image_axes", "map_panel", "number", "pct", "positive", "quantile_range",
+           "shorten", "wrap"]
+
+#: Maps are block-averaged so that neither side exceeds this many pixels (map panels are
+#: 2.2–3.3 inches wide: 512 pixels is over 150 per inch; larger maps only fatten the PDF).
+MAX_MAP_PX = 512
+#: Colour of a pixel without a value (masked or NaN) on every map.
+NO_VALUE = "#a3a3a3"
+
+PAGE_IN = (11.69, 8.27)  # A4 landscape
+PDF_DPI = 150   # resolution of the images the PDF resamples (all-in-focus, angular maps)
+PNG_DPI = 110   # 1286 × 910 pixel page PNGs
+_MARGIN_X = 0.45
+_HEADER_IN = 0.82     # title, sub-title and a rule
+_FOOTER_IN = 0.40
+#: matplotlib rc parameters of every page.
+RC = {
+    "font.size": 9,
+    "axes.titlesize": 10.5,
+    "axes.labelsize": 9,
+    "xtick.labelsize": 8,
+    "ytick.labelsize": 8,
+    "legend.fontsize": 7.5,
+    "pdf.fonttype": 3,
+    "pdf.compression": 6,
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "axes.titlepad": 4.0,
+    "axes.titley": 1.0,   # fixed title position: no automatic placement (slow)
+    "image.interpolation": "none",   # vector output embeds the pixels unresampled
+    "image.interpolation_stage": "rgba",
+}
+#: Mixture components, sorted by mean thickness / lobe width (blue, green, red as the
+#: seed's Fig. 18c for thin, middle and thick).
+COMPONENT_COLOURS = ("#1f77b4", "#2ca02c", "#d62728", "#ff7f0e", "#8c564b", "#e377c2",
+                     "#bcbd22", "#17becf", "#7f7f7f", "#9467bd")
+HEIGHT_TILT = "#7b3294"   # tilt from the height map, overlaid on the tilt histogram
+HIST_FILL, HIST_EDGE = "#dcdcdc", "#8a8a8a"
+#: Colour map of each kind of map.
+CMAPS = {"height": "plasma", "thickness": "viridis", "delta_e": "inferno",
+         "tilt": "magma", "sigma": "inferno"}
+DE = "ΔE₀₀"
+
+
+def component_colour(i):
+    """Colour of mixture component ``i`` (0-based)."""
+    return COMPONENT_COLOURS[i % len(COMPONENT_COLOURS)]
+
+
+# --------------------------------------------------------------------------- numbers, text
+def number(v):
+    """``float(v)`` if v is a finite real number (not bool), else None."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def positive(v):
+    """``float(v)`` if v is a finite number > 0, else None."""
+    v = number(v)
+    return v if v is not None and v > 0 else None
+
+
+def fmt(v, spec=".3g", unit=""):
+    """``v`` formatted with ``spec`` and ``unit`` ("°" without a space), "—" if not a number."""
+    v = number(v)
+    if v is None:
+        return "—"
+    return f"{v:{spec}}" + ((unit if unit == "°" else f" {unit}") if unit else "")
+
+
+def pct(v):
+    """A fraction as a percentage, or None if not a number."""
+    v = number(v)
+    return None if v is None else 100.0 * v
+
+
+def shorten(s, n):
+    """``str(s)``, its start replaced by "…" if longer than ``n`` characters."""
+    s = str(s)
+    return s if len(s) <= n else "…" + s[-(n - 1):]
+
+
+def wrap(text, width):
+    """Greedy wrap on ", " and spaces (a table cell holds one line per row)."""
+    return textwrap.wrap(text, width=width, break_long_words=True) or [""]
+
+
+# --------------------------------------------------------------------------- arrays
+def finite(a, mask=None):
+    """The finite values of ``a`` (None: none) outside ``mask`` (True = masked), 1-D float."""
+    if a is None:
+        return np.empty(0)
+    v = a if mask is None or mask.shape != a.shape else np.where(mask, np.nan, a)
+    v = np.asarray(v, dtype=np.float64).ravel()
+    return v[np.isfinite(v)]
+
+
+def downsample(a, max_px=MAX_MAP_PX):
+    """Block-average ``a`` (H×W or H×W×C; NaN-aware) so neither side exceeds ``max_px``.
+
+    Returns the reduced array and the block size (1 if unchanged). A boolean array gives a
+    boolean array (a block is True if at least half of it is).
+
+    >>> small, block = downsample(np.ones((1030, 20), bool))
+    >>> small.shape, small.dtype.name, block
+    ((344, 7), 'bool', 3)
+    """
+    h, w = a.shape[:2]
+    f = math.ceil(max(h, w) / max_px)
+    if f <= 1:
+        return a, 1
+    is_bool = a.dtype == bool
+    x = a.astype(np.float32)
+    H, W = math.ceil(h / f) * f, math.ceil(w / f) * f
+    pad = [(0, H - h), (0, W - w)] + [(0, 0)] * (x.ndim - 2)
+    x = np.pad(x, pad, constant_values=np.nan)
+    x = x.reshape((H // f, f, W // f, f) + x.shape[2:])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN blocks stay NaN
+        x = np.nanmean(x, axis=(1, 3))
+    return (x >= 0.5 if is_bool else x), f
+
+
+def colour_limits(values, lo=1.0, hi=99.0, *, floor=None):
+    """Robust colour limits (percentiles of the finite values) and the colour-bar extend.
+
+    >>> colour_limits(np.arange(101.0), 0.0, 99.0)
+    (0.0, 99.0, 'max')
+    """
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return 0.0, 1.0, "neither"
+    vmin, vmax = np.percentile(v, [lo, hi])
+    if floor is not None:
+        vmin = max(floor, vmin) if lo > 0 else floor
+    if not vmax > vmin:  # a constant map: a range of ±5 % (at least ±1) about it
+        d = max(abs(vmin) * 0.05, 1.0)
+        vmin, vmax = vmin - d, vmax + d
+        if floor is not None and vmin < floor:
+            vmin, vmax = floor, max(vmax, floor + d)
+    below, above = v.min() < vmin, v.max() > vmax
+    extend = {(True, True): "both", (True, False): "min", (False, True): "max"}.get(
+        (bool(below), bool(above)), "neither")
+    return float(vmin), float(vmax), extend
+
+
+def histogram(values, lo=None, hi=None, *, bins=80):
+    """(centres, density) of the finite ``values`` on ``bins`` equal bins over [lo, hi]
+    (default their range), or None if there are fewer than two values or none inside.
+
+    The density is :func:`microfacet.core.densities.histogram_density`'s (normalised over
+    the range); this adds only the display defaults.
+
+    >>> histogram(np.array([0.5, 1.5, 1.6, 2.5]), 0.0, 3.0, bins=3)[1].tolist()
+    [0.25, 0.5, 0.25]
+    """
+    values = finite(values)
+    if values.size < 2:
+        return None
+    lo = float(np.min(values)) if lo is None else lo
+    hi = float(np.max(values)) if hi is None else hi
+    if not hi > lo:
+        hi = lo + 1.0
+    try:
+        return histogram_density(values, bins=bins, range=(lo, hi))
+    except ValueError:  # no value inside [lo, hi]
+        return None
+
+
+def quantile_range(x, dens, q=(0.002, 0.998)):
+    """The (low, high) quantiles of a density tabulated at bin centres ``x``, or None.
+
+    >>> quantile_range(np.arange(5.0), np.array([0, 1, 1, 1, 0]), q=(0.1, 0.9))
+    (1.0, 3.0)
+    """
+    d = np.nan_to_num(np.asarray(dens, dtype=np.float64)).clip(0)
+    if x is None or d.sum() <= 0:
+        return None
+    c = np.cumsum(d) / d.sum()
+    return float(x[min(np.searchsorted(c, q[0]), x.size - 1)]), \
+        float(x[min(np.searchsorted(c, q[1]), x.size - 1)])
+
+
+# --------------------------------------------------------------------------- page
+class Page:
+    """One A4-landscape figure laid out in inches (bottom-left origin), no layout engine.
+
+    Fixed positions are an order of magnitude cheaper to draw than constrained layout
+    and keep the pages of every report identical in structure.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        Of size :data:`PAGE_IN`.
+
+    Attributes
+    ----------
+    W, H : float
+        Page size, inches.
+    left, right, bottom, top : float
+        The content area between the margins, the header and the footer, inches.
+    """
+
+    def __init__(self, fig):
+        self.fig = fig
+        self.W, self.H = fig.get_size_inches()
+        self.top = self.H - _HEADER_IN          # content area: [bottom, top] × [left, right]
+        self.bottom = _FOOTER_IN
+        self.left = _MARGIN_X
+        self.right = self.W - _MARGIN_X
+
+    def axes(self, x, y, w, h, **kw):
+        """Axes at ``(x, y)`` inches, ``w × h`` inches."""
+        return self.fig.add_axes((x / self.W, y / self.H, w / self.W, h / self.H), **kw)
+
+    def text(self, x, y, s, **kw):
+        """Figure text at ``(x, y)`` inches."""
+        return self.fig.text(x / self.W, y / self.H, s, **kw)
+
+    def grid(self, nrows, ncols, *, top=None, bottom=None, hgap=0.0, vgap=0.0,
+             widths=None, heights=None):
+        """Cells ``(x, y, w, h)`` in inches, row-major from the top left."""
+        top = self.top if top is None else top
+        bottom = self.bottom if bottom is None else bottom
+        widths = np.asarray(widths if widths is not None else [1.0] * ncols, float)
+        heights = np.asarray(heights if heights is not None else [1.0] * nrows, float)
+        ws = widths / widths.sum() * (self.right - self.left - hgap * (ncols - 1))
+        hs = heights / heights.sum() * (top - bottom - vgap * (nrows - 1))
+        cells = []
+        y = top
+        for r in range(nrows):
+            y -= hs[r]
+            x = self.left
+            for c in range(ncols):
+                cells.append((x, y, ws[c], hs[r]))
+                x += ws[c] + hgap
+            y -= vgap
+        return cells
+
+    def content(self):
+        """The whole content area as one cell ``(x, y, w, h)``."""
+        return (self.left, self.bottom, self.right - self.left, self.top - self.bottom)
+
+
+class Geometry:
+    """Axis units for the maps: µm if the pixel size is known, else pixels."""
+
+    def __init__(self, pixel_size_um):
+        self.px = pixel_size_um
+        self.unit = "µm" if pixel_size_um else "pixel"
+
+    def extent(self, shape, block=1):
+        """``imshow`` extent of a map of ``shape`` whose pixels are ``block`` pixels."""
+        s = (self.px or 1.0) * block
+        return (0.0, shape[1] * s, shape[0] * s, 0.0)
+
+    def label(self, ax):
+        """Label the axes of a map."""
+        ax.set_xlabel(f"x ({self.unit})", labelpad=2)
+        ax.set_ylabel(f"y ({self.unit})", labelpad=2)
+
+
+# --------------------------------------------------------------------------- map panels
+_MAP_MARGINS = dict(left=0.55, right=0.86, top=0.30, bottom=0.50)
+
+
+def colormap(name):
+    """The matplotlib colour map ``name`` with NaN drawn in :data:`NO_VALUE`."""
+    return mpl.colormaps[name].with_extremes(bad=NO_VALUE)
+
+
+def image_axes(pg, cell, shape):
+    """Axes in ``cell`` whose box has exactly the image's aspect (so a colour bar beside it
+    is as tall as the image), as large as the margins allow, centred; and that box."""
+    x, y, w, h = cell
+    m = _MAP_MARGINS
+    aw, ah = w - m["left"] - m["right"], h - m["top"] - m["bottom"]
+    r = shape[0] / shape[1]
+    iw, ih = (aw, aw * r) if aw * r <= ah else (ah / r, ah)
+    x0 = x + m["left"] + 0.5 * (aw - iw)
+    y0 = y + m["bottom"] + 0.5 * (ah - ih)
+    ax = pg.axes(x0, y0, iw, ih)
+    for sp in ax.spines.values():
+        sp.set_visible(True)
+        sp.set_linewidth(0.6)
+    return ax, (x0, y0, iw, ih)
+
+
+def blank_panel(pg, cell, text, title=None, shape=(1, 1)):
+    """An empty panel saying why, where a map of ``shape`` would be."""
+    ax, _ = image_axes(pg, cell, shape)
+    ax.set_axis_off()
+    if title:
+        ax.set_title(title)
+    ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes,
+            color="0.35", fontsize=9, wrap=True)
+    return ax
+
+
+def colourbar(pg, im, box, label, *, extend="neither", ticks=None, ticklabels=None,
+              no_value=None):
+    """A colour bar right of the image ``box``; below it, if ``no_value`` is a fraction,
+    a grey swatch saying what share of the map has no value."""
+    x0, y0, iw, ih = box
+    cax = pg.axes(x0 + iw + 0.08, y0, 0.13, ih)
+    cb = pg.fig.colorbar(im, cax=cax, extend=extend, ticks=ticks)
+    if ticklabels is not None:
+        cb.ax.set_yticklabels(ticklabels)
+    cb.set_label(label, labelpad=5)
+    cb.ax.tick_params(labelsize=7.5)
+    if no_value is not None:
+        pg.fig.add_artist(mpatches.Rectangle(
+            ((x0 + iw + 0.08) / pg.W, (y0 - 0.34) / pg.H), 0.13 / pg.W, 0.13 / pg.H,
+            facecolor=NO_VALUE, edgecolor="0.5", linewidth=0.5))
+        pg.text(x0 + iw + 0.26, y0 - 0.275, f"no value\n{100.0 * no_value:.1f} %",
+                fontsize=7, va="center", ha="left", color="0.25", linespacing=1.0)
+    return cb
+
+
+def map_panel(pg, cell, a, geom, *, title, label, cmap, limits=None, lo=1.0, hi=99.0,
+              floor=None):
+    """One H×W float map with a colour bar labelled ``label`` and a no-value swatch;
+    colour ``limits`` (vmin, vmax, extend) default to the ``lo``–``hi`` percentiles."""
+    small, block = downsample(a)
+    if limits is None:
+        limits = colour_limits(a, lo, hi, floor=floor)
+    vmin, vmax, extend = limits
+    ax, box = image_axes(pg, cell, small.shape)
+    im = ax.imshow(small, cmap=colormap(cmap), vmin=vmin, vmax=vmax, aspect="auto",
+                   extent=geom.extent(small.shape, block))
+    colourbar(pg, im, box, label, extend=extend, no_value=float(np.mean(~np.isfinite(a))))
+    ax.set_title(title)
+    geom.label(ax)
+    return ax
+
+
+def category_panel(pg, cell, codes, geom, *, colours, names, title, label, no_value):
+    """A map of small integer categories ``codes`` (−1 = no value) with a colour bar."""
+    block = max(1, math.ceil(max(codes.shape) / MAX_MAP_PX))
+    small = codes[::block, ::block]  # nearest: averaging would mix categories
+    k = len(colours)
+    cm = mcolors.ListedColormap(list(colours)).with_extremes(bad=NO_VALUE)
+    ax, box = image_axes(pg, cell, small.shape)
+    data = np.ma.masked_less(small.astype(np.float32), -0.5)
+    im = ax.imshow(data, cmap=cm, vmin=-0.5, vmax=k - 0.5, aspect="auto",
+                   extent=geom.extent(small.shape, block))
+    colourbar(pg, im, box, label, ticks=list(range(k)), ticklabels=list(names),
+              no_value=no_value)
+    ax.set_title(title)
+    geom.label(ax)
+    return ax
+
+
+# --------------------------------------------------------------------------- tables
+def draw_table(pg, x, y_top, w, rows, *, header=None, col_widths=None, fontsize=8.0,
+               row_h=0.205, title=None):
+    """A table of strings whose top-left corner is at ``(x, y_top)`` inches; returns the
+    y of its bottom edge.
+
+    Drawn as figure texts and one line collection: matplotlib's ``Axes.table`` takes
+    several times longer to draw.
+    """
+    if title:
+        pg.text(x, y_top - 0.02, title, fontsize=10, fontweight="bold", va="top")
+        y_top -= 0.27
+    all_rows = ([list(header)] if header is not None else []) + [list(r) for r in rows]
+    n = len(all_rows)
+    if n == 0:
+        return y_top
+    ncol = max(len(r) for r in all_rows)
+    cw = np.asarray(col_widths if col_widths is not None else [1.0] * ncol, float)
+    cx = x + np.concatenate([[0.0], np.cumsum(cw / cw.sum() * w)])
+    W, H = pg.W, pg.H
+    if header is not None:
+        pg.fig.add_artist(mpatches.Rectangle((x / W, (y_top - row_h) / H), w / W, row_h / H,
+                                             facecolor="#e8eef7", edgecolor="none", zorder=0))
+    segs = [[(x / W, (y_top - i * row_h) / H), ((x + w) / W, (y_top - i * row_h) / H)]
+            for i in range(n + 1)]
+    segs += [[(c / W, y_top / H), (c / W, (y_top - n * row_h) / H)] for c in cx]
+    pg.fig.add_artist(mcollections.LineCollection(segs, colors="0.8", linewidths=0.5,
+                                                  zorder=1))
+    pad = 0.07
+    for i, row in enumerate(all_rows):
+        yc = y_top - (i + 0.5) * row_h
+        is_head = header is not None and i == 0
+        for j, cell in enumerate(row):
+            if cell == "":
+                continue
+            pg.text(cx[j] + pad, yc, str(cell), fontsize=fontsize, va="center_baseline",
+                    ha="left", fontweight="bold" if is_head else "normal",
+                    color="0.25" if (j == 0 and not is_head) else "k")
+    return y_top - n * row_h

@@ -1,0 +1,238 @@
+"""Page 4 of the report, **parameters**: tables of the thickness components (weight, mean, SD),
+the NDF lobes (weight, slope SD as an angle, tan, Beckmann α), the analysis (mode, exposure,
+ΔE00, masking, optics, colour-table settings, ROIs) and the run (timings, versions, the files
+missing from the folder). :func:`parameter_tables` returns the same tables as strings."""
+
+from __future__ import annotations
+
+import math
+
+from .context import Context
+from .layout import DE, draw_table, fmt, number, pct, shorten, wrap
+
+__all__ = ["NAME", "TITLE", "draw", "parameter_tables"]
+
+NAME = "parameters"
+TITLE = "fitted parameters"
+
+_STEP_NAMES = {"height_from_focus": "height from focus", "colour_and_mask": "colour and mask",
+               "thickness_roi": "thickness per ROI", "tilt_per_pixel": "tilt per pixel",
+               "facet_fits": "facet fits", "mixtures": "mixture fits",
+               "write": "writing the results"}
+
+
+def parameter_tables(results_dir) -> dict:
+    """The tables of the report's parameter page, as lists of rows of strings.
+
+    Parameters
+    ----------
+    results_dir : path-like or Context
+        A results folder, or one already opened for the report.
+
+    Returns
+    -------
+    dict
+        ``"thickness"`` (header ``component, weight, mean (nm), SD (nm)``), ``"ndf"``
+        (``lobe, weight, slope SD (°), tan(slope SD), Beckmann α``), ``"analysis"`` and
+        ``"run"`` (``quantity, value`` pairs: versions, missing files), ``"timings"``
+        (``step, time``), each ``{"header": [...], "rows": [[...]]}``; ``"thickness"`` and
+        ``"ndf"`` also have a ``"note"`` on the fit. Numbers are formatted as printed:
+        weights with 3 decimals, thickness mean with 1 and SD with 2 (nm), lobe SD with 2 (°).
+
+    Raises
+    ------
+    InputError
+        ``results_dir`` or its ``summary.json`` is missing or malformed.
+
+    Examples
+    --------
+    >>> parameter_tables("results/sample1")["thickness"]["rows"][0]  # doctest: +SKIP
+    ['1', '0.085', '108.0', '1.28']
+    """
+    ctx = results_dir if isinstance(results_dir, Context) else Context.open(results_dir)
+    out = {}
+    rows = []
+    if ctx.thick is not None:
+        for i, (w, m, s) in enumerate(ctx.thick.components):
+            rows.append([f"{i + 1}", f"{w:.3f}", f"{m:.1f}", f"{s:.2f}"])
+    out["thickness"] = {"header": ["component", "weight", "mean (nm)", "SD (nm)"],
+                        "rows": rows, "note": _fit_note(ctx.res, "thickness", ctx.thick)}
+    rows = []
+    if ctx.ndf is not None:
+        for i, (w, s) in enumerate(ctx.ndf.components):
+            rows.append([f"{i + 1}", f"{w:.3f}", f"{s:.2f}",
+                         f"{math.tan(math.radians(s)):.4f}",
+                         f"{math.sqrt(2.0) * math.tan(math.radians(s)):.4f}"])
+    out["ndf"] = {"header": ["lobe", "weight", "slope SD σ (°)", "tan σ", "Beckmann α"],
+                  "rows": rows, "note": _fit_note(ctx.res, "ndf", ctx.ndf)}
+    out["analysis"] = {"header": ["quantity", "value"], "rows": _analysis_rows(ctx)}
+    out["run"] = {"header": ["quantity", "value"], "rows": _run_rows(ctx)}
+    out["timings"] = {"header": ["step", "time"], "rows": _timing_rows(ctx)}
+    return out
+
+
+def draw(pg, ctx):
+    """Draw the parameters page: fits and run on the left, the analysis on the right.
+
+    Parameters
+    ----------
+    pg : microfacet.report.layout.Page
+    ctx : microfacet.report.context.Context
+    """
+    tables = parameter_tables(ctx)
+    colw = 0.5 * (pg.right - pg.left - 0.4)
+    xl, xr = pg.left, pg.left + colw + 0.4
+    y = pg.top - 0.05
+    for key, title, widths in (
+            ("thickness", "oxide thickness: Gaussian mixture components",
+             [0.2, 0.2, 0.3, 0.3]),
+            ("ndf", "facet normals: zero-mean Gaussian-slope (Beckmann) lobes",
+             [0.12, 0.17, 0.27, 0.2, 0.24])):
+        t = tables[key]
+        rows = t["rows"] or [["—"] + ["no fit"] + [""] * (len(t["header"]) - 2)]
+        y = draw_table(pg, xl, y, colw, rows, header=t["header"], col_widths=widths,
+                       title=title, fontsize=8.5)
+        if t["note"]:
+            lines = wrap(t["note"], 92)
+            for j, line in enumerate(lines):
+                pg.text(xl, y - 0.17 - 0.15 * j, line, fontsize=7.5, color="0.3", va="center")
+            y -= 0.15 * len(lines)
+        y -= 0.42
+    # timings in two column pairs, then versions (long values wrapped over several rows)
+    tr = tables["timings"]["rows"]
+    if tr:
+        half = (len(tr) + 1) // 2
+        rows = [a + (tr[half + j] if half + j < len(tr) else ["", ""])
+                for j, a in enumerate(tr[:half])]
+        y = draw_table(pg, xl, y, colw, rows, col_widths=[0.32, 0.18, 0.32, 0.18],
+                       title="run time", fontsize=7.5, row_h=0.18) - 0.42
+    rows = [[k if j == 0 else "", line] for k, v in tables["run"]["rows"]
+            for j, line in enumerate(wrap(v, 70))]
+    if rows:
+        draw_table(pg, xl, y, colw, rows, col_widths=[0.22, 0.78], title="software",
+                   fontsize=7.5, row_h=0.18)
+    rows = [[k if j == 0 else "", line] for k, v in tables["analysis"]["rows"]
+            for j, line in enumerate(wrap(v, 50))]
+    draw_table(pg, xr, pg.top - 0.05, pg.right - xr, rows, col_widths=[0.40, 0.60],
+               title="analysis (summary.json)", fontsize=8.0)
+
+
+def _fit_note(res, key, mix):
+    m = res.get(key, "mixture")
+    if mix is None:
+        return ("no fit (no usable pixels)" if isinstance(m, dict) else
+                "no mixture in summary.json")
+    parts = []
+    bic = number(res.get(key, "mixture", "bic"))
+    k = len(mix.components)
+    by_k = res.get(key, "mixture", "bic_by_k")
+    if bic is not None:
+        tried = ""
+        if isinstance(by_k, dict) and by_k:
+            tried = (f"; k = 1–{len(by_k)} tried" if len(by_k) > 1 else "; only k = 1 tried")
+        parts.append(f"{k} component{'s' * (k > 1)} by BIC ({bic:.6g}{tried})")
+    ne, ns = number(res.get(key, "mixture", "n_effective")), \
+        number(res.get(key, "mixture", "n_samples"))
+    if ns is not None:
+        parts.append(f"{ns:.0f} pixels" + (f", {ne:.0f} effective samples"
+                                           if ne is not None else ""))
+    d = res.get(key, "mixture", "degenerate")
+    if d is True:
+        parts.append("degenerate fit")
+    elif isinstance(d, str) and d:
+        parts.append(d)
+    return "; ".join(parts)
+
+
+def _analysis_rows(ctx):
+    res = ctx.res
+    s = res.summary
+    p = res.parameters
+    rows = []
+    mode = s.get("mode") or p.get("mode")
+    if mode:
+        rows.append(["mode", str(mode) + {"joint": " (facet planes + colour)",
+                                          "seed": " (the paper's ROI method)"}.get(mode, "")])
+    for key in ("film", "substrate", "illuminant"):
+        v = ctx.optics(key)
+        if v:
+            rows.append([key, shorten(v, 40)])
+    src = s.get("exposure_source")
+    rows.append(["exposure", fmt(s.get("exposure"), ".4g") + (f" ({src})" if src else "")])
+    rows.append([f"{DE} mean / median / p95",
+                 " / ".join(fmt(res.get("delta_e", k), ".2f")
+                            for k in ("mean", "median", "p95"))])
+    if "colour_noise_de" in s:
+        rows.append([f"image colour noise ({DE})", fmt(s.get("colour_noise_de"), ".2f")])
+    rows.append(["masked fraction", fmt(pct(s.get("masked_fraction")), ".1f", "%")])
+    mt = ctx.max_tilt()
+    if mt:
+        rows.append(["largest measurable tilt", f"{mt:.1f}°"])
+    ti = res.get("tilt_information")
+    if isinstance(ti, dict):
+        rows.append(["tilt 1σ, median", fmt(ti.get("tilt_sigma_deg_median"), ".2f", "°")])
+        cd = pct(ti.get("colour_dominated_fraction"))
+        if cd is not None:
+            rows.append(["pixels whose tilt is set by colour", f"{cd:.1f} %"])
+    roi = res.get("thickness", "roi")
+    if isinstance(roi, dict):
+        rows.append(["ROIs fitted / total",
+                     f"{fmt(roi.get('fitted'), '.0f')} / {fmt(roi.get('count'), '.0f')}"
+                     + (f", mean {fmt(roi.get('thickness_nm_mean'), '.1f', 'nm')}"
+                        if number(roi.get("thickness_nm_mean")) is not None else "")
+                     + (f", {roi['ambiguous_count']} ambiguous"
+                        if number(roi.get("ambiguous_count")) else "")])
+    if p:
+        if "roi_size_px" in p:
+            rows.append(["ROI size", f"{fmt(p.get('roi_size_px'), '.0f')} px"])
+        tr = p.get("thickness_range_nm")
+        if isinstance(tr, list) and len(tr) == 2:
+            rows.append(["thickness search range", f"{fmt(tr[0], 'g')}–{fmt(tr[1], 'g')} nm"])
+        if mode == "joint" and "facet_size_um" in p:
+            rows.append(["facet size (segmentation)", fmt(p.get("facet_size_um"), ".3g",
+                                                          "µm")])
+        if "tilt_step_deg" in p:
+            rows.append(["tilt search step", fmt(p.get("tilt_step_deg"), ".3g", "°")])
+        if "max_components" in p:
+            rows.append(["largest k tried (BIC)", fmt(p.get("max_components"), ".0f")])
+    ct = res.get("colour_table")
+    if isinstance(ct, dict):
+        rows.append(["colour table: steps",
+                     f"{fmt(ct.get('thickness_step_nm'), '.3g', 'nm')} thickness, "
+                     f"{fmt(ct.get('theta_step_deg'), '.3g', '°')} tilt, "
+                     f"{fmt(ct.get('spectral_step_nm'), '.3g', 'nm')} wavelength"])
+        rows.append([f"colour table: error ({DE})",
+                     f"{fmt(ct.get('interp_error_de00'), '.3f')} interpolation, "
+                     f"{fmt(ct.get('spectral_error_de00'), '.3f')} spectral"])
+    return rows
+
+
+def _timing_rows(ctx):
+    """[[step, "x.xx s"]] from summary.json's timings_s, the total last."""
+    timings = ctx.res.get("timings_s")
+    if not isinstance(timings, dict):
+        return []
+    rows = [[_STEP_NAMES.get(k, k.replace("_", " ")), f"{number(v):.3g} s"]
+            for k, v in timings.items()
+            if k not in ("total", "report") and number(v) is not None]
+    if number(timings.get("total")) is not None:
+        rows.append(["total analysis", f"{number(timings['total']):.3g} s"])
+    if number(timings.get("report")) is not None:
+        rows.append(["report (previous)", f"{number(timings['report']):.3g} s"])
+    return rows
+
+
+def _run_rows(ctx):
+    res = ctx.res
+    rows = []
+    vers = res.get("versions")
+    if isinstance(vers, dict):
+        mv = vers.get("microfacet")
+        others = ", ".join(f"{k} {v}" for k, v in vers.items() if k != "microfacet")
+        rows.append(["versions", f"microfacet {mv}" + (f"; {others}" if others else "")])
+    elif res.get("version"):
+        rows.append(["versions", f"microfacet {res.get('version')}"])
+    missing = ctx.missing_files()
+    if missing:
+        rows.append(["not in the folder", ", ".join(missing)])
+    return rows

@@ -1,0 +1,140 @@
+"""The five pages of the report (microfacet.report.page_*): what each prints, from a real
+results folder."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from microfacet import __version__
+from microfacet.forward.angular import DISPLAY_CORE_DEG, display_exposure, simulate_map
+from microfacet.io.results import Results, write_results_files
+from microfacet.report import parameter_tables
+from microfacet.report.context import Context
+from microfacet.report.page_angular import ANGLES_DEG, WAVELENGTH_NM, optics, predicted_maps
+from microfacet.report.page_maps import component_codes
+
+
+def test_header_and_units_are_on_the_pages(results, report, pdf_text):
+    out, _ = report
+    res = Results(results)
+    p1 = pdf_text(out, 1)
+    assert "microfacet report — nd-fixture" in p1 and f"microfacet {__version__}" in p1
+    assert "height (µm)" in p1 and "x (µm)" in p1 and "numerical aperture" in p1
+    p2 = pdf_text(out, 2)
+    for label in ("thickness (nm)", "tilt from optical axis (°)", "tilt 1σ (°)", "CIEDE2000",
+                  "no value", "component (seed Fig. 18c)"):
+        assert label in p2, label
+    p3 = pdf_text(out, 3)
+    (w, m, s), (wn, sn) = res.thickness_mixture().components[0], res.ndf_mixture().components[0]
+    for label in ("oxide thickness (nm)", "probability density (1/nm)",
+                  "probability density (1/°)", "D(θ) (1/sr)", "fitted mixture",
+                  "histogram (thickness_pdf.csv)", "histogram (ndf_pdf.csv)",
+                  f"weight {w:.2f}, mean {m:.1f} nm, SD {s:.2f} nm",
+                  f"weight {wn:.2f}, slope SD {sn:.2f}°"):
+        assert label in p3, label
+    p5 = pdf_text(out, 5)
+    assert "microfacet thin-film BRDF" in p5 and "light zenith" in p5
+    assert "half-vector model" in p5
+
+
+def test_parameter_table_matches_summary(results, report, pdf_text):
+    summary = json.loads((results / "summary.json").read_text())
+    t = parameter_tables(results)
+    comps = summary["thickness"]["mixture"]["components"]
+    assert len(comps) >= 2
+    assert t["thickness"]["rows"] == [
+        [str(i + 1), f"{c['weight']:.3f}", f"{c['mean_nm']:.1f}", f"{c['sd_nm']:.2f}"]
+        for i, c in enumerate(comps)]
+    lobes = summary["ndf"]["mixture"]["components"]
+    assert [r[:3] for r in t["ndf"]["rows"]] == [
+        [str(i + 1), f"{c['weight']:.3f}", f"{c['sd_deg']:.2f}"] for i, c in enumerate(lobes)]
+    for r, c in zip(t["ndf"]["rows"], lobes):  # tan σ and Beckmann α = √2 tan σ
+        assert float(r[3]) == pytest.approx(np.tan(np.radians(c["sd_deg"])), abs=1e-4)
+        assert float(r[4]) == pytest.approx(np.sqrt(2) * float(r[3]), abs=2e-4)
+    analysis = dict(t["analysis"]["rows"])
+    assert analysis["exposure"] == (f"{summary['exposure']:.4g} "
+                                    f"({summary['exposure_source']})")
+    de = summary["delta_e"]
+    de_row = f"{de['mean']:.2f} / {de['median']:.2f} / {de['p95']:.2f}"
+    assert analysis["ΔE₀₀ mean / median / p95"] == de_row
+    assert analysis["masked fraction"] == f"{100 * summary['masked_fraction']:.1f} %"
+    assert analysis["largest measurable tilt"] == f"{summary['ndf']['max_tilt_deg']:.1f}°"
+    timings = dict(t["timings"]["rows"])
+    assert timings["total analysis"] == f"{summary['timings_s']['total']:.3g} s"
+    assert timings["mixture fits"] == f"{summary['timings_s']['mixtures']:.3g} s"
+    bic = summary["thickness"]["mixture"]["bic"]
+    assert f"BIC ({bic:.6g}" in t["thickness"]["note"]
+    assert f"BIC ({summary['ndf']['mixture']['bic']:.6g}" in t["ndf"]["note"]
+    assert "not in the folder" not in dict(t["run"]["rows"])  # the analysis writes them all
+    # ... and the PDF's parameter page prints them
+    text = pdf_text(report[0], 4)
+    for row in t["thickness"]["rows"] + t["ndf"]["rows"]:
+        assert re.search(r"\s+".join(map(re.escape, row)), text), row
+    assert de_row in text
+
+
+def test_missing_files_are_listed_on_the_parameter_page(results_copy):
+    folder = results_copy()
+    for name in ("mask.npy", "delta_e.npy", "tilt_height_deg.npy"):
+        (folder / name).unlink()
+    assert dict(parameter_tables(folder)["run"]["rows"])["not in the folder"] == \
+        "mask.npy, delta_e.npy, tilt_height_deg.npy"
+
+
+def test_component_map_has_no_value_exactly_where_thickness_has_none(results):
+    res = Results(results)
+    th = res.map("thickness_nm")
+    codes = component_codes(th, res.thickness_mixture())
+    assert np.array_equal(codes < 0, ~np.isfinite(th))
+    assert set(np.unique(codes[codes >= 0])) == set(range(len(res.thickness_mixture()
+                                                                .components)))
+
+
+def test_angular_maps_are_shown_at_the_display_exposure_the_page_states(results):
+    res = Results(results)
+    ctx = Context(res)
+    maps = predicted_maps(ctx)
+    assert [title.split()[0] for title, _, _ in maps] == ["microfacet", "half-vector"]
+    # the same map, simulated here from the folder's fits, and its display exposure
+    raw = simulate_map(model="microfacet", thickness=res.thickness_mixture(),
+                       ndf=res.ndf_mixture(), theta_light_deg=ANGLES_DEG,
+                       theta_view_deg=ANGLES_DEG, wavelength_nm=WAVELENGTH_NM, **optics(ctx))
+    e = display_exposure(raw)
+    assert abs(e - 1.0) > 0.1  # the rule matters for this map
+    _, m, note = maps[0]
+    stated = float(re.search(r"π·f_r × ([0-9.e+-]+):", note).group(1))
+    assert stated == pytest.approx(e, rel=5e-3)
+    assert m.meta["exposure"] == pytest.approx(e, rel=1e-9)
+    # what the note states holds for the map drawn
+    assert f"angles ≤ {DISPLAY_CORE_DEG:g}° shown at 0.9 of white" in note
+    core = ANGLES_DEG <= DISPLAY_CORE_DEG
+    assert np.percentile(m.xyz[np.ix_(core, core)][..., 1], 98) == pytest.approx(0.9, rel=1e-6)
+    # the half-vector map is shown at exposure 1, as its note says
+    _, hv, hv_note = maps[1]
+    assert display_exposure(hv) == 1.0 and hv.meta["exposure"] == 1.0
+    assert "exposure 1 (a white diffuser is white)" in hv_note
+
+
+def test_the_pdf_prints_the_angular_notes(results, report, pdf_text):
+    p5 = pdf_text(report[0], 5)
+    for _, _, note in predicted_maps(Context(Results(results))):
+        for line in note.splitlines():
+            assert line in p5, line
+
+
+def test_angular_page_without_fits(tmp_path):
+    """Edge cases, hand-made: no NDF fit (the half-vector map alone), no thickness fit
+    (nothing to predict)."""
+    thick = {"components": [{"weight": 1.0, "mean_nm": 130.0, "sd_nm": 3.0}]}
+    none = {"components": [], "bic": None}
+    for name, summary, models in (("no-ndf", {"thickness": {"mixture": thick},
+                                              "ndf": {"mixture": none}}, ["half-vector"]),
+                                  ("no-fit", {"thickness": {"mixture": none}}, [])):
+        (tmp_path / name).mkdir()
+        write_results_files(tmp_path / name, summary=summary, maps={})
+        maps = predicted_maps(Context.open(tmp_path / name))
+        assert [t.split()[0] for t, _, _ in maps] == models

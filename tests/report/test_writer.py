@@ -1,0 +1,148 @@
+"""write_report (microfacet.report.writer): the PDF and PNGs of a results folder, what it
+records in summary.json, and its errors."""
+
+from __future__ import annotations
+
+import copy
+import json
+import re
+
+import numpy as np
+import pytest
+
+from microfacet.core.errors import InputError
+from microfacet.io.results import Results, write_results_files
+from microfacet.report import NO_VALUE, PAGES, parameter_tables, write_report
+
+
+def test_real_folder_gives_five_pages_and_pngs(results, report, pdf_pages, check_pngs):
+    out, png = report
+    assert PAGES == ("overview", "maps", "distributions", "parameters", "angular")
+    assert out == results / "report.pdf" and out.is_file()
+    assert out.read_bytes().startswith(b"%PDF") and pdf_pages(out) == len(PAGES)
+    assert out.stat().st_size < 2_000_000
+    assert sorted(p.name for p in png.iterdir()) == check_pngs(png)
+    assert not [p for p in results.iterdir() if p.name.startswith(".report.pdf")]
+
+
+def test_masked_pixels_are_drawn_in_the_no_value_grey(results, report, png_rgb):
+    _, png = report
+    assert Results(results).map("mask").mean() > 0.01  # the fixture has masked pixels
+    grey = tuple(int(NO_VALUE[i:i + 2], 16) for i in (1, 3, 5))
+    maps = png_rgb(png / "report_2_maps.png")
+    n = int(np.all(maps == grey, axis=-1).sum())
+    assert n > 1000  # the masked pixels, on five maps
+    # the histogram page has no maps: the grey is only on map pages
+    dist = png_rgb(png / "report_3_distributions.png")
+    assert int(np.all(dist == grey, axis=-1).sum()) < n / 10
+
+
+def test_report_time_is_recorded_in_summary_json(results_copy, tmp_path):
+    folder = results_copy()
+    f = folder / "summary.json"
+    before = json.loads(f.read_text())
+    before["timings_s"].pop("report", None)   # as the analysis writes it
+    f.write_text(json.dumps(before))
+    text = f.read_text()
+    write_report(folder, out_pdf=tmp_path / "elsewhere" / "r.pdf")
+    assert f.read_text() == text  # a PDF outside the folder records nothing
+    write_report(folder)
+    after = json.loads(f.read_text())
+    t = after["timings_s"].pop("report")
+    assert isinstance(t, float) and t > 0 and round(t, 4) == t
+    assert after == before  # nothing else changed
+    # the next report shows it on page 4
+    assert dict(parameter_tables(folder)["timings"]["rows"])["report (previous)"] == \
+        f"{t:.3g} s"
+
+
+def test_pdf_elsewhere_and_missing_optional_files(results_copy, tmp_path, pdf_pages):
+    folder = results_copy()
+    for name in ("mask.npy", "delta_e.npy", "tilt_height_deg.npy", "ndf_pdf.csv"):
+        (folder / name).unlink()
+    out = write_report(folder, out_pdf=tmp_path / "elsewhere.pdf")
+    assert out == tmp_path / "elsewhere.pdf" and pdf_pages(out) == len(PAGES)
+    assert not (folder / "report.pdf").exists()
+
+
+def _all_masked(real, folder):
+    """Edge case, hand-made: what the analysis writes when every pixel is masked (NaN maps,
+    header-only CSVs, empty mixtures, null statistics), from the real folder's summary."""
+    s = copy.deepcopy(Results(real).summary)
+    s["thickness"] = {"mixture": {"components": [], "bic": None},
+                      "roi": {"count": 1, "fitted": 0, "thickness_nm_mean": None,
+                              "ambiguous_count": 0}}
+    s["ndf"]["mixture"] = {"components": [], "bic": None}
+    s.update(delta_e={"mean": None, "median": None, "p95": None}, masked_fraction=1.0)
+    nan = np.full((64, 80), np.nan)
+    maps = {n: nan for n in ("height_um", "thickness_nm", "tilt_deg", "tilt_sigma_deg",
+                             "delta_e", "colour_weight")}
+    maps.update(tilt_height_deg=np.zeros((64, 80)), mask=np.ones((64, 80), bool))
+    folder.mkdir()
+    write_results_files(
+        folder, summary=s, maps=maps, images={"all_in_focus": (np.full((64, 80, 3), 0.5), 8)},
+        tables={"thickness_pdf": (np.empty((0, 3)), ["thickness_nm", "density",
+                                                     "mixture_density"], "%.6g"),
+                "ndf_pdf": (np.empty((0, 3)), ["tilt_deg", "density", "mixture_density"],
+                            "%.6g"),
+                "thickness_roi": ([[0, 0, 64, np.nan, np.nan, 0]],
+                                  ["row0", "col0", "size", "thickness_nm", "mean_delta_e",
+                                   "n_pixels"], "%.6g")})
+    return folder
+
+
+def test_all_masked_folder_without_fits_still_renders(results, tmp_path, capsys, pdf_pages,
+                                                      check_pngs):
+    folder = _all_masked(results, tmp_path / "empty")
+    out = write_report(folder, png_dir=tmp_path / "png")
+    assert pdf_pages(out) == len(PAGES)
+    check_pngs(tmp_path / "png")
+    t = parameter_tables(folder)
+    assert t["thickness"]["rows"] == [] and t["ndf"]["rows"] == []
+    assert t["thickness"]["note"].startswith("no fit")
+    assert dict(t["analysis"]["rows"])["masked fraction"] == "100.0 %"
+    assert capsys.readouterr() == ("", "")  # library code prints nothing
+
+
+def test_only_summary_json_is_needed_even_without_an_ndf_fit(results_copy, pdf_pages):
+    """summary.json alone (of a folder being written), with the empty NDF mixture the
+    analysis writes when it cannot fit."""
+    folder = results_copy(".run.partial-abc123", only={"summary.json"})
+    assert [p.name for p in folder.iterdir()] == ["summary.json"]
+    s = json.loads((folder / "summary.json").read_text())
+    s["ndf"]["mixture"] = {"components": [], "bic": None}
+    (folder / "summary.json").write_text(json.dumps(s))
+    out = write_report(folder)
+    assert pdf_pages(out) == len(PAGES)
+    title = out.read_bytes().split(b"/Title (", 1)[1].split(b") >>", 1)[0]
+    assert title.decode("utf-16").endswith("run")  # the folder's final name, not .partial-
+
+
+def test_missing_folder_or_summary_is_an_input_error_naming_it(results_copy, tmp_path):
+    folder = results_copy()
+    (folder / "summary.json").unlink()
+    with pytest.raises(InputError, match="summary.json"):
+        write_report(folder)
+    with pytest.raises(InputError, match="nowhere"):
+        write_report(tmp_path / "nowhere")
+    assert not (folder / "report.pdf").exists()
+
+
+@pytest.mark.parametrize("name, text, where", [
+    ("summary.json", "{not json", "summary.json"),
+    ("summary.json", json.dumps({"thickness": {"mixture": {"components": [
+        {"weight": 1.0, "mean_nm": 130.0, "sd_nm": 0.0}]}}}), "summary.json"),
+    ("ndf_pdf.csv", "tilt_deg,density\n1,0.1\n", "ndf_pdf.csv"),
+    ("thickness_pdf.csv", "thickness_nm,density,mixture_density\n2,0.1,0.1\n1,0.1,0.1\n",
+     "thickness_pdf.csv"),
+    ("thickness_roi.csv", "row0,col0,size,thickness_nm,mean_delta_e,n_pixels\n0,0,x,1,1,1\n",
+     "thickness_roi.csv"),
+    ("delta_e.npy", "not an array", "delta_e.npy"),
+])
+def test_malformed_files_are_input_errors_naming_them(results_copy, name, text, where):
+    """Edge cases: one file of a real folder replaced by a malformed one."""
+    folder = results_copy()
+    (folder / name).write_text(text)
+    with pytest.raises(InputError, match=re.escape(where)):
+        write_report(folder)
+    assert not [p for p in folder.iterdir() if "report.pdf" in p.name]
