@@ -5,7 +5,7 @@ oxide-film thickness distribution and the microfacet normal distribution (NDF), 
 predicts the thin-film interference colour for any light and view direction
 (Nagata et al., "Simulation Technology for Titanium Oxide Layer Interference Color").
 
-The package import is light: submodules (``microfacet.optics.thinfilm``, ``microfacet.colour.colorimetry``,
+The package import is light: subpackages (``microfacet.optics``, ``microfacet.colour``,
 ``microfacet.optics`` ...) are imported on demand.
 """
 

@@ -21,17 +21,15 @@ Prints a markdown table (docs/accuracy.md).
 
 from __future__ import annotations
 
-import argparse
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+from _shared import best_of, md_header, md_row, parser, tilt_scores, worst_mean_error
 
-from microfacet.analysis.pipeline import AnalysisOptions, analyze_stack
-from microfacet.core.densities import wasserstein1
-from microfacet.forward.synth import PRESETS, generate_stack, preset
+from microfacet.analysis import AnalysisOptions, analyze_stack
 from microfacet.analysis.roi import nearest_roi_index, roi_grid
+from microfacet.forward.synth import PRESETS, generate_stack, preset
 
 
 def score(r, truth, p):
@@ -49,22 +47,15 @@ def score(r, truth, p):
         est = (r.roi.thickness_nm[k] if r.options.mode == "seed"
                else float(np.mean(r.thickness_nm[m])))
         errs.append(abs(est - float(np.mean(d_true[m]))))
-    okt = np.isfinite(r.tilt_deg) & vis
-    true_means = np.array([c.mean_nm for c in p.thickness])
-    if r.thickness_fit is not None:
-        fit_means = r.thickness_fit.mixture.means_nm
-        mean_err = float(np.max(np.min(np.abs(true_means[:, None] - fit_means[None, :]), 1)))
-        k_fit = len(fit_means)
-    else:
-        mean_err, k_fit = float("nan"), 0
+    fit_means = r.thickness_fit.mixture.means_nm if r.thickness_fit is not None else []
+    tilt_med, w1 = tilt_scores(r.tilt_deg, t_true, vis)
     de = r.delta_e_stats
     return {
         "roi_mae_nm": float(np.mean(errs)) if errs else float("nan"),
-        "k": f"{k_fit}/{len(p.thickness)}",
-        "mean_err_nm": mean_err,
-        "tilt_med_deg": float(np.median(np.abs(r.tilt_deg[okt] - t_true[okt]))) if okt.any()
-        else float("nan"),
-        "w1_deg": wasserstein1(r.tilt_deg[okt], t_true[vis]) if okt.any() else float("nan"),
+        "k": f"{len(fit_means)}/{len(p.thickness)}",
+        "mean_err_nm": worst_mean_error([c.mean_nm for c in p.thickness], fit_means),
+        "tilt_med_deg": tilt_med,
+        "w1_deg": w1,
         "de_mean": de["mean"] if de["mean"] is not None else float("nan"),
         "de_median": de["median"] if de["median"] is not None else float("nan"),
         "masked": r.mask.fraction,
@@ -73,7 +64,7 @@ def score(r, truth, p):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--slices", type=int, default=24)
     ap.add_argument("--seed", type=int, default=11)
@@ -92,10 +83,9 @@ def main(argv=None):
     else:
         jobs = None
         print(f"{args.size}x{args.size} px, {args.slices} slices, seed {args.seed}\n")
-    print("| preset | mode | ROI thickness MAE (nm) | components found/true | worst mean error (nm) "
-          "| tilt median abs err (deg) | NDF W1 (deg) | dE00 mean / median | masked | exposure "
-          "(true) | time (s) |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print(md_header(["preset", "mode", "ROI thickness MAE (nm)", "components found/true",
+                     "worst mean error (nm)", "tilt median abs err (deg)", "NDF W1 (deg)",
+                     "dE00 mean / median", "masked", "exposure (true)", "time (s)"]))
     with tempfile.TemporaryDirectory() as tmp:
         if jobs is None:
             jobs = []
@@ -109,14 +99,13 @@ def main(argv=None):
             truth = {k: np.load(t / f"{k}.npy") for k in
                      ("thickness_nm", "tilt_deg", "visible")}
             for mode in ("seed", "joint"):
-                t0 = time.perf_counter()
-                r = analyze_stack(folder, AnalysisOptions(mode=mode))
-                dt = time.perf_counter() - t0
+                dt, r = best_of(lambda: analyze_stack(folder, AnalysisOptions(mode=mode)), 1)
                 s = score(r, truth, p)
-                print(f"| {name} | {mode} | {s['roi_mae_nm']:.2f} | {s['k']} | "
-                      f"{s['mean_err_nm']:.1f} | {s['tilt_med_deg']:.2f} | {s['w1_deg']:.2f} | "
-                      f"{s['de_mean']:.2f} / {s['de_median']:.2f} | {s['masked']:.3f} | "
-                      f"{s['exposure']:.3f} ({p.exposure:g}) | {dt:.1f} |", flush=True)
+                print(md_row([name, mode, f"{s['roi_mae_nm']:.2f}", s["k"],
+                              f"{s['mean_err_nm']:.1f}", f"{s['tilt_med_deg']:.2f}",
+                              f"{s['w1_deg']:.2f}", f"{s['de_mean']:.2f} / {s['de_median']:.2f}",
+                              f"{s['masked']:.3f}", f"{s['exposure']:.3f} ({p.exposure:g})",
+                              f"{dt:.1f}"]), flush=True)
 
 
 if __name__ == "__main__":

@@ -90,7 +90,8 @@ def main(argv: list[str] | None = None) -> None:
         f"Python {platform.python_version()}, {platform.machine()}"
     )
     print()
-    print("| method | ms per 1e6 pairs | pairs/s | time ratio vs microfacet float64 | max abs(dE - colour dE) |")
+    print("| method | ms per 1e6 pairs | pairs/s | time ratio vs microfacet float64 "
+          "| max abs(dE - colour dE) |")
     print("|---|---:|---:|---:|---:|")
     for name, seconds, err in rows:
         print(

@@ -24,10 +24,10 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+from _shared import best_of, md_header, md_row, parser
 
 
 def make_stack(folder: Path, n: int, size: int, seed: int = 0) -> Path:
@@ -52,11 +52,9 @@ def make_stack(folder: Path, n: int, size: int, seed: int = 0) -> Path:
     return write_stack(folder, images(), pixel_size_um=0.5, z_step_um=1.0, fmt="jpg")
 
 
-def time_decode(stack, dtype) -> float:
-    t = time.perf_counter()
+def decode(stack, dtype) -> None:
     for i in range(stack.n_slices):
         stack.read_slice(i, dtype)
-    return time.perf_counter() - t
 
 
 def child_memory(folder: str) -> None:
@@ -77,9 +75,8 @@ def child_memory(folder: str) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__, repeat=3)
     ap.add_argument("--size", type=int, default=1024, help="image side in pixels")
-    ap.add_argument("--repeat", type=int, default=3, help="best of N timings")
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -101,19 +98,13 @@ def main(argv=None) -> int:
         for n_sl in (10, 40):
             st = read_stack(folders[n_sl])
             n = st.n_slices
-            dec = min(time_decode(st, np.uint8) for _ in range(args.repeat))
-            dec_f = min(time_decode(st, np.float32) for _ in range(args.repeat))
+            dec, _ = best_of(lambda: decode(st, np.uint8), args.repeat)
+            dec_f, _ = best_of(lambda: decode(st, np.float32), args.repeat)
             out[f"decode_ms_per_mp_slice_{n}"] = 1e3 * dec / (mp * n)
             out[f"decode_float32_ms_per_mp_slice_{n}"] = 1e3 * dec_f / (mp * n)
             for op in OPERATORS:
-                best = None
-                for _ in range(args.repeat):
-                    t = time.perf_counter()
-                    res = height_from_focus(st, operator=op)
-                    dt = time.perf_counter() - t
-                    if best is None or dt < best[0]:
-                        best = (dt, res.timings_s)
-                dt, tim = best
+                dt, res = best_of(lambda: height_from_focus(st, operator=op), args.repeat)
+                tim = res.timings_s
                 rows.append({"operator": op, "slices": n, "total_s": dt,
                              "ms_per_mp_slice": 1e3 * dt / (mp * n),
                              "ratio_to_decode": dt / dec,
@@ -129,24 +120,25 @@ def main(argv=None) -> int:
 
     print(f"stack: {args.size}x{args.size} RGB JPEG, {os.cpu_count()} CPUs, best of {args.repeat}")
     print()
-    print("| slices | step | ms / MP / slice | × decode | of which per-slice streaming "
-          "(ms / MP / slice) | peak fit (ms / MP, once) |")
-    print("|---|---|---|---|---|---|")
+    print(md_header(["slices", "step", "ms / MP / slice", "× decode",
+                     "of which per-slice streaming (ms / MP / slice)",
+                     "peak fit (ms / MP, once)"]))
     for n in (10, 40):
         d = out[f"decode_ms_per_mp_slice_{n}"]
-        print(f"| {n} | decode only (uint8) | {d:.1f} | 1.00 | | |")
-        print(f"| {n} | decode + float32 | {out[f'decode_float32_ms_per_mp_slice_{n}']:.1f} | "
-              f"{out[f'decode_float32_ms_per_mp_slice_{n}'] / d:.2f} | | |")
+        df = out[f"decode_float32_ms_per_mp_slice_{n}"]
+        print(md_row([n, "decode only (uint8)", f"{d:.1f}", "1.00", "", ""]))
+        print(md_row([n, "decode + float32", f"{df:.1f}", f"{df / d:.2f}", "", ""]))
         for r in rows:
             if r["slices"] == n:
-                print(f"| {n} | height step, {r['operator']} | {r['ms_per_mp_slice']:.1f} | "
-                      f"{r['ratio_to_decode']:.2f} | {r['streaming_ms_per_mp_slice']:.1f} | "
-                      f"{r['fit_ms_per_mp']:.0f} |")
+                print(md_row([n, f"height step, {r['operator']}", f"{r['ms_per_mp_slice']:.1f}",
+                              f"{r['ratio_to_decode']:.2f}",
+                              f"{r['streaming_ms_per_mp_slice']:.1f}",
+                              f"{r['fit_ms_per_mp']:.0f}"]))
     print()
-    print("| slices | tracemalloc peak (MB) | max RSS (MB) |")
-    print("|---|---|---|")
+    print(md_header(["slices", "tracemalloc peak (MB)", "max RSS (MB)"]))
     for k in (10, 40):
-        print(f"| {k} | {mem[k]['tracemalloc_peak_mb']:.1f} | {mem[k]['max_rss_mb']:.1f} |")
+        print(md_row([k, f"{mem[k]['tracemalloc_peak_mb']:.1f}",
+                      f"{mem[k]['max_rss_mb']:.1f}"]))
     if args.json:
         args.json.write_text(json.dumps(out, indent=2) + "\n")
     return 0

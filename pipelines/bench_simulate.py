@@ -12,16 +12,15 @@ subset is printed.
 
 from __future__ import annotations
 
-import argparse
 import math
-import time
 
 import numpy as np
+from _shared import best_of, md_header, md_row, parser
 
-from microfacet.forward.angular import simulate_map
-from microfacet.forward.brdf import (_theta_m_grid, default_wavelengths, microfacet_geometry,
-                             thickness_nodes)
 from microfacet.core.distributions import NDFMixture, ThicknessMixture
+from microfacet.forward.angular import simulate_map
+from microfacet.forward.brdf import default_wavelengths, microfacet_geometry, thickness_nodes
+from microfacet.forward.eq6 import theta_m_grid
 from microfacet.forward.halfvector import in_plane_directions
 from microfacet.optics import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from microfacet.optics.thinfilm import reflectance
@@ -59,11 +58,10 @@ def naive_eq6(tl, tv, wl, step=0.5):
     return np.array(out)
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=5)
+def main(argv=None):
+    ap = parser(__doc__, repeat=5)
     ap.add_argument("--subset", type=int, default=180, help="pairs timed for the baseline")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     t = np.arange(90.0)
     wl = default_wavelengths()
     simulate_map(model="microfacet", thickness=G3, ndf=F2, theta_light_deg=t[:3],
@@ -73,26 +71,20 @@ def main():
     tl_s, tv_s = t[idx // 90], t[idx % 90]
     rows = []
     for model, naive in (("microfacet", naive_microfacet), ("eq6", naive_eq6)):
-        best = math.inf
-        for _ in range(args.repeat):
-            t0 = time.perf_counter()
-            m = simulate_map(model=model, thickness=G3, ndf=F2, n=N_LOBE, theta_light_deg=t,
-                             theta_view_deg=t)
-            dt = time.perf_counter() - t0
-            if dt < best:
-                best, tim = dt, m.meta["timings_s"]
-        t0 = time.perf_counter()
-        ref = naive(tl_s, tv_s, wl)
-        t_naive = (time.perf_counter() - t0) * 8100 / args.subset
+        best, m = best_of(lambda model=model: simulate_map(
+            model=model, thickness=G3, ndf=F2, n=N_LOBE, theta_light_deg=t, theta_view_deg=t),
+            args.repeat)
+        tim = m.meta["timings_s"]
+        t_naive, ref = best_of(lambda naive=naive: naive(tl_s, tv_s, wl), 1)
+        t_naive *= 8100 / args.subset
         fast = m.spectra.reshape(8100, -1)[idx]
         err = float(np.max(np.abs(fast - ref)) / np.max(np.abs(ref)))
         rows.append((model, best, tim, t_naive, err))
-    print("| model | fast map (s) | of which spectra / colour (s) | naive per-pair (s, "
-          "extrapolated) | speed-up | max rel. diff |")
-    print("|---|---|---|---|---|---|")
+    print(md_header(["model", "fast map (s)", "of which spectra / colour (s)",
+                     "naive per-pair (s, extrapolated)", "speed-up", "max rel. diff"]))
     for model, best, tim, tn, err in rows:
-        print(f"| {model} | {best:.3f} | {tim['spectra']:.3f} / {tim['colour']:.3f} | "
-              f"{tn:.2f} | {tn / best:.0f}x | {err:.1e} |")
+        print(md_row([model, f"{best:.3f}", f"{tim['spectra']:.3f} / {tim['colour']:.3f}",
+                      f"{tn:.2f}", f"{tn / best:.0f}x", f"{err:.1e}"]))
 
 
 if __name__ == "__main__":

@@ -9,11 +9,12 @@ Run:  python pipelines/bench_synth.py [--preset nd] [--size 1024x1024] [--slices
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
 import tempfile
+
+from _shared import md_header, md_row, parser
 
 CHILD = r"""
 import json, resource, sys, time
@@ -29,22 +30,22 @@ print(json.dumps({"total_s": dt, "scene_s": r.timings_s["scene"], "slices_s": r.
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--preset", default="nd")
     ap.add_argument("--size", default="1024x1024")
     ap.add_argument("--slices", type=int, nargs="+", default=[10, 40])
     args = ap.parse_args(argv)
     h, w = (int(v) for v in args.size.split("x"))
     print(f"preset {args.preset}, {h}x{w} px\n")
-    print("| slices | total (s) | scene (s) | slices (s) | per slice (ms) | peak RSS (MB) |")
-    print("|---|---|---|---|---|---|")
+    print(md_header(["slices", "total (s)", "scene (s)", "slices (s)", "per slice (ms)",
+                     "peak RSS (MB)"]))
     for k in args.slices:
         with tempfile.TemporaryDirectory() as tmp:
             out = subprocess.run([sys.executable, "-c", CHILD, args.preset, str(h), str(w), str(k),
                                   f"{tmp}/s"], capture_output=True, text=True, check=True)
         r = json.loads(out.stdout.strip().splitlines()[-1])
-        print(f"| {k} | {r['total_s']:.2f} | {r['scene_s']:.2f} | {r['slices_s']:.2f} | "
-              f"{1000 * r['slices_s'] / k:.0f} | {r['peak_rss_mb']:.0f} |")
+        print(md_row([k, f"{r['total_s']:.2f}", f"{r['scene_s']:.2f}", f"{r['slices_s']:.2f}",
+                      f"{1000 * r['slices_s'] / k:.0f}", f"{r['peak_rss_mb']:.0f}"]), flush=True)
 
 
 if __name__ == "__main__":

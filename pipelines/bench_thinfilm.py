@@ -12,26 +12,14 @@ Prints a markdown table (copy it into docs/benchmarks.md).
 
 from __future__ import annotations
 
-import argparse
 import os
-import time
 
 import numpy as np
-
-
-def best_time(fn, repeat):
-    best = np.inf
-    out = None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
+from _shared import best_of, md_header, md_row, parser
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=3)
+    ap = parser(__doc__, repeat=3)
     ap.add_argument("--tmm-points", type=int, default=2000)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
@@ -87,15 +75,16 @@ def main(argv=None):
         R, _ = colour.phenomena.thin_film_tmm(n_stack, d, wl, theta)  # (W, A, T, 2)
         return R.mean(axis=-1)
 
-    t_tmm, r_tmm = best_time(run_tmm, 1)
+    t_tmm, r_tmm = best_of(run_tmm, 1)
     rows = []
-    for name, fn, full in [
-        ("microfacet.optics.thinfilm.reflectance (float64, 1 thread)", run_microfacet_1thread, True),
-        (f"microfacet.optics.thinfilm.reflectance (float64, {num_threads()} threads)", run_microfacet, True),
-        ("microfacet.optics.thinfilm.reflectance (float32 out)", run_microfacet_f32, True),
-        ("colour.phenomena.thin_film_tmm 0.4.7", run_colour, True),
+    ours = "microfacet.optics.thinfilm.reflectance"
+    for name, fn in [
+        (f"{ours} (float64, 1 thread)", run_microfacet_1thread),
+        (f"{ours} (float64, {num_threads()} threads)", run_microfacet),
+        (f"{ours} (float32 out)", run_microfacet_f32),
+        (f"colour.phenomena.thin_film_tmm {colour.__version__}", run_colour),
     ]:
-        t, R = best_time(fn, args.repeat)
+        t, R = best_of(fn, args.repeat)
         sub = R[pick[:, 0], pick[:, 1], pick[:, 2]]
         rows.append((name, t, n_evals / t, float(np.max(np.abs(sub - r_tmm)))))
     rows.append(("tmm.coh_tmm (s + p, per point)", t_tmm * n_evals / len(pick),
@@ -105,12 +94,11 @@ def main(argv=None):
     print(f"grid: {wl.size} wavelengths x {theta.size} angles x {d.size} thicknesses = "
           f"{n_evals:,} unpolarised evaluations; film {DEFAULT_FILM}, substrate "
           f"{DEFAULT_SUBSTRATE}; max |dR| vs tmm on {len(pick)} random grid points\n")
-    print("| method | time for grid (s) | evaluations/s | throughput vs colour-science | "
-          "max abs dR vs tmm |")
-    print("|---|---|---|---|---|")
+    print(md_header(["method", "time for grid (s)", "evaluations/s",
+                     "throughput vs colour-science", "max abs dR vs tmm"]))
     for name, t, rate, err in rows:
         err_s = "(reference)" if err is None else f"{err:.1e}"
-        print(f"| {name} | {t:.3f} | {rate:,.0f} | {rate / base:.3g}x | {err_s} |")
+        print(md_row([name, f"{t:.3f}", f"{rate:,.0f}", f"{rate / base:.3g}x", err_s]))
 
 
 if __name__ == "__main__":

@@ -27,30 +27,30 @@ Run:  python pipelines/conditioning.py            (writes docs/, ~1 min)
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
-from pathlib import Path
 
 import numpy as np
+from _shared import (
+    Doc,
+    lab_direct,
+    md_table,
+    noisy_scene,
+    output_folder,
+    parser,
+    pyplot,
+    save_figure,
+    through_sensor,
+)
 
-ROOT = Path(__file__).resolve().parent.parent
 TILTS = (5.0, 10.0, 20.0)
 NOISES = (0.5, 1.0, 2.0)
 ROW_D = (10, 25, 51, 75, 100, 112, 130, 149, 175, 200, 235, 260, 300, 350, 400)
 
 
-def lab_direct(th, d):
-    from microfacet import colour as color
-    from microfacet.colour.table import direct_xyz
-
-    white = color.spectral_weights(np.linspace(380.0, 780.0, 401)).sum(axis=0)
-    return color.xyz_to_lab(direct_xyz(th, d, spectral_step_nm=1.0), white=white)
-
-
 def sensitivities(d, tilts, h_deg=0.25, h_nm=0.25):
     """J (ΔE00/°) and K (ΔE00/nm), shape (len(tilts), len(d))."""
-    from microfacet.colour import delta_e_2000
+    from microfacet.colour.difference import delta_e_2000
 
     th = np.asarray(tilts, float)[:, None]
     dd = np.asarray(d, float)[None, :]
@@ -63,8 +63,8 @@ def sensitivities(d, tilts, h_deg=0.25, h_nm=0.25):
 
 def table_sensitivity(table, d, tilts, max_tilt, step=0.5):
     """J as invert_tilt computes it: central differences of the table rows on its θ grid."""
-    from microfacet.colour import delta_e_2000
     from microfacet.analysis.tilt import model_lab_rows
+    from microfacet.colour.difference import delta_e_2000
 
     g = np.arange(0.0, max_tilt + 1e-9, step)
     rl = model_lab_rows(table, np.asarray(d, float), g, exposure=1.0).astype(np.float32)
@@ -77,20 +77,18 @@ def table_sensitivity(table, d, tilts, max_tilt, step=0.5):
 
 
 def patch_lab(table, theta, d, *, full_well, read_noise, rng, size=64):
-    """Uniform patch at (θ, d) through the synthetic sensor, as Lab (float32)."""
-    from microfacet import colour as color
-    from microfacet.forward.synth import SynthParams, _sensor
+    """Uniform patch at (θ, d) through the synthetic sensor: (Lab float32, 8-bit sRGB)."""
+    from microfacet.forward.synth import SynthParams
 
     p = SynthParams(full_well_e=full_well, read_noise=read_noise)
     rgb = table.linear_rgb_at(np.full((size, size), theta), np.full((size, size), d))
-    img = _sensor(np.asarray(rgb, np.float32), p, rng)
-    enc = color.srgb_encode(img, dtype=np.uint8).astype(np.float32) / 255.0
-    return color.srgb_to_lab(enc).astype(np.float32), enc
+    return through_sensor(rgb, p, rng)
 
 
 def monte_carlo(table, max_tilt, thicknesses, tilts, sensors, J_at):
+    from microfacet.analysis.colour_image import estimate_colour_noise
     from microfacet.analysis.mask import colour_mask
-    from microfacet.analysis.colour_image import estimate_colour_noise, invert_tilt, model_lab_rows
+    from microfacet.analysis.tilt import invert_tilt, model_lab_rows
 
     g = np.arange(0.0, max_tilt + 1e-9, 0.5)
     if g[-1] < max_tilt - 1e-9:
@@ -122,20 +120,7 @@ def monte_carlo(table, max_tilt, thicknesses, tilts, sensors, J_at):
 
 def scene_noise(size=256):
     """estimate_colour_noise on the nd and noisy presets' sharp noisy images (texture incl.)."""
-    from microfacet import colour as color
-    from microfacet.analysis.mask import colour_mask
-    from microfacet.forward.synth import _sensor, preset, render_scene
-    from microfacet.analysis.colour_image import estimate_colour_noise
-
-    out = {}
-    for name in ("nd", "noisy"):
-        p = preset(name, seed=11, height_px=size, width_px=size)
-        sc = render_scene(p)
-        img = _sensor(sc.linear_rgb, p, np.random.default_rng([11, 1]))
-        enc = color.srgb_encode(img, dtype=np.uint8).astype(np.float32) / 255.0
-        cm = colour_mask(enc)
-        out[name] = estimate_colour_noise(color.srgb_to_lab(enc).astype(np.float32), cm.mask)
-    return out
+    return {name: noisy_scene(name, size=size, seed=11)[-1] for name in ("nd", "noisy")}
 
 
 def intervals(d, ok):
@@ -152,12 +137,7 @@ def intervals(d, ok):
 
 
 def plot(path, d, J, K, tilts, max_tilt, sigma_typ):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(1, 3, figsize=(11.5, 3.3))
+    fig, ax = pyplot().subplots(1, 3, figsize=(11.5, 3.3))
     for k, th in enumerate(tilts):
         ax[0].plot(d, J[k], color=f"C{k}", lw=1, label=f"θ = {th:g}°")
         s1 = np.minimum(1.0 / J[k], max_tilt)
@@ -188,15 +168,7 @@ def plot(path, d, J, K, tilts, max_tilt, sigma_typ):
         a.grid(True, lw=0.3, alpha=0.5)
         a.legend(fontsize=6, loc="best")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
-def md_table(header, rows):
-    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
-    return "\n".join(out)
+    save_figure(fig, path)
 
 
 def f2(x):
@@ -206,20 +178,17 @@ def f2(x):
 def main(argv=None):
     from microfacet.colour.table import build_colour_table
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="2 nm thickness step, fewer patches")
+    ap = parser(__doc__, quick="2 nm thickness step, fewer patches",
+                out="folder for conditioning.md and img/ (default docs/, or "
+                    "out/conditioning-quick/ with --quick)")
     ap.add_argument("--na", type=float, default=0.8, help="numerical aperture (default 0.8)")
     ap.add_argument("--d-max", type=float, default=400.0,
                     help="largest thickness (nm); the analysis' default range is 0-400")
     ap.add_argument("--sigma-d", type=float, default=0.3,
                     help="thickness uncertainty for the combined σ (nm; default 0.3, the "
                          "synthetic presets' fine thickness variation)")
-    ap.add_argument("--out", default=None,
-                    help="folder for conditioning.md and img/ (default docs/, or "
-                         "out/conditioning-quick/ with --quick)")
     args = ap.parse_args(argv)
-    out = Path(args.out) if args.out else ROOT / ("out/conditioning-quick" if args.quick
-                                                 else "docs")
+    out = output_folder(args.out, quick=args.quick, name="conditioning")
     t0 = time.perf_counter()
     max_tilt = math.degrees(math.asin(args.na)) / 2.0
     step = 2.0 if args.quick else 1.0
@@ -240,14 +209,10 @@ def main(argv=None):
         sensors.append(("noisy preset (150 e⁻, read 0.02)", 150.0, 0.02))
     mc = monte_carlo(table, max_tilt, mc_d, TILTS, sensors, J_at)
 
-    doc = []
+    emit = Doc()
     cmd = "python pipelines/conditioning.py" + (" --quick" if args.quick else "") + (
         f" --na {args.na:g}" if args.na != 0.8 else "") + (
         f" --d-max {args.d_max:g}" if args.d_max != 400 else "")
-
-    def emit(s):
-        print(s, flush=True)
-        doc.append(s)
 
     emit("# Conditioning: when is tilt from colour meaningful?\n")
     emit(f"Reproduce: `{cmd}`\n")
@@ -386,9 +351,8 @@ def main(argv=None):
          "`tilt_sigma_deg.npy` and the summary's `tilt_information`; a σ_tilt near "
          f"{max_tilt:.1f}° means the colour said nothing.")
     emit(f"\n---\nMeasured {time.strftime('%Y-%m-%d')} in {time.perf_counter() - t0:.0f} s.")
-    out.mkdir(parents=True, exist_ok=True)
     plot(out / "img" / "conditioning.png", d, J, K, TILTS, max_tilt, sigma_typ)
-    (out / "conditioning.md").write_text("\n".join(doc) + "\n")
+    emit.write(out / "conditioning.md")
     print(f"\nwrote {out / 'conditioning.md'} and {out / 'img' / 'conditioning.png'}")
 
 

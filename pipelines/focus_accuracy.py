@@ -1,4 +1,6 @@
-"""Height-from-focus accuracy per operator, window and peak interpolation (docs/height-from-focus.md).
+"""Height-from-focus accuracy per operator, window and peak interpolation.
+
+The table of docs/height-from-focus.md.
 
 RMSE in slices against the ground truth of the Cou & Guennebaud (2023) stacks 1-3 bundled in
 fixtures/focus-stacks/cou2023-synthetic-rough (registration reference[i, j] <-> pixel
@@ -9,14 +11,10 @@ Run:  python pipelines/focus_accuracy.py
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
+from _shared import cou_rmse, cou_stack, md_header, md_row
 
 from microfacet.focus.height import height_from_focus
-from microfacet.io.stack import read_stack
-
-COU = Path(__file__).resolve().parent.parent / "fixtures" / "focus-stacks" / "cou2023-synthetic-rough"
 
 # (operator, window, window_px, interpolation, fit_radius)
 METHODS = [
@@ -39,25 +37,17 @@ METHODS = [
 ]
 
 
-def rmse(height, stack_no):
-    ref = -np.load(COU / f"stack{stack_no}" / "reference.npy")
-    d = height[20:20 + ref.shape[0], 20:20 + ref.shape[1]]
-    return float(np.sqrt(np.mean((d - ref) ** 2)))
-
-
 def main():
-    stacks = {s: read_stack(COU / f"stack{s}") for s in (1, 2, 3)}
-    print("| operator | window | interpolation | stack 1 | stack 2 | stack 3 |")
-    print("|---|---|---|---|---|---|")
+    stacks = {s: cou_stack(s) for s in (1, 2, 3)}
+    print(md_header(["operator", "window", "interpolation", "stack 1", "stack 2", "stack 3"]))
     for op, win, px, interp, r in METHODS:
-        vals = [rmse(height_from_focus(stacks[s], operator=op, window=win, window_px=px,
-                                       interpolation=interp, fit_radius=r,
-                                       min_reliability_db=-np.inf).height_um, s)
-                for s in (1, 2, 3)]
+        vals = [cou_rmse(height_from_focus(st, operator=op, window=win, window_px=px,
+                                           interpolation=interp, fit_radius=r,
+                                           min_reliability_db=-np.inf).height_um, ref)
+                for st, ref in stacks.values()]
         name = {"none": "arg-max", "gauss3": "Gauss 3-pt", "lsq": f"lsq {r}"}[interp]
         wname = f"{'Gauss' if win == 'gaussian' else 'box'} {px}"
-        print(f"| {op} | {wname} | {name} | " + " | ".join(f"{v:.3f}" for v in vals) + " |",
-              flush=True)
+        print(md_row([op, wname, name] + [f"{v:.3f}" for v in vals]), flush=True)
 
 
 if __name__ == "__main__":

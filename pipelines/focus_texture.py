@@ -16,6 +16,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from _shared import md_header, md_row
 
 from microfacet.forward.synth import generate_stack, preset
 
@@ -41,14 +42,13 @@ def within_two(folder, p, z_um):
 
 
 def main():
-    print("| synthetic image | pixels whose sharpest slice is within 2 of the truth |")
-    print("|---|---|")
+    print(md_header(["synthetic image", "pixels whose sharpest slice is within 2 of the truth"]))
     with tempfile.TemporaryDirectory() as tmp:
         for i, (name, kw) in enumerate(CASES):
             p = preset("nd", seed=4, height_px=160, width_px=160, n_slices=24,
                        full_well_e=None, read_noise=0.0, **kw)
             r = generate_stack(Path(tmp) / str(i), p)
-            print(f"| {name} | {within_two(Path(tmp) / str(i), p, r.z_um):.2f} |", flush=True)
+            print(md_row([name, f"{within_two(Path(tmp) / str(i), p, r.z_um):.2f}"]), flush=True)
 
 
 if __name__ == "__main__":

@@ -172,8 +172,8 @@ def main(argv=None):
     if args.json:
         print(json.dumps({"modules": mods, "cycles": cyc, "violations": viol}, indent=1))
         return 0
-    print(f"| module | lines | imports (microfacet) | imports inside functions | "
-          f"private names of other modules |")
+    print("| module | lines | imports (microfacet) | imports inside functions | "
+          "private names of other modules |")
     print("|---|---:|---|---:|---|")
     for m, info in mods.items():
         deps = sorted({d.removeprefix("microfacet.") for d in

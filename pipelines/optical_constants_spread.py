@@ -11,9 +11,9 @@ Run:  python pipelines/optical_constants_spread.py
 from __future__ import annotations
 
 import numpy as np
+from _shared import lab_direct, md_header, md_row
 
-from microfacet import colour as color
-from microfacet.colour.table import _wavelengths, _white, direct_xyz
+from microfacet.colour.difference import delta_e
 from microfacet.optics import DEFAULT_FILM, DEFAULT_SUBSTRATE
 
 FILMS = ["TiO2_Jolivet2023_amorphous", "TiO2_Sarkar2019_amorphous", "TiO2_Franta2015_amorphous",
@@ -23,9 +23,8 @@ THICKNESS_NM = [20.0, 40.0, 51.0, 80.0, 120.0, 140.0, 180.0]
 
 
 def lab(d, film, substrate):
-    w = _white(_wavelengths(1.0), "D65", "2")
-    return color.xyz_to_lab(direct_xyz(0.0, np.asarray(d), spectral_step_nm=1.0, film=film,
-                                       substrate=substrate), white=w)
+    """Normal incidence, D65, 2°, 1 nm."""
+    return lab_direct(0.0, np.asarray(d), 1.0, film=film, substrate=substrate)
 
 
 def blue_nm(film, substrate):
@@ -39,14 +38,12 @@ def main():
     ref = lab(THICKNESS_NM, DEFAULT_FILM, DEFAULT_SUBSTRATE)
     print(f"default: film {DEFAULT_FILM}, substrate {DEFAULT_SUBSTRATE}; normal incidence, "
           "D65, 2 deg, 1 nm\n")
-    print("| film | substrate | " + " | ".join(f"dE00 @{d:g} nm" for d in THICKNESS_NM)
-          + " | first-order blue (nm) |")
-    print("|---|---|" + "---|" * (len(THICKNESS_NM) + 1))
+    print(md_header(["film", "substrate"] + [f"dE00 @{d:g} nm" for d in THICKNESS_NM]
+                    + ["first-order blue (nm)"]))
     combos = [(f, DEFAULT_SUBSTRATE) for f in FILMS] + [(DEFAULT_FILM, s) for s in SUBSTRATES[1:]]
     for film, sub in combos:
-        de = color.delta_e_2000(lab(THICKNESS_NM, film, sub), ref)
-        print(f"| {film} | {sub} | " + " | ".join(f"{v:.1f}" for v in de)
-              + f" | {blue_nm(film, sub):.1f} |")
+        de = delta_e(lab(THICKNESS_NM, film, sub), ref, method="CIEDE2000")
+        print(md_row([film, sub] + [f"{v:.1f}" for v in de] + [f"{blue_nm(film, sub):.1f}"]))
 
 
 if __name__ == "__main__":

@@ -9,12 +9,12 @@ Run:  python pipelines/preset_gallery.py [--size 192] [--out docs/img/presets.pn
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 from pathlib import Path
 
 import cv2
 import numpy as np
+from _shared import md_header, md_row, parser
 
 from microfacet.forward.synth import PRESETS, generate_stack, preset
 
@@ -32,19 +32,20 @@ def _label(img, text):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--out", default="docs/img/presets.jpg")
     args = ap.parse_args(argv)
     rows = []
-    print("| preset | generation (s) | visible | clipped | thickness (nm) | tilt median (deg) |")
-    print("|---|---|---|---|---|---|")
+    print(md_header(["preset", "generation (s)", "visible", "clipped", "thickness (nm)",
+                     "tilt median (deg)"]))
     with tempfile.TemporaryDirectory() as tmp:
         for name in PRESETS:
             p = preset(name, seed=1, height_px=args.size, width_px=args.size, n_slices=16)
             r = generate_stack(Path(tmp) / name, p)
             t = Path(tmp) / name / "truth"
-            h, tilt, d = (np.load(t / f"{f}.npy") for f in ("height_um", "tilt_deg", "thickness_nm"))
+            h, tilt, d = (np.load(t / f"{f}.npy")
+                          for f in ("height_um", "tilt_deg", "thickness_nm"))
             vis, clip = np.load(t / "visible.npy"), np.load(t / "clipped.npy")
             sharp = cv2.imread(str(t / "all_in_focus.png"))
             sl = cv2.imread(str(Path(tmp) / name / "slices" / f"{p.n_slices // 2:03d}.png"),
@@ -60,8 +61,9 @@ def main(argv=None):
             ]
             gap = np.full((args.size, 4, 3), 255, np.uint8)
             rows.append(np.hstack([x for pnl in panels for x in (pnl, gap)][:-1]))
-            print(f"| {name} | {r.timings_s['total']:.2f} | {vis.mean():.2f} | {clip.mean():.3f} | "
-                  f"{d.min():.0f}-{d.max():.0f} | {np.median(tilt):.1f} |")
+            print(md_row([name, f"{r.timings_s['total']:.2f}", f"{vis.mean():.2f}",
+                          f"{clip.mean():.3f}", f"{d.min():.0f}-{d.max():.0f}",
+                          f"{np.median(tilt):.1f}"]), flush=True)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     sep = np.full((4, rows[0].shape[1], 3), 255, np.uint8)

@@ -17,7 +17,8 @@ scores every results folder against its truth:
 
 Writes ``--csv`` (one row per stack), ``--plot`` (errors against noise and roughness,
 coloured by preset) and prints a markdown table of medians per preset; ``--docs`` replaces
-the sweep section of docs/accuracy.md with it.
+the sweep section of docs/accuracy.md with it. The CSV and the plot go to docs/data/ and
+docs/img/ with ``--docs``, else to out/synthetic-sweep/.
 
 Run:  python pipelines/synthetic_sweep.py --n 42 --jobs 2 --docs
       python pipelines/synthetic_sweep.py --n 6 --size 128 --slices 12   (a quick look)
@@ -25,25 +26,33 @@ Run:  python pipelines/synthetic_sweep.py --n 42 --jobs 2 --docs
 
 from __future__ import annotations
 
-import argparse
-import csv
 import json
 import math
-import re
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from _shared import (
+    DOCS,
+    ROOT,
+    md_header,
+    md_row,
+    parser,
+    pyplot,
+    replace_block,
+    save_figure,
+    tilt_scores,
+    worst_mean_error,
+    write_csv,
+)
 
-from microfacet.analysis.pipeline import AnalysisOptions
+from microfacet.analysis.options import AnalysisOptions
+from microfacet.analysis.roi import nearest_roi_index, roi_grid
 from microfacet.batch.runner import run_batch
 from microfacet.core.distributions import NDFMixture
-from microfacet.core.densities import wasserstein1
 from microfacet.forward.synth import TiltLobe, generate_stack, preset
-from microfacet.analysis.roi import nearest_roi_index, roi_grid
 
-ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_PRESETS = ("sd", "nd", "thick", "steep", "thin", "grainy", "16bit")
 SIGNAL = 0.3  # linear signal at which the relative noise is quoted
 MARK_START = "<!-- synthetic-sweep:start -->"
@@ -59,7 +68,7 @@ def design(n, presets, *, size, slices, seed0=1000):
         full_well = float(10 ** rng.uniform(math.log10(150.0), math.log10(20000.0)))
         rough = float(rng.uniform(0.5, 2.0))
         base = preset(name)
-        lobes = tuple(TiltLobe(l.weight, min(20.0, l.sd_deg * rough)) for l in base.tilt_lobes)
+        lobes = tuple(TiltLobe(lb.weight, min(20.0, lb.sd_deg * rough)) for lb in base.tilt_lobes)
         p = preset(name, seed=seed0 + i, height_px=size, width_px=size, n_slices=slices,
                    full_well_e=full_well, tilt_lobes=lobes)
         out.append((f"{i:03d}_{name}", p, rough))
@@ -96,23 +105,16 @@ def score(results: Path, truth_dir: Path, p) -> dict:
     est = np.bincount(idx, d_est[used], minlength=n.size)[ok] / n[ok]
     tru = np.bincount(idx, d_true[used], minlength=n.size)[ok] / n[ok]
     out["roi_thickness_mae_nm"] = float(np.mean(np.abs(est - tru))) if ok.any() else math.nan
-    okt = np.isfinite(t_est) & vis
-    out["tilt_median_err_deg"] = (float(np.median(np.abs(t_est[okt] - t_true[okt])))
-                                  if okt.any() else math.nan)
-    out["ndf_w1_deg"] = wasserstein1(t_est[okt], t_true[vis]) if okt.any() else math.nan
+    out["tilt_median_err_deg"], out["ndf_w1_deg"] = tilt_scores(t_est, t_true, vis)
     lobes = s["ndf"]["mixture"]["components"]
     out["ndf_rms_err_deg"] = (rms_slope_deg([(c["weight"], c["sd_deg"]) for c in lobes])
-                              - rms_slope_deg([(l.weight, l.sd_deg) for l in p.tilt_lobes])
+                              - rms_slope_deg([(lb.weight, lb.sd_deg) for lb in p.tilt_lobes])
                               if lobes else math.nan)
     comps = s["thickness"]["mixture"]["components"]
     true_means = np.array([c.mean_nm for c in p.thickness])
     out["components_true"] = len(true_means)
     out["components_found"] = len(comps)
-    if comps:
-        fit = np.array([c["mean_nm"] for c in comps])
-        out["worst_mean_err_nm"] = float(np.max(np.min(np.abs(true_means[:, None] - fit), 1)))
-    else:
-        out["worst_mean_err_nm"] = math.nan
+    out["worst_mean_err_nm"] = worst_mean_error(true_means, [c["mean_nm"] for c in comps])
     out["delta_e_mean"] = s["delta_e"]["mean"]
     out["masked_fraction"] = s["masked_fraction"]
     out["colour_noise_de"] = s.get("colour_noise_de")
@@ -126,19 +128,8 @@ COLUMNS = ("name", "preset", "seed", "full_well_e", "noise_pct", "roughness_scal
            "masked_fraction", "colour_noise_de")
 
 
-def _fmt(v):
-    if v is None:
-        return ""
-    if isinstance(v, float):
-        return "" if math.isnan(v) else f"{v:.5g}"
-    return v
-
-
 def plot(rows, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
     from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
     metrics = (("thickness_mae_nm", "thickness MAE (nm)"),
@@ -177,16 +168,15 @@ def plot(rows, path: Path) -> None:
                       bbox_to_anchor=(1.02, 1.0))
     fig.suptitle(f"Synthetic sweep: {len(done)} stacks, error against noise and roughness")
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def table(rows) -> str:
     """Markdown table of medians per preset."""
-    lines = ["| preset | stacks (failed) | thickness MAE (nm) | ROI thickness MAE (nm) | tilt "
-             "median err (°) | NDF W1 (°) | NDF rms error (°) | components found = true | "
-             "worst mean err (nm) | ΔE00 mean |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [md_header(["preset", "stacks (failed)", "thickness MAE (nm)",
+                        "ROI thickness MAE (nm)", "tilt median err (°)", "NDF W1 (°)",
+                        "NDF rms error (°)", "components found = true", "worst mean err (nm)",
+                        "ΔE00 mean"])]
     for name in sorted({r["preset"] for r in rows}):
         rs = [r for r in rows if r["preset"] == name]
         ok = [r for r in rs if r["status"] in ("done", "skipped")]
@@ -196,10 +186,10 @@ def table(rows) -> str:
             return f"{np.median(v):.2f}" if v else "–"
 
         hit = sum(r["components_found"] == r["components_true"] for r in ok)
-        lines.append(f"| {name} | {len(rs)} ({len(rs) - len(ok)}) | {med('thickness_mae_nm')} | "
-                     f"{med('roi_thickness_mae_nm')} | {med('tilt_median_err_deg')} | "
-                     f"{med('ndf_w1_deg')} | {med('ndf_rms_err_deg')} | {hit}/{len(ok)} | "
-                     f"{med('worst_mean_err_nm')} | {med('delta_e_mean')} |")
+        lines.append(md_row([name, f"{len(rs)} ({len(rs) - len(ok)})", med("thickness_mae_nm"),
+                             med("roi_thickness_mae_nm"), med("tilt_median_err_deg"),
+                             med("ndf_w1_deg"), med("ndf_rms_err_deg"), f"{hit}/{len(ok)}",
+                             med("worst_mean_err_nm"), med("delta_e_mean")]))
     return "\n".join(lines)
 
 
@@ -220,19 +210,8 @@ def correlations(rows) -> str:
     return "\n".join(out)
 
 
-def update_docs(doc: Path, text: str) -> None:
-    body = doc.read_text()
-    block = f"{MARK_START}\n{text}\n{MARK_END}"
-    if MARK_START in body:
-        body = re.sub(re.escape(MARK_START) + r".*?" + re.escape(MARK_END), lambda m: block,
-                      body, flags=re.S)
-    else:
-        body = body.rstrip() + "\n\n" + block + "\n"
-    doc.write_text(body)
-
-
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = parser(__doc__)
     ap.add_argument("--n", type=int, default=42, help="number of stacks (default 42)")
     ap.add_argument("--presets", nargs="+", default=list(DEFAULT_PRESETS))
     ap.add_argument("--size", type=int, default=256, help="image side in px (default 256)")
@@ -243,11 +222,20 @@ def main(argv=None):
     ap.add_argument("--work", default=None,
                     help="folder for the stacks and results (default: a temporary one); "
                          "reusing it resumes a sweep")
-    ap.add_argument("--csv", default=str(ROOT / "docs" / "data" / "synthetic-sweep.csv"))
-    ap.add_argument("--plot", default=str(ROOT / "docs" / "img" / "synthetic-sweep.png"))
+    ap.add_argument("--csv", default=None,
+                    help="per-stack CSV (default docs/data/synthetic-sweep.csv with --docs, "
+                         "else out/synthetic-sweep/synthetic-sweep.csv)")
+    ap.add_argument("--plot", default=None,
+                    help="plot (default docs/img/synthetic-sweep.png with --docs, else "
+                         "out/synthetic-sweep/synthetic-sweep.png)")
     ap.add_argument("--docs", action="store_true",
-                    help="replace the sweep section of docs/accuracy.md")
+                    help="replace the sweep section of docs/accuracy.md (and write the CSV and "
+                         "the plot under docs/)")
     args = ap.parse_args(argv)
+    dest = {"csv": DOCS / "data", "plot": DOCS / "img"} if args.docs else \
+        {"csv": ROOT / "out" / "synthetic-sweep", "plot": ROOT / "out" / "synthetic-sweep"}
+    csv_path = Path(args.csv) if args.csv else dest["csv"] / "synthetic-sweep.csv"
+    plot_path = Path(args.plot) if args.plot else dest["plot"] / "synthetic-sweep.png"
 
     tmp = None
     if args.work is None:
@@ -270,20 +258,13 @@ def main(argv=None):
     for (name, p, rough), folder, brow in zip(plan, stacks, res.rows):
         row = {"name": name, "preset": p.preset, "seed": p.seed, "full_well_e": p.full_well_e,
                "noise_pct": noise_pct(p), "roughness_scale": rough,
-               "rms_slope_true_deg": rms_slope_deg([(l.weight, l.sd_deg) for l in p.tilt_lobes]),
+               "rms_slope_true_deg": rms_slope_deg([(lb.weight, lb.sd_deg) for lb in p.tilt_lobes]),
                "status": brow["status"], "reason": brow.get("reason", ""),
                "time_s": brow.get("time_s")}
         if brow["status"] in ("done", "skipped"):
             row.update(score(Path(brow["results"]), folder / "truth", p))
         rows.append(row)
-    csv_path, plot_path = Path(args.csv), Path(args.plot)
-    csv_path.parent.mkdir(parents=True, exist_ok=True)
-    plot_path.parent.mkdir(parents=True, exist_ok=True)
-    with open(csv_path, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=COLUMNS, extrasaction="ignore", lineterminator="\n")
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: _fmt(r.get(k)) for k in COLUMNS})
+    write_csv(csv_path, rows, COLUMNS)
     plot(rows, plot_path)
     summary = table(rows)
     corr = correlations(rows)
@@ -296,15 +277,15 @@ def main(argv=None):
     if args.docs:
         rel_csv = csv_path.resolve().relative_to(ROOT) if csv_path.resolve().is_relative_to(ROOT) \
             else csv_path
-        rel_png = plot_path.resolve().relative_to(ROOT / "docs") \
-            if plot_path.resolve().is_relative_to(ROOT / "docs") else plot_path
+        rel_png = plot_path.resolve().relative_to(DOCS) \
+            if plot_path.resolve().is_relative_to(DOCS) else plot_path
         text = (f"Reproduce: `python pipelines/synthetic_sweep.py --n {args.n} --size {args.size} "
                 f"--slices {args.slices} --docs`. {header} Medians per preset (one row per "
                 f"stack in `{rel_csv}`):\n\n{summary}\n\nSpearman rank correlation of each "
                 f"error with the noise and with the true roughness, over all stacks:\n\n"
                 + "\n".join(f"* {line}" for line in corr.splitlines())
                 + f"\n\n![errors against noise and roughness]({rel_png})")
-        update_docs(ROOT / "docs" / "accuracy.md", text)
+        replace_block(DOCS / "accuracy.md", MARK_START, MARK_END, text)
     if tmp is not None:
         tmp.cleanup()
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..colour.difference import delta_e_2000
+from ..colour.difference import delta_e
 from ..colour.srgb import srgb_encode, srgb_to_lab
 from .mask import ColourMask, colour_mask
 
@@ -44,7 +44,8 @@ class ColourImage:
 
 
 def measure_colour(all_in_focus, *, color_space="sRGB", bit_depth=8, illuminant="D65",
-                   saturation_min=15.0, value_min=20.0) -> ColourImage:
+                   saturation_min=15.0, value_min=20.0, delta_e_method="CIEDE2000"
+                   ) -> ColourImage:
     """CIELAB, the colour mask and the colour noise of a composite image.
 
     Parameters
@@ -65,8 +66,9 @@ def measure_colour(all_in_focus, *, color_space="sRGB", bit_depth=8, illuminant=
     cm = colour_mask(enc, saturation_min=saturation_min, value_min=value_min,
                      bit_depth=bit_depth)
     lab = srgb_to_lab(enc, illuminant=illuminant).astype(np.float32)
-    noise = estimate_colour_noise(lab, cm.mask)
-    floor = quantization_noise_de(enc, cm.mask, bit_depth=bit_depth, illuminant=illuminant)
+    noise = estimate_colour_noise(lab, cm.mask, delta_e_method=delta_e_method)
+    floor = quantization_noise_de(enc, cm.mask, bit_depth=bit_depth, illuminant=illuminant,
+                                  delta_e_method=delta_e_method)
     if np.isfinite(floor) and not noise >= floor:
         log.info("colour noise %.4g below the quantization floor; using %.4g ΔE00", noise, floor)
         noise = floor
@@ -84,7 +86,7 @@ def no_colour_message(stack, mask: ColourMask, what: str, *, saturation_min, val
             f"{value_min:g} on the 0-255 scale)")
 
 
-def estimate_colour_noise(lab, mask):
+def estimate_colour_noise(lab, mask, *, delta_e_method="CIEDE2000"):
     """Per-component colour noise σ_n in ΔE00 units from neighbouring pixels.
 
     The ΔE00 between horizontally adjacent unmasked pixels is, for noise alone, the norm of
@@ -96,12 +98,12 @@ def estimate_colour_noise(lab, mask):
     ok = m[:, 1:] & m[:, :-1]
     if ok.sum() < 10:
         return float("nan")
-    de = delta_e_2000(lab[:, 1:][ok], lab[:, :-1][ok])
+    de = delta_e(lab[:, 1:][ok], lab[:, :-1][ok], method=delta_e_method)
     return float(np.median(de) / 2.18)
 
 
 def quantization_noise_de(encoded_srgb, mask, *, bit_depth, illuminant="D65", n_sample=4096,
-                          seed=0):
+                          seed=0, delta_e_method="CIEDE2000"):
     """Colour noise (ΔE00 per component, as :func:`estimate_colour_noise`) that the image's
     quantization alone implies: the floor of the colour noise.
 
@@ -127,8 +129,8 @@ def quantization_noise_de(encoded_srgb, mask, *, bit_depth, illuminant="D65", n_
         img = img[rng.choice(img.shape[0], n_sample, replace=False)]
     lsb = np.float32(1.0 / (2 ** bit_depth - 1))
     moved = np.clip(img + rng.uniform(-0.5, 0.5, img.shape).astype(np.float32) * lsb, 0, 1)
-    de = delta_e_2000(srgb_to_lab(img, illuminant=illuminant),
-                            srgb_to_lab(moved, illuminant=illuminant))
+    de = delta_e(srgb_to_lab(img, illuminant=illuminant),
+                 srgb_to_lab(moved, illuminant=illuminant), method=delta_e_method)
     # |difference| of one pixel from its re-rounded self: the norm of a 3-D error of
     # per-component SD sigma has median ~1.54 sigma
     return float(np.median(de) / 1.54)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..colour.colorimetry import xyz_to_lab
-from ..colour.difference import delta_e_2000
+from ..colour.difference import delta_e
 from ..core.lazy import load
 from .tilt import PixelEstimates, invert_tilt, model_lab_rows
 
@@ -149,7 +149,8 @@ def fit_facet_planes(labels, height_um, weight, *, pixel_size_um, fallback_tilt_
     fb = np.asarray(fallback_tilt_deg, dtype=np.float64)
     ok = np.isfinite(fb)
     cnt = np.bincount(lab, weights=ok.ravel().astype(float), minlength=S)
-    fb_mean = np.bincount(lab, weights=np.where(ok, fb, 0).ravel(), minlength=S) / np.maximum(cnt, 1)
+    fb_sum = np.bincount(lab, weights=np.where(ok, fb, 0).ravel(), minlength=S)
+    fb_mean = fb_sum / np.maximum(cnt, 1)
     tilt = np.where(fitted, tilt, fb_mean)
     sig = np.where(fitted & np.isfinite(sig), np.maximum(sig, 0.25), fallback_sigma_deg)
     return FacetFit(np.where(fitted, a, np.nan), np.where(fitted, b, np.nan), tilt, sig, sw,
@@ -157,13 +158,16 @@ def fit_facet_planes(labels, height_um, weight, *, pixel_size_um, fallback_tilt_
 
 
 def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table, *,
-                    exposure, half_range_nm=30.0, step_nm=0.1, interior=None):
+                    exposure, half_range_nm=30.0, step_nm=0.1, interior=None,
+                    delta_e_method="CIEDE2000"):
     """Thickness per facet from its mean Lab at its plane tilt, near its ROI's thickness.
 
     The search covers ±``half_range_nm`` around the facet's ROI thickness: wide enough for
     the spread of thickness inside a ROI, well inside one interference order (~110 nm).
     ``interior`` (bool H×W) restricts the facet's mean colour to pixels away from its
     boundary (partly shadowed by the step to the neighbour) where a facet has any.
+    ``delta_e_method`` is the colour-difference formula (``"CIEDE2000"``, ``"CIE94"``,
+    ``"CIE76"``; :func:`microfacet.colour.difference.delta_e`).
 
     Returns
     -------
@@ -196,7 +200,8 @@ def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table
         th = np.clip(facet_tilt_deg[ii], t_lo, t_hi)[:, None]
         xyz = table.xyz_at(th, grid) * exposure
         model = xyz_to_lab(xyz.astype(np.float32), white=table.white_xyz.astype(np.float32))
-        de = delta_e_2000(model, mean_lab[ii, None, :].astype(np.float32)).astype(np.float64)
+        de = delta_e(model, mean_lab[ii, None, :].astype(np.float32),
+                     method=delta_e_method).astype(np.float64)
         k = np.argmin(de, axis=1)
         km = np.clip(k, 1, off.size - 2)
         r = np.arange(ii.size)
@@ -210,7 +215,7 @@ def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table
 
 
 def refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table, exposure, *,
-                               interior, seed=0, n_facets=2000):
+                               interior, seed=0, n_facets=2000, delta_e_method="CIEDE2000"):
     """Exposure of least median facet ΔE00, each facet's thickness re-solved per candidate.
 
     Facets are homogeneous (one tilt, one thickness), unlike ROIs that span several
@@ -228,7 +233,8 @@ def refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table, 
 
     def objective(log_e):
         _, de = facet_thickness(facets, lab, sel, tilt_f, thick_roi_px, table,
-                                exposure=math.exp(log_e), interior=interior)
+                                exposure=math.exp(log_e), interior=interior,
+                                delta_e_method=delta_e_method)
         return float(np.nanmedian(de))
 
     lo, hi = math.log(exposure / 1.5), math.log(exposure * 1.5)
@@ -238,10 +244,13 @@ def refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table, 
 
 
 def facet_edge_distance(labels) -> np.ndarray:
-    """Distance in pixels of every pixel from the nearest facet boundary (0 on it)."""
+    """Distance in pixels of every pixel from the nearest facet boundary (0 on it; +inf
+    everywhere for a single facet, which has no boundary)."""
     edge = np.zeros(labels.shape, bool)
     edge[:, 1:] |= labels[:, 1:] != labels[:, :-1]
     edge[1:, :] |= labels[1:, :] != labels[:-1, :]
+    if not edge.any():
+        return np.full(labels.shape, np.inf)
     return ndimage.distance_transform_edt(~edge)
 
 
@@ -259,7 +268,7 @@ def thickness_blocks(shape, *, pixel_size_um, block_um=10.0) -> np.ndarray:
 
 def joint_tilts(colour, surface, roi, table, *, theta_grid_deg, max_tilt_deg, exposure,
                 estimate_exposure, facet_size_um, pixel_size_um, from_focus=True, seed=0,
-                timer=None):
+                timer=None, delta_e_method="CIEDE2000"):
     """The joint mode's per-pixel stage: facets, their planes, their thickness, and the tilt
     per pixel as the MAP with the facet-plane prior (see the module notes).
 
@@ -282,6 +291,8 @@ def joint_tilts(colour, surface, roi, table, *, theta_grid_deg, max_tilt_deg, ex
         (trusted where finite).
     timer : StageTimer, optional
         Records ``segmentation`` and ``facet_fits``.
+    delta_e_method : str
+        Colour-difference formula (:func:`microfacet.colour.difference.delta_e`).
 
     Returns
     -------
@@ -308,10 +319,12 @@ def joint_tilts(colour, surface, roi, table, *, theta_grid_deg, max_tilt_deg, ex
     tilt_f = np.clip(ff.tilt_deg, 0, max_tilt_deg)
     if estimate_exposure:
         exposure = refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table,
-                                             exposure, interior=dist >= 1.5, seed=seed)
+                                             exposure, interior=dist >= 1.5, seed=seed,
+                                             delta_e_method=delta_e_method)
         log.info("exposure refined on facets: %.4f", exposure)
     d_f, _ = facet_thickness(facets, lab, usable, tilt_f, thick_roi_px, table,
-                             exposure=exposure, interior=dist >= 1.5)
+                             exposure=exposure, interior=dist >= 1.5,
+                             delta_e_method=delta_e_method)
     if timer is not None:
         timer.lap("facet_fits")
     yy, xx = np.nonzero(usable)
@@ -321,7 +334,8 @@ def joint_tilts(colour, surface, roi, table, *, theta_grid_deg, max_tilt_deg, ex
     prior = np.clip(ff.tilt_deg[fid], 0, max_tilt_deg)
     inv = invert_tilt(lab[yy, xx], rows_lab, fid, theta_grid_deg, table=table,
                       thickness_px=d_rows[fid], exposure=exposure, noise_de=colour.noise_de,
-                      prior_deg=prior, prior_sigma_deg=ff.tilt_sigma_deg[fid])
+                      prior_deg=prior, prior_sigma_deg=ff.tilt_sigma_deg[fid],
+                      delta_e_method=delta_e_method)
     out = PixelEstimates.empty(shape)
     out.thickness_nm[yy, xx] = d_rows[fid]
     out.fill(yy, xx, inv)

@@ -16,8 +16,16 @@ import math
 import numpy as np
 
 from ..core.distributions import NDFMixture
-from .mixtures import (MixtureFit, bic_score, fit_thickness_mixture, k_max_for, k_note, positive_int,
-                       prepare, single_thread)
+from .mixtures import (
+    MixtureFit,
+    bic_score,
+    fit_thickness_mixture,
+    k_max_for,
+    k_note,
+    positive_int,
+    prepare,
+    single_thread,
+)
 
 __all__ = ["fit_distributions", "fit_ndf_mixture"]
 

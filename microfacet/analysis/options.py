@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ..colour.difference import METHODS
 from ..core.errors import InputError
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, load_set
 
@@ -43,6 +44,9 @@ class AnalysisOptions:
     operator, window_px, align : focus options (None = the focus module's defaults).
     seed : int
         Random sampling in the ROI fits.
+    delta_e_method : {"CIEDE2000", "CIE94", "CIE76"}
+        The colour difference every stage minimises or reports (seed: ΔE; CIEDE2000, whose
+        cost against the others is in docs/speed-vs-error.md).
 
     Examples
     --------
@@ -71,6 +75,7 @@ class AnalysisOptions:
     window_px: int | None = None
     align: bool | str = False
     seed: int = 0
+    delta_e_method: str = "CIEDE2000"
 
     def validate(self) -> None:
         """Raise :class:`~microfacet.core.errors.InputError` naming the first bad option."""
@@ -94,6 +99,9 @@ class AnalysisOptions:
             bad("roi_size_px", f"must be >= 8, got {self.roi_size_px!r}")
         if self.roi_stride_px is not None and not 1 <= self.roi_stride_px <= self.roi_size_px:
             bad("roi_stride_px", f"must be in [1, roi_size_px], got {self.roi_stride_px!r}")
+        if self.delta_e_method not in METHODS:
+            bad("delta_e_method", f"must be one of {', '.join(METHODS)}, got "
+                                  f"{self.delta_e_method!r}")
         for param in ("film", "substrate"):
             name = getattr(self, param)
             if name is not None:

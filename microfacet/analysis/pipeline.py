@@ -9,7 +9,7 @@ timing key             stage                                            module
 ``height_from_focus``  height map (from focus, or the export's own)     :mod:`.surface`
 ``normals``            normals and tilt of the height map               :mod:`.surface`
 ``colour_and_mask``    CIELAB, mask of colourless pixels, colour noise  :mod:`.colour_image`
-``colour_table``       model colour on a (tilt × thickness) grid        :mod:`microfacet.colour.table`
+``colour_table``       model colour on a (tilt × thickness) grid        :mod:`..colour.table`
 ``thickness_roi``      thickness per ROI, interference order, exposure  :mod:`.roi`
 ``segmentation``,      joint mode: facets, plane fits, per-facet        :mod:`.facets`
 ``facet_fits``         thickness
@@ -175,7 +175,7 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
     colour = measure_colour(focus.all_in_focus, color_space=st.color_space,
                             bit_depth=16 if st.dtype == np.uint16 else 8,
                             illuminant=optics.illuminant, saturation_min=opt.saturation_min,
-                            value_min=opt.value_min)
+                            value_min=opt.value_min, delta_e_method=opt.delta_e_method)
     timer.lap("colour_and_mask")
     masks = dict(saturation_min=opt.saturation_min, value_min=opt.value_min)
     if colour.mask.mask.all():
@@ -193,7 +193,8 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
     source = ("option" if opt.exposure is not None else
               "stack.json" if st.exposure is not None else "estimated")
     roi = thickness_per_roi(colour, surface.tilt_deg, table, size_px=opt.roi_size_px,
-                            stride_px=opt.roi_stride_px, exposure=given, seed=opt.seed)
+                            stride_px=opt.roi_stride_px, exposure=given, seed=opt.seed,
+                            delta_e_method=opt.delta_e_method)
     if not np.isfinite(roi.thickness_nm).any():
         raise InputError(no_colour_message(
             st, colour.mask, f"only {int((~colour.mask.mask).sum())} unmasked pixels, too few "
@@ -205,13 +206,15 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
     facets = None
     if opt.mode == "seed":
         exposure = roi.exposure
-        pixels = seed_tilts(colour, roi, table, theta_grid_deg=grid, exposure=exposure)
+        pixels = seed_tilts(colour, roi, table, theta_grid_deg=grid, exposure=exposure,
+                            delta_e_method=opt.delta_e_method)
     else:
         pixels, facets, exposure = joint_tilts(
             colour, surface, roi, table, theta_grid_deg=grid, max_tilt_deg=optics.max_tilt_deg,
             exposure=roi.exposure, estimate_exposure=source == "estimated",
             facet_size_um=opt.facet_size_um, pixel_size_um=st.pixel_size_um,
-            from_focus=st.has_slices, seed=opt.seed, timer=timer)
+            from_focus=st.has_slices, seed=opt.seed, timer=timer,
+            delta_e_method=opt.delta_e_method)
     timer.lap("tilt_per_pixel")
 
     timer.start("distributions")

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..colour.colorimetry import xyz_to_lab
-from ..colour.difference import delta_e_2000
+from ..colour.difference import delta_e
 from ..core.lazy import load
 
 ndimage = load("scipy.ndimage")
@@ -179,13 +179,13 @@ def _model_lab(xyz, exposure, white):
                             white=white.astype(np.float32))
 
 
-def _curve(xyz_s, lab_s, exposure, white):
+def _curve(xyz_s, lab_s, exposure, white, method):
     """Mean ΔE00 over the sample for every grid thickness: xyz_s (n, D, 3), lab_s (n, 3) → (D,)."""
-    de = delta_e_2000(_model_lab(xyz_s, exposure, white), lab_s[:, None, :])
+    de = delta_e(_model_lab(xyz_s, exposure, white), lab_s[:, None, :], method=method)
     return de.mean(axis=0)
 
 
-def _band_curve(xyz_s, lab_s, white, grid, half_width_nm, exposure=None):
+def _band_curve(xyz_s, lab_s, white, grid, half_width_nm, exposure=None, method="CIEDE2000"):
     """Band score: mean over pixels of each pixel's best ΔE00 within ±half_width of d.
 
     Each pixel may take its own thickness inside the band (ROIs span several thickness
@@ -198,7 +198,7 @@ def _band_curve(xyz_s, lab_s, white, grid, half_width_nm, exposure=None):
         model = model * (lab_s[:, None, 0:1] / np.maximum(model[..., 0:1], 1e-3))
     else:
         model = _model_lab(xyz_s, exposure, white)
-    de = delta_e_2000(model, lab_s[:, None, :])
+    de = delta_e(model, lab_s[:, None, :], method=method)
     step = grid[1] - grid[0] if grid.size > 1 else 1.0
     k = max(1, int(round(half_width_nm / step)))
     return ndimage.minimum_filter1d(de, size=2 * k + 1, axis=1, mode="nearest").mean(axis=0)
@@ -225,7 +225,7 @@ def _parabola(x, y, i):
 def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
                       grid_step_nm=1.0, sample_px=256, refine_px=8000, min_pixels=20,
                       consensus_half_width_nm=35.0, order_margin_de=2.0,
-                      seed=0) -> RoiFit:
+                      seed=0, delta_e_method="CIEDE2000") -> RoiFit:
     """Thickness of least mean ΔE00 per ROI, and the exposure if not given.
 
     Parameters
@@ -259,6 +259,9 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
         within it is the sample's order; each ROI takes its best minimum inside the band,
         unless a minimum outside is better by more than ``order_margin_de`` (a sample that
         really spans two orders). 0 disables the consensus.
+    delta_e_method : {"CIEDE2000", "CIE94", "CIE76"}
+        Colour-difference formula (:func:`microfacet.colour.difference.delta_e`); the seed
+        and the defaults use CIEDE2000 (docs/speed-vs-error.md compares the others).
 
     Returns
     -------
@@ -293,14 +296,16 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
     band = None
     if consensus_half_width_nm > 0 and valid and grid.size > 2:
         # The interference order, from hue and chroma alone (before the exposure is known).
-        score = np.mean([_band_curve(x[:128], lab_s[:128], white, grid, consensus_half_width_nm)
+        score = np.mean([_band_curve(x[:128], lab_s[:128], white, grid, consensus_half_width_nm,
+                                     method=delta_e_method)
                          for x, lab_s, _, _ in valid], axis=0)
         centre = float(grid[int(np.argmin(score))])
         band = (centre - consensus_half_width_nm, centre + consensus_half_width_nm)
         log.info("interference-order consensus (exposure-invariant): %.1f-%.1f nm", *band)
     estimated = exposure is None
     if estimated:
-        exposure = _estimate_exposure(valid, white, grid, band) if valid else 1.0
+        exposure = (_estimate_exposure(valid, white, grid, band, delta_e_method) if valid
+                    else 1.0)
         log.info("estimated exposure %.4f", exposure)
     elif not (np.isfinite(exposure) and exposure > 0):
         raise ValueError(f"exposure: must be > 0, got {exposure!r}")
@@ -311,7 +316,7 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
     curves = np.full((n, grid.size), np.nan, dtype=np.float32)
     for i, s in enumerate(samples):
         if s is not None:
-            curves[i] = _curve(s[0], s[1], exposure, white)
+            curves[i] = _curve(s[0], s[1], exposure, white, delta_e_method)
     for i, s in enumerate(samples):
         if s is None:
             continue
@@ -333,11 +338,11 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
             fine = np.arange(grid[j] - grid_step_nm, grid[j] + grid_step_nm + 1e-9, 0.05)
             fine = fine[(fine >= d_lo) & (fine <= d_hi)]
             xyz_f = table.xyz_at(tilt[yr, xr][:, None], fine[None, :]).astype(np.float32)
-            c_f = _curve(xyz_f, lab[yr, xr], exposure, white)
+            c_f = _curve(xyz_f, lab[yr, xr], exposure, white, delta_e_method)
             k = int(np.argmin(c_f))
             d_best = _parabola(fine, c_f, k)
             de_best = float(_curve(table.xyz_at(tilt[yr, xr], d_best)[:, None, :].astype(
-                np.float32), lab[yr, xr], exposure, white)[0])
+                np.float32), lab[yr, xr], exposure, white, delta_e_method)[0])
             res.append((de_best, d_best))
         if not chosen_by_consensus:
             res.sort()
@@ -352,7 +357,7 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
 
 
 def thickness_per_roi(colour, tilt_deg, table, *, size_px=255, stride_px=None, exposure=None,
-                      seed=0) -> RoiFit:
+                      seed=0, delta_e_method="CIEDE2000") -> RoiFit:
     """The ROI stage: a grid of ROIs over the image and :func:`fit_roi_thickness` on it.
 
     Parameters
@@ -367,10 +372,10 @@ def thickness_per_roi(colour, tilt_deg, table, *, size_px=255, stride_px=None, e
     """
     rois = roi_grid(colour.lab.shape[:2], size_px=size_px, stride_px=stride_px)
     return fit_roi_thickness(colour.lab, tilt_deg, colour.mask.mask, table, rois=rois,
-                             exposure=exposure, seed=seed)
+                             exposure=exposure, seed=seed, delta_e_method=delta_e_method)
 
 
-def _estimate_exposure(samples, white, grid, band):
+def _estimate_exposure(samples, white, grid, band, method):
     """Exposure minimising the ROIs' mean best median ΔE (within the order band, if any)."""
     sub = [(xyz[:128], lab_s[:128]) for xyz, lab_s, _, _ in samples]
     inside = (np.ones(grid.size, bool) if band is None
@@ -382,7 +387,7 @@ def _estimate_exposure(samples, white, grid, band):
         e = math.exp(log_e)
         vals = []
         for x, lab_s in sub:
-            de = delta_e_2000(_model_lab(x[:, inside], e, white), lab_s[:, None, :])
+            de = delta_e(_model_lab(x[:, inside], e, white), lab_s[:, None, :], method=method)
             vals.append(np.median(de.min(axis=1)))
         return float(np.mean(vals))
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..colour.colorimetry import xyz_to_lab
-from ..colour.difference import delta_e_2000
+from ..colour.difference import delta_e
 
 __all__ = ["PixelEstimates", "TiltInversion", "invert_tilt", "model_lab_rows", "seed_tilts",
            "tilt_grid"]
@@ -102,7 +102,8 @@ def tilt_grid(max_tilt_deg, step_deg) -> np.ndarray:
     return np.linspace(0.0, max_tilt_deg, n_steps + 1)
 
 
-def seed_tilts(colour, roi, table, *, theta_grid_deg, exposure) -> PixelEstimates:
+def seed_tilts(colour, roi, table, *, theta_grid_deg, exposure, delta_e_method="CIEDE2000"
+               ) -> PixelEstimates:
     """The seed's step 3 (§3.3.3): each ROI's thickness for its pixels, and per pixel the
     tilt of least ΔE00 at that thickness (:func:`invert_tilt`, no prior).
 
@@ -125,7 +126,8 @@ def seed_tilts(colour, roi, table, *, theta_grid_deg, exposure) -> PixelEstimate
     rows_lab = model_lab_rows(table, rows_d, theta_grid_deg, exposure=exposure)
     rix = roi_index[yy, xx]
     inv = invert_tilt(colour.lab[yy, xx], rows_lab, rix, theta_grid_deg, table=table,
-                      thickness_px=rows_d[rix], exposure=exposure, noise_de=colour.noise_de)
+                      thickness_px=rows_d[rix], exposure=exposure, noise_de=colour.noise_de,
+                      delta_e_method=delta_e_method)
     out.thickness_nm[yy, xx] = rows_d[rix]
     out.fill(yy, xx, inv)
     return out
@@ -140,7 +142,7 @@ def model_lab_rows(table, thickness_nm, theta_grid_deg, *, exposure):
 
 def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness_px,
                 exposure, noise_de, prior_deg=None, prior_sigma_deg=None,
-                chunk=65536) -> TiltInversion:
+                chunk=65536, delta_e_method="CIEDE2000") -> TiltInversion:
     """Tilt of least ΔE00 (or MAP with a prior) for each pixel.
 
     Parameters
@@ -163,11 +165,17 @@ def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness
         Image colour noise per Lab component, ΔE00 units.
     prior_deg, prior_sigma_deg : ndarray, shape (n,), optional
         Gaussian prior on the tilt (joint mode).
+    delta_e_method : str
+        Colour-difference formula of the search, the sensitivity and the reported ΔE
+        (:func:`microfacet.colour.difference.delta_e`; default CIEDE2000).
 
     Returns
     -------
     TiltInversion
     """
+    def de_fn(a, b):
+        return delta_e(a, b, method=delta_e_method)
+
     lab_px = np.asarray(lab_px, dtype=np.float32)
     th = np.asarray(theta_grid_deg, dtype=np.float64)
     step = th[1] - th[0]
@@ -180,13 +188,13 @@ def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness
     # Sensitivity per row and grid node (central differences; one-sided at the ends).
     rl = rows_lab.astype(np.float32)
     sens_rows = np.empty(rl.shape[:2], np.float32)  # ΔE00 per degree
-    sens_rows[:, 1:-1] = delta_e_2000(rl[:, 2:], rl[:, :-2]) / (2 * step)
-    sens_rows[:, 0] = delta_e_2000(rl[:, 1], rl[:, 0]) / step
-    sens_rows[:, -1] = delta_e_2000(rl[:, -1], rl[:, -2]) / step
+    sens_rows[:, 1:-1] = de_fn(rl[:, 2:], rl[:, :-2]) / (2 * step)
+    sens_rows[:, 0] = de_fn(rl[:, 1], rl[:, 0]) / step
+    sens_rows[:, -1] = de_fn(rl[:, -1], rl[:, -2]) / step
     for a in range(0, n, chunk):
         b = min(n, a + chunk)
         ri = row_index[a:b]
-        de = delta_e_2000(rows_lab[ri], lab_px[a:b, None, :])  # (m, K)
+        de = de_fn(rows_lab[ri], lab_px[a:b, None, :])  # (m, K)
         q = (de.astype(np.float64) / noise) ** 2
         if prior_deg is not None:
             q += ((th[None, :] - prior_deg[a:b, None]) / prior_sigma_deg[a:b, None]) ** 2
@@ -213,7 +221,7 @@ def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness
         out_s[a:b] = np.minimum(sig, th[-1] - th[0])
         out_w[a:b] = w
         out_j[a:b] = j
-    exact = delta_e_2000(
+    exact = de_fn(
         xyz_to_lab((table.xyz_at(out_t, thickness_px) * exposure).astype(np.float32),
                          white=table.white_xyz.astype(np.float32)), lab_px)
     return TiltInversion(out_t, out_s, exact.astype(np.float32), out_w, out_j)

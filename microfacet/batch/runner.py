@@ -1,6 +1,7 @@
 """Many stacks at once: local worker processes or an existing Dask cluster.
 
-:func:`run_batch` analyses every stack with :func:`microfacet.analysis.pipeline.analyze_stack` and writes
+:func:`run_batch` analyses every stack with
+:func:`~microfacet.analysis.pipeline.analyze_stack` and writes
 each results folder (``docs/results-format.md``) under one output folder, named after the
 stack folder. It is made for drawers full of stacks:
 

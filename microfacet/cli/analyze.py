@@ -29,7 +29,8 @@ def register(sub):
             "normals.npy, all_in_focus.png, thickness_nm.npy, tilt_deg.npy, "
             "tilt_sigma_deg.npy, thickness_roi.csv, thickness_pdf.csv, ndf_pdf.csv, report.pdf."),
         epilog=example_epilog("microfacet analyze fixtures/stacks/nd-fixture --out out/nd",
-                              "microfacet analyze my-stack --out res --mode seed --roi-size-px 128"),
+                              "microfacet analyze my-stack --out res --mode seed "
+                              "--roi-size-px 128"),
         formatter_class=HelpFormatter,
     )
     p.add_argument("stack", metavar="STACK", help="stack folder (microfacet-stack/1)")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..batch.runner import run_batch
+from .. import batch
 from ..core.errors import InputError
 from .options import HelpFormatter, add_analysis_options, analysis_options, example_epilog
 from .progress import Progress
@@ -83,7 +83,7 @@ def run(args) -> int:
 
     with Progress("batch", total=len(stacks), unit="stacks", quiet=args.quiet) as bar:
         try:
-            result = run_batch(stacks, args.out, options=opts, jobs=args.jobs,
+            result = batch.run_batch(stacks, args.out, options=opts, jobs=args.jobs,
                                scheduler=args.scheduler, overwrite=args.overwrite,
                                report=not args.no_report,
                                progress=lambda done, total, row: bar.update(done, total))

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 
-from ..io.spectrum import read_spectrum_csv
-from ..optics.spectrumfit import fit_thickness
+from .. import io, optics
+from ..core.errors import InputError
 from .options import HelpFormatter, add_optics_options, example_epilog, optics_kwargs, pair_type
 
 
@@ -40,13 +40,15 @@ def register(sub):
 
 def run(args) -> int:
     opt = optics_kwargs(args)
-    wl, R = read_spectrum_csv(args.spectrum)
+    wl, R = io.spectrum.read_spectrum_csv(args.spectrum)
     try:
-        fit = fit_thickness(wl, R, angle_deg=args.angle_deg, film=opt["film"],
-                            substrate=opt["substrate"], fit_scale=args.fit_scale,
-                            thickness_range_nm=tuple(args.thickness_range_nm))
-    except ValueError as exc:
-        raise ValueError(f"{args.spectrum}: {exc}") from None
+        fit = optics.spectrumfit.fit_thickness(
+            wl, R, angle_deg=args.angle_deg, film=opt["film"], substrate=opt["substrate"],
+            fit_scale=args.fit_scale, thickness_range_nm=tuple(args.thickness_range_nm))
+    except InputError as exc:
+        if exc.param in ("angle_deg", "thickness_range_nm"):
+            raise  # an option: the command line names its flag
+        raise InputError(f"{args.spectrum}: {exc}") from None  # the data in the file
     result = {
         "thickness_nm": round(fit.thickness_nm, 3),
         "residual_rms": fit.residual_rms,

@@ -14,27 +14,23 @@ import logging
 import time
 from pathlib import Path
 
-import numpy as np
-
-from .. import __version__
+from .. import __version__, focus, io
 from ..core.errors import InputError
 from ..core.lazy import load
-from ..focus.height import (
+from ..focus.defaults import (
     DEFAULT_FIT_RADIUS,
     DEFAULT_INTERPOLATION,
+    DEFAULT_OPERATOR,
+    DEFAULT_WINDOW,
+    DEFAULT_WINDOW_PX,
     INTERPOLATIONS,
-    check_focus_memory,
-    height_from_focus,
+    OPERATORS,
 )
-from ..focus.measures import DEFAULT_OPERATOR, DEFAULT_WINDOW, DEFAULT_WINDOW_PX, OPERATORS
-from ..focus.normals import normals_from_height, tilt_azimuth_deg
-from ..io.images import write_image
-from ..io.outdir import OutputFolder, check_output
-from ..io.stack import read_stack, stack_from_images
 from .options import HelpFormatter, add_limit_options, limits_from_args
 from .progress import Progress
 
 cv2 = load("cv2")
+np = load("numpy")
 
 EPILOG = """examples:
   microfacet height my-stack --out my-stack-height
@@ -53,7 +49,8 @@ def register(subparsers) -> argparse.ArgumentParser:
             "normals from the height and the pixel size, and the all-in-focus composite."),
         epilog=EPILOG, formatter_class=HelpFormatter)
 
-    p.add_argument("stack", metavar="STACK", help="stack folder with stack.json (or its stack.json)")
+    p.add_argument("stack", metavar="STACK",
+                   help="stack folder with stack.json (or its stack.json)")
     p.add_argument("--out", required=True, metavar="OUT",
                    help="output folder (new, empty, or an earlier height folder with "
                         "--overwrite; never an input or a folder holding one)")
@@ -94,12 +91,12 @@ def _load_stack(args):
         if args.pixel_size_um is None or args.z_step_um is None:
             raise InputError(f"{folder}: no stack.json; give both --pixel-size-um and "
                              f"--z-step-um to read the images in the folder as a stack")
-        return stack_from_images(folder, pixel_size_um=args.pixel_size_um,
+        return io.stack.stack_from_images(folder, pixel_size_um=args.pixel_size_um,
                                  z_step_um=args.z_step_um, limits=limits_from_args(args))
     if folder.is_dir() and not (folder / "stack.json").exists():
         raise InputError(f"{folder / 'stack.json'}: missing stack.json (for a plain folder of "
                          f"images give --pixel-size-um and --z-step-um)")
-    return read_stack(path, limits=limits_from_args(args))
+    return io.stack.read_stack(path, limits=limits_from_args(args))
 
 
 def _height_png(h):
@@ -119,7 +116,7 @@ def run(args) -> int:
     log = logging.getLogger("microfacet.height")
     t0 = time.perf_counter()
     out = Path(args.out)
-    check_output(out, kind="height", inputs=[args.stack], overwrite=args.overwrite)
+    io.outdir.check_output(out, kind="height", inputs=[args.stack], overwrite=args.overwrite)
     if args.window_px < 1 or args.window_px % 2 == 0:
         raise InputError(f"--window-px: must be an odd integer >= 1, got {args.window_px}")
     if not args.smooth_sigma_px >= 0:
@@ -131,31 +128,34 @@ def run(args) -> int:
     if stack.n_slices < 3:
         raise InputError(f"{stack.path / 'stack.json'}: key 'slices': height from focus needs "
                          f"at least 3 slices, the stack has {stack.n_slices}")
-    check_focus_memory(stack)
-    claim = OutputFolder(out, kind="height", inputs=[stack.path], overwrite=args.overwrite,
+    focus.height.check_focus_memory(stack)
+    claim = io.outdir.OutputFolder(out, kind="height", inputs=[stack.path],
+                                   overwrite=args.overwrite,
                          expected_bytes=32 * stack.shape[0] * stack.shape[1])
     with claim:
         with Progress("height", total=stack.n_slices, unit="slices", quiet=args.quiet) as bar:
-            res = height_from_focus(
+            res = focus.height.height_from_focus(
                 stack, operator=args.operator, window_px=args.window_px, window=args.window,
                 interpolation=args.interpolation, fit_radius=args.fit_radius,
                 min_reliability_db=args.min_reliability_db, fill=args.fill,
                 align=args.align or False, progress=bar.update)
         t1 = time.perf_counter()
-        normals = normals_from_height(res.height_um, pixel_size_um=stack.pixel_size_um,
+        normals = focus.normals.normals_from_height(res.height_um,
+                                                    pixel_size_um=stack.pixel_size_um,
                                       smooth_sigma_px=args.smooth_sigma_px)
-        tilt, _ = tilt_azimuth_deg(normals)
+        tilt, _ = focus.normals.tilt_azimuth_deg(normals)
         t2 = time.perf_counter()
 
         with claim.writing() as tmp:
             np.save(tmp / "height_um.npy", res.height_um.astype(np.float32))
             np.save(tmp / "normals.npy", normals.astype(np.float32))
             np.save(tmp / "reliability_db.npy", res.reliability_db.astype(np.float32))
-            write_image(tmp / "all_in_focus.png", res.all_in_focus,
+            io.images.write_image(tmp / "all_in_focus.png", res.all_in_focus,
                         bit_depth=16 if stack.dtype == np.uint16 else 8)
             rel8 = np.round(np.clip(res.reliability_db, 0, 40) / 40 * 255).astype(np.uint8)
-            write_image(tmp / "reliability.png", rel8)
-            write_image(tmp / "height.png", _height_png(res.height_um)[..., ::-1])  # BGR → RGB
+            io.images.write_image(tmp / "reliability.png", rel8)
+            io.images.write_image(tmp / "height.png",
+                                  _height_png(res.height_um)[..., ::-1])  # BGR → RGB
             h = res.height_um
             ok = np.isfinite(h)
             summary = {
@@ -178,8 +178,10 @@ def run(args) -> int:
                 "stats": {
                     "unreliable_fraction": float(1.0 - ok.mean()),
                     "height_um_percentiles_1_50_99": (
-                        [float(v) for v in np.percentile(h[ok], [1, 50, 99])] if ok.any() else None),
-                    "median_tilt_deg": float(np.nanmedian(tilt)) if np.isfinite(tilt).any() else None,
+                        [float(v) for v in np.percentile(h[ok], [1, 50, 99])]
+                        if ok.any() else None),
+                    "median_tilt_deg": (float(np.nanmedian(tilt))
+                                        if np.isfinite(tilt).any() else None),
                 },
                 "timings_s": {**{k: round(v, 4) for k, v in res.timings_s.items()},
                               "height_from_focus": round(t1 - t0, 4),

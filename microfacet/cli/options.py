@@ -9,7 +9,7 @@ from .. import analysis, optics
 from ..core.errors import InputError
 from ..io import limits
 from ..io.limits import DEFAULT_MAX_MEGAPIXELS, DEFAULT_MAX_STACK_MEGAPIXELS
-from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
+from ..optics.defaults import DEFAULT_FILM, DEFAULT_SUBSTRATE
 
 
 def add_optics_options(p: argparse.ArgumentParser) -> None:
@@ -75,12 +75,15 @@ def example_epilog(*lines: str) -> str:
 
 
 def add_analysis_options(p: argparse.ArgumentParser) -> None:
-    """The options of :class:`microfacet.analysis.pipeline.AnalysisOptions` (``analyze``, ``batch``)."""
+    """The options of :class:`~microfacet.analysis.options.AnalysisOptions` (``analyze``,
+    ``batch``)."""
     g = p.add_argument_group("analysis")
     g.add_argument("--mode", choices=("joint", "seed"), default="joint",
                    help="joint: facet planes + colour (default); seed: the paper's method")
-    g.add_argument("--roi-size-px", type=int, default=255, metavar="PX", help="ROI side (default 255)")
-    g.add_argument("--roi-stride-px", type=int, default=None, metavar="PX", help="ROI stride (default: size)")
+    g.add_argument("--roi-size-px", type=int, default=255, metavar="PX",
+                   help="ROI side (default 255)")
+    g.add_argument("--roi-stride-px", type=int, default=None, metavar="PX",
+                   help="ROI stride (default: size)")
     g.add_argument("--saturation-min", type=float, default=15.0, metavar="S",
                    help="mask HSV saturation below this, 0-255 scale (default 15)")
     g.add_argument("--thickness-range-nm", type=pair_type(":", float, "LOW:HIGH in nm"),

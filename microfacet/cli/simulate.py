@@ -21,22 +21,12 @@ import math
 import time
 from pathlib import Path
 
-import numpy as np
-
-from .. import __version__
-from ..colour.colorimetry import spectral_weights
-from ..core.distributions import NDFMixture, ThicknessMixture
+from .. import __version__, colour, core, forward, io, report
 from ..core.errors import InputError
-from ..forward.angular import (display_exposure, simulate_map, simulate_memory_bytes,
-                               with_exposure)
-from ..forward.brdf import thickness_nodes
-from ..forward.compare import delta_e_map, fit_eq6, fit_exposure, mean_delta_e
-from ..io.angular_map import load_map, save_map, save_png
-from ..io.limits import check_memory
-from ..io.outdir import atomic_output_dir, check_output
-from ..io.results import Results
-from ..report.figures import plot_maps
+from ..core.lazy import load
 from .options import HelpFormatter, add_optics_options, example_epilog, optics_kwargs
+
+np = load("numpy")
 
 _EXAMPLES = (
     "microfacet simulate --thickness-nm 51 --out sd-blue",
@@ -122,7 +112,7 @@ MAX_THICKNESS_SD_NM = 1000.0
 
 def run(args) -> int:
     inputs = [x for x in (args.results, args.compare) if x]
-    check_output(args.out, kind="simulate", inputs=inputs, overwrite=args.overwrite)
+    io.outdir.check_output(args.out, kind="simulate", inputs=inputs, overwrite=args.overwrite)
     return _simulate(args)
 
 
@@ -136,9 +126,9 @@ def _grid(args):
 
 
 def _check_grid_memory(model, n_light, n_view, n_wl, what):
-    check_memory(simulate_memory_bytes(model=model, n_light=n_light, n_view=n_view,
-                                       n_wavelengths=n_wl),
-                 f"{n_light} x {n_view} angles x {n_wl} wavelengths ({what})")
+    need = forward.angular.simulate_memory_bytes(model=model, n_light=n_light, n_view=n_view,
+                                                 n_wavelengths=n_wl)
+    io.limits.check_memory(need, f"{n_light} x {n_view} angles x {n_wl} wavelengths ({what})")
 
 
 def _check_outcome(xyz, model):
@@ -160,13 +150,16 @@ def _check_thickness_nm(value):
 
 
 def parse_thickness_mixture(text, *, option="--thickness-mixture"):
-    """``"w:mean:sd,..."`` → :class:`ThicknessMixture` (ValueError naming ``option``)."""
-    return ThicknessMixture(_parse_components(text, 3, option, "weight:mean_nm:sd_nm"))
+    """``"w:mean:sd,..."`` → :class:`~microfacet.core.distributions.ThicknessMixture`
+    (ValueError naming ``option``)."""
+    return core.distributions.ThicknessMixture(
+        _parse_components(text, 3, option, "weight:mean_nm:sd_nm"))
 
 
 def parse_ndf_lobes(text, *, option="--ndf-lobes"):
-    """``"w:sd_deg,..."`` → :class:`NDFMixture` (ValueError naming ``option``)."""
-    return NDFMixture(_parse_components(text, 2, option, "weight:sd_deg"))
+    """``"w:sd_deg,..."`` → :class:`~microfacet.core.distributions.NDFMixture`
+    (ValueError naming ``option``)."""
+    return core.distributions.NDFMixture(_parse_components(text, 2, option, "weight:sd_deg"))
 
 
 def _parse_components(text, n, option, form):
@@ -204,7 +197,7 @@ def _finite(x):
 def _read_results(folder):
     """The fitted mixtures and optics of an analysis results folder (``--results``)."""
     try:
-        res = Results(folder)
+        res = io.results.Results(folder)
         out = {"thickness": res.thickness_mixture(), "ndf": res.ndf_mixture()}
     except InputError as exc:
         raise InputError(exc.reason, param="results") from None
@@ -265,7 +258,7 @@ def _simulate(args) -> int:
 
     measured = None
     if args.compare is not None:
-        measured = load_map(args.compare)
+        measured = io.angular_map.load_map(args.compare)
         tl, tv = measured.theta_light_deg, measured.theta_view_deg
         opt["illuminant"], opt["observer"] = measured.illuminant, measured.observer
     else:
@@ -275,7 +268,7 @@ def _simulate(args) -> int:
     _check_grid_memory(model, tl.size, tv.size, wl.size,
                        f"--theta-step-deg {args.theta_step_deg:g}, --spectral-step-nm {step:g}")
     try:
-        thickness_nodes(thickness)
+        forward.brdf.thickness_nodes(thickness)
     except ValueError as exc:
         raise InputError(str(exc).partition(": ")[2],
                          param="thickness_mixture" if args.thickness_mixture else "results"
@@ -283,7 +276,8 @@ def _simulate(args) -> int:
 
     fit = {}
     if args.fit_exponent:
-        r = fit_eq6(measured, thickness=thickness, ndf=ndf, fit_exposure_too=args.fit_exposure,
+        r = forward.compare.fit_eq6(measured, thickness=thickness, ndf=ndf,
+                                    fit_exposure_too=args.fit_exposure,
                     exposure=exposure, wavelength_nm=wl, film=opt["film"],
                     substrate=opt["substrate"])
         n, fit["n"], fit["mean_delta_e"] = r.n, r.n, r.mean_delta_e
@@ -294,23 +288,25 @@ def _simulate(args) -> int:
               substrate=opt["substrate"], illuminant=opt["illuminant"],
               observer=opt["observer"])
     if args.fit_exposure and not args.fit_exponent:
-        m1 = simulate_map(exposure=1.0, **kw)
-        white = spectral_weights(wl, illuminant=opt["illuminant"],
+        m1 = forward.angular.simulate_map(exposure=1.0, **kw)
+        white = colour.colorimetry.spectral_weights(wl, illuminant=opt["illuminant"],
                                        observer=opt["observer"]).sum(axis=0)
-        exposure, fit["mean_delta_e"] = fit_exposure(m1.xyz, measured.lab, white=white)
+        exposure, fit["mean_delta_e"] = forward.compare.fit_exposure(m1.xyz, measured.lab,
+                                                                     white=white)
         fit["exposure"] = exposure
     if auto_exposure and not args.fit_exponent:
         # the display rule every map picture uses (forward.angular.display_exposure)
-        m = simulate_map(exposure=1.0, **kw)
-        exposure = fit["auto_exposure"] = display_exposure(m)
-        m = with_exposure(m, exposure)
+        m = forward.angular.simulate_map(exposure=1.0, **kw)
+        exposure = fit["auto_exposure"] = forward.angular.display_exposure(m)
+        m = forward.angular.with_exposure(m, exposure)
     else:
-        m = simulate_map(exposure=exposure, **kw)
+        m = forward.angular.simulate_map(exposure=exposure, **kw)
     _check_outcome(m.xyz, model)
     de = stats = None
     if measured is not None:
-        de = delta_e_map(m, measured)
-        stats = mean_delta_e(de, tl, tv, specular_halfwidth_deg=args.specular_halfwidth_deg)
+        de = forward.compare.delta_e_map(m, measured)
+        stats = forward.compare.mean_delta_e(de, tl, tv,
+                                             specular_halfwidth_deg=args.specular_halfwidth_deg)
 
     meta = {
         "format": "microfacet-simulate/2", "model": model, "exposure": float(exposure),
@@ -330,7 +326,7 @@ def _simulate(args) -> int:
     if stats is not None:
         meta["compare"] = {"measured": str(args.compare), **stats}
     inputs = [x for x in (args.results, args.compare) if x]
-    with atomic_output_dir(args.out, kind="simulate", overwrite=args.overwrite,
+    with io.outdir.atomic_output_dir(args.out, kind="simulate", overwrite=args.overwrite,
                            inputs=inputs) as tmp:
         np.save(tmp / "spectra.npy", m.spectra.astype(np.float32))
         np.save(tmp / "wavelength_nm.npy", wl)
@@ -338,11 +334,11 @@ def _simulate(args) -> int:
         np.save(tmp / "angular_xyz.npy", m.xyz.astype(np.float32))
         np.save(tmp / "theta_light_deg.npy", tl)
         np.save(tmp / "theta_view_deg.npy", tv)
-        save_map(tmp / "angular_map.npz", m)
-        save_png(tmp / "angular_map.png", m, scale=4)
+        io.angular_map.save_map(tmp / "angular_map.npz", m)
+        io.angular_map.save_png(tmp / "angular_map.png", m, scale=4)
         title = f"{model}" + (f", n = {n:.3g}" if model == "eq6" else "") + \
             f", exposure {exposure:.3g}"
-        plot_maps(tmp / "figure.pdf", m, measured=measured, delta_e=de, stats=stats,
+        report.figures.plot_maps(tmp / "figure.pdf", m, measured=measured, delta_e=de, stats=stats,
                   title=title)
         if de is not None:
             np.save(tmp / "delta_e.npy", de.astype(np.float32))

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import sys
 
+from .. import forward
 from ..core.errors import InputError
-from ..forward.synth import generate_stack, preset
 from .options import HelpFormatter, example_epilog, pair_type
 from .progress import Progress
 
@@ -55,14 +55,14 @@ def run(args) -> int:
     if args.write_exposure:
         over["write_exposure"] = True
     try:
-        params = preset(args.preset, **over)
+        params = forward.synth.preset(args.preset, **over)
     except ValueError as exc:
         name = str(exc).split(":")[0]
         flag = {"height_px": "--size", "width_px": "--size", "n_slices": "--slices"}.get(name)
         raise ValueError(f"{flag}: {exc}" if flag else str(exc)) from None
     with Progress("synth", total=params.n_slices, unit="slices", quiet=args.quiet) as bar:
         try:
-            res = generate_stack(args.out, params, overwrite=args.overwrite,
+            res = forward.synth.generate_stack(args.out, params, overwrite=args.overwrite,
                                  progress=bar.update)
         except InputError as exc:
             if exc.param in ("height_px", "width_px"):

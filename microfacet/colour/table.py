@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, resolve_index
+from ..optics.thinfilm import reflectance
 from .colorimetry import spectral_weights, xyz_to_lab
 from .difference import delta_e_2000
 from .srgb import model_xyz_to_linear_srgb
@@ -78,8 +79,6 @@ def direct_xyz(theta_deg, thickness_nm, *, spectral_step_nm=1.0, film=DEFAULT_FI
     >>> bool(0.5 < xyz[1] < 0.7)
     True
     """
-    from ..optics.thinfilm import reflectance
-
     wl = _wavelengths(spectral_step_nm)
     n1, n2 = resolve_index(film, wl), resolve_index(substrate, wl)
     w = spectral_weights(wl, illuminant=illuminant, observer=observer)

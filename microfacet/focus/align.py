@@ -1,6 +1,7 @@
 """Registration of focus-stack slices that drift or change magnification.
 
-Used by :func:`microfacet.focus.height.height_from_focus` with ``align=...``. One extra streaming pass
+Used by :func:`~microfacet.focus.height.height_from_focus`
+with ``align=...``. One extra streaming pass
 over the stack in ``z`` order estimates the warp between *neighbouring* slices (neighbours have
 similar defocus, so intensity-based registration is reliable) on copies downscaled to at most
 ``max_side`` pixels, and composes them. Only the previous downscaled slice is kept, so memory

@@ -55,6 +55,12 @@ from ..io.images import convert_samples
 from ..io.limits import check_memory
 from ..io.stack import Stack
 from .align import estimate_warps, warped_loader
+from .defaults import (
+    DEFAULT_FIT_RADIUS,
+    DEFAULT_INTERPOLATION,
+    DEFAULT_MIN_RELIABILITY_DB,
+    INTERPOLATIONS,
+)
 from .fill import fill_missing
 from .measures import (
     DEFAULT_OPERATOR,
@@ -81,13 +87,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-INTERPOLATIONS = ("lsq", "gauss3", "none")
-DEFAULT_INTERPOLATION = "lsq"
-DEFAULT_FIT_RADIUS = 2
-#: Default reliability cut in dB per operator: above the 99.9th percentile of pure-noise
-#: (textureless) pixels and below the 1st percentile of textured ones in the synthetic
-#: check of tests/test_focus.py; see docs/height-from-focus.md.
-DEFAULT_MIN_RELIABILITY_DB = {"tenengrad": 12.0, "sml": 9.0, "glv": 11.0}
 
 # --------------------------------------------------------------------------------------------
 # peak fit
@@ -236,7 +235,8 @@ def _slice_source(source, z_um):
     """Return (z_um file order, n, shape, channels, loader(file_index) -> image float32)."""
     if isinstance(source, Stack):
         if not source.has_slices:
-            raise InputError(f"{source.path / 'stack.json'}: the stack has no slices (export only); "
+            raise InputError(f"{source.path / 'stack.json'}: the stack has no slices (export "
+                             f"only); "
                              f"height from focus needs slices")
         if z_um is not None:
             raise ValueError("z_um must not be given with a Stack (it has its own)")
@@ -432,7 +432,10 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
             ok = np.ones(br.shape, bool)
             coef = None
         else:
-            sub_v, sub_x = (vals, xz) if interpolation == "lsq" else (vals[r - 1:r + 2], xz[r - 1:r + 2])
+            if interpolation == "lsq":
+                sub_v, sub_x = vals, xz
+            else:
+                sub_v, sub_x = vals[r - 1:r + 2], xz[r - 1:r + 2]
             off, coef, ok = peak_fit(sub_v, sub_x, weighted=(interpolation == "lsq"),
                                      dtype=np.float32)
         height[sl] = zc + off * step

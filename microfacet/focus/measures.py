@@ -23,19 +23,13 @@ import math
 import numpy as np
 
 from ..core.lazy import load
+from .defaults import DEFAULT_OPERATOR, DEFAULT_WINDOW, DEFAULT_WINDOW_PX, OPERATORS, WINDOWS
 
 cv2 = load("cv2")
 
 __all__ = ["DEFAULT_OPERATOR", "DEFAULT_WINDOW", "DEFAULT_WINDOW_PX", "OPERATORS", "WINDOWS",
            "check_window", "focus_measure", "to_grey"]
 
-OPERATORS = ("tenengrad", "sml", "glv")
-WINDOWS = ("gaussian", "box")
-#: Defaults, chosen from the accuracy table in docs/height-from-focus.md; their cost against
-#: the alternatives: docs/speed-vs-error.md §4.
-DEFAULT_OPERATOR = "tenengrad"
-DEFAULT_WINDOW_PX = 7
-DEFAULT_WINDOW = "gaussian"
 
 _ML_KX = np.array([[-1.0, 2.0, -1.0]], dtype=np.float32)
 

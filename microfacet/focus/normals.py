@@ -9,7 +9,7 @@ is used (not pixels).
 Derivatives are central differences where both neighbours are valid, one-sided where only
 one is (image borders, next to NaN holes) and NaN where neither is. Accuracy: second order,
 so on a sphere cap of radius ``R`` pixels the angular error is about
-``(pixel/R)²·tan θ / (6 cos² θ)`` radians at tilt θ; ``tests/test_normals.py`` checks a cap
+``(pixel/R)²·tan θ / (6 cos² θ)`` radians at tilt θ; ``tests/focus/test_normals.py`` checks a cap
 with R = 60 px to within 0.05° up to 45° tilt and 0.25° up to 60° tilt, and a tilted plane
 exactly.
 

@@ -8,7 +8,8 @@ perfect white diffuser under the illuminant) and an sRGB display colour.
 
 Models (:func:`simulate_map`)
     ``"half-vector"`` — the film at θ_d averaged over g(d) (seed §2.3, eq. 5);
-    ``"microfacet"`` — the reflectance factor π f_r of :func:`microfacet.forward.brdf.microfacet_brdf`
+    ``"microfacet"`` — the reflectance factor π f_r of
+    :func:`~microfacet.forward.brdf.microfacet_brdf`
     (what a gonio-spectrophotometer reports relative to a white diffuser);
     ``"eq6"`` — :func:`microfacet.forward.brdf.eq6_reflectance_inplane` (arbitrary scale).
     Every map is multiplied by ``exposure`` before colours are computed.

@@ -107,7 +107,8 @@ def half_vector(light, view):
 
 
 def half_angle_from_vectors(light, view):
-    """θ_d = ½ ∠(light, view) in degrees for 3-D directions (..., 3), pointing away from the surface.
+    """θ_d = ½ ∠(light, view) in degrees for 3-D directions (..., 3) pointing away from the
+    surface.
 
     Uses ``2·atan2(|l − v|, |l + v|)`` for the angle, which is accurate at all angles
     (``arccos`` of the dot product loses precision near 0°).

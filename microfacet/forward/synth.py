@@ -55,6 +55,7 @@ from .scene import render_scene
 cv2 = load("cv2")
 
 __all__ = [
+    "apply_sensor",
     "PRESETS",
     "SynthParams",
     "SynthResult",
@@ -252,7 +253,8 @@ PRESETS: dict[str, SynthParams] = {
                       exposure=1.5),
     # 16-bit slices.
     "16bit": _p("16bit", tilt_lobes=(TiltLobe(0.6, 3.0), TiltLobe(0.4, 9.0)),
-                thickness=(ThicknessComponent(0.5, 120.0, 3.0), ThicknessComponent(0.5, 140.0, 3.0)),
+                thickness=(ThicknessComponent(0.5, 120.0, 3.0),
+                           ThicknessComponent(0.5, 140.0, 3.0)),
                 bit_depth=16),
 }
 
@@ -377,7 +379,7 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
             i0 = u.astype(np.intp)
             f = (u - i0).astype(np.float32)[..., None]
             img = ladder[i0, rows, cols] * (1 - f) + ladder[i0 + 1, rows, cols] * f
-            img = _sensor(img, p, rng_noise)
+            img = apply_sensor(img, p, rng_noise)
             code = srgb_encode(img, dtype=dtype)
             write_image(tmp / names[k], code)
             if progress is not None:
@@ -418,8 +420,22 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
     return SynthResult(Path(out), p, z, timings)
 
 
-def _sensor(img, p, rng):
-    """Shot + read noise (Gaussian approximations) and clipping, in linear units."""
+def apply_sensor(img, p, rng):
+    """Shot and read noise (Gaussian approximations) and clipping of a linear image.
+
+    Parameters
+    ----------
+    img : ndarray of float32 (H, W, 3)
+        Linear RGB, 1 = full well.
+    p : SynthParams
+        ``full_well_e`` (shot noise, electrons at full scale) and ``read_noise`` (fraction
+        of full scale).
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray of float32 (H, W, 3), in [0, 1]
+    """
     img = np.clip(img, 0.0, None)
     var = np.zeros_like(img)
     if p.full_well_e:

@@ -45,7 +45,8 @@ cv2 = load("cv2")
 tifffile = load("tifffile")
 
 __all__ = ["IMAGE_SUFFIXES", "ImageInfo", "MultiPageTiff", "convert_samples", "decode_image",
-           "image_info", "npy_info", "read_png", "read_tiff_headers", "tiff_page_info", "to_code_values",
+           "image_info", "npy_info", "read_png", "read_tiff_headers", "tiff_page_info",
+           "to_code_values",
            "to_rgb_or_grey", "write_image"]
 
 #: File suffixes accepted for slices and export images (lower case).

@@ -23,8 +23,8 @@ Examples
 >>> try:
 ...     Limits(max_megapixels=10).check_image((30000, 30000), "slice 0")
 ... except InputError as exc:
-...     print(exc)
-slice 0: 30000x30000 pixels (900 MP) is more than the limit of 10 MP per image; max_megapixels raises it
+...     print(exc.args[0].split(";")[0])
+slice 0: 30000x30000 pixels (900 MP) is more than the limit of 10 MP per image
 """
 
 from __future__ import annotations

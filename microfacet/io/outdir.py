@@ -263,11 +263,13 @@ def sweep_stale(folder) -> list[Path]:
             taken = acquire(lock, shown=str(folder / name))
         except InputError:
             continue  # a live run holds it
+        if not taken:  # this process is writing it right now (the lock is re-entrant)
+            release(lock)
+            continue
         try:
             removed += _clean_leftovers(folder, name, None)
         finally:
-            if taken:
-                release(lock)
+            release(lock)
     return removed
 
 

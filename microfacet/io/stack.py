@@ -189,7 +189,8 @@ class Stack:
                              f"its header {self.shape} {self.dtype} x{self.channels}")
         return convert_samples(raw, dtype)
 
-    def iter_slices(self, dtype=np.float32, *, order: str = "file") -> Iterator[tuple[int, float, np.ndarray]]:
+    def iter_slices(self, dtype=np.float32, *, order: str = "file"
+                    ) -> Iterator[tuple[int, float, np.ndarray]]:
         """Yield ``(index, z_um, image)`` one slice at a time.
 
         Only one decoded slice is alive at a time inside this generator, so memory does not
@@ -215,7 +216,8 @@ class Stack:
     def read_export_height(self) -> np.ndarray:
         """The microscope export's height map, float32 (H, W) in µm (non-finite kept as NaN)."""
         if self.export_height_path is None:
-            raise InputError(f"{self.path / 'stack.json'}: key 'height_um': the stack has no export")
+            raise InputError(f"{self.path / 'stack.json'}: key 'height_um': the stack has no "
+                             f"export")
         p = self.export_height_path
         if p.suffix.lower() == ".npy":
             h = np.load(p, allow_pickle=False)
@@ -227,7 +229,8 @@ class Stack:
         return h
 
     def read_export_image(self, dtype=np.float32) -> np.ndarray:
-        """The microscope export's all-in-focus image, (H, W) or (H, W, 3), see :meth:`read_slice`."""
+        """The microscope export's all-in-focus image, (H, W) or (H, W, 3); see
+        :meth:`read_slice`."""
         if self.export_image_path is None:
             raise InputError(f"{self.path / 'stack.json'}: key 'image': the stack has no export")
         return convert_samples(decode_image(self.export_image_path,

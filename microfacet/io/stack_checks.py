@@ -295,7 +295,8 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits) -> dict:
         else:
             s = meta["z_step_um"]
             if not _is_number(s) or not math.isfinite(s) or s == 0:
-                raise InputError(f"{where('z_step_um')}: must be a finite non-zero number, got {s!r}")
+                raise InputError(f"{where('z_step_um')}: must be a finite non-zero number, "
+                                 f"got {s!r}")
             z_um = np.arange(n, dtype=np.float64) * float(s)
     else:
         z_um = np.zeros(0, dtype=np.float64)

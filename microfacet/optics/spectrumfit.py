@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.errors import InputError
 from ..core.lazy import load
 from .constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, resolve_index
 from .thinfilm import reflectance
@@ -113,22 +114,24 @@ def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FIL
     wl = np.asarray(wavelength_nm, dtype=np.float64)
     y = np.asarray(reflectance, dtype=np.float64)
     if wl.ndim != 1 or y.shape != wl.shape:
-        raise ValueError("reflectance: must be 1-D and the same length as wavelength_nm")
+        raise InputError("must be 1-D and the same length as `wavelength_nm`",
+                         param="reflectance")
     keep = np.isfinite(wl) & np.isfinite(y)
     if keep.sum() < 3:
-        raise ValueError("reflectance: need at least 3 finite samples")
+        raise InputError("need at least 3 finite samples", param="reflectance")
     wl, y = wl[keep], y[keep]
     if np.unique(wl).size < MIN_WAVELENGTHS:
-        raise ValueError(f"wavelength_nm: the spectrum has {np.unique(wl).size} distinct "
-                         f"wavelength(s); a thickness fit needs at least {MIN_WAVELENGTHS}")
+        raise InputError(f"the spectrum has {np.unique(wl).size} distinct wavelength(s); a "
+                         f"thickness fit needs at least {MIN_WAVELENGTHS}", param="wavelength_nm")
     lo, hi = (float(v) for v in thickness_range_nm)
     if not (0 <= lo < hi <= MAX_THICKNESS_NM):
-        raise ValueError(f"thickness_range_nm: need 0 <= low < high <= {MAX_THICKNESS_NM:g} "
-                         f"nm, got {thickness_range_nm!r}")
+        raise InputError(f"need 0 <= low < high <= {MAX_THICKNESS_NM:g} nm, got {lo:g}:{hi:g}",
+                         param="thickness_range_nm")
     if not (0 < grid_step_nm <= 10):
-        raise ValueError("grid_step_nm: must be in (0, 10] nm so no minimum is skipped")
+        raise InputError("must be in (0, 10] nm so no minimum is skipped", param="grid_step_nm")
     if not (0 <= angle_deg < 90):
-        raise ValueError("angle_deg: must satisfy 0 <= angle < 90 degrees")
+        raise InputError(f"must satisfy 0 <= angle < 90 degrees, got {angle_deg:g}",
+                         param="angle_deg")
     n1 = resolve_index(film, wl)
     n2 = resolve_index(substrate, wl)
 

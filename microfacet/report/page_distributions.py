@@ -16,8 +16,17 @@ import numpy as np
 
 from ..core.densities import cell_edges, ndf_D_from_tilt_histogram
 from ..core.distributions import NDFMixture, ThicknessMixture
-from .layout import (DE, HEIGHT_TILT, HIST_EDGE, HIST_FILL, component_colour, finite,
-                     histogram, number, quantile_range)
+from .layout import (
+    DE,
+    HEIGHT_TILT,
+    HIST_EDGE,
+    HIST_FILL,
+    component_colour,
+    finite,
+    histogram,
+    number,
+    quantile_range,
+)
 
 __all__ = ["NAME", "TITLE", "draw"]
 

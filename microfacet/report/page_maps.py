@@ -6,8 +6,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layout import (CMAPS, DE, blank_panel, category_panel, colour_limits, component_colour,
-                     finite, map_panel)
+from .layout import (
+    CMAPS,
+    DE,
+    blank_panel,
+    category_panel,
+    colour_limits,
+    component_colour,
+    finite,
+    map_panel,
+)
 
 __all__ = ["NAME", "TITLE", "component_codes", "draw"]
 

@@ -6,8 +6,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layout import (CMAPS, NO_VALUE, blank_panel, category_panel, downsample, draw_table,
-                     finite, fmt, image_axes, map_panel, number, pct, shorten)
+from .layout import (
+    CMAPS,
+    NO_VALUE,
+    blank_panel,
+    category_panel,
+    downsample,
+    draw_table,
+    finite,
+    fmt,
+    image_axes,
+    map_panel,
+    number,
+    pct,
+    shorten,
+)
 
 __all__ = ["NAME", "TITLE", "draw"]
 

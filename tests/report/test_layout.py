@@ -6,8 +6,17 @@ import numpy as np
 import pytest
 
 from microfacet.core.densities import histogram_density
-from microfacet.report.layout import (MAX_MAP_PX, Page, colour_limits, downsample, finite, fmt,
-                                      histogram, number, quantile_range)
+from microfacet.report.layout import (
+    MAX_MAP_PX,
+    Page,
+    colour_limits,
+    downsample,
+    finite,
+    fmt,
+    histogram,
+    number,
+    quantile_range,
+)
 
 
 def test_histogram_is_the_project_density_with_display_defaults():

@@ -1,0 +1,226 @@
+"""What the speed-vs-error experiments (``sve_*.py``, driven by ``speed_vs_error.py``) share:
+the scene ranges, the run sizes, the library defaults, the timer, the Pareto plot, the noisy
+``nd`` scene of section 3 and the standalone runner of one section.
+
+Not a script (imported by the ``sve_*.py`` scripts, see ``_shared``).
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+from _shared import ROOT, Doc, best_of, noisy_scene, pareto_front, parser, pyplot, save_figure
+
+NA = 0.8
+MAX_TILT = math.degrees(math.asin(NA)) / 2.0   # 26.57°: the microscope's tilt range
+THETA_RANGE = (0.0, MAX_TILT + 0.5)            # as microfacet.analysis.pipeline builds its table
+RANGES = [(0.0, 200.0), (0.0, 400.0), (0.0, 800.0)]
+SPECTRAL_STEPS = (1.0, 2.0, 5.0, 10.0, 20.0)
+FORMULAS = ("CIE76", "CIE94", "CIEDE2000")
+#: the keyword a search would need to take another ΔE formula (see formula_kw)
+FORMULA_HOOK = "delta_e_method"
+
+
+def config(quick, repeat=None):
+    """Sample sizes and settings of a full run, or of a quick check."""
+    if quick:
+        return dict(repeat=repeat or 1, n_points=3000, n_time=500, n_lookup=50_000,
+                    d_steps=(0.5, 1.0, 2.0, 4.0), t_steps=(1.0, 2.0, 4.0, 8.0), scene_px=384,
+                    n_tilt_px=20_000, tilt_steps=(0.1, 0.25, 0.5, 1.0, 2.0, 4.0),
+                    n_formula=200_000, focus_stacks=(1,), focus_px=(5, 7, 9),
+                    eq6_n=(50.0, 5000.0), eq6_steps=(0.25, 0.5, 1.0, 2.0), eq6_ref_step=0.1,
+                    eq6_d_steps=(0.5, "default", 3.0, 6.0))
+    return dict(repeat=repeat or 3, n_points=20_000, n_time=2000, n_lookup=200_000,
+                d_steps=(0.25, 0.5, 1.0, 2.0, 4.0), t_steps=(0.5, 1.0, 2.0, 4.0, 8.0),
+                scene_px=1024, n_tilt_px=100_000,
+                tilt_steps=(0.05, 0.1, 0.25, 0.5, 1.0, 2.0, 4.0), n_formula=1_000_000,
+                focus_stacks=(1, 2, 3), focus_px=(3, 5, 7, 9, 11, 15),
+                eq6_n=(50.0, 500.0, 5000.0), eq6_steps=(0.1, 0.25, 0.5, 1.0, 2.0, 5.0),
+                eq6_ref_step=0.05, eq6_d_steps=(0.25, 0.5, "default", 3.0, 6.0))
+
+
+def timed(fn, repeat):
+    """Best-of timer of these experiments: fast calls repeated for ≥ 0.25 s, slow ones ≤ 8 s."""
+    return best_of(fn, repeat, min_total_s=0.25, max_calls=30, max_total_s=8.0)
+
+
+@functools.cache
+def defaults():
+    """The defaults as the installed library defines them (labels follow the code)."""
+    from microfacet.analysis.facets import facet_thickness
+    from microfacet.analysis.options import AnalysisOptions
+    from microfacet.analysis.roi import fit_roi_thickness
+    from microfacet.focus import height as focus
+    from microfacet.forward.angular import simulate_map
+    from microfacet.forward.brdf import thickness_nodes
+
+    def dflt(fn, name):
+        return inspect.signature(fn).parameters[name].default
+
+    return dict(
+        roi_grid=float(dflt(fit_roi_thickness, "grid_step_nm")),
+        roi_sample=int(dflt(fit_roi_thickness, "sample_px")),
+        roi_refine=int(dflt(fit_roi_thickness, "refine_px")),
+        facet_step=float(dflt(facet_thickness, "step_nm")),
+        tilt_step=float(AnalysisOptions().tilt_step_deg),
+        eq6_step=float(dflt(simulate_map, "theta_m_step_deg")),
+        dnode_max=float(dflt(thickness_nodes, "max_step_nm")),
+        focus=(focus.DEFAULT_OPERATOR, focus.DEFAULT_WINDOW, int(focus.DEFAULT_WINDOW_PX),
+               focus.DEFAULT_INTERPOLATION, int(focus.DEFAULT_FIT_RADIUS)),
+    )
+
+
+def formula_kw(fn, method):
+    """Keywords that make the search ``fn`` use the ΔE formula ``method``, or None.
+
+    The searches of :mod:`microfacet.analysis` call ``delta_e_2000`` directly; another formula
+    needs a ``delta_e_method=`` parameter (passed on to
+    :func:`microfacet.colour.difference.delta_e`). Without it the setting is not measured —
+    never by swapping the library's functions.
+    """
+    if method == "CIEDE2000":
+        return {}
+    if FORMULA_HOOK in inspect.signature(fn).parameters:
+        return {FORMULA_HOOK: method}
+    return None
+
+
+def no_hook_note(fn_name, methods):
+    """The sentence for formula settings that could not be measured."""
+    return (f"{' / '.join(methods)} inside the search: **not measured** — `{fn_name}` has no "
+            f"`{FORMULA_HOOK}=` parameter (it calls `delta_e_2000` directly).")
+
+
+@functools.cache
+def scene(size):
+    """Section 3's scene: the `nd` preset with its sensor noise, the analysis' colour table."""
+    from microfacet.colour.table import build_colour_table
+
+    p, sc, lab, mask, noise = noisy_scene("nd", size=size, seed=11)
+    table = build_colour_table(thickness_range_nm=(0.0, 400.0), theta_range_deg=THETA_RANGE)
+    return dict(p=p, sc=sc, lab=lab, mask=mask, used=~mask, noise=noise, table=table)
+
+
+@functools.cache
+def roi_reference(size):
+    """The ROI grid, the true ROI thickness and the reference fit (the finest settings)."""
+    from microfacet.analysis.roi import fit_roi_thickness, roi_grid
+
+    s = scene(size)
+    sc, used = s["sc"], s["used"]
+    rois = roi_grid(s["lab"].shape[:2], size_px=255)
+    rows_, cols_, (rh, rw) = rois
+    truth = np.array([float(sc.thickness_nm[r0:r0 + rh, c0:c0 + rw][
+        used[r0:r0 + rh, c0:c0 + rw]].mean()) for r0 in rows_ for c0 in cols_])
+    ref_kw = dict(grid_step_nm=0.5, sample_px=2048, refine_px=10 ** 7)
+    ref = fit_roi_thickness(s["lab"], sc.tilt_deg, s["mask"], s["table"], rois=rois, **ref_kw)
+    return rois, truth, ref
+
+
+@functools.cache
+def facet_truth(size):
+    """True facets: interior pixels, usable pixels, mean tilt per facet (clipped)."""
+    from scipy import ndimage
+
+    s = scene(size)
+    sc = s["sc"]
+    facets = sc.facet_id
+    H, W = facets.shape
+    S = int(facets.max()) + 1
+    edge_px = np.zeros((H, W), bool)
+    edge_px[:, 1:] |= facets[:, 1:] != facets[:, :-1]
+    edge_px[1:, :] |= facets[1:, :] != facets[:-1, :]
+    interior = ndimage.distance_transform_edt(~edge_px) >= 1.5
+    usable = s["used"] & sc.visible
+    tilt_f = np.clip(np.bincount(facets.ravel(), weights=sc.tilt_deg.ravel(), minlength=S)
+                     / np.maximum(np.bincount(facets.ravel(), minlength=S), 1), 0, MAX_TILT)
+    return dict(facets=facets, S=S, interior=interior, usable=usable, tilt_f=tilt_f)
+
+
+def pareto_plot(path, panels, *, xlabel, ylabel, suptitle=None, logx=True, logy=True):
+    """One PNG, one panel per entry of ``panels``.
+
+    panel: {"title", "series": [{"label", "x", "y", "names", "default" (index or None)}],
+            "hlines": [(y, label)]}
+    """
+    plt = pyplot()
+    import matplotlib.ticker as ticker
+
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.9 * len(panels), 3.5), squeeze=False)
+    for ax, pnl in zip(axes[0], panels):
+        allx, ally = [], []
+        plogx, plogy = pnl.get("logx", logx), pnl.get("logy", logy)
+        for k, s in enumerate(pnl["series"]):
+            x = np.asarray(s["x"], float)
+            y = np.asarray(s["y"], float)
+            keep = y > 0 if plogy else np.isfinite(y)  # a zero error is the reference itself
+            names = [nm for nm, kp in zip(s.get("names", [""] * len(x)), keep) if kp]
+            dflt = s.get("default")
+            dflt = (int(np.sum(keep[:dflt])) if dflt is not None and keep[dflt] else None)
+            x, y = x[keep], y[keep]
+            ax.plot(x, y, "o-" if s.get("line", True) else "o", ms=4, lw=0.8,
+                    color=f"C{k}", label=s["label"])
+            for xi, yi, nm in zip(x, y, names):
+                ax.annotate(nm, (xi, yi), fontsize=6, xytext=(3, 2), textcoords="offset points",
+                            color=f"C{k}")
+            if dflt is not None:
+                ax.plot([x[dflt]], [y[dflt]], marker="*", ms=13, mfc="none", mec="red", mew=1.4,
+                        zorder=5)
+            allx += list(x)
+            ally += list(y)
+        groups = ([(allx, ally, "0.6")] if pnl.get("front", "all") == "all" else
+                  [([xi for xi, yi in zip(s["x"], s["y"]) if yi > 0],
+                    [yi for yi in s["y"] if yi > 0], f"C{k}")
+                   for k, s in enumerate(pnl["series"])])
+        for gx, gy, col in groups:
+            front = pareto_front(gx, gy)
+            if len(front) > 1:
+                ax.step([gx[i] for i in front], [gy[i] for i in front], where="post", color=col,
+                        lw=2.5, alpha=0.3, zorder=0)
+        for yv, lab in pnl.get("hlines", []):
+            ax.axhline(yv, color="0.4", ls="--", lw=0.8)
+            ax.annotate(lab, (0.02, yv), xycoords=("axes fraction", "data"),
+                        fontsize=6, color="0.3", xytext=(0, 2), textcoords="offset points")
+        if "ylim" in pnl:
+            ax.set_ylim(*pnl["ylim"])
+        for on, axis, setter in ((plogx, ax.xaxis, ax.set_xscale),
+                                 (plogy, ax.yaxis, ax.set_yscale)):
+            if on:
+                setter("log")
+                if axis is ax.xaxis:
+                    axis.set_major_locator(ticker.LogLocator(base=10, subs=(1, 2, 5)))
+                axis.set_minor_formatter(ticker.NullFormatter())
+                axis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+        ax.set_title(pnl["title"], fontsize=8)
+        ax.set_xlabel(xlabel, fontsize=7)
+        ax.set_ylabel(pnl.get("ylabel", ylabel), fontsize=7)
+        ax.tick_params(labelsize=6)
+        ax.grid(True, which="major", lw=0.3, alpha=0.5)
+        ax.legend(fontsize=6, loc="best")
+    if suptitle:
+        fig.suptitle(suptitle + "   (red star = default; grey = Pareto front)", fontsize=8)
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def section_main(run, name, doc_string, argv=None):
+    """Run one section alone: print it, write OUT/sve-<name>.md and OUT/img/sve-*.png.
+
+    OUT is ``--out``, else out/speed-vs-error[-quick]/ (never docs/: the page there is the
+    whole report, ``python pipelines/speed_vs_error.py``).
+    """
+    ap = parser(doc_string, quick="small samples, fewer settings, 1 repeat", repeat=None,
+                out="folder for sve-NAME.md and img/ (default out/speed-vs-error[-quick]/)")
+    args = ap.parse_args(argv)
+    cfg = config(args.quick, args.repeat)
+    out = Path(args.out) if args.out else ROOT / "out" / (
+        "speed-vs-error-quick" if args.quick else "speed-vs-error")
+    doc = Doc()
+    run(cfg, doc, out / "img")
+    path = doc.write(out / f"sve-{name}.md")
+    print(f"\nwrote {path} and {out / 'img'}/", file=sys.stderr)

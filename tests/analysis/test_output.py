@@ -1,0 +1,83 @@
+"""The results folder of an analysis (microfacet.analysis.output, format
+``microfacet-results/1``): what ``microfacet analyze`` writes follows the spec
+(docs/results-format.md), and ``write_results`` replaces only its own kind of folder."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from microfacet.analysis import write_results
+from microfacet.cli import main
+from microfacet.core.errors import InputError
+
+FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "stacks" / "nd-fixture"
+TRUTH = FIXTURE / "truth"
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    out = tmp_path_factory.mktemp("res") / "nd"
+    assert main(["analyze", str(FIXTURE), "--out", str(out), "-q"]) == 0
+    return out
+
+
+def test_results_folder_follows_the_spec(results):
+    H, W = np.load(TRUTH / "height_um.npy").shape
+    for name, shape in [("height_um", (H, W)), ("normals", (H, W, 3)), ("thickness_nm", (H, W)),
+                        ("tilt_deg", (H, W)), ("tilt_sigma_deg", (H, W))]:
+        a = np.load(results / f"{name}.npy")
+        assert a.dtype == np.float32 and a.shape == shape, name
+    n = np.load(results / "normals.npy")
+    ok = np.isfinite(n).all(-1)
+    np.testing.assert_allclose(np.linalg.norm(n[ok], axis=-1), 1, atol=1e-5)
+    assert (n[ok][:, 2] > 0).all()
+    for f in ("all_in_focus.png", "report.pdf"):
+        assert (results / f).stat().st_size > 0
+    s = json.loads((results / "summary.json").read_text())
+    assert s["format"] == "microfacet-results/1"
+    for comp in s["thickness"]["mixture"]["components"]:
+        assert set(comp) >= {"weight", "mean_nm", "sd_nm"}
+    means = [c["mean_nm"] for c in s["thickness"]["mixture"]["components"]]
+    assert means == sorted(means)
+    sds = [c["sd_deg"] for c in s["ndf"]["mixture"]["components"]]
+    assert sds == sorted(sds) and all(c["mean_deg"] == 0 for c in s["ndf"]["mixture"]["components"])
+    assert s["ndf"]["mixture"]["bic"] is not None and s["thickness"]["mixture"]["bic"] is not None
+    assert s["exposure"] > 0 and 0 <= s["masked_fraction"] < 0.5
+    assert s["delta_e"]["mean"] > 0 and s["timings_s"]["total"] > 0
+    header = (results / "thickness_roi.csv").read_text().splitlines()[0]
+    assert header.startswith("row0,col0,size,thickness_nm,mean_delta_e,n_pixels")
+    for name, col in (("thickness_pdf.csv", "thickness_nm"), ("ndf_pdf.csv", "tilt_deg")):
+        t = np.genfromtxt(results / name, delimiter=",", names=True)
+        assert t.dtype.names == (col, "density", "mixture_density")
+        x = t[col]
+        for c in ("density", "mixture_density"):
+            assert np.trapezoid(t[c], x) == pytest.approx(1.0, abs=0.02), (name, c)
+    # Masked pixels are NaN in the colour maps and nowhere else.
+    mask = np.load(results / "mask.npy")
+    assert np.isnan(np.load(results / "thickness_nm.npy")[mask]).all()
+
+
+def test_write_results_replaces_only_its_own_kind(nd_analysis, tmp_path):
+    """An empty folder is used; an earlier results folder needs overwrite; anything else is
+    never replaced, with or without overwrite."""
+    res = nd_analysis("seed")
+    out = tmp_path / "r"
+    out.mkdir()
+    write_results(res, out)                   # empty: nothing to lose
+    assert (out / "summary.json").is_file()
+    with pytest.raises(InputError, match="already exists"):
+        write_results(res, out)
+    (out / "note.txt").write_text("mine")
+    write_results(res, out, overwrite=True)   # a results folder: replaced
+    assert not (out / "note.txt").exists()
+    other = tmp_path / "photos"
+    other.mkdir()
+    (other / "cat.jpg").write_bytes(b"\xff\xd8")
+    for overwrite in (False, True):
+        with pytest.raises(InputError, match="never replaced") as err:
+            write_results(res, other, overwrite=overwrite)
+        assert err.value.param == "out"
+    assert (other / "cat.jpg").read_bytes() == b"\xff\xd8"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["photos", "r"]

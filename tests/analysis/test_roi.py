@@ -1,0 +1,59 @@
+"""ROI thickness and exposure (microfacet.analysis.roi) on images rendered from the model
+(independent of the synth)."""
+
+import numpy as np
+import pytest
+
+from microfacet import colour as color
+from microfacet.analysis.roi import fit_roi_thickness, nearest_roi_index, roi_grid
+from microfacet.colour.table import build_colour_table
+
+
+@pytest.fixture(scope="module")
+def table():
+    return build_colour_table(thickness_range_nm=(0, 400), theta_range_deg=(0, 27))
+
+
+def _render(table, thickness, tilt, exposure):
+    xyz = table.xyz_at(tilt, thickness) * exposure
+    return color.xyz_to_lab(xyz, white=table.white_xyz).astype(np.float32)
+
+
+def test_roi_grid_tiles_cover_the_image():
+    rows, cols, (h, w) = roi_grid((600, 300), size_px=255)
+    assert rows[-1] + h == 600 and cols[-1] + w == 300
+    rows, cols, (h, w) = roi_grid((100, 90), size_px=255)
+    assert rows == [0] and cols == [0] and (h, w) == (100, 90)  # ROI larger than the image
+    ri, ci = nearest_roi_index((600, 300), *roi_grid((600, 300), size_px=255))
+    assert ri[0] == 0 and ri[-1] == 1 and (ci == 0).all()
+    with pytest.raises(ValueError, match="stride_px"):
+        roi_grid((100, 100), size_px=50, stride_px=60)
+
+
+@pytest.mark.parametrize("exposure", [0.7, 1.0, 1.4])
+def test_recovers_roi_thickness_and_exposure(table, exposure):
+    rng = np.random.default_rng(1)
+    H, W = 64, 128
+    d = np.where(np.arange(W)[None, :] < 64, 118.0, 146.0) + np.zeros((H, 1))
+    tilt = rng.uniform(0, 20, (H, W))
+    lab = _render(table, d, tilt, exposure)
+    lab += rng.normal(0, 0.3, lab.shape).astype(np.float32)
+    rois = roi_grid((H, W), size_px=64)
+    fit = fit_roi_thickness(lab, tilt, np.zeros((H, W), bool), table, rois=rois)
+    assert fit.exposure == pytest.approx(exposure, rel=0.02)
+    np.testing.assert_allclose(fit.thickness_nm, [118.0, 146.0], atol=0.3)
+    assert np.all(fit.mean_delta_e < 1.0)
+    assert np.all(fit.ambiguity_delta_e > 1.0)  # another order is clearly worse
+    assert fit.exposure_estimated
+
+
+def test_masked_roi_is_nan_and_given_exposure_is_used(table):
+    H, W = 32, 64
+    lab = _render(table, np.full((H, W), 60.0), np.full((H, W), 5.0), 1.0)
+    mask = np.zeros((H, W), bool)
+    mask[:, 32:] = True
+    fit = fit_roi_thickness(lab, np.full((H, W), 5.0), mask, table,
+                            rois=roi_grid((H, W), size_px=32), exposure=1.0)
+    assert fit.thickness_nm[0] == pytest.approx(60.0, abs=0.2)
+    assert np.isnan(fit.thickness_nm[1]) and fit.n_pixels[1] == 0
+    assert not fit.exposure_estimated

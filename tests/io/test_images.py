@@ -1,0 +1,304 @@
+"""Image files (microfacet.io.images): headers read without decoding, decoding, writing.
+
+PNGs are written here byte by byte (signature, IHDR, PLTE, IDAT, IEND with zlib and CRC), an
+encoder independent of OpenCV, so the header parser and the decoder are checked against
+known pixels for every PNG colour type; JPEGs and TIFFs come from OpenCV and tifffile, and
+their headers are compared with what decoding gives.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+
+import cv2
+import numpy as np
+import pytest
+import tifffile
+
+from microfacet.core.errors import InputError
+from microfacet.io.images import (
+    ImageInfo,
+    MultiPageTiff,
+    convert_samples,
+    decode_image,
+    image_info,
+    npy_info,
+    read_png,
+    read_tiff_headers,
+    to_code_values,
+    write_image,
+)
+
+H, W = 5, 7
+WHERE = "slices[1] (x)"   # how callers name the file in messages
+
+
+def _chunk(kind: bytes, data: bytes) -> bytes:
+    return (struct.pack(">I", len(data)) + kind + data
+            + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+
+
+def _png(samples: np.ndarray, colour_type: int, bit_depth: int = 8, palette=None) -> bytes:
+    """A PNG of ``samples`` (H, W[, C]) written by hand: filter 0 on every row, 8- or 16-bit
+    samples (big-endian), optional PLTE."""
+    h, w = samples.shape[:2]
+    raw = samples.astype(">u2" if bit_depth == 16 else np.uint8).reshape(h, -1) if h else []
+    rows = b"".join(b"\x00" + r.tobytes() for r in raw)
+    ihdr = struct.pack(">IIBBBBB", w, h, bit_depth, colour_type, 0, 0, 0)
+    out = b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr)
+    if palette is not None:
+        out += _chunk(b"PLTE", np.asarray(palette, np.uint8).tobytes())
+    return out + _chunk(b"IDAT", zlib.compress(rows)) + _chunk(b"IEND", b"")
+
+
+def _samples(channels, bit_depth, seed=0):
+    rng = np.random.default_rng(seed)
+    top = 65535 if bit_depth == 16 else 255
+    shape = (H, W) if channels == 1 else (H, W, channels)
+    return rng.integers(0, top + 1, shape).astype(np.uint16 if bit_depth == 16 else np.uint8)
+
+
+# ------------------------------------------------------------------------------ PNG
+
+
+@pytest.mark.parametrize("colour_type, channels_in, bit_depth, channels, dtype", [
+    (0, 1, 8, 1, np.uint8),       # grey
+    (0, 1, 16, 1, np.uint16),
+    (4, 2, 8, 1, np.uint8),       # grey + alpha: grey
+    (4, 2, 16, 1, np.uint16),
+    (2, 3, 8, 3, np.uint8),       # RGB
+    (2, 3, 16, 3, np.uint16),
+    (6, 4, 8, 3, np.uint8),       # RGBA: RGB
+    (6, 4, 16, 3, np.uint16),
+])
+def test_png_header_and_decoding_of_every_colour_type(tmp_path, colour_type, channels_in,
+                                                      bit_depth, channels, dtype):
+    s = _samples(channels_in, bit_depth)
+    p = tmp_path / "x.png"
+    p.write_bytes(_png(s, colour_type, bit_depth))
+    info = image_info(p, WHERE)
+    assert info == ImageInfo((H, W), np.dtype(dtype), channels)
+    img = decode_image(p, WHERE, channels=info.channels)
+    expected = s if channels_in in (1, 3) else s[..., :-1] if channels == 3 else s[..., 0]
+    assert img.dtype == info.dtype and img.shape[:2] == info.shape
+    assert (img.ndim == 2) == (info.channels == 1)
+    np.testing.assert_array_equal(img, expected)        # values and RGB order
+
+
+def test_palette_png(tmp_path):
+    palette = np.array([[255, 0, 0], [0, 200, 0], [10, 20, 250], [7, 7, 7]], np.uint8)
+    idx = np.random.default_rng(1).integers(0, 4, (H, W)).astype(np.uint8)
+    p = tmp_path / "p.png"
+    p.write_bytes(_png(idx, 3, 8, palette=palette.ravel()))
+    info = image_info(p, WHERE)
+    assert info == ImageInfo((H, W), np.dtype(np.uint8), 3)
+    np.testing.assert_array_equal(decode_image(p, WHERE, channels=3), palette[idx])
+
+
+def test_header_is_read_without_decoding(tmp_path):
+    """Only the header and the last bytes are read: a PNG whose pixel data is garbage has a
+    valid header (the garbage is found when decoding, naming the file)."""
+    good = _png(_samples(3, 8), 2)
+    bad = bytearray(good)
+    start = 8 + 25 + 8                                  # signature, IHDR chunk, IDAT header
+    bad[start:len(bad) - 16] = b"\x55" * (len(bad) - 16 - start)
+    p = tmp_path / "g.png"
+    p.write_bytes(bytes(bad))
+    assert image_info(p, WHERE) == ImageInfo((H, W), np.dtype(np.uint8), 3)
+    with pytest.raises(InputError, match=r"slices\[1\] \(x\): cannot decode"):
+        decode_image(p, WHERE)
+
+
+@pytest.mark.parametrize("cut, match", [
+    (lambda b: b[:-12], r"truncated PNG"),                  # no IEND
+    (lambda b: b[: len(b) // 2], r"truncated PNG"),
+    (lambda b: b[:20], r"not a PNG"),                       # header cut inside IHDR
+    (lambda b: b"GIF89a" + b[6:], r"not a PNG"),
+])
+def test_truncated_or_foreign_png_is_refused_naming_the_file(tmp_path, cut, match):
+    p = tmp_path / "t.png"
+    p.write_bytes(cut(_png(_samples(1, 8), 0)))
+    with pytest.raises(InputError, match=rf"^slices\[1\] \(x\): {match}"):
+        image_info(p, WHERE)
+
+
+def test_png_of_zero_size_or_unknown_colour_type_is_refused(tmp_path):
+    p = tmp_path / "z.png"
+    p.write_bytes(_png(np.zeros((0, 3), np.uint8), 0))
+    with pytest.raises(InputError, match="zero size"):
+        image_info(p, WHERE)
+    data = bytearray(_png(_samples(1, 8), 0))
+    data[25] = 5                                         # colour type 5 does not exist
+    p.write_bytes(bytes(data))
+    with pytest.raises(InputError, match="colour type 5"):
+        image_info(p, WHERE)
+
+
+# ------------------------------------------------------------------------ JPEG and TIFF
+
+
+@pytest.mark.parametrize("rgb", [False, True])
+def test_jpeg_header_matches_decoding(tmp_path, rgb):
+    img = np.full((H, W, 3) if rgb else (H, W), 90, np.uint8)
+    p = tmp_path / "j.jpg"
+    assert cv2.imwrite(str(p), img)
+    info = image_info(p, WHERE)
+    dec = decode_image(p, WHERE, channels=info.channels)
+    assert info == ImageInfo(dec.shape[:2], dec.dtype, 1 if dec.ndim == 2 else 3)
+    assert info.channels == (3 if rgb else 1)
+    # truncated: no end-of-image marker, and cut before the frame header
+    data = p.read_bytes()
+    p.write_bytes(data[: len(data) - 80])
+    with pytest.raises(InputError, match=r"^slices\[1\] \(x\): truncated JPEG"):
+        image_info(p, WHERE)
+    p.write_bytes(data[:4])
+    with pytest.raises(InputError, match=r"^slices\[1\] \(x\): truncated or corrupt JPEG"):
+        image_info(p, WHERE)
+    p.write_bytes(b"not a jpeg")
+    with pytest.raises(InputError, match=r"not a JPEG"):
+        image_info(p, WHERE)
+
+
+@pytest.mark.parametrize("shape, dtype, channels", [
+    ((H, W), np.uint8, 1),
+    ((H, W), np.uint16, 1),
+    ((H, W, 3), np.uint8, 3),
+    ((H, W, 3), np.uint16, 3),
+    ((H, W, 4), np.uint8, 3),      # RGBA: RGB
+])
+def test_tiff_header_matches_decoding(tmp_path, shape, dtype, channels):
+    top = np.iinfo(dtype).max
+    img = np.random.default_rng(2).integers(0, top + 1, shape).astype(dtype)
+    p = tmp_path / "t.tif"
+    tifffile.imwrite(p, img, photometric="rgb" if len(shape) == 3 else "minisblack")
+    info = image_info(p, WHERE)
+    assert info == ImageInfo((H, W), np.dtype(dtype), channels)
+    dec = decode_image(p, WHERE, channels=info.channels)
+    np.testing.assert_array_equal(dec, img[..., :3] if len(shape) == 3 else img)
+    data = p.read_bytes()
+    p.write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match=r"^slices\[1\] \(x\): (truncated|unreadable) TIFF"):
+        image_info(p, WHERE)
+
+
+def test_tiff_of_float_samples_is_refused(tmp_path):
+    p = tmp_path / "f.tif"
+    tifffile.imwrite(p, np.zeros((H, W), np.float32))
+    with pytest.raises(InputError, match=r"TIFF sample type float32 is not supported"):
+        image_info(p, WHERE)
+
+
+def test_multi_page_tiff_headers_in_one_pass_and_pages_read(tmp_path):
+    pages = np.random.default_rng(3).integers(0, 65536, (4, H, W, 3)).astype(np.uint16)
+    p = tmp_path / "stack.tif"
+    with tifffile.TiffWriter(p) as tw:
+        for page in pages:
+            tw.write(page, photometric="rgb")
+    seen = []
+    uniform = read_tiff_headers(p, "key 'tiff'", lambda *a: seen.append(a))
+    assert uniform is True and len(seen) == 4
+    assert [s[2] for s in seen] == [ImageInfo((H, W), np.dtype(np.uint16), 3)] * 4
+    assert "page 3" in seen[3][1]
+    mp = MultiPageTiff(p, uniform)
+    try:
+        for k in (2, 0, 3):
+            np.testing.assert_array_equal(mp.read(k, f"page {k}", 3), pages[k])
+        with pytest.raises(InputError, match="page 9: cannot decode"):
+            mp.read(9, "page 9", 3)
+    finally:
+        mp.close()
+
+
+def test_unsupported_suffix_and_unreadable_file(tmp_path):
+    p = tmp_path / "x.bmp"
+    p.write_bytes(b"BM")
+    with pytest.raises(InputError, match=r"unsupported image type '\.bmp'"):
+        image_info(p, WHERE)
+    with pytest.raises(InputError, match=r"^slices\[1\] \(x\): cannot read"):
+        image_info(tmp_path / "missing.png", WHERE)
+
+
+# -------------------------------------------------------------------------------- npy
+
+
+def test_npy_header_without_loading(tmp_path):
+    a = np.zeros((6, 4), np.float32)
+    p = tmp_path / "h.npy"
+    np.save(p, a)
+    assert npy_info(p, WHERE) == ((6, 4), np.dtype(np.float32))
+    data = p.read_bytes()
+    p.write_bytes(data[:-10])
+    with pytest.raises(InputError, match=r"^slices\[1\] \(x\): truncated \.npy"):
+        npy_info(p, WHERE)
+    np.save(p, np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    with pytest.raises(InputError, match="Python objects"):
+        npy_info(p, WHERE)
+    p.write_bytes(b"not numpy")
+    with pytest.raises(InputError, match="not a readable .npy"):
+        npy_info(p, WHERE)
+
+
+# ------------------------------------------------------------------------- writing
+
+
+@pytest.mark.parametrize("channels, bit_depth", [(1, 8), (1, 16), (3, 8), (3, 16)])
+def test_write_and_decode_round_trip(tmp_path, channels, bit_depth):
+    s = _samples(channels, bit_depth, seed=4)
+    p = tmp_path / "w.png"
+    write_image(p, s)
+    info = image_info(p, WHERE)
+    assert info == ImageInfo((H, W), s.dtype, channels)
+    np.testing.assert_array_equal(decode_image(p, WHERE, channels=channels), s)
+    # floats are encoded values in [0, 1]: rounded to the nearest code value
+    top = 65535 if bit_depth == 16 else 255
+    write_image(p, s / top, bit_depth=bit_depth)
+    np.testing.assert_array_equal(decode_image(p, WHERE, channels=channels), s)
+
+
+def test_rgb_order_is_kept_on_disk(tmp_path):
+    """The file is RGB for every other reader (here the hand-made parser's view: OpenCV's
+    own reader gives BGR)."""
+    img = np.zeros((H, W, 3), np.uint8)
+    img[..., 0] = 200
+    p = tmp_path / "red.png"
+    write_image(p, img)
+    assert cv2.imread(str(p))[0, 0].tolist() == [0, 0, 200]     # BGR in OpenCV
+    assert decode_image(p, WHERE)[0, 0].tolist() == [200, 0, 0]
+
+
+def test_to_code_values_clips_rounds_and_maps_nan_to_zero():
+    x = np.array([-0.5, 0.0, 0.6 / 255, 0.4 / 255, 1.0, 2.0, np.nan])
+    np.testing.assert_array_equal(to_code_values(x), [0, 0, 1, 0, 255, 255, 0])
+    assert to_code_values(x, bit_depth=16).dtype == np.uint16
+    assert to_code_values(np.array([0.5]), bit_depth=16)[0] == 32768
+    ints = np.array([3, 400], np.uint16)
+    assert to_code_values(ints) is ints
+    with pytest.raises(ValueError, match="bit_depth"):
+        to_code_values(x, bit_depth=12)
+
+
+def test_write_image_failure_names_the_path(tmp_path):
+    with pytest.raises(OSError, match="cannot write .*nowhere"):
+        write_image(tmp_path / "nowhere" / "a.png", np.zeros((H, W), np.uint8))
+
+
+@pytest.mark.parametrize("channels, bit_depth", [(1, 8), (3, 8), (1, 16), (3, 16), (4, 8)])
+def test_read_png_scales_to_0_1(tmp_path, channels, bit_depth):
+    s = _samples(channels, bit_depth, seed=5)
+    p = tmp_path / "r.png"
+    p.write_bytes(_png(s, {1: 0, 3: 2, 4: 6}[channels], bit_depth))
+    img = read_png(p)
+    assert img.dtype == np.float32
+    top = 65535.0 if bit_depth == 16 else 255.0
+    expected = (s[..., :3] if channels == 4 else s) / top
+    np.testing.assert_allclose(img, expected, rtol=1e-6, atol=0)
+    assert img.min() >= 0 and img.max() <= 1
+    np.testing.assert_allclose(convert_samples(s, np.float64), s / top)
+
+
+def test_read_png_of_a_broken_file_names_it(tmp_path):
+    p = tmp_path / "broken.png"
+    p.write_bytes(b"\x89PNG\r\n\x1a\n" + b"\x00" * 40)
+    with pytest.raises(InputError, match=r"broken\.png.*cannot decode"):
+        read_png(p)
