@@ -37,8 +37,8 @@ def dask_client(scheduler, timeout_s, jobs=None):
     """``(client, cluster)``: a Client of the scheduler at ``scheduler``, or of a new
     LocalCluster for ``"local"`` (``cluster`` is None for an existing scheduler)."""
     try:
-        from distributed import Client, LocalCluster
-    except ImportError:
+        Client, LocalCluster = distributed.Client, distributed.LocalCluster
+    except ImportError:  # the lazy module is imported here: dask[distributed] is optional
         raise InputError("needs dask.distributed (pip install 'dask[distributed]' or "
                          "microfacet[cluster])", param="scheduler") from None
     if not log.isEnabledFor(logging.DEBUG):  # Dask's INFO chatter only with -vv
