@@ -4,7 +4,9 @@ The table of docs/height-from-focus.md.
 
 RMSE in slices against the ground truth of the Cou & Guennebaud (2023) stacks 1-3 bundled in
 fixtures/focus-stacks/cou2023-synthetic-rough (registration reference[i, j] <-> pixel
-(i+20, j+20), depth = -reference), all pixels, no reliability mask.
+(i+20, j+20), depth = -reference), all pixels, no reliability mask. The last two rows are the
+current default (Lorentz fit, 7 + 15 px windows) and the earlier one (``EARLIER_DEFAULT``),
+measured in the same run.
 
 Run:  python pipelines/focus_accuracy.py
 """
@@ -14,9 +16,10 @@ from __future__ import annotations
 import numpy as np
 from _shared import cou_rmse, cou_stack, md_header, md_row
 
+from microfacet.focus.defaults import EARLIER_DEFAULT
 from microfacet.focus.height import height_from_focus
 
-# (operator, window, window_px, interpolation, fit_radius)
+# (operator, window, window_px, interpolation, fit_radius): one window each
 METHODS = [
     ("sml", "box", 5, "none", None),
     ("sml", "box", 5, "gauss3", None),
@@ -34,6 +37,7 @@ METHODS = [
     ("tenengrad", "gaussian", 7, "lsq", 3),
     ("tenengrad", "gaussian", 9, "lsq", 2),
     ("tenengrad", "gaussian", 11, "lsq", 2),
+    ("tenengrad", "gaussian", 7, "lorentz", 2),
 ]
 
 
@@ -43,11 +47,18 @@ def main():
     for op, win, px, interp, r in METHODS:
         vals = [cou_rmse(height_from_focus(st, operator=op, window=win, window_px=px,
                                            interpolation=interp, fit_radius=r,
+                                           coarse_window_px=None,
                                            min_reliability_db=-np.inf).height_um, ref)
                 for st, ref in stacks.values()]
-        name = {"none": "arg-max", "gauss3": "Gauss 3-pt", "lsq": f"lsq {r}"}[interp]
+        name = {"none": "arg-max", "gauss3": "Gauss 3-pt", "lsq": f"lsq {r}",
+                "lorentz": f"Lorentz {r}"}[interp]
         wname = f"{'Gauss' if win == 'gaussian' else 'box'} {px}"
         print(md_row([op, wname, name] + [f"{v:.3f}" for v in vals]), flush=True)
+    for label, kw in (("default: Lorentz 2, windows 7 + 15", {}),
+                      ("earlier default: lsq 2, window 7", EARLIER_DEFAULT)):
+        vals = [cou_rmse(height_from_focus(st, min_reliability_db=-np.inf, **kw).height_um, ref)
+                for st, ref in stacks.values()]
+        print(md_row(["tenengrad", "Gauss 7", label] + [f"{v:.3f}" for v in vals]), flush=True)
 
 
 if __name__ == "__main__":

@@ -7,10 +7,14 @@ module              stage
 ``surface``         height map (from focus or an export), normals, tilt
 ``colour_image``    CIELAB, the colour mask (``mask``), the colour noise
 ``roi``             thickness per region of interest, interference order, exposure
-``tilt``            per-pixel tilt by colour inversion (seed mode)
-``facets``          facets, plane fits, per-facet thickness (joint mode)
-``mixtures``        thickness mixture, components by BIC with honest sample sizes
-``ndf_fit``         NDF lobes (Rayleigh EM); ``fit_distributions`` (the stage)
+``tilt``            per-pixel tilt by colour inversion (both modes)
+``segmentation``    facets from colour and height edges (joint mode)
+``facets``          plane fits, per-facet thickness (joint mode)
+``joint``           the joint mode's stage: facets → tilt per pixel
+``sampling``        independent samples in a map (correlation area)
+``mixtures``        thickness mixture (deconvolved), components by BIC with honest n
+``ndf_fit``         NDF lobes (deconvolved, censored Rayleigh EM)
+``identification``  the distributions stage, and whether the data determine them
 ``pipeline``        :func:`analyze_stack`: the stages in order
 ``output``          :func:`write_results`: the results folder
 ==================  ============================================================
@@ -21,8 +25,9 @@ Nothing here imports the forward models or the report.
 from ..core.lazy import attach
 
 __getattr__, __dir__, __all__ = attach(__name__, submodules=(
-    "options", "surface", "colour_image", "mask", "roi", "tilt", "facets", "mixtures",
-    "ndf_fit", "pipeline", "output"), submod_attrs={
+    "options", "surface", "colour_image", "mask", "roi", "tilt", "segmentation", "facets",
+    "joint", "sampling", "mixtures", "ndf_fit", "identification", "pipeline", "output"),
+    submod_attrs={
     "options": ["AnalysisOptions"],
     "pipeline": ["AnalysisResult", "analyze_stack"],
     "output": ["save_results", "write_results"],

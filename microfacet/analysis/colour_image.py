@@ -44,8 +44,8 @@ class ColourImage:
 
 
 def measure_colour(all_in_focus, *, color_space="sRGB", bit_depth=8, illuminant="D65",
-                   saturation_min=15.0, value_min=20.0, delta_e_method="CIEDE2000"
-                   ) -> ColourImage:
+                   saturation_min=15.0, value_min=20.0, delta_e_method="CIEDE2000",
+                   steep_ratio=0.3) -> ColourImage:
     """CIELAB, the colour mask and the colour noise of a composite image.
 
     Parameters
@@ -57,6 +57,9 @@ def measure_colour(all_in_focus, *, color_space="sRGB", bit_depth=8, illuminant=
     illuminant : str
     saturation_min, value_min : float
         Mask thresholds, 0-255 HSV scale (seed: saturation 15).
+    steep_ratio : float or None
+        Pixels darker than this fraction of the film (linear) are masked too: facets
+        tilted past the acceptance (:func:`~microfacet.analysis.mask.steep_facet_mask`).
     """
     aif = np.asarray(all_in_focus)
     if aif.ndim == 2:
@@ -64,7 +67,7 @@ def measure_colour(all_in_focus, *, color_space="sRGB", bit_depth=8, illuminant=
     enc = (srgb_encode(aif, dtype=np.float32) if color_space == "linear-sRGB"
            else aif.astype(np.float32))
     cm = colour_mask(enc, saturation_min=saturation_min, value_min=value_min,
-                     bit_depth=bit_depth)
+                     bit_depth=bit_depth, steep_ratio=steep_ratio)
     lab = srgb_to_lab(enc, illuminant=illuminant).astype(np.float32)
     noise = estimate_colour_noise(lab, cm.mask, delta_e_method=delta_e_method)
     floor = quantization_noise_de(enc, cm.mask, bit_depth=bit_depth, illuminant=illuminant,
@@ -80,7 +83,7 @@ def no_colour_message(stack, mask: ColourMask, what: str, *, saturation_min, val
     key = "tiff" if stack.tiff_path is not None else "slices" if stack.has_slices else "image"
     f = mask.fractions()
     reasons = ", ".join(f"{name.replace('_', ' ')} {100 * f[name]:.0f}%" for name in
-                        ("low_saturation", "dark", "clipped", "invalid", "shadow"))
+                        ("low_saturation", "dark", "clipped", "invalid", "shadow", "steep"))
     return (f"{stack.path / 'stack.json'}: key {key!r}: no colour information to analyse, "
             f"{what} ({reasons}; saturation_min {saturation_min:g}, value_min "
             f"{value_min:g} on the 0-255 scale)")

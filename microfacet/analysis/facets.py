@@ -1,24 +1,23 @@
-"""Joint per-facet estimate of thickness and tilt (beyond the seed).
+"""Facets: a plane per facet from the height map, a thickness per facet from its colour.
 
 Colour moves about 2 ΔE00 per nm of thickness but only 0.03-0.3 per degree of tilt: to
 first order a tilt θ acts like a thickness change d·(1 − cos θ₁), so a 1 nm thickness
 change inside a region masquerades as a 10-20° tilt in the seed's per-pixel inversion.
-Thickness and tilt cannot both be read from one pixel's colour. The joint estimate uses
-what each source is good at:
+Thickness and tilt cannot both be read from one pixel's colour. The joint mode
+(:mod:`.joint`) uses what each source is good at, facet by facet (facets from
+:func:`microfacet.analysis.segmentation.segment_facets`):
 
-1. **Facets from colour.** The seed observed (§3.3.2, Fig. 17) that one colour in the
-   microscope image is one flat facet. The all-in-focus image is segmented into facets
-   (SLIC superpixels on Lab, mean size = the expected facet size).
-2. **Tilt from the height map, per facet.** A weighted least-squares plane is fitted to the
-   height-from-focus map over each facet (weights: focus reliability, and distance from
-   the facet boundary, where the focus window mixes neighbours). Many noisy heights give
-   one well-determined slope; its covariance gives the prior σ.
-3. **Thickness from colour, per facet.** With the facet's tilt known, its thickness is the
-   d of least ΔE00 between the mean Lab of the facet's interior and the model, searched
-   within ±30 nm of its ROI's thickness (same interference order).
-4. **Tilt per pixel**: the MAP with the facet-plane prior and the colour likelihood at the
-   facet's thickness (:func:`microfacet.analysis.tilt.invert_tilt`), which also reports the share of
-   the information that came from colour.
+* **Tilt from reliable heights** (:func:`fit_facet_planes`): a least-squares plane through the
+  facet's *reliable* heights only, each weighted by 1/σ_h² (its error from the focus stage).
+  Its covariance, inflated by the reduced χ² of the fit when the plane fits worse than the
+  height errors allow, is the slope noise the NDF fit deconvolves. A facet with fewer than
+  ``min_pixels`` reliable heights, or whose reliable pixels do not span a plane, gets no tilt
+  (``fitted`` False, tilt NaN): it is not guessed.
+* **Thickness from colour at that tilt** (:func:`facet_thickness`): the d of least ΔE00
+  between the facet's mean interior Lab and the model, searched over the facet's interference
+  order (±0.45 of the colour period λ/(2n) around its ROI's thickness: the colours of the
+  neighbouring orders, ~λ/(2n) away, stay out), with a 1-σ error from the curvature of
+  ΔE² and the tilt's own error.
 """
 
 from __future__ import annotations
@@ -32,148 +31,177 @@ import numpy as np
 from ..colour.colorimetry import xyz_to_lab
 from ..colour.difference import delta_e
 from ..core.lazy import load
-from .tilt import PixelEstimates, invert_tilt, model_lab_rows
+from ..optics.constants import optical_constants
+from .segmentation import plane_from_moments, plane_moments
 
-segmentation = load("skimage.segmentation")
 ndimage = load("scipy.ndimage")
 optimize = load("scipy.optimize")
 
-__all__ = ["FacetFit", "facet_edge_distance", "facet_thickness", "fit_facet_planes",
-           "joint_tilts", "refine_exposure_on_facets", "segment_facets", "thickness_blocks"]
+__all__ = ["ORDER_SWITCH_DE", "ORDER_SWITCH_RATIO", "FacetFit", "FacetThickness",
+           "facet_edge_distance", "facet_thickness", "film_index", "fit_facet_planes",
+           "order_half_width_nm", "refine_exposure_on_facets"]
 
 log = logging.getLogger(__name__)
 
-
-def segment_facets(lab, *, facet_px, compactness=2.0):
-    """Superpixel segmentation of a Lab image into facets.
-
-    Parameters
-    ----------
-    lab : ndarray, shape (H, W, 3)
-        CIELAB image (NaN allowed; treated as mid grey for segmentation).
-    facet_px : float
-        Expected mean facet diameter in pixels.
-    compactness : float
-        SLIC compactness in Lab units (low: follow colour edges).
-
-    Returns
-    -------
-    ndarray of int32, shape (H, W)
-        Segment labels 0..S-1.
-    """
-    lab = np.asarray(lab, dtype=np.float64)
-    img = np.where(np.isfinite(lab), lab, np.array([50.0, 0.0, 0.0]))
-    h, w = img.shape[:2]
-    n_seg = max(1, int(round(h * w / (np.pi * (max(facet_px, 2.0) / 2) ** 2))))
-    labels = segmentation.slic(img, n_segments=n_seg, compactness=compactness, convert2lab=False,
-                  channel_axis=-1, start_label=0, enforce_connectivity=True, sigma=0.5)
-    _, inv = np.unique(labels, return_inverse=True)
-    return inv.reshape(h, w).astype(np.int32)
+#: Wavelength at which the film's index sets the colour period and the refraction angle.
+_LAMBDA_C_NM = 560.0
 
 
 @dataclass
 class FacetFit:
-    """Plane fits per facet (arrays of length S).
+    """Plane fits per facet (arrays of length S; NaN where not ``fitted``).
 
     Attributes
     ----------
     slope_x, slope_y : ndarray
         dh/dx and dh/dy (x = image columns, y = image rows, both in µm).
+    slope_cov : ndarray, shape (S, 2, 2)
+        Covariance of (slope_x, slope_y), inflated by ``max(1, chi2_dof)`` and by the
+        correlation of the height errors.
+    slope_sigma : ndarray
+        Isotropic slope noise per axis, √(trace(cov) / 2): a measured slope vector is the
+        true one plus N(0, slope_sigma² I) (the NDF fit's noise model).
     tilt_deg, tilt_sigma_deg : ndarray
-        Tilt of the plane and its 1-σ uncertainty.
-    n_eff : ndarray
-        Sum of the weights.
+        Tilt of the plane and its 1-σ uncertainty (along the gradient).
+    n_pixels : ndarray of int
+        Reliable pixels the plane was fitted to.
+    chi2_dof : ndarray
+        Weighted residual per degree of freedom (≈ 1 when the heights' σ is right and the
+        facet is one plane).
     fitted : ndarray of bool
-        False where too few weighted pixels: tilt falls back to the mean of the smoothed
-        height-map tilt with a wide σ.
+        The facet has a height tilt.
     """
 
     slope_x: np.ndarray
     slope_y: np.ndarray
+    slope_cov: np.ndarray
+    slope_sigma: np.ndarray
     tilt_deg: np.ndarray
     tilt_sigma_deg: np.ndarray
-    n_eff: np.ndarray
+    n_pixels: np.ndarray
+    chi2_dof: np.ndarray
     fitted: np.ndarray
 
 
-def fit_facet_planes(labels, height_um, weight, *, pixel_size_um, fallback_tilt_deg,
-                     min_weight=6.0, fallback_sigma_deg=8.0) -> FacetFit:
-    """Weighted least-squares plane per segment (vectorised with bincount sums).
+def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size_um,
+                     min_pixels=8, correlation_px=1.0) -> FacetFit:
+    """Weighted least-squares plane per facet through its reliable heights only.
 
     Parameters
     ----------
     labels : ndarray of int, shape (H, W)
+        Facets 0..S-1.
     height_um : ndarray, shape (H, W)
         Height map (NaN ignored).
-    weight : ndarray, shape (H, W)
-        Non-negative weights (0 = not used).
+    height_sigma_um : ndarray or float
+        1-σ height error per pixel (µm): weights 1/σ².
+    reliable : ndarray of bool, shape (H, W)
+        Pixels whose height may be used (the others, however plausible, are not).
     pixel_size_um : float
-    fallback_tilt_deg : ndarray, shape (H, W)
-        Per-pixel tilt used (averaged per segment) where a plane cannot be fitted.
-    """
-    h, w = labels.shape
-    S = int(labels.max()) + 1
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64) * pixel_size_um
-    z = np.asarray(height_um, dtype=np.float64)
-    wt = np.where(np.isfinite(z), np.asarray(weight, dtype=np.float64), 0.0)
-    z = np.where(np.isfinite(z), z, 0.0)
-    lab = labels.ravel()
-
-    def s(v):
-        return np.bincount(lab, weights=(wt * v).ravel(), minlength=S)
-
-    sw = s(1.0)
-    sx, sy, sz = s(xx), s(yy), s(z)
-    sxx, sxy, syy = s(xx * xx), s(xx * yy), s(yy * yy)
-    sxz, syz, szz = s(xx * z), s(yy * z), s(z * z)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mx, my, mz = sx / sw, sy / sw, sz / sw
-        cxx = sxx - sw * mx * mx
-        cxy = sxy - sw * mx * my
-        cyy = syy - sw * my * my
-        cxz = sxz - sw * mx * mz
-        cyz = syz - sw * my * mz
-        czz = szz - sw * mz * mz
-        det = cxx * cyy - cxy * cxy
-        a = (cyy * cxz - cxy * cyz) / det  # dz/dx
-        b = (cxx * cyz - cxy * cxz) / det  # dz/dy
-        resid = np.maximum(czz - a * cxz - b * cyz, 0.0)
-        var = resid / np.maximum(sw - 3.0, 1.0)
-        # Covariance of (a, b) = var * inv(C); project on the gradient direction.
-        g = np.hypot(a, b)
-        ux, uy = np.where(g > 0, a / g, 1 / np.sqrt(2)), np.where(g > 0, b / g, 1 / np.sqrt(2))
-        var_g = var * (cyy * ux * ux - 2 * cxy * ux * uy + cxx * uy * uy) / det
-    fitted = (sw >= min_weight) & (det > 1e-12 * np.maximum(cxx * cyy, 1e-300)) & np.isfinite(a)
-    tilt = np.rad2deg(np.arctan(np.where(fitted, g, 0.0)))
-    sig = np.rad2deg(np.sqrt(np.maximum(var_g, 0.0)) / (1.0 + g * g))
-    fb = np.asarray(fallback_tilt_deg, dtype=np.float64)
-    ok = np.isfinite(fb)
-    cnt = np.bincount(lab, weights=ok.ravel().astype(float), minlength=S)
-    fb_sum = np.bincount(lab, weights=np.where(ok, fb, 0).ravel(), minlength=S)
-    fb_mean = fb_sum / np.maximum(cnt, 1)
-    tilt = np.where(fitted, tilt, fb_mean)
-    sig = np.where(fitted & np.isfinite(sig), np.maximum(sig, 0.25), fallback_sigma_deg)
-    return FacetFit(np.where(fitted, a, np.nan), np.where(fitted, b, np.nan), tilt, sig, sw,
-                    fitted)
-
-
-def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table, *,
-                    exposure, half_range_nm=30.0, step_nm=0.1, interior=None,
-                    delta_e_method="CIEDE2000"):
-    """Thickness per facet from its mean Lab at its plane tilt, near its ROI's thickness.
-
-    The search covers ±``half_range_nm`` around the facet's ROI thickness: wide enough for
-    the spread of thickness inside a ROI, well inside one interference order (~110 nm).
-    ``interior`` (bool H×W) restricts the facet's mean colour to pixels away from its
-    boundary (partly shadowed by the step to the neighbour) where a facet has any.
-    ``delta_e_method`` is the colour-difference formula (``"CIEDE2000"``, ``"CIE94"``,
-    ``"CIE76"``; :func:`microfacet.colour.difference.delta_e`).
+    min_pixels : int
+        Fewest reliable pixels for a plane (3 determine it; the default leaves 5 degrees of
+        freedom for the residual that scales its covariance).
+    correlation_px : float
+        Correlation area A of the height errors in pixels. Heights from focus share their
+        errors over the focus window (measured: 27-41 px² for a 7 px window), which the
+        residual about the plane cannot show: the slope covariance of independent errors is
+        multiplied by ``n A / (n + 5 A)`` — A for facets much larger than the correlation
+        area, less for smaller ones (a smooth error tilts a small facet less than it would
+        n independent errors), fitted within ±30 % to simulations of smoothed white noise
+        for facets of 0.3-36 correlation areas (tests/analysis/test_facets.py).
 
     Returns
     -------
-    thickness_nm, delta_e : ndarray, shape (S,)
-        NaN for facets with no usable pixel.
+    FacetFit
+
+    Examples
+    --------
+    >>> yy, xx = np.mgrid[0:10, 0:20]
+    >>> labels = (xx >= 10).astype(np.int32)
+    >>> h = np.where(labels == 0, 0.1, -0.2) * xx * 0.5     # slopes 0.1 and -0.2
+    >>> rel = np.ones(h.shape, bool); rel[:, 10:] = False   # facet 1: no reliable height
+    >>> ff = fit_facet_planes(labels, h, height_sigma_um=0.01, reliable=rel, pixel_size_um=0.5)
+    >>> ff.fitted.tolist(), round(float(ff.slope_x[0]), 6), bool(np.isnan(ff.tilt_deg[1]))
+    ([True, False], 0.1, True)
     """
+    S = int(labels.max()) + 1
+    sig = np.broadcast_to(np.asarray(height_sigma_um, dtype=np.float64), labels.shape)
+    z = np.asarray(height_um, dtype=np.float64)
+    use = np.asarray(reliable, bool) & np.isfinite(z) & np.isfinite(sig) & (sig > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        wt = np.where(use, 1.0 / sig ** 2, 0.0)
+    m = plane_moments(labels, np.where(use, z, np.nan), wt, pixel_size_um=pixel_size_um,
+                      n_labels=S)
+    n = np.bincount(labels.ravel(), weights=use.ravel(), minlength=S).astype(np.int64)
+    a, b, rss, cov = plane_from_moments(m)
+    fitted = (n >= max(int(min_pixels), 4)) & np.isfinite(a) & np.isfinite(b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        chi2 = np.where(fitted, rss / np.maximum(n - 3, 1), np.nan)
+    A = max(float(correlation_px), 1.0)
+    corr = n * A / (n + 5.0 * A) if A > 1.0 else np.ones(n.shape)
+    infl = np.where(fitted, np.maximum(chi2, 1.0) * np.maximum(corr, 1.0), np.nan)
+    cov = np.where(fitted[:, None, None], cov * infl[:, None, None], np.nan)
+    g = np.hypot(a, b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ux = np.where(g > 0, a / g, 1 / np.sqrt(2))
+        uy = np.where(g > 0, b / g, 1 / np.sqrt(2))
+        var_g = (cov[:, 0, 0] * ux * ux + 2 * cov[:, 0, 1] * ux * uy + cov[:, 1, 1] * uy * uy)
+    tilt = np.where(fitted, np.degrees(np.arctan(g)), np.nan)
+    tsig = np.where(fitted, np.degrees(np.sqrt(np.maximum(var_g, 0.0)) / (1.0 + g * g)),
+                    np.nan)
+    ssig = np.where(fitted, np.sqrt(np.maximum(cov[:, 0, 0] + cov[:, 1, 1], 0.0) / 2.0),
+                    np.nan)
+    nan = np.where(fitted, 0.0, np.nan)
+    return FacetFit(a + nan, b + nan, cov, ssig, tilt, tsig, n, chi2, fitted)
+
+
+def film_index(table) -> float:
+    """Real refractive index of the table's film at 560 nm (sets the colour period)."""
+    n = optical_constants(table.film, np.array([_LAMBDA_C_NM]))
+    return float(np.real(np.ravel(n)[0]))
+
+
+def order_half_width_nm(table) -> float:
+    """Half-width of one interference order's thickness window: 0.45 λ/(2n) at 560 nm.
+
+    The colour of a film repeats (paler) about every λ/(2n) of thickness (~110 nm for TiO2):
+    a search of ±0.45 of that around a thickness in the right order cannot reach the
+    neighbouring orders' look-alike colours.
+    """
+    return 0.45 * _LAMBDA_C_NM / (2.0 * film_index(table))
+
+
+@dataclass
+class FacetThickness:
+    """Thickness per facet (arrays of length S; NaN where a facet has no usable pixel).
+
+    Attributes
+    ----------
+    thickness_nm, sigma_nm : ndarray
+        Thickness and its 1-σ error (colour noise and misfit through the curvature of ΔE²,
+        plus the thickness equivalent of the tilt's error).
+    delta_e : ndarray
+        ΔE00 between the facet's mean colour and the model at the solution.
+    at_window_edge : ndarray of bool
+        The minimum lies at the edge of the interference-order window (the colour fits a
+        thickness outside the order better: ambiguous).
+    n_pixels : ndarray of int
+        Pixels whose mean colour was used.
+    delta_e_other_order : ndarray
+        The least ΔE00 in the neighbouring orders' windows (one colour period above and
+        below; NaN where both lie outside the table): close to ``delta_e``, the order is
+        uncertain.
+    """
+
+    thickness_nm: np.ndarray
+    sigma_nm: np.ndarray
+    delta_e: np.ndarray
+    at_window_edge: np.ndarray
+    n_pixels: np.ndarray
+    delta_e_other_order: np.ndarray
+
+
+def _facet_means(labels, lab, usable, interior, values):
     S = int(labels.max()) + 1
     lab_flat = np.asarray(lab, dtype=np.float64).reshape(-1, 3)
     u = np.asarray(usable, bool).ravel()
@@ -185,33 +213,149 @@ def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table
     cnt = np.bincount(lb[u], minlength=S).astype(np.float64)
     mean_lab = np.stack([np.bincount(lb[u], weights=lab_flat[u, c], minlength=S)
                          for c in range(3)], axis=-1) / np.maximum(cnt, 1)[:, None]
-    d_roi = np.bincount(lb[u], weights=np.asarray(roi_thickness_px).ravel()[u],
-                        minlength=S) / np.maximum(cnt, 1)
-    has = (cnt > 0) & np.isfinite(d_roi)
-    idx = np.flatnonzero(has)
-    off = np.arange(-half_range_nm, half_range_nm + 1e-9, step_nm)
+    v = np.asarray(values, dtype=np.float64).ravel()[u]
+    ok = np.isfinite(v)
+    mv = (np.bincount(lb[u][ok], weights=v[ok], minlength=S)
+          / np.maximum(np.bincount(lb[u][ok], minlength=S), 1))
+    return mean_lab, cnt, mv
+
+
+def _scan(table, centre, tilt, mean_lab, offsets, exposure, white, method):
     lo, hi = float(table.thickness_nm[0]), float(table.thickness_nm[-1])
-    th_out = np.full(S, np.nan)
-    de_out = np.full(S, np.nan)
+    grid = np.clip(centre[:, None] + offsets[None, :], lo, hi)
+    xyz = table.xyz_at(tilt[:, None], grid) * exposure
+    model = xyz_to_lab(xyz.astype(np.float32), white=white)
+    de = delta_e(model, mean_lab[:, None, :].astype(np.float32), method=method)
+    return grid, de.astype(np.float64)
+
+
+#: A facet leaves its ROI's interference order when a thickness outside it fits its colour
+#: better by more than this (ΔE00); within it the orders are not told apart by colour.
+ORDER_SWITCH_DE = 1.0
+#: ... and by a factor: the other order must fit at most this fraction of the ROI order's
+#: ΔE00 (a facet of two regions or of a groove fits neither well and stays; on the
+#: fixture, without it 1.8 % of the pixels switched to a wrong order).
+ORDER_SWITCH_RATIO = 0.5
+
+
+def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table, *,
+                    exposure, tilt_sigma_deg=None, noise_de=1.0, half_width_nm=None,
+                    step_nm=0.05, interior=None, delta_e_method="CIEDE2000",
+                    order_switch_de=ORDER_SWITCH_DE) -> FacetThickness:
+    """Thickness per facet from its mean Lab at its tilt, within its interference order.
+
+    The order is the ROI's (the window ±``half_width_nm`` about the ROI thickness) unless a
+    scan of the table's whole thickness range finds, outside that window, a thickness whose
+    colour fits the facet better by more than ``order_switch_de`` and with at most
+    :data:`ORDER_SWITCH_RATIO` of the ROI order's ΔE00: a facet of another
+    population than its ROI's majority, in another order, takes its own. Within ΔE00
+    ``order_switch_de`` the orders are not told apart by colour and the ROI's is kept.
+
+    Parameters
+    ----------
+    labels : ndarray of int, shape (H, W)
+    lab : ndarray, shape (H, W, 3)
+    usable : ndarray of bool, shape (H, W)
+        Unmasked pixels.
+    facet_tilt_deg : ndarray, shape (S,)
+        Tilt per facet (its plane's, or a stand-in where it has none).
+    roi_thickness_px : ndarray, shape (H, W)
+        The ROI stage's thickness per pixel: the facet's window is centred on its mean.
+    table : ColourTable
+    exposure : float
+    tilt_sigma_deg : ndarray, shape (S,), optional
+        Error of ``facet_tilt_deg`` (adds d·tan θ₁·cos θ/(n cos θ₁)·σ_θ to the error).
+    noise_de : float
+        Colour noise per Lab component of one pixel.
+    half_width_nm : float, optional
+        Half-width of the search window (default :func:`order_half_width_nm`).
+    step_nm : float
+        Final resolution (a 1 nm scan, then ±1 nm at this step, then a parabola).
+    interior : ndarray of bool, optional
+        Pixels away from the facet's boundary (partly shadowed): the mean colour uses them
+        where a facet has any.
+    delta_e_method : str
+        ``"CIEDE2000"``, ``"CIE94"`` or ``"CIE76"``.
+    order_switch_de : float or None
+        None: stay in the ROI's order (no whole-range scan).
+
+    Returns
+    -------
+    FacetThickness
+    """
+    S = int(labels.max()) + 1
+    mean_lab, cnt, centre = _facet_means(labels, lab, usable, interior, roi_thickness_px)
+    tilt = np.asarray(facet_tilt_deg, dtype=np.float64)
+    has = (cnt > 0) & np.isfinite(centre) & np.isfinite(tilt)
+    hw = order_half_width_nm(table) if half_width_nm is None else float(half_width_nm)
+    n_film = film_index(table)
+    white = table.white_xyz.astype(np.float32)
     t_lo, t_hi = float(table.theta_deg[0]), float(table.theta_deg[-1])
-    for a in range(0, idx.size, 4096):
-        ii = idx[a:a + 4096]
-        grid = np.clip(d_roi[ii, None] + off[None, :], lo, hi)
-        th = np.clip(facet_tilt_deg[ii], t_lo, t_hi)[:, None]
-        xyz = table.xyz_at(th, grid) * exposure
-        model = xyz_to_lab(xyz.astype(np.float32), white=table.white_xyz.astype(np.float32))
-        de = delta_e(model, mean_lab[ii, None, :].astype(np.float32),
-                     method=delta_e_method).astype(np.float64)
-        k = np.argmin(de, axis=1)
-        km = np.clip(k, 1, off.size - 2)
+    out = {k: np.full(S, np.nan) for k in ("d", "s", "de", "alt")}
+    d_lo, d_hi = float(table.thickness_nm[0]), float(table.thickness_nm[-1])
+    period = hw / 0.45
+    edge = np.zeros(S, bool)
+    coarse = np.arange(-hw, hw + 1e-9, 1.0)
+    fine = np.arange(-1.0, 1.0 + 1e-9, step_nm)
+    idx = np.flatnonzero(has)
+    for a in range(0, idx.size, 2048):
+        ii = idx[a:a + 2048]
         r = np.arange(ii.size)
+        th = np.clip(tilt[ii], t_lo, t_hi)
+        if order_switch_de is not None:
+            cen = centre[ii]
+            full, de_full = _scan(table, np.zeros(ii.size), th, mean_lab[ii],
+                                  np.arange(d_lo, d_hi + 1e-9, 1.0), exposure, white,
+                                  delta_e_method)
+            inside = np.abs(full - cen[:, None]) <= hw
+            best_in = np.where(inside, de_full, np.inf).min(axis=1)
+            k_out = np.argmin(np.where(inside, np.inf, de_full), axis=1)
+            de_out = de_full[r, k_out]
+            switch = (de_out < best_in - order_switch_de) & (de_out < ORDER_SWITCH_RATIO
+                                                             * best_in)
+            centre[ii] = np.where(switch, full[r, k_out], cen)
+        grid, de = _scan(table, centre[ii], th, mean_lab[ii], coarse, exposure, white,
+                         delta_e_method)
+        k = np.argmin(de, axis=1)
+        edge[ii] = (k == 0) | (k == coarse.size - 1)
+        grid, de = _scan(table, grid[r, k], th, mean_lab[ii], fine, exposure, white,
+                         delta_e_method)
+        k = np.argmin(de, axis=1)
+        km = np.clip(k, 1, fine.size - 2)
         y0, y1, y2 = de[r, km - 1] ** 2, de[r, km] ** 2, de[r, km + 1] ** 2
         den = y0 - 2 * y1 + y2
         with np.errstate(divide="ignore", invalid="ignore"):
             o = np.where((den > 0) & (k == km), np.clip(0.5 * (y0 - y2) / den, -1, 1), 0.0)
-        th_out[ii] = grid[r, k] + o * step_nm
-        de_out[ii] = de[r, k]
-    return th_out, de_out
+            curv = np.where(den > 0, den / step_nm ** 2, np.nan)   # d²(ΔE²)/dd²
+        d_best = grid[r, k] + o * step_nm
+        de_best = np.sqrt(np.maximum(y1 - 0.25 * (y0 - y2) * o, 0.0))
+        # colour error of the facet's mean per Lab component: noise over its pixels, or
+        # the misfit itself when larger (model error, thickness variation in the facet)
+        sc = np.maximum(noise_de / np.sqrt(cnt[ii]), de_best / math.sqrt(3.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s_col = sc * np.sqrt(2.0 / curv)
+        s2 = s_col ** 2
+        if tilt_sigma_deg is not None:
+            sin1 = np.sin(np.radians(th)) / n_film
+            cos1 = np.sqrt(1.0 - sin1 ** 2)
+            dd_dth = d_best * (sin1 / cos1) * np.cos(np.radians(th)) / (n_film * cos1)
+            ts = np.asarray(tilt_sigma_deg, dtype=np.float64)[ii]
+            s2 = s2 + (dd_dth * np.radians(np.nan_to_num(ts, nan=0.0))) ** 2
+        # at most the SD of a uniform spread over the window (a flat ΔE curve)
+        s_tot = np.minimum(np.sqrt(s2), hw / math.sqrt(3.0))
+        out["d"][ii], out["de"][ii], out["s"][ii] = d_best, de_best, np.where(
+            np.isfinite(s_tot), s_tot, hw / math.sqrt(3.0))
+        alt = np.full(ii.size, np.inf)
+        for shift in (-period, period):
+            c2 = d_best + shift
+            inside = (c2 + hw >= d_lo) & (c2 - hw <= d_hi)
+            if inside.any():
+                _, de2 = _scan(table, c2[inside], th[inside], mean_lab[ii[inside]], coarse,
+                               exposure, white, delta_e_method)
+                alt[inside] = np.minimum(alt[inside], de2.min(axis=1))
+        out["alt"][ii] = np.where(np.isfinite(alt), alt, np.nan)
+    return FacetThickness(out["d"], out["s"], out["de"], edge, cnt.astype(np.int64),
+                          out["alt"])
 
 
 def refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table, exposure, *,
@@ -219,27 +363,29 @@ def refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table, 
     """Exposure of least median facet ΔE00, each facet's thickness re-solved per candidate.
 
     Facets are homogeneous (one tilt, one thickness), unlike ROIs that span several
-    thickness regions, so they pin the exposure down better than the ROI fit did.
+    thickness regions, so they pin the exposure down better than the ROI fit did. Facets
+    without a tilt (NaN in ``tilt_f``) are not used.
     """
     S = int(facets.max()) + 1
     rng = np.random.default_rng(seed)
     cnt = np.bincount(facets[usable & interior], minlength=S)
-    cand = np.flatnonzero(cnt >= 4)
+    cand = np.flatnonzero((cnt >= 4) & np.isfinite(tilt_f))
     if cand.size < 10:
         return exposure
     pick = np.zeros(S, bool)
     pick[rng.choice(cand, min(n_facets, cand.size), replace=False)] = True
     sel = usable & pick[facets]
+    tilt = np.where(pick, tilt_f, np.nan)
 
     def objective(log_e):
-        _, de = facet_thickness(facets, lab, sel, tilt_f, thick_roi_px, table,
-                                exposure=math.exp(log_e), interior=interior,
-                                delta_e_method=delta_e_method)
-        return float(np.nanmedian(de))
+        ft = facet_thickness(facets, lab, sel, tilt, thick_roi_px, table,
+                             exposure=math.exp(log_e), interior=interior, step_nm=0.1,
+                             delta_e_method=delta_e_method, order_switch_de=None)
+        return float(np.nanmedian(ft.delta_e))
 
     lo, hi = math.log(exposure / 1.5), math.log(exposure * 1.5)
     opt = optimize.minimize_scalar(objective, bounds=(lo, hi), method="bounded",
-                          options={"xatol": 0.005})
+                                   options={"xatol": 0.005})
     return float(math.exp(opt.x)) if opt.fun <= objective(math.log(exposure)) else exposure
 
 
@@ -252,92 +398,3 @@ def facet_edge_distance(labels) -> np.ndarray:
     if not edge.any():
         return np.full(labels.shape, np.inf)
     return ndimage.distance_transform_edt(~edge)
-
-
-def thickness_blocks(shape, *, pixel_size_um, block_um=10.0) -> np.ndarray:
-    """Block id per pixel of square blocks of ``block_um`` (at least 4 px).
-
-    Neighbouring facets share a smooth thickness field: they are not independent samples for
-    the mixture's model choice. Blocks of ~10 µm are (docs/accuracy.md).
-    """
-    h, w = shape
-    block = max(4, int(round(block_um / pixel_size_um)))
-    by, bx = np.mgrid[0:h, 0:w]
-    return (by // block) * ((w + block - 1) // block) + bx // block
-
-
-def joint_tilts(colour, surface, roi, table, *, theta_grid_deg, max_tilt_deg, exposure,
-                estimate_exposure, facet_size_um, pixel_size_um, from_focus=True, seed=0,
-                timer=None, delta_e_method="CIEDE2000"):
-    """The joint mode's per-pixel stage: facets, their planes, their thickness, and the tilt
-    per pixel as the MAP with the facet-plane prior (see the module notes).
-
-    Parameters
-    ----------
-    colour : ColourImage
-    surface : Surface
-    roi : RoiFit
-    table : ColourTable
-    theta_grid_deg : ndarray
-        From :func:`~microfacet.analysis.tilt.tilt_grid`.
-    max_tilt_deg : float
-    exposure : float
-        From the ROI stage.
-    estimate_exposure : bool
-        Refine the exposure on facets (:func:`refine_exposure_on_facets`).
-    facet_size_um, pixel_size_um : float
-    from_focus : bool
-        The height comes from focus (weights from its reliability) rather than an export
-        (trusted where finite).
-    timer : StageTimer, optional
-        Records ``segmentation`` and ``facet_fits``.
-    delta_e_method : str
-        Colour-difference formula (:func:`microfacet.colour.difference.delta_e`).
-
-    Returns
-    -------
-    estimates : PixelEstimates
-    facets : ndarray of int32 (H, W)
-    exposure : float
-    """
-    lab = colour.lab
-    shape = lab.shape[:2]
-    foc = surface.focus
-    thick_roi_px = roi.thickness_nm[roi.index_map(shape)]
-    usable = ~colour.mask.mask & np.isfinite(thick_roi_px)
-    facets = segment_facets(lab, facet_px=facet_size_um / pixel_size_um)
-    if timer is not None:
-        timer.lap("segmentation")
-    if from_focus:
-        rel = np.clip(np.nan_to_num(foc.reliability_db, nan=0.0) / 20.0, 0.0, 1.0) ** 2
-    else:  # a microscope export's height is trusted where it is finite
-        rel = np.isfinite(foc.height_fit_um).astype(np.float64)
-    dist = facet_edge_distance(facets)
-    weight = rel * np.clip(dist / 2.0, 0.0, 1.0) if not surface.no_focus else np.zeros(shape)
-    ff = fit_facet_planes(facets, foc.height_fit_um, weight, pixel_size_um=pixel_size_um,
-                          fallback_tilt_deg=surface.tilt_deg)
-    tilt_f = np.clip(ff.tilt_deg, 0, max_tilt_deg)
-    if estimate_exposure:
-        exposure = refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table,
-                                             exposure, interior=dist >= 1.5, seed=seed,
-                                             delta_e_method=delta_e_method)
-        log.info("exposure refined on facets: %.4f", exposure)
-    d_f, _ = facet_thickness(facets, lab, usable, tilt_f, thick_roi_px, table,
-                             exposure=exposure, interior=dist >= 1.5,
-                             delta_e_method=delta_e_method)
-    if timer is not None:
-        timer.lap("facet_fits")
-    yy, xx = np.nonzero(usable)
-    fid = facets[yy, xx]
-    d_rows = np.where(np.isfinite(d_f), d_f, table.thickness_nm[0])
-    rows_lab = model_lab_rows(table, d_rows, theta_grid_deg, exposure=exposure)
-    prior = np.clip(ff.tilt_deg[fid], 0, max_tilt_deg)
-    inv = invert_tilt(lab[yy, xx], rows_lab, fid, theta_grid_deg, table=table,
-                      thickness_px=d_rows[fid], exposure=exposure, noise_de=colour.noise_de,
-                      prior_deg=prior, prior_sigma_deg=ff.tilt_sigma_deg[fid],
-                      delta_e_method=delta_e_method)
-    out = PixelEstimates.empty(shape)
-    out.thickness_nm[yy, xx] = d_rows[fid]
-    out.fill(yy, xx, inv)
-    out.thickness_group = thickness_blocks(shape, pixel_size_um=pixel_size_um)
-    return out, facets, float(exposure)

@@ -1,42 +1,43 @@
-"""Fitting the thickness mixture to per-pixel samples, and the model choice both fits use.
+"""Fitting the thickness mixture, and the model choice both mixture fits use.
 
 Thickness (:func:`fit_thickness_mixture`)
-    A 1-D Gaussian mixture with free means, fitted with scikit-learn's
-    ``GaussianMixture`` for K = 1 … ``max_components``; K is chosen by BIC.
+    A 1-D Gaussian mixture with free means fitted by EM with per-sample noise ("extreme
+    deconvolution", Bovy, Hogg & Roweis 2011, in one dimension): sample ``i`` measured with
+    error σ_i has density ``Σ w_k N(x_i; μ_k, s_k² + σ_i²)``, so the components describe the
+    *true* thickness, not the noisy estimates. Samples may carry weights (area). This is our
+    own EM rather than scikit-learn's ``GaussianMixture``, which takes neither per-sample
+    noise nor sample weights.
 
 Facet normals
-    :func:`microfacet.analysis.ndf_fit.fit_ndf_mixture` (zero-mean Gaussian-slope lobes),
-    with the model choice below.
+    :func:`microfacet.analysis.ndf_fit.fit_ndf_mixture` (zero-mean Gaussian-slope lobes,
+    the same deconvolution, plus censoring), with the model choice below.
 
-Model choice and correlated samples (both fitters)
-    ``BIC = −2 (n_eff / n_fit) ℓ + p log n_eff``, where ℓ is the log-likelihood of the
-    ``n_fit`` samples the mixture was fitted to (all finite samples, or a reproducible
-    subsample of ``max_samples``), and ``p`` the number of free parameters (3K − 1 for
-    the thickness, 2K − 1 for the NDF). Without ``group`` the samples are taken as
-    independent, ``n_eff = n_fit`` (the Kish effective size ``(Σw)² / Σw²`` with
-    thickness ``weights``), and this is the usual BIC.
+Model choice with an honest number of independent samples (both fitters)
+    ``BIC = −2 (n_eff / W) ℓ + p log n_eff``, where ℓ is the (weighted) log-likelihood of
+    the samples the mixture was fitted to, W their total weight and ``p`` the number of free
+    parameters (3K − 1 for the thickness, 2K − 1 for the NDF).
 
-    **Per-pixel values are not independent**: a grain or facet of thousands of pixels
-    shares one thickness/tilt, so the usual BIC, with n in the tens of thousands, rewards
-    a narrow component for every large region and overfits badly. Pass ``group`` (a
-    region/facet id per sample): the mixture is still fitted to the pixel samples (so it
-    describes the per-pixel, i.e. area-weighted, distribution), but the BIC counts the
-    distinct groups (among all finite samples) as the independent observations,
-    ``n_eff = n_groups``: the log-likelihood is scaled by ``n_groups / n_fit`` (with equal
-    group sizes, each group contributes its average per-pixel log-likelihood) and the
-    penalty is ``p log n_groups``. This is an effective-sample-size heuristic, not an
-    exact likelihood; it needs enough groups (a few tens) to resolve several components.
+    **Per-pixel values are not independent**: a thickness region or a facet of thousands of
+    pixels shares one thickness or tilt, and the usual BIC, with n in the tens of thousands,
+    rewards a narrow component for every large region. ``n_eff`` is therefore the number of
+    independent observations: ``n_effective`` when given (the number of independent
+    thickness regions, :attr:`microfacet.analysis.sampling.Regions.effective_count`, or
+    the number of facets), else the number of distinct ``group`` ids, else the Kish size
+    ``(Σw)² / Σw²`` of the weights, else the number of samples.
 
-    In either case K is also limited to the number of distinct values and so that the
-    model has no more parameters than effective observations (``p ≤ n_eff``); the
-    ``degenerate`` field of the result says when that limit was applied.
-
+    A K whose solution has a component carried by fewer than ``min_component_samples``
+    independent samples (``w_k n_eff``) or with its SD at the floor describes a sample or a
+    spike, not a population: it is not admissible, whatever its BIC. K is also limited to the
+    number of distinct values and to ``p ≤ n_eff``; ``degenerate`` says when a limit applied.
+    Of the admissible K, the smallest within 2 of the least BIC is chosen (a larger K must
+    earn "positive evidence"). ``bic_margin`` is the least BIC of the other admissible K minus
+    that of the chosen one (≥ 10: very strong evidence for the choice; near 0 or negative,
+    down to −2: a toss-up decided for the simpler model).
 """
 
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,13 +45,12 @@ import numpy as np
 from ..core.distributions import ThicknessMixture
 from ..core.lazy import load
 
-sklearn_mixture = load("sklearn.mixture")
-sklearn_exceptions = load("sklearn.exceptions")
 threadpoolctl = load("threadpoolctl")
 
 __all__ = [
     "MixtureFit",
     "bic_score",
+    "choose_k",
     "fit_thickness_mixture",
     "k_max_for",
     "k_note",
@@ -59,7 +59,6 @@ __all__ = [
     "single_thread",
 ]
 
-_DEG = math.pi / 180.0
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
@@ -72,24 +71,30 @@ class MixtureFit:
     mixture : ThicknessMixture or NDFMixture
         The mixture with the chosen number of components K.
     bic : float
-        BIC of the chosen K (see the module docstring for the ``group`` handling).
+        BIC of the chosen K (see the module notes).
     bic_by_k : dict of int to float
-        BIC of every K that was fitted (K that exceed the number of distinct values or
-        the effective sample size are not fitted and absent).
+        BIC of every K that was fitted (``info["inadmissible_k"]`` lists those not
+        allowed to win: a component on fewer than ``min_component_samples`` independent
+        samples or at the SD floor).
     n_samples : int
         Finite samples given (after dropping NaN and zero weights).
     n_effective : float
-        The number of independent observations the BIC used: the number of distinct
-        groups with ``group``, else the number of samples fitted (after subsampling; the
-        Kish effective size with ``weights``).
+        The number of independent observations the BIC used.
     degenerate : bool or str
-        ``False``, or a short description of the degenerate case handled (e.g. a single
-        distinct value fitted as one component with the floor sd).
+        ``False``, or a short description of the degenerate case handled.
     n_fit : int
         Samples the mixture was actually fitted to (≤ ``max_samples``).
     log_likelihood_by_k : dict of int to float
-        Log-likelihood of the ``n_fit`` samples for each K (thickness density per nm, or
-        tilt density per degree), before the ``n_eff / n_fit`` scaling.
+        Weighted log-likelihood of the fitted samples for each K (density per nm, or tilt
+        density per degree), before the ``n_eff / W`` scaling.
+    bic_margin : float or None
+        BIC of the best other admissible K minus the chosen one's (None: only one K).
+    identified : bool
+        The data determine the distribution (set by the analysis; see ``reason``).
+    reason : str
+        Why not, in one sentence a user can act on ("" when identified).
+    info : dict
+        Fit-specific numbers (e.g. censored fraction, facets used).
     """
 
     mixture: object
@@ -100,21 +105,31 @@ class MixtureFit:
     degenerate: object = False
     n_fit: int = 0
     log_likelihood_by_k: dict = field(default_factory=dict, repr=False)
+    bic_margin: float | None = None
+    identified: bool = True
+    reason: str = ""
+    info: dict = field(default_factory=dict)
 
     @property
     def n_components(self) -> int:
         return len(self.mixture.components)
 
     def to_json(self) -> dict:
-        """``{"components": [...], "bic", "bic_by_k", "n_effective"}`` (plus ``form`` for
-        the NDF, ``n_samples`` and ``degenerate``); ``bic_by_k`` keys are strings."""
+        """``{"components": [...], "bic", "bic_by_k", "bic_margin", "n_effective",
+        "identified", "reason", ...}`` (plus ``form`` for the NDF); ``bic_by_k`` keys are
+        strings."""
         out = dict(self.mixture.to_json())
         out["bic"] = _json_float(self.bic)
         out["bic_by_k"] = {str(k): _json_float(v) for k, v in sorted(self.bic_by_k.items())}
+        out["bic_margin"] = None if self.bic_margin is None else _json_float(self.bic_margin)
         out["n_effective"] = _json_float(self.n_effective)
         out["n_samples"] = int(self.n_samples)
         out["degenerate"] = self.degenerate if isinstance(self.degenerate, str) else bool(
             self.degenerate)
+        out["identified"] = bool(self.identified)
+        out["reason"] = str(self.reason)
+        out.update({k: (_json_float(v) if isinstance(v, float) else v)
+                    for k, v in self.info.items()})
         return out
 
 
@@ -132,70 +147,75 @@ def positive_int(x, name):
     return int(x)
 
 
-def prepare(values, name, weights, group, max_samples, random_state):
-    """Flatten, drop NaN / zero weight, subsample reproducibly.
-
-    Returns ``x_fit, n_samples, n_eff, n_groups`` where ``n_eff`` is the effective number
-    of independent observations for the BIC.
-    """
+def _array(values, name, size=None, shape=None):
     try:
-        x = np.asarray(values, dtype=np.float64)
+        a = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError):
         raise ValueError(f"{name}: expected an array of numbers") from None
-    shape = x.shape
-    x = x.ravel()
+    if size is not None and a.size != size:
+        raise ValueError(f"{name}: shape {a.shape} does not match {shape}")
+    return a.ravel()
+
+
+def prepare(values, name, weights, group, max_samples, random_state, *, sigma=None,
+            sigma_name="sigma", n_effective=None):
+    """Flatten, drop NaN / zero weight, subsample reproducibly.
+
+    Returns
+    -------
+    x, w, s : ndarray
+        Values, weights (ones without ``weights``) and per-sample noise (zeros without
+        ``sigma``) of the fitted samples.
+    n : int
+        Finite samples given.
+    n_eff : float
+        Independent observations for the BIC (see the module notes).
+    """
+    x = _array(values, name)
+    shape = np.shape(values)
     if np.isinf(x).any():
         raise ValueError(f"{name}: contains infinite values")
     keep = ~np.isnan(x)
-
-    w = None
+    w = np.ones(x.size)
     if weights is not None:
-        try:
-            w = np.asarray(weights, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError("weights: expected an array of numbers") from None
-        if w.size != x.size:
-            raise ValueError(f"weights: shape {w.shape} does not match {name} {shape}")
-        w = w.ravel()
+        w = _array(weights, "weights", x.size, shape)
         if not np.all(np.isfinite(w)) or np.any(w < 0):
             raise ValueError("weights: must be finite and >= 0")
         keep &= w > 0
-
+    s = np.zeros(x.size)
+    if sigma is not None:
+        s = np.broadcast_to(_array(sigma, sigma_name), x.shape) if np.size(sigma) == 1 else \
+            _array(sigma, sigma_name, x.size, shape)
+        if np.any(np.asarray(s)[keep] < 0) or np.isinf(np.asarray(s)[keep]).any():
+            raise ValueError(f"{sigma_name}: must be finite and >= 0")
+        keep &= np.isfinite(s)
     g = None
     if group is not None:
         g = np.asarray(group)
         if g.size != x.size:
             raise ValueError(f"group: shape {g.shape} does not match {name} {shape}")
         g = g.ravel()
-
-    x = x[keep]
-    n = x.size
+    n = int(keep.sum())
     if n == 0:
-        raise ValueError(f"{name}: no finite values" + (" with weight > 0" if w is not None
+        raise ValueError(f"{name}: no finite values" + (" with weight > 0" if weights is not None
                                                         else ""))
-    rng = np.random.default_rng(random_state)
-    if w is not None:
-        w = w[keep]
-        p = w / w.sum()
-        kish = 1.0 / float(np.sum(p * p))
-        size = min(n, max_samples)
-        idx = np.sort(rng.choice(n, size=size, replace=True, p=p))
-        n_fit_eff = min(kish, float(size))
-    elif n > max_samples:
-        idx = np.sort(rng.choice(n, size=max_samples, replace=False))
-        n_fit_eff = float(max_samples)
+    x, w, s = x[keep], w[keep], np.asarray(s, dtype=np.float64)[keep]
+    p = w / w.sum()
+    kish = 1.0 / float(np.sum(p * p))
+    if n > max_samples:
+        idx = np.sort(np.random.default_rng(random_state).choice(n, size=max_samples,
+                                                                 replace=False))
+        x, w, s = x[idx], w[idx], s[idx]
+        kish = min(kish, float(max_samples))
+    if n_effective is not None:
+        n_eff = float(n_effective)
+        if not (math.isfinite(n_eff) and n_eff > 0):
+            raise ValueError(f"n_effective: must be finite and > 0, got {n_effective!r}")
+    elif g is not None:
+        n_eff = float(min(np.unique(g[keep]).size, kish))
     else:
-        idx = None
-        n_fit_eff = float(n)
-    x_fit = x if idx is None else x[idx]
-
-    n_groups = None
-    if g is not None:
-        n_groups = int(np.unique(g[keep]).size)
-        n_eff = float(min(n_groups, n_fit_eff))
-    else:
-        n_eff = n_fit_eff
-    return x_fit, n, n_eff, n_groups
+        n_eff = kish
+    return x, w, s, n, n_eff
 
 
 def single_thread():
@@ -204,9 +224,10 @@ def single_thread():
     return threadpoolctl.threadpool_limits(limits=1)
 
 
-def bic_score(loglik_fit, n_fit, n_eff, p):
-    """BIC with the log-likelihood of ``n_fit`` samples rescaled to ``n_eff`` observations."""
-    return -2.0 * loglik_fit * (n_eff / n_fit) + p * math.log(n_eff)
+def bic_score(loglik_fit, w_total, n_eff, p):
+    """BIC with the log-likelihood of samples of total weight ``w_total`` rescaled to
+    ``n_eff`` independent observations."""
+    return -2.0 * loglik_fit * (n_eff / w_total) + p * math.log(max(n_eff, 1.0))
 
 
 def k_max_for(max_components, n_unique, n_eff, params_per_k, extra):
@@ -215,39 +236,142 @@ def k_max_for(max_components, n_unique, n_eff, params_per_k, extra):
     return max(1, min(max_components, n_unique, k_by_p))
 
 
+def k_note(k_max, max_components, n_unique, n_eff, what):
+    if k_max >= max_components:
+        return False
+    if n_unique <= k_max:
+        return f"only {n_unique} distinct {what}: max_components reduced to {k_max}"
+    return f"n_effective {n_eff:g}: max_components reduced to {k_max} (parameters <= n_effective)"
+
+
+#: A larger K must beat every smaller admissible K by at least this much BIC ("positive
+#: evidence", Kass & Raftery 1995); below it the data do not ask for the extra component.
+PARSIMONY_BIC = 2.0
+
+
+def choose_k(fits, n_eff, min_component_samples):
+    """The smallest admissible K within :data:`PARSIMONY_BIC` of the least BIC, and its
+    margin (the least BIC of the other admissible K minus its own).
+
+    ``fits``: K → (bic, weights, inadmissible). Returns ``(k, margin, admissible_bics)``.
+    K = 1 is always admissible.
+    """
+    ok = {}
+    for k, (bic, w, bad) in fits.items():
+        if k == 1 or (np.min(w) * n_eff >= min_component_samples and not bad):
+            ok[k] = bic
+    least = min(ok.values())
+    k_best = min(k for k, v in ok.items() if v <= least + PARSIMONY_BIC)
+    others = [v for k, v in ok.items() if k != k_best]
+    margin = (min(others) - ok[k_best]) if others else None
+    return k_best, margin, ok
+
+
 # -------------------------------------------------------------------------- thickness
 
 
-def fit_thickness_mixture(thickness_nm, *, max_components=5, weights=None, group=None,
-                          random_state=0, max_samples=20000, sd_floor_nm=0.1) -> MixtureFit:
-    """Gaussian mixture of oxide thickness, number of components chosen by BIC.
+def _xd_em(x, v, a, w, mu, s2, s2_floor, *, bg=0.0, max_iter=300, tol=1e-8):
+    """Weighted 1-D extreme-deconvolution EM; returns (w, mu, s2, ℓ, w_bg).
+
+    ``bg`` > 0: a uniform background of that density (1/span) joins the Gaussians with its
+    own weight ``w_bg`` (the samples no population explains); ``w`` and ``w_bg`` sum to 1.
+    """
+    W = a.sum()
+    k = len(mu)
+    w = np.asarray(w, float) / np.sum(w)
+    w_bg = 0.0
+    if bg > 0:
+        w, w_bg = w * 0.95, 0.05
+    mu = np.asarray(mu, float).copy()
+    s2 = np.maximum(np.asarray(s2, float), s2_floor)
+    xc = x[:, None]
+    vc = v[:, None]
+    prev, ll = -np.inf, -np.inf
+    for it in range(max_iter + 1):
+        V = s2[None, :] + vc
+        lp = np.log(np.maximum(w, 1e-300)) - 0.5 * (_LOG_2PI + np.log(V)) - (xc - mu) ** 2 / (
+            2.0 * V)
+        if bg > 0:
+            lp = np.column_stack([lp, np.full(x.size, math.log(max(w_bg, 1e-300) * bg))])
+        m = lp.max(axis=1, keepdims=True)
+        e = np.exp(lp - m)
+        tot = e.sum(axis=1, keepdims=True)
+        ll = float(np.sum(a * (m[:, 0] + np.log(tot[:, 0]))))
+        if it == max_iter or ll - prev <= tol * W:
+            break
+        prev = ll
+        r_all = a[:, None] * (e / tot)
+        ar = r_all[:, :k]
+        nk = np.maximum(ar.sum(axis=0), 1e-300)
+        b = mu + s2 / V * (xc - mu)
+        B = s2 * vc / V
+        mu = (ar * b).sum(axis=0) / nk
+        s2 = np.maximum((ar * ((b - mu) ** 2 + B)).sum(axis=0) / nk, s2_floor)
+        w = nk / W
+        if bg > 0:
+            w_bg = float(r_all[:, k].sum() / W)
+    return w, mu, s2, ll, w_bg
+
+
+def _unexplained_cluster(x, a, dens, floor_density, *, width=2.0):
+    """Centre of the heaviest cluster (Gaussian kernel of ``width`` nm, on a grid of
+    width/4) of samples weighted by how badly the current components explain them
+    (area / (1 + density / floor))."""
+    u = a / (1.0 + dens / floor_density)
+    step = width / 4.0
+    i = np.floor((x - x.min()) / step).astype(np.int64)
+    h = np.bincount(i, weights=u)
+    kern = np.exp(-0.5 * (np.arange(-16, 17) / 4.0) ** 2)
+    s = np.convolve(h, kern, mode="same")
+    return float(x.min() + (int(np.argmax(s)) + 0.5) * step)
+
+
+def _weighted_quantiles(x, a, q):
+    o = np.argsort(x)
+    c = np.cumsum(a[o])
+    return np.interp(np.asarray(q) * c[-1], c - 0.5 * a[o], x[o])
+
+
+def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=None,
+                          n_effective=None, max_components=5, random_state=0,
+                          max_samples=20000, sd_floor_nm=0.1, min_component_samples=1.0,
+                          background=False) -> MixtureFit:
+    """Gaussian mixture of the true oxide thickness, number of components by BIC.
 
     Parameters
     ----------
     thickness_nm : array_like, any shape
-        Per-pixel (or per-region) thickness in nm. NaN is ignored.
+        Thickness samples in nm (per pixel, per facet, per region). NaN is ignored.
+    sigma_nm : array_like or float, optional
+        1-σ measurement error of each sample (nm): the components are deconvolved from it.
+    weights : array_like, same shape, optional
+        Non-negative sample weights (e.g. facet areas).
+    group : array_like, same shape, optional
+        Region / facet id per sample: without ``n_effective``, the number of distinct groups
+        is the number of independent observations.
+    n_effective : float, optional
+        The number of independent observations (see the module notes).
     max_components : int, optional
-        Largest K tried (K = 1 … max). Also limited to the number of distinct values and
-        to ``3K − 1 ≤ n_effective``.
-    weights : array_like, same shape as ``thickness_nm``, optional
-        Non-negative sample weights (e.g. pixel area). ``GaussianMixture`` takes no
-        weights, so the fit uses a reproducible weighted resample (with replacement) of
-        ``min(n, max_samples)`` values; the BIC then uses the Kish effective sample size.
-    group : array_like, same shape as ``thickness_nm``, optional
-        Region / facet id per sample. When given, the BIC counts the number of distinct
-        groups as the number of independent observations (log-likelihood scaled by
-        ``n_groups / n_fit``, penalty ``p log n_groups``); see the module docstring.
-        Without it, spatially correlated pixels make the BIC overfit.
+        Largest K tried; also limited to the number of distinct values and to
+        ``3K − 1 ≤ n_effective``.
     random_state : int, optional
-        Seed for the subsample and the k-means initialisation (results are reproducible).
+        Seed of the subsample taken when there are more than ``max_samples`` values.
     max_samples : int, optional
-        Larger inputs are subsampled (without replacement) to this many values.
     sd_floor_nm : float, optional
-        Smallest component sd, nm (added as a variance regulariser ``sd_floor_nm²``).
-        A single distinct value is returned as one component with this sd, and
-        ``degenerate`` says so. Thickness quantised to a grid (e.g. a lookup table with a
-        1 nm step) with few distinct values invites a spike per grid value: set the floor
-        to about the step.
+        Smallest component SD. A single distinct value is one component at the floor
+        (``degenerate`` says so); for K ≥ 2 a component at the floor is not admissible
+        unless the samples' errors (mean ``sigma_nm²`` ≥ 4 floor²) bound its likelihood.
+    min_component_samples : float, optional
+        Fewest independent samples (``w_k n_eff``) a component of a K ≥ 2 solution needs:
+        one, a population seen in a single independent region (measured on the
+        generalization sweep: with two, populations on one region of a scene were lost).
+
+    background : bool, optional
+        Fit, beside the K Gaussians, a uniform background over the samples' span with its
+        own weight (one more parameter for every K): samples no population explains (dust,
+        pit floors, mis-fitted facets) then neither ask for components of their own nor
+        widen the populations. The components returned are the populations' mixture
+        (weights renormalised without it); ``info["background_weight"]`` is its weight.
 
     Returns
     -------
@@ -263,62 +387,93 @@ def fit_thickness_mixture(thickness_nm, *, max_components=5, weights=None, group
     --------
     >>> rng = np.random.default_rng(0)
     >>> d = np.concatenate([rng.normal(120, 3, 4000), rng.normal(140, 3, 6000)])
-    >>> fit = fit_thickness_mixture(d)
+    >>> fit = fit_thickness_mixture(d + rng.normal(0, 2, d.size), sigma_nm=2.0)
     >>> fit.n_components, [round(m) for m in fit.mixture.means_nm]
     (2, [120, 140])
+    >>> [round(float(s), 1) for s in fit.mixture.sds_nm]     # the noise of 2 nm deconvolved
+    [3.0, 3.0]
     """
     max_components = positive_int(max_components, "max_components")
     max_samples = positive_int(max_samples, "max_samples")
     sd_floor_nm = float(sd_floor_nm)
     if not (math.isfinite(sd_floor_nm) and sd_floor_nm > 0):
         raise ValueError(f"sd_floor_nm: must be finite and > 0, got {sd_floor_nm!r}")
-    x, n, n_eff, _ = prepare(thickness_nm, "thickness_nm", weights, group, max_samples,
-                              random_state)
-    n_fit = x.size
+    x, a, s, n, n_eff = prepare(thickness_nm, "thickness_nm", weights, group, max_samples,
+                                random_state, sigma=sigma_nm, sigma_name="sigma_nm",
+                                n_effective=n_effective)
+    v = s * s
+    W = float(a.sum())
     uniq = np.unique(x)
+    s2_floor = sd_floor_nm ** 2
 
-    if uniq.size == 1:
-        v = float(uniq[0])
-        ll = n_fit * (-math.log(sd_floor_nm) - 0.5 * _LOG_2PI)
-        bic = bic_score(ll, n_fit, n_eff, 2)
-        return MixtureFit(ThicknessMixture([(1.0, v, sd_floor_nm)]), bic, {1: bic}, n, n_eff,
-                          f"single value {v:g} nm: one component with floor sd "
-                          f"{sd_floor_nm:g} nm", n_fit, {1: ll})
+    if uniq.size == 1 and not np.any(v > 0):
+        val = float(uniq[0])
+        ll = W * (-math.log(sd_floor_nm) - 0.5 * _LOG_2PI)
+        bic = bic_score(ll, W, n_eff, 2)
+        return MixtureFit(ThicknessMixture([(1.0, val, sd_floor_nm)]), bic, {1: bic}, n, n_eff,
+                          f"single value {val:g} nm: one component with floor sd "
+                          f"{sd_floor_nm:g} nm", x.size, {1: ll})
 
     k_max = k_max_for(max_components, uniq.size, n_eff, 3, -1)
-    X = x[:, None]
-    fits, bics, lls = {}, {}, {}
-    with single_thread(), warnings.catch_warnings():
-        # an unconverged over-sized K only loses in the BIC; no need to warn
-        warnings.simplefilter("ignore", sklearn_exceptions.ConvergenceWarning)
+    # With measurement errors well above the floor, a component at the floor has a bounded
+    # likelihood (its spread is below the resolution, e.g. a population seen in one region):
+    # admissible. Without, it is a spike on repeated values: not admissible.
+    bounded = float(np.average(v, weights=a)) >= 4.0 * s2_floor
+    # the background: uniform over the samples' span (padded by the SD floor and errors)
+    span = float(x.max() - x.min()) + 4.0 * float(np.sqrt(np.max(v)) if v.size else 0.0) \
+        + 2.0 * sd_floor_nm
+    bg = 1.0 / span if background and uniq.size > 2 else 0.0
+    sols, lls, fits, bgw = {}, {}, {}, {}
+    spread = float(np.sqrt(max(np.average((x - np.average(x, weights=a)) ** 2, weights=a)
+                               - np.average(v, weights=a), s2_floor)))
+    with single_thread():
         for k in range(1, k_max + 1):
-            # two starts: k-means (seeded) and the k quantiles; keep the higher likelihood
-            q = np.quantile(x, (np.arange(k) + 0.5) / k)[:, None]
-            best = None
-            for kw in ({"init_params": "kmeans"}, {"means_init": q}):
-                gm = sklearn_mixture.GaussianMixture(n_components=k, covariance_type="full",
-                                     reg_covar=sd_floor_nm ** 2, max_iter=500, tol=1e-5,
-                                     random_state=random_state, **kw)
-                gm.fit(X)
-                ll = float(gm.score(X)) * n_fit
-                if best is None or ll > best[1]:
-                    best = (gm, ll)
-            fits[k], lls[k] = best
-            if k > 1 and lls[k] < lls[k - 1]:  # EM stuck below the nested K − 1 optimum
-                lls[k] = lls[k - 1]
-            bics[k] = bic_score(lls[k], n_fit, n_eff, 3 * k - 1)
-    k_best = min(bics, key=bics.get)
-    gm = fits[k_best]
-    comps = [(float(w), float(m), float(math.sqrt(c)))
-             for w, m, c in zip(gm.weights_, gm.means_[:, 0], gm.covariances_.ravel())
-             if w > 0]
+            q = _weighted_quantiles(x, a, (np.arange(k) + 0.5) / k)
+            starts = [(np.ones(k), q, np.full(k, (spread / k) ** 2))]
+            if k > 1:
+                wp, mp, sp = sols[k - 1]
+                j = int(np.argmax(wp * np.sqrt(sp)))           # split the widest-heaviest
+                d = math.sqrt(sp[j])
+                starts.append((np.append(np.delete(wp, j), [wp[j] / 2] * 2),
+                               np.append(np.delete(mp, j), [mp[j] - d, mp[j] + d]),
+                               np.append(np.delete(sp, j), [sp[j] / 2] * 2)))
+                # a new component at the worst-fitted sample
+                dens = np.zeros(x.size)
+                for wk, mk, sk in zip(wp, mp, sp):
+                    V = sk + v
+                    dens += wk * np.exp(-(x - mk) ** 2 / (2 * V)) / np.sqrt(V)
+                i = int(np.argmin(dens))
+                starts.append((np.append(wp * 0.9, 0.1), np.append(mp, x[i]),
+                               np.append(sp, (spread / k) ** 2)))
+                # ... and at the heaviest cluster of badly fitted samples
+                c = _unexplained_cluster(x, a, dens, max(bg, 1e-3 / max(spread, 1e-9)))
+                starts.append((np.append(wp * 0.9, 0.1), np.append(mp, c),
+                               np.append(sp, max(float(np.median(v)), s2_floor))))
+            runs = [_xd_em(x, v, a, *st, s2_floor, bg=bg, max_iter=25) for st in starts]
+
+            def admissible(r):
+                return k == 1 or (np.min(r[0]) * n_eff >= min_component_samples and not (
+                    np.any(r[2] <= s2_floor * 1.0001) and not bounded))
+
+            # the most likely admissible start, converged (a spike on a few samples may be
+            # more likely, and is not a population); then checked again
+            pre = [r for r in runs if admissible(r)] or runs
+            w, mu, s2, ll, w_bg = _xd_em(x, v, a, *max(pre, key=lambda r: r[3])[:3],
+                                         s2_floor, bg=bg)
+            good = admissible((w, mu, s2))
+            bgw[k] = w_bg
+            sols[k] = (w, mu, s2)
+            lls[k] = max(ll, lls.get(k - 1, -np.inf))      # never below the nested optimum
+            bad = not good
+            fits[k] = (bic_score(lls[k], W, n_eff, 3 * k - 1 + (bg > 0)), w, bad)
+    k_best, margin, ok = choose_k(fits, n_eff, min_component_samples)
+    bics = {k: f[0] for k, f in fits.items()}
+    info_k = sorted(set(bics) - set(ok))
+    w, mu, s2 = sols[k_best]
+    w = w / w.sum()             # the populations' distribution, without the background
+    comps = [(float(a_), float(m_), float(math.sqrt(c_))) for a_, m_, c_ in zip(w, mu, s2)
+             if a_ > 1e-12]
     return MixtureFit(ThicknessMixture(comps), bics[k_best], bics, n, n_eff,
-                      k_note(k_max, max_components, uniq.size, n_eff, "values"), n_fit, lls)
-
-
-def k_note(k_max, max_components, n_unique, n_eff, what):
-    if k_max >= max_components:
-        return False
-    if n_unique <= k_max:
-        return f"only {n_unique} distinct {what}: max_components reduced to {k_max}"
-    return f"n_effective {n_eff:g}: max_components reduced to {k_max} (parameters <= n_effective)"
+                      k_note(k_max, max_components, uniq.size, n_eff, "values"), x.size, lls,
+                      bic_margin=margin, info={"inadmissible_k": info_k,
+                                               "background_weight": bgw[k_best]})

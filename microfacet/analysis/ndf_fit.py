@@ -1,12 +1,26 @@
-"""Fitting the NDF: a mixture of zero-mean Gaussian-slope lobes to per-pixel tilts.
+"""Fitting the NDF: zero-mean Gaussian-slope lobes, deconvolved from slope noise, censored.
 
-The slope magnitude ``m = tan θ`` of a pixel is a mixture of Rayleigh distributions,
-``f(m) = Σ w_k (m / σ_k²) exp(−m² / 2σ_k²)``, fitted by EM: responsibilities
-``r_k ∝ w_k σ_k⁻² exp(−m² / 2σ_k²)``, ``σ_k² = Σ r_k m² / (2 Σ r_k)``, ``w_k = Σ r_k / n``.
-Several deterministic starts (quantile blocks, a geometric spread, the K − 1 solution plus a
-wide or a narrow lobe, or with its heaviest lobe split), each run briefly, the best one to
-convergence; K = 1 … ``max_components`` by BIC with ``p = 2K − 1`` parameters, with the
-effective sample size of :mod:`microfacet.analysis.mixtures`.
+Model
+    A facet's slope vector is drawn from ``Σ w_k N(0, s_k² I)`` (a lobe of RMS slope
+    ``s_k √2``, ``sd_deg = atan s_k``); its magnitude ``m = tan θ`` is then a Rayleigh mixture.
+    A slope *measured* with isotropic noise ``N(0, σ_i² I)`` (a plane fitted to noisy
+    heights) has magnitude Rayleigh with ``s_k² + σ_i²``: the lobes are fitted to the
+    measurements with that noise model, by EM with the true slope as the latent variable
+    (extreme deconvolution, Bovy, Hogg & Roweis 2011): posterior
+    ``E[|m|² | m̂, k] = (s_k²/V)² m̂² + 2 s_k² σ_i² / V`` with ``V = s_k² + σ_i²``.
+
+Censoring
+    Facets tilted past the objective's acceptance (asin(NA)/2 under coaxial light) reflect
+    outside it: they are dark, and their tilt is not measured — but it is known to exceed
+    the limit. Dropping them biases every lobe narrow (a 22° lobe read as 12.5° at NA 0.8).
+    They enter as censored observations of weight = their area: likelihood
+    ``Σ w_k exp(−L² / 2 s_k²)`` with ``L = tan θ_lim``, and in the EM
+    ``E[|m|² | |m| > L, k] = L² + 2 s_k²`` (the Rayleigh tail is memoryless in m²).
+
+Weights and the model choice
+    Samples are weighted by area (the NDF is a distribution per unit projected area); K by
+    the BIC of :mod:`microfacet.analysis.mixtures` with its honest ``n_eff`` (facets, not
+    pixels) and its admissibility rules.
 """
 
 from __future__ import annotations
@@ -16,10 +30,11 @@ import math
 import numpy as np
 
 from ..core.distributions import NDFMixture
+from ..core.lazy import load
 from .mixtures import (
     MixtureFit,
     bic_score,
-    fit_thickness_mixture,
+    choose_k,
     k_max_for,
     k_note,
     positive_int,
@@ -27,88 +42,138 @@ from .mixtures import (
     single_thread,
 )
 
-__all__ = ["fit_distributions", "fit_ndf_mixture"]
+optimize = load("scipy.optimize")
+
+__all__ = ["fit_ndf_mixture", "width_relative_error"]
 
 _DEG = math.pi / 180.0
 _M_LOG_FLOOR = 1e-6  # slope magnitude at which log m is evaluated for tilts of exactly 0
-
-
 _S2_CEIL = math.tan(88.9 * _DEG) ** 2  # NDFMixture needs sd_deg < 89
 
 
-def _rayleigh_em(m2, w, s2, s2_floor, max_iter=1000, tol=1e-4):
-    """EM for a zero-mean Rayleigh mixture on squared slopes ``m2``; returns (w, s2, ℓ′).
+def _rayleigh_em(m2, v, a, C, L2, w, s2, s2_floor, max_iter=1000, tol=1e-7):
+    """Weighted, deconvolved, censored Rayleigh-mixture EM; returns (w, s2, ℓ′).
 
-    ℓ′ is the log-likelihood without the model-independent Σ log m term. Stops when an
-    iteration raises the total log-likelihood by less than ``tol`` (BIC differences that
-    matter are of order 1) or after ``max_iter`` iterations.
+    ``m2`` squared measured slopes, ``v`` their noise variance per axis, ``a`` weights,
+    ``C`` the censored weight (slopes above ``√L2``). ℓ′ omits the model-independent
+    Σ a log m̂ term. Stops when an iteration raises ℓ′ by less than ``tol`` × total weight.
     """
-    n = m2.size
+    W = float(a.sum() + C)
     w = np.asarray(w, dtype=np.float64) / np.sum(w)
     s2 = np.clip(np.asarray(s2, dtype=np.float64), s2_floor, _S2_CEIL)
-    m2c = m2[:, None]
-    prev = -np.inf
-    ll = -np.inf
+    m2c, vc = m2[:, None], v[:, None]
+    prev, ll = -np.inf, -np.inf
     for it in range(max_iter + 1):
-        a = (np.log(w) - np.log(s2)) - m2c * (0.5 / s2)
-        amax = a.max(axis=1, keepdims=True)
-        e = np.exp(a - amax)
+        V = s2[None, :] + vc
+        lw = np.log(np.maximum(w, 1e-300))
+        lp = lw - np.log(V) - m2c / (2.0 * V)
+        mx = lp.max(axis=1, keepdims=True)
+        e = np.exp(lp - mx)
         tot = e.sum(axis=1, keepdims=True)
-        ll = float(np.sum(amax) + np.sum(np.log(tot)))
-        if it == max_iter or ll - prev <= tol:
+        ll = float(np.sum(a * (mx[:, 0] + np.log(tot[:, 0]))))
+        if C > 0:
+            lc = lw - L2 / (2.0 * s2)
+            mc = lc.max()
+            ec = np.exp(lc - mc)
+            ll += C * float(mc + np.log(ec.sum()))
+        if it == max_iter or ll - prev <= tol * W:
             break
         prev = ll
-        r = e / tot
-        nk = r.sum(axis=0)
-        w = np.maximum(nk / n, 1e-300)
-        w = w / w.sum()
-        s2 = np.clip((m2 @ r) / np.maximum(2.0 * nk, 1e-300), s2_floor, _S2_CEIL)
+        ar = a[:, None] * (e / tot)
+        E = (s2 / V) ** 2 * m2c + 2.0 * s2 * vc / V
+        num = 0.5 * (ar * E).sum(axis=0)
+        nk = ar.sum(axis=0)
+        if C > 0:
+            rc = C * ec / ec.sum()
+            num = num + 0.5 * rc * (L2 + 2.0 * s2)
+            nk = nk + rc
+        nk = np.maximum(nk, 1e-300)
+        w = nk / W
+        s2 = np.clip(num / nk, s2_floor, _S2_CEIL)
     return w, s2, ll
 
 
-def _rayleigh_em_multistart(m2, starts, s2_floor, *, burn_in=25):
-    """Run every start for ``burn_in`` iterations, then the best one to convergence."""
-    runs = [_rayleigh_em(m2, w0, s0, s2_floor, max_iter=burn_in) for w0, s0 in starts]
-    w, s2, _ = max(runs, key=lambda r: r[2])
-    return _rayleigh_em(m2, w, s2, s2_floor)
+def width_relative_error(tilt_deg, slope_sigma, weights, n_effective) -> float:
+    """Relative 1-σ error of the width of one lobe fitted to these measured tilts.
+
+    From the Fisher information of ``s²`` in the deconvolved Rayleigh model at the
+    single-lobe fit, ``I = Σ a_i / V_i²`` (``V_i = s² + σ_i²``, weights scaled to sum to
+    ``n_effective``); the error of ``s`` is ``1 / (2 s² √I)``: ``1/(2√n)`` for exact slopes,
+    growing as (1 + σ²/s²) when the noise is comparable to the lobe. Censored samples are
+    left out (conservative).
+
+    Examples
+    --------
+    >>> t = np.full(100, 5.0)
+    >>> round(width_relative_error(t, 0.0, 1.0, 100), 3)
+    0.05
+    """
+    th = np.asarray(tilt_deg, dtype=np.float64).ravel()
+    sg = np.broadcast_to(np.asarray(slope_sigma, dtype=np.float64), th.shape).ravel()
+    a = np.broadcast_to(np.asarray(weights, dtype=np.float64), th.shape).ravel()
+    ok = np.isfinite(th) & np.isfinite(sg) & (a > 0)
+    if ok.sum() < 2:
+        return float("inf")
+    m2 = np.tan(th[ok] * _DEG) ** 2
+    v = sg[ok] ** 2
+    a = a[ok] * (n_effective / a[ok].sum())
+
+    def nll(log_s2):
+        V = math.exp(log_s2) + v
+        return float(np.sum(a * (np.log(V) + m2 / (2.0 * V))))
+
+    hi = math.log(max(float(np.max(m2)), 1e-6) * 10.0)
+    opt = optimize.minimize_scalar(nll, bounds=(math.log(1e-10), hi), method="bounded",
+                                   options={"xatol": 1e-4})
+    s2 = math.exp(opt.x)
+    info = float(np.sum(a / (s2 + v) ** 2))
+    return 1.0 / (2.0 * s2 * math.sqrt(info)) if info > 0 else float("inf")
 
 
-def fit_ndf_mixture(tilt_deg, *, max_components=5, group=None, random_state=0,
-                    max_samples=50000, sd_floor_deg=0.05) -> MixtureFit:
-    """Mixture of zero-mean Gaussian-slope lobes fitted to per-pixel tilts, K by BIC.
-
-    The slope magnitude ``m = tan θ`` of a Gaussian-slope lobe is Rayleigh with parameter
-    ``s = tan(sd_deg)``; the Rayleigh mixture is fitted by EM (vectorised) from several
-    deterministic starts per K, keeping the highest likelihood.
+def fit_ndf_mixture(tilt_deg, *, slope_sigma=None, weights=None, censored_weight=0.0,
+                    censor_tilt_deg=None, max_components=5, group=None, n_effective=None,
+                    random_state=0, max_samples=50000, sd_floor_deg=0.05,
+                    min_component_samples=2.0) -> MixtureFit:
+    """Mixture of zero-mean Gaussian-slope lobes fitted to measured tilts, K by BIC.
 
     Parameters
     ----------
     tilt_deg : array_like, any shape
-        Per-pixel tilt of the surface normal from the mean normal, degrees, in [0, 90).
-        NaN is ignored. One pixel = one unit of projected area (as
-        :meth:`NDFMixture.tilt_pdf` assumes).
+        Measured tilt of each sample (facet or pixel) from the mean normal, degrees, in
+        [0, 90). NaN is ignored.
+    slope_sigma : array_like or float, optional
+        Isotropic noise of each measured slope vector, per axis, as a slope (e.g.
+        :attr:`~microfacet.analysis.facets.FacetFit.slope_sigma`): deconvolved.
+    weights : array_like, same shape, optional
+        Sample weights (facet areas; one pixel = one unit of projected area by default).
+    censored_weight : float, optional
+        Total weight (area) of samples whose tilt is only known to exceed
+        ``censor_tilt_deg`` (dark facets past the acceptance).
+    censor_tilt_deg : float, optional
+        The censoring limit (asin(NA)/2); needed with ``censored_weight``.
     max_components : int, optional
-        Largest number of lobes K tried; also limited to ``2K − 1 ≤ n_effective`` and the
-        number of distinct values.
-    group : array_like, same shape as ``tilt_deg``, optional
-        Region / facet id per sample; the BIC then uses the number of distinct groups as
-        the effective sample size (see the module docstring).
+        Largest K tried; also limited to ``2K − 1 ≤ n_effective`` and distinct values.
+    group : array_like, optional
+        Facet id per sample (per-pixel input): distinct ids are the independent samples.
+    n_effective : float, optional
+        Independent samples (default: groups, else the Kish size of the weights) — the
+        censored weight is counted in proportion.
     random_state : int, optional
-        Seed of the subsample taken when there are more than ``max_samples`` values.
     max_samples : int, optional
-        Larger inputs are subsampled reproducibly to this many values.
+        Larger inputs are subsampled reproducibly.
     sd_floor_deg : float, optional
-        Smallest lobe sd, degrees (lobe sds are also capped at 88.9°). All-zero tilts
-        give one lobe with this sd and ``degenerate`` says so. Many tilts of exactly 0
-        (flat pixels) are a real spike at 0 and may be fitted as a lobe at the floor.
+        Smallest lobe SD (degrees); lobe SDs are also capped at 88.9°. All-zero tilts give
+        one lobe at the floor (``degenerate`` says so); for K ≥ 2 a lobe at the floor is not
+        admissible.
+    min_component_samples : float, optional
+        Fewest independent samples a lobe of a K ≥ 2 solution needs.
 
     Returns
     -------
     MixtureFit
-        ``mixture`` is an :class:`~microfacet.core.distributions.NDFMixture`; ``bic`` is based on
-        the log-likelihood of the tilt density per degree (:meth:`NDFMixture.tilt_pdf`),
-        with ``log tan θ`` evaluated at ``tan θ ≥ 1e-6`` for tilts of exactly 0 (a term
-        that is the same for every K, so it does not affect the choice).
+        ``mixture`` is an :class:`~microfacet.core.distributions.NDFMixture`; the BIC uses
+        the log-likelihood of the tilt density per degree. ``info`` holds
+        ``censored_fraction``.
 
     Raises
     ------
@@ -118,9 +183,10 @@ def fit_ndf_mixture(tilt_deg, *, max_components=5, group=None, random_state=0,
     Examples
     --------
     >>> rng = np.random.default_rng(1)
-    >>> s = np.tan(np.radians(5.0))
-    >>> tilt = np.degrees(np.arctan(np.hypot(*rng.normal(0, s, (2, 5000)))))
-    >>> fit = fit_ndf_mixture(tilt)
+    >>> s, noise = np.tan(np.radians(5.0)), 0.05
+    >>> slopes = rng.normal(0, s, (2, 4000)) + rng.normal(0, noise, (2, 4000))
+    >>> tilt = np.degrees(np.arctan(np.hypot(*slopes)))
+    >>> fit = fit_ndf_mixture(tilt, slope_sigma=noise)
     >>> fit.n_components, round(float(fit.mixture.sds_deg[0]), 1)
     (1, 5.0)
     """
@@ -129,87 +195,89 @@ def fit_ndf_mixture(tilt_deg, *, max_components=5, group=None, random_state=0,
     sd_floor_deg = float(sd_floor_deg)
     if not (math.isfinite(sd_floor_deg) and 0 < sd_floor_deg < 89):
         raise ValueError(f"sd_floor_deg: must be in (0, 89), got {sd_floor_deg!r}")
-    th, n, n_eff, _ = prepare(tilt_deg, "tilt_deg", None, group, max_samples, random_state)
+    C = float(censored_weight)
+    if not (math.isfinite(C) and C >= 0):
+        raise ValueError(f"censored_weight: must be finite and >= 0, got {censored_weight!r}")
+    L2 = 0.0
+    if C > 0:
+        if censor_tilt_deg is None or not (0 < float(censor_tilt_deg) < 90):
+            raise ValueError("censor_tilt_deg: needed in (0, 90) with censored_weight > 0")
+        L2 = math.tan(float(censor_tilt_deg) * _DEG) ** 2
+    th, a, sg, n, n_eff = prepare(tilt_deg, "tilt_deg", weights, group, max_samples,
+                                  random_state, sigma=slope_sigma, sigma_name="slope_sigma",
+                                  n_effective=n_effective)
     if np.any(th < 0) or np.any(th >= 90):
         raise ValueError("tilt_deg: tilts must be in [0, 90) degrees")
-    n_fit = th.size
+    a_sum = float(a.sum())
+    if C > 0:   # in the units of the fitted (possibly subsampled) samples' weights
+        t_all = np.asarray(tilt_deg, dtype=np.float64)
+        w_all = (np.ones(t_all.shape) if weights is None
+                 else np.broadcast_to(np.asarray(weights, dtype=np.float64), t_all.shape))
+        C = C * a_sum / float(np.sum(w_all[np.isfinite(t_all)]))
+        if n_effective is None:
+            n_eff *= (a_sum + C) / a_sum
+    W = a_sum + C
     rad = th * _DEG
     m = np.tan(rad)
     m2 = m * m
+    v = sg * sg
     s2_floor = math.tan(sd_floor_deg * _DEG) ** 2
     # model-independent part of the log density per degree: log m + 2 log sec θ + log(π/180)
-    const = float(np.sum(np.log(np.maximum(m, _M_LOG_FLOOR)) - 2.0 * np.log(np.cos(rad))))
-    const += n_fit * math.log(_DEG)
+    const = float(np.sum(a * (np.log(np.maximum(m, _M_LOG_FLOOR)) - 2.0 * np.log(np.cos(rad))
+                              + math.log(_DEG))))
+    info = {"censored_fraction": C / W if W > 0 else 0.0}
 
     uniq = np.unique(th)
-    if np.all(m2 == 0):
-        # the likelihood of all-zero slopes under one lobe at the floor width
-        ll = n_fit * -math.log(s2_floor) + const
-        bic = bic_score(ll, n_fit, n_eff, 1)
+    if np.all(m2 == 0) and not np.any(v > 0) and C == 0:
+        ll = a_sum * -math.log(s2_floor) + const
+        bic = bic_score(ll, W, n_eff, 1)
         return MixtureFit(NDFMixture([(1.0, sd_floor_deg)]), bic, {1: bic}, n, n_eff,
                           f"all tilts are 0: one lobe with floor sd {sd_floor_deg:g} deg",
-                          n_fit, {1: ll})
+                          th.size, {1: ll}, info=info)
 
-    k_max = k_max_for(max_components, uniq.size, n_eff, 2, -1)
+    k_max = k_max_for(max_components, uniq.size + (C > 0), n_eff, 2, -1)
     order = np.sort(m2)
-    med = float(np.median(m2))
-    q_lo, q_hi = (float(v) for v in np.quantile(m2, [0.05, 0.95]))
-    sols, bics, lls = {}, {}, {}
+    base = max(float(np.average(np.maximum(m2 - 2 * v, 0.0), weights=a)) / 2.0, s2_floor)
+    if C > 0:
+        base = max(base, L2 / 4.0 * C / W)
+    # A lobe at the floor is a spike unless the slope noise bounds its likelihood
+    # (as in fit_thickness_mixture).
+    bounded = float(np.average(v, weights=a)) >= 4.0 * s2_floor
+    sols, lls, fits = {}, {}, {}
     with single_thread():
         for k in range(1, k_max + 1):
-            # 1. quantile blocks of m²: σ² = mean(m²)/2 within each equal-count block
-            starts = [(np.ones(k), np.array([b.mean() / 2.0 for b in np.array_split(order, k)]))]
-            # 2. geometric spread about the median (median of a Rayleigh: σ √(2 ln 2))
-            centre = max(med, s2_floor) / (2.0 * math.log(2.0))
-            starts.append((np.ones(k), centre * np.geomspace(1 / 9.0, 9.0, k)))
+            # 1. quantile blocks of m²; 2. a geometric spread about the mean square slope
+            starts = [(np.ones(k), np.array([max(b.mean() / 2.0, s2_floor)
+                                             for b in np.array_split(order, k)]))]
+            starts.append((np.ones(k), base * np.geomspace(1 / 9.0, 9.0, k)))
             if k > 1:
                 # 3./4. the K − 1 solution plus one wide or one narrow lobe;
                 # 5. the K − 1 solution with its heaviest lobe split in two
                 wp, sp = sols[k - 1]
-                hi = max(q_hi / 2.0, sp.max() * 4.0)
-                lo = max(min(q_lo / 2.0, sp.min() / 4.0), s2_floor)
-                starts.append((np.append(wp * 0.9, 0.1), np.append(sp, hi)))
-                starts.append((np.append(wp * 0.9, 0.1), np.append(sp, lo)))
+                starts.append((np.append(wp * 0.9, 0.1), np.append(sp, sp.max() * 4.0)))
+                starts.append((np.append(wp * 0.9, 0.1),
+                               np.append(sp, max(sp.min() / 4.0, s2_floor))))
                 j = int(np.argmax(wp))
                 ws, ss = wp.copy(), sp.copy()
                 ws[j] /= 2.0
                 ss[j] /= 1.5
                 starts.append((np.append(ws, wp[j] / 2.0), np.append(ss, sp[j] * 1.5)))
-            w, s2, ll = _rayleigh_em_multistart(m2, starts, s2_floor)
+            runs = [_rayleigh_em(m2, v, a, C, L2, w0, s0, s2_floor, max_iter=25)
+                    for w0, s0 in starts]
+            w0, s0, _ = max(runs, key=lambda r: r[2])
+            w, s2, ll = _rayleigh_em(m2, v, a, C, L2, w0, s0, s2_floor)
             sols[k] = (w, s2)
-            # never below the nested K − 1 optimum (EM stopped early / poor start)
             lls[k] = max(ll + const, lls.get(k - 1, -np.inf))
-            bics[k] = bic_score(lls[k], n_fit, n_eff, 2 * k - 1)
-    k_best = min(bics, key=bics.get)
+            at_floor = (k > 1 and bool(np.any(s2 <= s2_floor * 1.0001))
+                        and not bounded)
+            fits[k] = (bic_score(lls[k], W, n_eff, 2 * k - 1), w, at_floor)
+    k_best, margin, ok = choose_k(fits, n_eff, min_component_samples)
+    bics = {k: f[0] for k, f in fits.items()}
+    info_k = sorted(set(bics) - set(ok))
     w, s2 = sols[k_best]
     sd = np.degrees(np.arctan(np.sqrt(s2)))
-    comps = [(float(a), float(b)) for a, b in zip(w, sd) if a > 1e-12]
+    comps = [(float(x), float(y)) for x, y in zip(w, sd) if x > 1e-12]
+    info["inadmissible_k"] = info_k
     return MixtureFit(NDFMixture(comps), bics[k_best], bics, n, n_eff,
-                      k_note(k_max, max_components, uniq.size, n_eff, "tilts"), n_fit, lls)
-
-
-def fit_distributions(pixels, *, max_components=5, facets=None):
-    """The distributions stage: the thickness mixture and the NDF lobes of per-pixel estimates.
-
-    Parameters
-    ----------
-    pixels : PixelEstimates
-        Per-pixel thickness and tilt; ``thickness_group`` sets the thickness model choice's
-        independent samples.
-    max_components : int
-    facets : ndarray of int (H, W), optional
-        Facet labels: the NDF's independent samples (joint mode).
-
-    Returns
-    -------
-    thickness_fit, ndf_fit : MixtureFit or None
-        None where fewer than two pixels have a value.
-    """
-    ok = np.isfinite(pixels.thickness_nm)
-    tfit = (fit_thickness_mixture(pixels.thickness_nm[ok], max_components=max_components,
-                                  group=pixels.thickness_group[ok]) if ok.sum() >= 2 else None)
-    okt = np.isfinite(pixels.tilt_deg)
-    nfit = (fit_ndf_mixture(pixels.tilt_deg[okt], max_components=max_components,
-                            group=facets[okt] if facets is not None else None)
-            if okt.sum() >= 2 else None)
-    return tfit, nfit
+                      k_note(k_max, max_components, uniq.size, n_eff, "tilts"), th.size, lls,
+                      bic_margin=margin, info=info)

@@ -20,6 +20,7 @@ from .. import __version__
 from ..core.densities import cell_edges, pdf_table
 from ..io.outdir import atomic_output_dir
 from ..io.results import json_safe, write_results_files
+from .identification import AMBIGUOUS_ORDER_DE, MEDIAN_NOISE_FLOOR_FACTOR, NOISE_FLOOR_FACTOR
 
 __all__ = ["build_summary", "results_size_bytes", "save_results", "write_results"]
 
@@ -28,8 +29,14 @@ __all__ = ["build_summary", "results_size_bytes", "save_results", "write_results
 _RESULT_BYTES_PER_PIXEL = 64
 _REPORT_BYTES = 8 << 20
 _ROI_COLUMNS = ["row0", "col0", "size", "thickness_nm", "mean_delta_e", "n_pixels", "width",
-                "runner_up_thickness_nm", "runner_up_delta_e", "ambiguity_delta_e"]
-_ROI_FMT = ["%d", "%d", "%d", "%.3f", "%.4f", "%d", "%d", "%.3f", "%.4f", "%.4f"]
+                "runner_up_thickness_nm", "runner_up_delta_e", "ambiguity_delta_e",
+                "ambiguous", "pixel_mean_nm", "pixel_sd_nm"]
+_ROI_FMT = ["%d", "%d", "%d", "%.3f", "%.4f", "%d", "%d", "%.3f", "%.4f", "%.4f", "%d", "%.3f",
+            "%.3f"]
+_FACET_COLUMNS = ["facet", "n_pixels", "tilt_deg", "tilt_sigma_deg", "height_plane",
+                  "slope_sigma", "thickness_nm", "thickness_sigma_nm", "delta_e",
+                  "other_order_delta_e", "censored_fraction"]
+_FACET_FMT = ["%d", "%d", "%.4f", "%.4f", "%d", "%.5f", "%.3f", "%.3f", "%.4f", "%.4f", "%.4f"]
 
 
 def results_size_bytes(shape, *, report: bool = True) -> int:
@@ -73,6 +80,27 @@ def _ndf_pdf(r):
     return pdf_table(tl, r.ndf_fit.mixture, grid=grid)
 
 
+def _ambiguous(roi):
+    fit = np.isfinite(roi.thickness_nm)
+    return (fit & (np.nan_to_num(roi.ambiguity_delta_e, nan=np.inf) < AMBIGUOUS_ORDER_DE)
+            ).astype(int)
+
+
+def _facet_rows(joint):
+    th, pl, area = joint.thickness, joint.planes, joint.area_px
+    cens = np.bincount(joint.facets.ravel(), weights=joint.censored.ravel(),
+                       minlength=area.size) / np.maximum(area, 1)
+    return np.column_stack([np.arange(area.size), area, pl.tilt_deg, pl.tilt_sigma_deg,
+                            pl.fitted.astype(int), pl.slope_sigma, th.thickness_nm, th.sigma_nm,
+                            th.delta_e, th.delta_e_other_order, cens])
+
+
+def _identification(fit, missing):
+    if fit is None:
+        return {"identified": False, "reason": missing}
+    return {"identified": bool(fit.identified), "reason": fit.reason}
+
+
 def save_results(result, folder) -> None:
     """Write the results of ``result`` into the existing folder ``folder`` (normally the
     temporary folder of an :class:`~microfacet.io.outdir.OutputFolder`)."""
@@ -80,11 +108,15 @@ def save_results(result, folder) -> None:
     t0 = time.perf_counter()
     rel = np.isfinite(r.focus.height_um)
     roi = r.roi
+    pix_mean, pix_sd = roi.pixel_stats(r.thickness_nm)
     roi_rows = np.column_stack([roi.row0, roi.col0, np.full(roi.row0.size, roi.height_px),
                                 roi.thickness_nm, roi.mean_delta_e, roi.n_pixels,
                                 np.full(roi.row0.size, roi.width_px),
                                 roi.runner_up_thickness_nm, roi.runner_up_delta_e,
-                                roi.ambiguity_delta_e])
+                                roi.ambiguity_delta_e, _ambiguous(roi), pix_mean, pix_sd])
+    tables = {"thickness_roi": (roi_rows, _ROI_COLUMNS, _ROI_FMT)}
+    if r.joint is not None:
+        tables["facets"] = (_facet_rows(r.joint), _FACET_COLUMNS, _FACET_FMT)
     maps = {
         "height_um": r.focus.height_um, "normals": np.where(rel[..., None], r.normals, np.nan),
         "reliability_db": r.focus.reliability_db, "tilt_height_deg": r.tilt_height_deg,
@@ -98,7 +130,7 @@ def save_results(result, folder) -> None:
         folder, summary=summary, maps=maps,
         images={"all_in_focus": (r.focus.all_in_focus,
                                  16 if r.stack.dtype == np.uint16 else 8)},
-        tables={"thickness_roi": (roi_rows, _ROI_COLUMNS, _ROI_FMT),
+        tables={**tables,
                 "thickness_pdf": (_thickness_pdf(r), ["thickness_nm", "density",
                                                       "mixture_density"], "%.6g"),
                 "ndf_pdf": (_ndf_pdf(r), ["tilt_deg", "density", "mixture_density"], "%.6g")})
@@ -149,6 +181,10 @@ def build_summary(r) -> dict:
     thick_mix = r.thickness_fit.to_json() if r.thickness_fit is not None else empty_mix
     ndf_mix = r.ndf_fit.to_json() if r.ndf_fit is not None else empty_mix
     ok_roi = np.isfinite(roi.thickness_nm)
+    floor = NOISE_FLOOR_FACTOR * r.noise_de
+    ndf_id = _identification(r.ndf_fit, "no facet tilts to fit")
+    thick_mix.update(_identification(r.thickness_fit, "no thickness values to fit"))
+    ndf_mix.update(ndf_id)
     s = {
         "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "mode": r.options.mode,
@@ -167,13 +203,16 @@ def build_summary(r) -> dict:
             "roi": {"count": int(roi.thickness_nm.size), "fitted": int(ok_roi.sum()),
                     "thickness_nm_mean": float(np.mean(roi.thickness_nm[ok_roi]))
                     if ok_roi.any() else None,
-                    "ambiguous_count": int(np.sum(roi.ambiguity_delta_e[ok_roi] < 1.0))},
+                    "ambiguous_count": int(_ambiguous(roi).sum()),
+                    "ambiguous_delta_e": AMBIGUOUS_ORDER_DE},
         },
-        "ndf": {"mixture": ndf_mix, "max_tilt_deg": r.max_tilt_deg,
+        "ndf": {**ndf_id, "mixture": ndf_mix, "max_tilt_deg": r.max_tilt_deg,
                 "histogram": "per-pixel tilt of unmasked pixels (projected-area density)"},
+        "facets": _facet_summary(r.joint),
         "exposure": r.exposure,
         "exposure_source": r.exposure_source,
-        "delta_e": r.delta_e_stats,
+        "delta_e": {**r.delta_e_stats, "noise_floor_mean": floor,
+                    "noise_floor_median": MEDIAN_NOISE_FLOOR_FACTOR * r.noise_de},
         "masked_fraction": r.mask.fraction,
         "mask": r.mask.fractions(),
         "colour_noise_de": r.noise_de,
@@ -189,6 +228,19 @@ def build_summary(r) -> dict:
                          "interp_error_de00": r.table.interp_error_de00,
                          "theta_step_deg": r.table.theta_step_deg,
                          "thickness_step_nm": r.table.thickness_step_nm},
+        "warnings": r.warnings,
         "timings_s": dict(r.timings_s),
     }
     return json_safe(s)
+
+
+def _facet_summary(joint):
+    """``summary.json`` ``facets`` (joint mode; None in seed mode)."""
+    if joint is None:
+        return None
+    pl, area = joint.planes, joint.area_px.astype(np.float64)
+    tot = max(float(area.sum()), 1.0)
+    return {"count": int(area.size), "median_area_px": float(np.median(area)),
+            "with_height_plane": int(pl.fitted.sum()),
+            "height_plane_area_fraction": float(area[pl.fitted].sum() / tot),
+            "censored_area_fraction": float(joint.censored.sum() / tot)}

@@ -11,11 +11,12 @@ timing key             stage                                            module
 ``colour_and_mask``    CIELAB, mask of colourless pixels, colour noise  :mod:`.colour_image`
 ``colour_table``       model colour on a (tilt × thickness) grid        :mod:`..colour.table`
 ``thickness_roi``      thickness per ROI, interference order, exposure  :mod:`.roi`
-``segmentation``,      joint mode: facets, plane fits, per-facet        :mod:`.facets`
-``facet_fits``         thickness
-``tilt_per_pixel``     per-pixel tilt (seed: least ΔE00; joint: MAP     :mod:`.tilt`, :mod:`.facets`
+``segmentation``,      joint mode: facets, plane fits, per-facet        :mod:`.segmentation`,
+``facet_fits``         thickness                                        :mod:`.facets`
+``tilt_per_pixel``     per-pixel tilt (seed: least ΔE00; joint: MAP     :mod:`.tilt`, :mod:`.joint`
                        with the facet-plane prior)
-``mixtures``           thickness mixture and NDF lobes                  :mod:`.mixtures`
+``mixtures``           thickness mixture and NDF lobes, and whether     :mod:`.identification`
+                       the data determine them
 =====================  ==============================================  ===================
 
 Two modes: ``"joint"`` (default) takes each facet's tilt from a plane fit of the height map
@@ -35,8 +36,8 @@ from ..core.timing import StageTimer
 from ..io.limits import check_memory
 from ..io.stack import Stack, read_stack
 from .colour_image import measure_colour, no_colour_message
-from .facets import joint_tilts
-from .ndf_fit import fit_distributions
+from .identification import analysis_warnings, fit_joint_distributions, fit_seed_distributions
+from .joint import joint_tilts
 from .options import AnalysisOptions, scene_optics
 from .roi import thickness_per_roi
 from .surface import measure_height, surface_normals
@@ -91,6 +92,7 @@ class AnalysisResult:
     delta_e: np.ndarray
     colour_weight: np.ndarray
     facets: np.ndarray | None
+    joint: object
     thickness_fit: object
     ndf_fit: object
     exposure: float
@@ -100,6 +102,14 @@ class AnalysisResult:
     table: object
     optics: dict
     timings_s: dict = field(default_factory=dict)
+
+    @property
+    def warnings(self) -> list[str]:
+        """What a user must know before trusting the distributions (one line each;
+        :func:`~microfacet.analysis.identification.analysis_warnings`)."""
+        return analysis_warnings(thickness_fit=self.thickness_fit, ndf_fit=self.ndf_fit,
+                                 roi=self.roi, delta_e_median=self.delta_e_stats["median"],
+                                 noise_de=self.noise_de)
 
     @property
     def delta_e_stats(self) -> dict:
@@ -203,22 +213,30 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
 
     timer.start("tilt per pixel")
     grid = tilt_grid(optics.max_tilt_deg, opt.tilt_step_deg)
-    facets = None
+    joint = None
     if opt.mode == "seed":
         exposure = roi.exposure
         pixels = seed_tilts(colour, roi, table, theta_grid_deg=grid, exposure=exposure,
                             delta_e_method=opt.delta_e_method)
     else:
-        pixels, facets, exposure = joint_tilts(
+        joint = joint_tilts(
             colour, surface, roi, table, theta_grid_deg=grid, max_tilt_deg=optics.max_tilt_deg,
             exposure=roi.exposure, estimate_exposure=source == "estimated",
             facet_size_um=opt.facet_size_um, pixel_size_um=st.pixel_size_um,
             from_focus=st.has_slices, seed=opt.seed, timer=timer,
             delta_e_method=opt.delta_e_method)
+        pixels, exposure = joint.pixels, joint.exposure
     timer.lap("tilt_per_pixel")
 
     timer.start("distributions")
-    tfit, nfit = fit_distributions(pixels, max_components=opt.max_components, facets=facets)
+    if joint is None:
+        tfit, nfit = fit_seed_distributions(pixels, roi=roi, table=table, exposure=exposure,
+                                            noise_de=colour.noise_de,
+                                            max_components=opt.max_components)
+    else:
+        tfit, nfit = fit_joint_distributions(joint, roi=roi, table=table,
+                                             max_tilt_deg=optics.max_tilt_deg,
+                                             max_components=opt.max_components)
     timer.lap("mixtures")
     timer.total()
     return AnalysisResult(
@@ -226,7 +244,8 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
         tilt_height_deg=surface.tilt_deg, lab=colour.lab, mask=colour.mask, roi=roi,
         thickness_nm=pixels.thickness_nm, tilt_deg=pixels.tilt_deg,
         tilt_sigma_deg=pixels.tilt_sigma_deg, delta_e=pixels.delta_e,
-        colour_weight=pixels.colour_weight, facets=facets, thickness_fit=tfit, ndf_fit=nfit,
+        colour_weight=pixels.colour_weight, facets=None if joint is None else joint.facets,
+        joint=joint, thickness_fit=tfit, ndf_fit=nfit,
         exposure=float(exposure), exposure_source=source, noise_de=colour.noise_de,
         max_tilt_deg=optics.max_tilt_deg, table=table, optics=optics.to_json(),
         timings_s=dict(timer.timings))

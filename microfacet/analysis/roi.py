@@ -167,6 +167,27 @@ class RoiFit:
     rows: list = field(default_factory=list)
     cols: list = field(default_factory=list)
 
+    def pixel_stats(self, thickness_nm) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and SD (nm) of the finite per-pixel thicknesses inside each ROI's window.
+
+        The single least-ΔE fit (:attr:`thickness_nm`) of a ROI mixing populations is no
+        summary of it; these are (NaN for a ROI without pixels).
+
+        >>> r = RoiFit(np.array([0]), np.array([0]), 2, 2, *[np.zeros(1)] * 5,
+        ...            np.zeros(1, int), 1.0, False, np.zeros(1), np.zeros((1, 1)))
+        >>> [round(float(v[0]), 3) for v in r.pixel_stats([[100.0, 110.0], [np.nan, 120.0]])]
+        [110.0, 8.165]
+        """
+        d = np.asarray(thickness_nm, dtype=np.float64)
+        mean = np.full(self.row0.size, np.nan)
+        sd = np.full(self.row0.size, np.nan)
+        for i, (r0, c0) in enumerate(zip(self.row0, self.col0)):
+            v = d[r0:r0 + self.height_px, c0:c0 + self.width_px]
+            v = v[np.isfinite(v)]
+            if v.size:
+                mean[i], sd[i] = v.mean(), v.std()
+        return mean, sd
+
     def index_map(self, shape) -> np.ndarray:
         """For every pixel of an image of ``shape``, the index of the ROI whose centre is
         nearest (int, H×W)."""

@@ -65,8 +65,8 @@ class PixelEstimates:
         Thickness; tilt, its 1-σ uncertainty; the ΔE00 at the solution; the share of the
         tilt information that came from colour.
     thickness_group : ndarray of int (H, W)
-        Which pixels share one independent thickness sample (ROIs in the seed mode, blocks of
-        ~10 µm in the joint mode), for the mixture's model choice.
+        Which pixels share one thickness estimate (ROIs in the seed mode, facets in the
+        joint mode).
     """
 
     thickness_nm: np.ndarray
@@ -161,8 +161,9 @@ def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness
     thickness_px : ndarray, shape (n,)
         Thickness used for each pixel (its row's).
     exposure : float
-    noise_de : float
-        Image colour noise per Lab component, ΔE00 units.
+    noise_de : float or ndarray, shape (n,)
+        Colour error per Lab component, ΔE00 units: the image noise, or per pixel the
+        calibrated error of the colour term (noise, thickness uncertainty, misfit).
     prior_deg, prior_sigma_deg : ndarray, shape (n,), optional
         Gaussian prior on the tilt (joint mode).
     delta_e_method : str
@@ -184,7 +185,8 @@ def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness
     out_s = np.empty(n, np.float32)
     out_w = np.empty(n, np.float32)
     out_j = np.empty(n, np.float32)
-    noise = max(float(noise_de), 1e-3) if np.isfinite(noise_de) else 1.0
+    noise_all = np.broadcast_to(np.asarray(noise_de, dtype=np.float64), (n,))
+    noise_all = np.where(np.isfinite(noise_all), np.maximum(noise_all, 1e-3), 1.0)
     # Sensitivity per row and grid node (central differences; one-sided at the ends).
     rl = rows_lab.astype(np.float32)
     sens_rows = np.empty(rl.shape[:2], np.float32)  # ΔE00 per degree
@@ -194,8 +196,9 @@ def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness
     for a in range(0, n, chunk):
         b = min(n, a + chunk)
         ri = row_index[a:b]
+        noise = noise_all[a:b]
         de = de_fn(rows_lab[ri], lab_px[a:b, None, :])  # (m, K)
-        q = (de.astype(np.float64) / noise) ** 2
+        q = (de.astype(np.float64) / noise[:, None]) ** 2
         if prior_deg is not None:
             q += ((th[None, :] - prior_deg[a:b, None]) / prior_sigma_deg[a:b, None]) ** 2
         k = np.argmin(q, axis=1)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from pathlib import Path
@@ -67,10 +68,16 @@ def run(args) -> int:
         lobes = ", ".join(f"{s:.1f}° ({100 * w:.0f}%)"
                           for w, s in result.ndf_fit.mixture.components) \
             if result.ndf_fit else "none"
+        if fit is not None and not fit.identified:
+            comps += " -- NOT IDENTIFIED"
+        if result.ndf_fit is None or not result.ndf_fit.identified:
+            lobes += " -- NOT IDENTIFIED, not a measurement"
         de = result.delta_e_stats
         print(f"wrote {out} in {time.perf_counter() - t0:.1f} s\n"
               f"  thickness: {comps}\n  NDF lobes (slope SD): {lobes}\n"
               f"  exposure {result.exposure:.3f} ({result.exposure_source}), "
               f"mean dE00 {de['mean'] if de['mean'] is None else round(de['mean'], 2)}, "
               f"masked {100 * result.mask.fraction:.1f}%", file=sys.stderr)
+    for w in result.warnings:
+        logging.getLogger(__name__).warning("%s: %s", out, w)
     return 0

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 from .. import forward
 from ..core.errors import InputError
+from ..forward.synth_params import VARIATIONS, parse_variation
 from .options import HelpFormatter, example_epilog, pair_type
 from .progress import Progress
 
@@ -22,9 +24,14 @@ def register(sub):
             "microfacets, oxide-thickness regions from a Gaussian mixture, thin-film colour "
             "at incidence = facet tilt, darkness past asin(NA)/2, defocus blur, shot and "
             "read noise. Ground truth goes to OUT/truth/. Presets: " + ", ".join(PRESET_NAMES)
-            + "."),
-        epilog=example_epilog("microfacet synth nd-demo --preset nd --seed 1 --size 512x512 "
-                              "--slices 32"),
+            + ". Imaging variations (off by default: other facet shapes, terraces, pits, "
+            "scratches, dust, tilt-dependent brightness, vignetting, white balance, drift, "
+            "JPEG slices, other optical constants) are set with --variation NAME=VALUE."),
+        epilog=example_epilog(
+            "microfacet synth nd-demo --preset nd --seed 1 --size 512x512 --slices 32",
+            "microfacet synth nd-pits --preset nd --seed 1 --variation pit_density_per_mm2=2000 "
+            "\\",
+            "    --variation jpeg_quality=85 --variation white_balance_gains=1.1,1,0.9"),
         formatter_class=HelpFormatter,
     )
     p.add_argument("out", metavar="OUT", help="output stack folder")
@@ -36,6 +43,10 @@ def register(sub):
     p.add_argument("--slices", type=int, default=None, metavar="K",
                    help="number of focal planes (default 24)")
     p.add_argument("--bit-depth", type=int, choices=(8, 16), default=None)
+    p.add_argument("--variation", action="append", default=[], type=_variation,
+                   metavar="NAME=VALUE",
+                   help="set an imaging variation (repeatable; docs/synthetic-stacks.md): "
+                        + ", ".join(VARIATIONS))
     p.add_argument("--write-exposure", action="store_true",
                    help="write the true exposure into stack.json (else it must be estimated)")
     p.add_argument("--overwrite", action="store_true",
@@ -44,8 +55,16 @@ def register(sub):
     return p
 
 
+def _variation(text):
+    try:
+        return parse_variation(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def run(args) -> int:
-    over = {"seed": args.seed}
+    over = dict(args.variation)
+    over["seed"] = args.seed
     if args.size is not None:
         over["height_px"], over["width_px"] = args.size
     if args.slices is not None:
@@ -58,7 +77,9 @@ def run(args) -> int:
         params = forward.synth.preset(args.preset, **over)
     except ValueError as exc:
         name = str(exc).split(":")[0]
-        flag = {"height_px": "--size", "width_px": "--size", "n_slices": "--slices"}.get(name)
+        flag = {"height_px": "--size", "width_px": "--size", "n_slices": "--slices",
+                "bit_depth": "--bit-depth"}.get(name, "--variation" if name in VARIATIONS
+                                                 else None)
         raise ValueError(f"{flag}: {exc}" if flag else str(exc)) from None
     with Progress("synth", total=params.n_slices, unit="slices", quiet=args.quiet) as bar:
         try:

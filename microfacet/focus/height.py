@@ -1,29 +1,35 @@
-"""Height from focus: streaming peak search, sub-slice interpolation, reliability and the
-all-in-focus composite.
+"""Height from focus: streaming peak search over one or more focus windows, sub-slice peak
+fit, per-pixel height uncertainty, reliability and the all-in-focus composite.
 
-The stack is read **once**, slice by slice in increasing ``z``; per pixel only a fixed number
-of image-sized buffers is kept (the last ``2r+1`` focus images, the focus values of the
-``2r+1`` slices around the best slice so far, the best value, its rank, a running sum and the
-composite), so peak memory is ``O(H·W)`` whatever the number of slices.
+The stack is read **once**, slice by slice in increasing ``z``; per pixel and window only a
+fixed number of image-sized buffers is kept (:class:`~microfacet.focus.stream.PeakTracker`),
+so peak memory is ``O(H·W)`` whatever the number of slices.
 
-Method (defaults chosen from the measured RMSE on the Cou & Guennebaud (2023) ground-truth
-stacks, see ``docs/height-from-focus.md``):
+Method (defaults chosen from the measurements of ``docs/height-from-focus.md``: the RMSE on
+the Cou & Guennebaud (2023) ground-truth stacks and the coverage on rendered stacks of known
+relief and texture contrast, ``pipelines/focus_coverage.py``):
 
-1. Focus measure per slice (:mod:`microfacet.focus.measures`).
-2. Running arg-max over slices, keeping the focus values of the ``2r+1`` slices around the
-   best one (``r = fit_radius``).
-3. Sub-slice peak: a weighted least-squares parabola in ``log F`` against ``z`` over those
-   ``2r+1`` slices (a Gaussian focus curve), weights ``(F/F_max)²`` (``interpolation="lsq"``,
-   default ``r = 2``). ``"gauss3"`` is the classic 3-point Gaussian (``r = 1``, unweighted),
-   ``"none"`` the arg-max slice. Non-uniform and unsorted ``z`` are handled (the fit uses the
-   actual ``z`` of each neighbour by z rank).
-4. Reliability in dB after Pertuz et al. (2013):
-   ``R = 20·log10(N·F_max / Σ_k |F_k − G(z_k)|)`` with ``G`` the fitted Gaussian. Inside the
-   fit window the residual is exact; outside it ``G`` is neglected (the residual is taken as
-   ``F`` itself, from a running sum), which can only lower ``R``. Pixels whose fitted curve has
-   no maximum get ``R = 0 dB``. Pixels below ``min_reliability_db`` are NaN in ``height_um``
-   (optionally filled).
-5. All-in-focus composite: each pixel from its sharpest slice.
+1. Focus measure per slice (:mod:`microfacet.focus.measures`) in the main window
+   (``window_px``, default 7) and a coarse one (``coarse_window_px``, default 15, on a grid
+   downsampled by 2), optionally a fine one (``fine_window_px``).
+2. Per window, the running arg-max over slices with the focus values of the ``2r+1`` slices
+   around the best one (``r = fit_radius``), the running sum of the focus values and of their
+   squared second differences along ``z``.
+3. Sub-slice peak (:mod:`microfacet.focus.peaks`): weighted least squares over those slices
+   of a parabola in ``F^(-1/2)`` (``interpolation="lorentz"``, default: the focus curve of
+   Gaussian-blurred texture), or in ``log F`` (``"lsq"``, a Gaussian; the earlier default),
+   the classic 3-point Gaussian (``"gauss3"``) or the arg-max slice (``"none"``). Non-uniform
+   and unsorted ``z`` are handled.
+4. Significance of the peak against the noise of the curve's tails (a false-peak rate of
+   1e-5 per pixel and window under Gaussian noise) and the height uncertainty σ
+   (:mod:`microfacet.focus.uncertainty`): the fit's own variance plus what relief does to a
+   window (slope, curvature, a widened curve). Each pixel takes the window with the smallest
+   σ among those with a significant peak.
+5. Reliability (``reliability="sigma"``, default): ``−20·log10(σ / z step)`` dB, at most 0 dB
+   without a significant peak; pixels below ``min_reliability_db`` (default 4 dB: σ ≤ 0.63
+   z step) or without a significant peak are NaN in ``height_um`` (optionally filled).
+   ``reliability="pertuz"``: the Pertuz et al. (2013) ratio of the earlier versions.
+6. All-in-focus composite: each pixel from its sharpest slice (main window).
 
 Examples
 --------
@@ -33,8 +39,10 @@ Examples
 >>> import cv2
 >>> z = np.arange(9.0)
 >>> imgs = [cv2.GaussianBlur(tex, (0, 0), 0.5 + 0.5 * abs(zk - 4.3)) for zk in z]
->>> res = height_from_focus(imgs, z_um=z, min_reliability_db=0)
+>>> res = height_from_focus(imgs, z_um=z)
 >>> bool(abs(np.nanmedian(res.height_um) - 4.3) < 0.15)
+True
+>>> bool(np.nanmedian(res.height_sigma_um) < 0.15 and res.reliable.mean() > 0.9)
 True
 """
 
@@ -56,10 +64,18 @@ from ..io.limits import check_memory
 from ..io.stack import Stack
 from .align import estimate_warps, warped_loader
 from .defaults import (
+    COLOURS,
+    DEFAULT_COARSE_WINDOW_PX,
+    DEFAULT_COLOUR,
     DEFAULT_FIT_RADIUS,
     DEFAULT_INTERPOLATION,
     DEFAULT_MIN_RELIABILITY_DB,
+    DEFAULT_RELIABILITY,
+    DETECTION_ALPHA,
     INTERPOLATIONS,
+    PERTUZ_MIN_RELIABILITY_DB,
+    RELIABILITIES,
+    SIGMA_MODEL,
 )
 from .fill import fill_missing
 from .measures import (
@@ -68,13 +84,17 @@ from .measures import (
     DEFAULT_WINDOW_PX,
     OPERATORS,
     check_window,
-    focus_measure,
+    focus_measures,
+    noise_shape,
 )
+from .peaks import peak_fit
+from .stream import PeakTracker
+from .uncertainty import add_relief_terms, combine, fit_window
 
 cv2 = load("cv2")
-ndimage = load("scipy.ndimage")
 
 __all__ = [
+    "DEFAULT_COARSE_WINDOW_PX",
     "DEFAULT_FIT_RADIUS",
     "DEFAULT_INTERPOLATION",
     "DEFAULT_MIN_RELIABILITY_DB",
@@ -86,80 +106,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-
-# --------------------------------------------------------------------------------------------
-# peak fit
-
-
-def peak_fit(values: np.ndarray, x: np.ndarray, *, weighted: bool = True, dtype=np.float64):
-    """Least-squares Gaussian fit (parabola in ``log F``) to focus values around a peak.
-
-    Parameters
-    ----------
-    values : ndarray, shape (K, ...)
-        Focus values at ``K`` neighbouring slices; NaN marks a missing neighbour.
-    x : ndarray, shape (K, ...)
-        Their positions (e.g. ``z − z_best``, any consistent unit); NaN where missing.
-    weighted : bool
-        Weights ``(F/F_max)²`` (True) or uniform (False; with K = 3 this is the classic
-        3-point Gaussian interpolation).
-    dtype : numpy dtype
-        Working precision (float32 is used by :func:`height_from_focus`; ``x`` should then be
-        of order 1, e.g. in slice steps).
-
-    Returns
-    -------
-    offset : ndarray of ``dtype``, shape (...)
-        Peak position in the unit of ``x`` (clipped to the span of the valid ``x``; 0 where the
-        fit has no maximum).
-    coef : ndarray of ``dtype``, shape (3, ...)
-        ``(a, b, c)`` of ``log F ≈ a x² + b x + c``.
-    ok : ndarray of bool, shape (...)
-        True where the fit has a maximum (``a < 0``). A flat curve (all valid values equal
-        to 1e-6 relative, e.g. identical slices) has none, whatever the sign of the
-        rounding-level ``a``.
-    """
-    v = np.asarray(values, dtype=dtype)
-    x = np.asarray(x, dtype=dtype)
-    valid = np.isfinite(v) & np.isfinite(x) & (v > 0)
-    vmax = np.max(np.where(valid, v, 0.0), axis=0)
-    vmin = np.min(np.where(valid, v, np.inf), axis=0)
-    flat = vmax - vmin <= 1e-6 * vmax  # a's sign is rounding noise there: no maximum
-    tiny = np.finfo(np.float32).tiny
-    L = np.log(np.where(valid, np.maximum(v, tiny), 1.0))
-    if weighted:
-        w = np.where(valid, (v / np.maximum(vmax, tiny)) ** 2, 0.0)
-    else:
-        w = valid.astype(dtype)
-    xx = np.where(valid, x, 0.0)
-    # normal equations of  min Σ w (a x² + b x + c − L)²  solved by Cramer's rule
-    x2 = xx * xx
-    s0 = w.sum(0)
-    s1 = (w * xx).sum(0)
-    s2 = (w * x2).sum(0)
-    s3 = (w * x2 * xx).sum(0)
-    s4 = (w * x2 * x2).sum(0)
-    t0 = (w * L).sum(0)
-    t1 = (w * xx * L).sum(0)
-    t2 = (w * x2 * L).sum(0)
-    det = s4 * (s2 * s0 - s1 * s1) - s3 * (s3 * s0 - s1 * s2) + s2 * (s3 * s1 - s2 * s2)
-    da = t2 * (s2 * s0 - s1 * s1) - s3 * (t1 * s0 - s1 * t0) + s2 * (t1 * s1 - s2 * t0)
-    db = s4 * (t1 * s0 - s1 * t0) - t2 * (s3 * s0 - s1 * s2) + s2 * (s3 * t0 - t1 * s2)
-    dc = s4 * (s2 * t0 - t1 * s1) - s3 * (s3 * t0 - t1 * s2) + t2 * (s3 * s1 - s2 * s2)
-    good = (np.abs(det) > 1e-12) & (valid.sum(0) >= 3)
-    safe = np.where(good, det, 1.0)
-    a = np.where(good, da / safe, 0.0)
-    b = np.where(good, db / safe, 0.0)
-    c = np.where(good, dc / safe, 0.0)
-    ok = good & (a < 0) & ~flat
-    off = np.where(ok, -b / (2.0 * np.where(ok, a, -1.0)), 0.0)
-    lo = np.min(np.where(valid, x, np.inf), axis=0)
-    hi = np.max(np.where(valid, x, -np.inf), axis=0)
-    lo = np.where(np.isfinite(lo), lo, 0.0)
-    hi = np.where(np.isfinite(hi), hi, 0.0)
-    off = np.clip(off, lo, hi)
-    return off, np.stack([a, b, c]), ok
 
 
 # --------------------------------------------------------------------------------------------
@@ -177,13 +123,17 @@ class FocusResult:
     height_fit_um : ndarray of float32, shape (H, W)
         The fitted height everywhere (no reliability mask, no fill).
     reliability_db : ndarray of float32, shape (H, W)
-        Pertuz-style reliability in dB (larger is more reliable).
+        Reliability in dB (larger is more reliable). With ``reliability="sigma"`` (default)
+        the precision ``−20·log10(height_sigma_um / z step)`` (20 dB: σ = 0.1 step, 6 dB:
+        σ = 0.5 step), at most 0 dB where no focus peak is significant; with ``"pertuz"`` the
+        ratio of Pertuz et al. (2013).
     reliable : ndarray of bool, shape (H, W)
-        ``reliability_db >= min_reliability_db``.
+        The pixels with a height in ``height_um``: a significant focus peak (``"sigma"``) and
+        ``reliability_db >= min_reliability_db`` (all pixels when that is −inf).
     best_index : ndarray of int32, shape (H, W)
-        File-order index of the sharpest slice per pixel.
+        File-order index of the sharpest slice per pixel (main window).
     focus_max : ndarray of float32, shape (H, W)
-        The focus measure at the sharpest slice.
+        The focus measure at the sharpest slice (main window).
     all_in_focus : ndarray of float32, shape (H, W) or (H, W, 3)
         Each pixel from its sharpest slice, in the slices' encoding, scaled to [0, 1].
     z_um : ndarray of float64, shape (N,)
@@ -192,7 +142,18 @@ class FocusResult:
         The options used.
     timings_s : dict
         Wall times: ``read`` (waiting for decoded slices), ``focus`` (per-slice work),
-        ``fit`` (peak fit and reliability), ``total``.
+        ``fit`` (peak fits, uncertainty and choice of window), ``total``.
+    height_sigma_um : ndarray of float32, shape (H, W)
+        One-standard-deviation uncertainty of ``height_fit_um`` in µm, NaN where no focus
+        peak is significant. Calibrated on rendered stacks of known relief (steps, crater
+        rims, ridges, smooth) and texture contrast and on the Cou & Guennebaud stacks:
+        |error| ≤ 2σ for 96-99 % of the reliable pixels (slightly conservative;
+        docs/height-from-focus.md).
+    detected : ndarray of bool, shape (H, W)
+        True where at least one window has a significant focus peak (a textureless pixel
+        has none: it gets no height, whatever the cut).
+    window_px_map : ndarray of uint8, shape (H, W)
+        The focus window (px) whose height each pixel took.
     """
 
     height_um: np.ndarray
@@ -205,6 +166,9 @@ class FocusResult:
     z_um: np.ndarray
     params: dict = field(default_factory=dict)
     timings_s: dict = field(default_factory=dict)
+    height_sigma_um: np.ndarray | None = None
+    detected: np.ndarray | None = None
+    window_px_map: np.ndarray | None = None
 
     @property
     def unreliable_fraction(self) -> float:
@@ -213,10 +177,10 @@ class FocusResult:
 
 
 #: Peak memory of ``microfacet height`` ≈ base + per pixel × H × W, set just above what
-#: ``/usr/bin/time -f %M`` measured on nd stacks of 16 slices: 139, 235 and 579 MB at 0.26,
-#: 1.05 and 4.2 MP (≈ 120 MB + 110 B/px; slices are streamed, so their number does not count).
+#: ``/usr/bin/time -f %M`` measured on nd stacks of 16 slices (see MEMORY_NOTE in
+#: docs/height-from-focus.md); slices are streamed, so their number does not count.
 MEMORY_BASE_BYTES = 150 << 20
-MEMORY_BYTES_PER_PIXEL = 130
+MEMORY_BYTES_PER_PIXEL = 170
 
 
 def check_focus_memory(stack) -> None:
@@ -270,6 +234,54 @@ def _slice_source(source, z_um):
     return z, z.size, first.shape[:2], (3 if first.ndim == 3 else 1), load
 
 
+def _windows(shape, window_px, window, fine_window_px, coarse_window_px):
+    """(window_px, window, downsample) of every window, sorted by size; index of the main."""
+    out = []
+    if fine_window_px:
+        check_window(fine_window_px, window)
+        if fine_window_px < window_px:
+            out.append((int(fine_window_px), window, 1))
+    out.append((int(window_px), window, 1))
+    main = len(out) - 1
+    if coarse_window_px:
+        check_window(coarse_window_px, window)
+        if coarse_window_px > window_px:
+            ds = 2 if coarse_window_px >= 11 and min(shape) >= 32 else 1
+            out.append((int(coarse_window_px), window, ds))
+    return out, main
+
+
+def _check_options(operator, window_px, window, interpolation, fit_radius, reliability,
+                   colour, min_reliability_db, fill):
+    if operator not in OPERATORS:
+        raise ValueError(f"operator must be one of {OPERATORS}, not {operator!r}")
+    check_window(window_px, window)
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, not {interpolation!r}")
+    if reliability not in RELIABILITIES:
+        raise ValueError(f"reliability must be one of {RELIABILITIES}, not {reliability!r}")
+    if colour not in COLOURS:
+        raise ValueError(f"colour must be one of {COLOURS}, not {colour!r}")
+    if interpolation in ("lsq", "lorentz"):
+        r = DEFAULT_FIT_RADIUS if fit_radius is None else fit_radius
+        if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or not 1 <= r <= 10:
+            raise ValueError(f"fit_radius must be an integer in 1..10, got {fit_radius!r}")
+    else:
+        r = 1
+    if min_reliability_db is None:
+        cuts = DEFAULT_MIN_RELIABILITY_DB if reliability == "sigma" else \
+            PERTUZ_MIN_RELIABILITY_DB
+        min_reliability_db = cuts[operator]
+    if isinstance(min_reliability_db, bool) or not isinstance(min_reliability_db, (int, float)) \
+            or math.isnan(min_reliability_db):
+        raise ValueError(f"min_reliability_db must be a number, got {min_reliability_db!r}")
+    if fill is True:
+        fill = "smooth"
+    if fill not in (None, False, "smooth", "nearest"):
+        raise ValueError(f"fill must be None, True, 'smooth' or 'nearest', not {fill!r}")
+    return int(r), float(min_reliability_db), fill
+
+
 def height_from_focus(source, *, z_um: Sequence[float] | None = None,
                       operator: str = DEFAULT_OPERATOR, window_px: int = DEFAULT_WINDOW_PX,
                       window: str = DEFAULT_WINDOW, interpolation: str = DEFAULT_INTERPOLATION,
@@ -277,8 +289,12 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
                       min_reliability_db: float | None = None,
                       fill: str | bool | None = None, align: bool | str = False,
                       reference: int | None = None, prefetch: bool = True,
-                      progress: Callable[[int, int], None] | None = None) -> FocusResult:
-    """Height map from a focus stack in one streaming pass.
+                      progress: Callable[[int, int], None] | None = None,
+                      colour: str = DEFAULT_COLOUR,
+                      coarse_window_px: int | None = DEFAULT_COARSE_WINDOW_PX,
+                      fine_window_px: int | None = None,
+                      reliability: str = DEFAULT_RELIABILITY) -> FocusResult:
+    """Height map and its uncertainty from a focus stack in one streaming pass.
 
     Parameters
     ----------
@@ -290,19 +306,21 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
         Slice heights in µm (required for an image sequence, not allowed with a Stack). Any
         order and spacing, no duplicates.
     operator : {"tenengrad", "sml", "glv"}
-        Focus measure, see :func:`focus_measure`.
+        Focus measure, see :func:`~microfacet.focus.measures.focus_measure`.
     window_px : int
-        Odd window side in pixels.
+        Odd side of the main focus window in pixels.
     window : {"gaussian", "box"}
         Window shape.
-    interpolation : {"lsq", "gauss3", "none"}
-        Sub-slice peak estimate: weighted least-squares Gaussian over ``±fit_radius`` slices,
-        the 3-point Gaussian, or the arg-max slice.
+    interpolation : {"lorentz", "lsq", "gauss3", "none"}
+        Sub-slice peak estimate: weighted least squares over ``±fit_radius`` slices of a
+        parabola in ``F^(-1/2)`` or in ``log F``, the 3-point Gaussian, or the arg-max slice.
     fit_radius : int, optional
-        Neighbours on each side used by ``"lsq"`` (default 2); ``"gauss3"`` uses 1.
+        Neighbours on each side used by ``"lorentz"`` and ``"lsq"`` (default 2);
+        ``"gauss3"`` uses 1.
     min_reliability_db : float, optional
-        Pixels with a lower reliability are NaN in ``height_um`` (use ``-inf`` to keep all).
-        Default: ``DEFAULT_MIN_RELIABILITY_DB[operator]``.
+        Pixels with a lower reliability are NaN in ``height_um`` (``-inf`` keeps all).
+        Default: 4 dB (σ ≤ 0.63 z step) for ``reliability="sigma"``,
+        ``PERTUZ_MIN_RELIABILITY_DB[operator]`` for ``"pertuz"``.
     fill : {None, False, True, "smooth", "nearest"}
         Fill unreliable pixels (True means ``"smooth"``), see :func:`fill_missing`.
     align : bool or {"ecc", "phase"}
@@ -314,40 +332,34 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
         Decode the next slice in a background thread while the current one is measured.
     progress : callable(done, total), optional
         Called after each slice.
+    colour : {"luma", "rgb"}
+        Measure the luma of RGB slices, or sum the measures of the three channels (better
+        where colour texture is more than about twice the grey one).
+    coarse_window_px : int or None
+        A second, larger window (evaluated on a grid downsampled by 2 when ≥ 11 px) that
+        pixels take where it gives the smaller uncertainty (weak texture); None: main window
+        only. Ignored unless larger than ``window_px``.
+    fine_window_px : int or None
+        An optional smaller window for sharp relief (ignored unless smaller than
+        ``window_px``); off by default: on the Cou stacks it raises the RMSE.
+    reliability : {"sigma", "pertuz"}
+        What ``reliability_db`` means and what ``reliable`` requires (see FocusResult).
 
     Returns
     -------
     FocusResult
     """
     t_start = time.perf_counter()
-    if operator not in OPERATORS:
-        raise ValueError(f"operator must be one of {OPERATORS}, not {operator!r}")
-    check_window(window_px, window)
-    if interpolation not in INTERPOLATIONS:
-        raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, not {interpolation!r}")
-    if interpolation == "lsq":
-        r = DEFAULT_FIT_RADIUS if fit_radius is None else fit_radius
-        if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or not 1 <= r <= 10:
-            raise ValueError(f"fit_radius must be an integer in 1..10, got {fit_radius!r}")
-    else:
-        r = 1
-    if min_reliability_db is None:
-        min_reliability_db = DEFAULT_MIN_RELIABILITY_DB[operator]
-    if isinstance(min_reliability_db, bool) or not isinstance(min_reliability_db, (int, float)) \
-            or math.isnan(min_reliability_db):
-        raise ValueError(f"min_reliability_db must be a number, got {min_reliability_db!r}")
-    if fill is True:
-        fill = "smooth"
-    if fill not in (None, False, "smooth", "nearest"):
-        raise ValueError(f"fill must be None, True, 'smooth' or 'nearest', not {fill!r}")
-
+    r, min_reliability_db, fill = _check_options(
+        operator, window_px, window, interpolation, fit_radius, reliability, colour,
+        min_reliability_db, fill)
     z, n, shape, channels, load = _slice_source(source, z_um)
     if n < 3:
         raise InputError(f"a focus stack needs at least 3 slices, got {n}")
     order = np.argsort(z, kind="stable")          # rank -> file index
     zs = z[order]                                 # sorted heights
     H, W = shape
-    K = 2 * r + 1
+    wins, main = _windows(shape, window_px, window, fine_window_px, coarse_window_px)
 
     warps = None
     if align:
@@ -355,30 +367,11 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
         warps, ref = estimate_warps(load, order, shape, method=method, reference=reference)
         load = warped_loader(load, warps, shape)
 
-    ring = np.zeros((K, H, W), np.float32)          # focus of the last K ranks
-    win = np.full((K, H, W), np.nan, np.float32)   # focus around the best rank
-    best = np.full((H, W), -np.inf, np.float32)     # delayed running max (for win)
-    best_rank = np.zeros((H, W), np.int32)
+    trackers = [PeakTracker(((H + 1) // 2, (W + 1) // 2) if ds == 2 else (H, W), radius=r,
+                            n_slices=n) for _, _, ds in wins]
     best_now = np.full((H, W), -np.inf, np.float32)  # undelayed max (for the composite)
-    fsum = np.zeros((H, W), np.float64 if n > 1000 else np.float32)
     aif = np.zeros((H, W, 3) if channels == 3 else (H, W), np.float32)
     mask = np.empty((H, W), bool)
-    nan_img = np.full((H, W), np.nan, np.float32)
-
-    def take_candidate(c, last):
-        """Candidate rank c: its window ranks c-r..c+r are all known (or beyond the end)."""
-        np.greater(ring[c % K], best, out=mask)
-        if not mask.any():
-            return
-        m8 = mask.view(np.uint8)                     # 0/1, an OpenCV mask (no copy)
-        cv2.max(ring[c % K], best, dst=best)
-        np.copyto(best_rank, c, where=mask)
-        for j in range(K):
-            rk = c - r + j
-            if 0 <= rk <= last:
-                cv2.copyTo(ring[rk % K], m8, win[j])
-            else:
-                cv2.copyTo(nan_img, m8, win[j])
 
     t_read = t_focus = 0.0
     pool = ThreadPoolExecutor(max_workers=1) if prefetch else None
@@ -390,74 +383,58 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
             if pool and k + 1 < n:
                 fut = pool.submit(load, int(order[k + 1]))
             t1 = time.perf_counter()
-            f = focus_measure(img, operator=operator, window_px=window_px, window=window)
-            ring[k % K] = f
-            fsum += f
+            fs = focus_measures(img, wins, operator=operator, colour=colour)
+            for tr, f in zip(trackers, fs):
+                tr.push(f, k)
+            f = fs[main]
             np.greater(f, best_now, out=mask)
             cv2.max(f, best_now, dst=best_now)
             cv2.copyTo(img, mask.view(np.uint8), aif)
-            c = k - r
-            if c >= 0:
-                take_candidate(c, k)
             t_read += t1 - t0
             t_focus += time.perf_counter() - t1
             if progress is not None:
                 progress(k + 1, n)
         t1 = time.perf_counter()
-        for c in range(max(0, n - r), n):
-            take_candidate(c, n - 1)
+        for tr in trackers:
+            tr.finish()
+            tr.release_ring()
         t_focus += time.perf_counter() - t1
     finally:
         if pool:
             pool.shutdown(wait=True, cancel_futures=True)
-    ring = None  # free the K focus images before the peak fit
 
-    # ---- peak fit and reliability, in row blocks (temporaries stay small) -------------
+    # ---- peak fits, uncertainty, choice of window ------------------------------------------
     t2 = time.perf_counter()
-    height = np.empty((H, W), np.float32)
-    rel = np.empty((H, W), np.float32)
     step = float(np.median(np.diff(zs))) if n > 1 else 1.0
-    rows = max(1, (1 << 20) // max(1, W * K))
-    for r0 in range(0, H, rows):
-        sl = slice(r0, min(H, r0 + rows))
-        br = best_rank[sl]
-        ranks = br[None] + (np.arange(K) - r)[:, None, None]
-        inside = (ranks >= 0) & (ranks < n)
-        zc = zs[br]
-        xz = np.where(inside, (zs[np.clip(ranks, 0, n - 1)] - zc) / step, np.nan)
-        xz = xz.astype(np.float32)
-        vals = win[:, sl]
-        if interpolation == "none":
-            off = np.zeros(br.shape)
-            ok = np.ones(br.shape, bool)
-            coef = None
-        else:
-            if interpolation == "lsq":
-                sub_v, sub_x = vals, xz
-            else:
-                sub_v, sub_x = vals[r - 1:r + 2], xz[r - 1:r + 2]
-            off, coef, ok = peak_fit(sub_v, sub_x, weighted=(interpolation == "lsq"),
-                                     dtype=np.float32)
-        height[sl] = zc + off * step
-        # reliability (Pertuz 2013, windowed residual)
-        fmax = best[sl]
-        vin = np.where(np.isfinite(vals), vals, 0.0)
-        if coef is not None:
-            a, b, c0 = coef
-            xv = np.where(np.isfinite(xz), xz, 0.0)
-            g = np.exp(np.clip(a * xv * xv + b * xv + c0, -80.0, 80.0))
-            resid_in = np.where(np.isfinite(vals), np.abs(vals - g), 0.0).sum(0)
-        else:
-            resid_in = np.zeros(br.shape)
-        outside = np.maximum(fsum[sl] - vin.sum(0), 0.0)
-        err = resid_in + outside
-        tiny = 1e-30
-        R = 20.0 * np.log10(np.maximum(n * fmax, tiny) / np.maximum(err, tiny * n))
-        R = np.where(ok & (fmax > 0), R, 0.0)
-        rel[sl] = np.clip(R, -200, 200)
+    fits = []
+    for (px, win, ds), tr in zip(wins, trackers):
+        k_noise = noise_shape(operator=operator, window_px=px, window=win, downsample=ds,
+                              colour=colour, channels=channels)
+        fit = fit_window(tr, zs, step, interpolation=interpolation, shape_k=k_noise,
+                         alpha=DETECTION_ALPHA, prior_dof=SIGMA_MODEL["prior_dof"],
+                         pertuz=(reliability == "pertuz"), window_px=px, downsample=ds)
+        add_relief_terms(fit, step, SIGMA_MODEL)
+        fits.append(fit.upsampled((H, W)))
+    best_main = trackers[main].best
+    best_rank = trackers[main].best_rank
+    trackers = None
+    idx, sigma, detected = combine(fits, main, step, prefer=SIGMA_MODEL["prefer"])
+    pick = idx[None].astype(np.intp)
+    height = np.take_along_axis(np.stack([f.height_um for f in fits]), pick, 0)[0]
+    if reliability == "pertuz":
+        rel = np.take_along_axis(np.stack([f.pertuz_db for f in fits]), pick, 0)[0]
+        reliable = rel >= min_reliability_db
+    else:
+        rel = -20.0 * np.log10(np.clip(sigma, 1e-3, 1e6))
+        rel = np.where(detected, rel, np.minimum(rel, 0.0))
+        reliable = (detected & (rel >= min_reliability_db)) if min_reliability_db > -np.inf \
+            else np.ones((H, W), bool)
+    sigma_um = np.where(detected & np.isfinite(sigma), sigma * abs(step), np.nan)
+    window_map = np.array([w[0] for w in wins], np.uint8)[idx]
+    fits = None
     t3 = time.perf_counter()
 
-    reliable = rel >= min_reliability_db
+    height = height.astype(np.float32)
     h = np.where(reliable, height, np.float32(np.nan)).astype(np.float32)
     if fill:
         h = fill_missing(h, method=fill)
@@ -465,7 +442,10 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
     t_end = time.perf_counter()
     params = {
         "operator": operator, "window_px": int(window_px), "window": window,
-        "interpolation": interpolation, "fit_radius": int(r) if interpolation == "lsq" else None,
+        "windows_px": [int(w[0]) for w in wins], "colour": colour,
+        "interpolation": interpolation,
+        "fit_radius": int(r) if interpolation in ("lsq", "lorentz") else None,
+        "reliability": reliability,
         "min_reliability_db": float(min_reliability_db), "fill": fill or None,
         "align": (align if isinstance(align, str) else ("ecc" if align else None)),
         "n_slices": int(n), "shape": [int(H), int(W)], "channels": int(channels),
@@ -474,8 +454,11 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
         params["alignment"] = {"reference": int(ref),
                                "warps": [np.asarray(w_).tolist() for w_ in warps]}
     timings = {"read": t_read, "focus": t_focus, "fit": t3 - t2, "total": t_end - t_start}
-    log.info("height from focus: %d slices %dx%d, %.1f%% unreliable, %.2f s", n, W, H,
-             100.0 * (1.0 - reliable.mean()), timings["total"])
-    return FocusResult(height_um=h, height_fit_um=height, reliability_db=rel, reliable=reliable,
-                       best_index=best_index, focus_max=best, all_in_focus=aif, z_um=z,
-                       params=params, timings_s=timings)
+    log.info("height from focus: %d slices %dx%d, %.1f%% unreliable (%.1f%% without a focus "
+             "peak), %.2f s", n, W, H, 100.0 * (1.0 - reliable.mean()),
+             100.0 * (1.0 - detected.mean()), timings["total"])
+    return FocusResult(height_um=h, height_fit_um=height, reliability_db=rel.astype(np.float32),
+                       reliable=reliable, best_index=best_index, focus_max=best_main,
+                       all_in_focus=aif, z_um=z, params=params, timings_s=timings,
+                       height_sigma_um=sigma_um.astype(np.float32), detected=detected,
+                       window_px_map=window_map)

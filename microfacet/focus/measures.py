@@ -4,8 +4,15 @@
 (sum-modified-Laplacian, Nayar & Nakagawa 1994) or ``"glv"`` (grey-level local variance),
 accumulated over a window of ``window_px`` pixels. ``window="gaussian"`` (default) uses a
 Gaussian window with the same standard deviation as a box of side ``window_px``
-(σ = window_px/√12); ``window="box"`` uses the box itself. The defaults were chosen from the
-measured RMSE on the Cou & Guennebaud (2023) ground-truth stacks (docs/height-from-focus.md).
+(σ = window_px/√12); ``window="box"`` uses the box itself. ``colour="luma"`` (default) measures
+the Rec. 601 luma; ``colour="rgb"`` sums the measure of the three channels (it sees
+isoluminant colour texture, at three times the noise floor of one channel).
+
+:func:`focus_measures` computes several windows from one slice, sharing the per-pixel energy;
+a window can be evaluated on a grid downsampled by 2 (``downsample=2``: the energy is reduced
+with :func:`cv2.pyrDown`, then windowed with the remaining spread), which is exact enough for
+windows of 11 px and more and costs a quarter. The defaults were chosen from measurements
+(docs/height-from-focus.md).
 
 Examples
 --------
@@ -19,19 +26,32 @@ True
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
 from ..core.lazy import load
-from .defaults import DEFAULT_OPERATOR, DEFAULT_WINDOW, DEFAULT_WINDOW_PX, OPERATORS, WINDOWS
+from .defaults import (
+    COLOURS,
+    DEFAULT_COLOUR,
+    DEFAULT_OPERATOR,
+    DEFAULT_WINDOW,
+    DEFAULT_WINDOW_PX,
+    OPERATORS,
+    WINDOWS,
+)
 
 cv2 = load("cv2")
 
-__all__ = ["DEFAULT_OPERATOR", "DEFAULT_WINDOW", "DEFAULT_WINDOW_PX", "OPERATORS", "WINDOWS",
-           "check_window", "focus_measure", "to_grey"]
+__all__ = ["COLOURS", "DEFAULT_COLOUR", "DEFAULT_OPERATOR", "DEFAULT_WINDOW",
+           "DEFAULT_WINDOW_PX", "OPERATORS", "WINDOWS", "check_window", "focus_measure",
+           "focus_measures", "noise_shape", "to_grey"]
 
 
 _ML_KX = np.array([[-1.0, 2.0, -1.0]], dtype=np.float32)
+#: spread (σ, px) that cv2.pyrDown's 5-tap binomial kernel applies before decimation
+_PYR_SIGMA = 1.0
+
 
 def to_grey(image: np.ndarray) -> np.ndarray:
     """Luma of an image for focus measurement.
@@ -59,11 +79,20 @@ def check_window(window_px, window):
     if isinstance(window_px, bool) or not isinstance(window_px, (int, np.integer)) \
             or window_px < 1 or window_px % 2 == 0:
         raise ValueError(f"window_px must be an odd integer >= 1, got {window_px!r}")
-    if window not in ("gaussian", "box"):
+    if window not in WINDOWS:
         raise ValueError(f"window must be 'gaussian' or 'box', not {window!r}")
 
 
-def _window_sum(img: np.ndarray, window_px: int, window: str) -> np.ndarray:
+def _window_sum(img: np.ndarray, window_px: int, window: str, downsample: int = 1) -> np.ndarray:
+    """Window mean of ``img`` (already reduced by ``downsample`` when that is 2)."""
+    if downsample == 2:
+        sig = math.sqrt(max(window_px * window_px / 12.0 - _PYR_SIGMA ** 2, 0.0)) / 2.0
+        if window == "box":
+            side = max(1, int(round(window_px / 2.0)) | 1)
+            return cv2.boxFilter(img, -1, (side, side), normalize=True,
+                                 borderType=cv2.BORDER_REFLECT) if side > 1 else img
+        return cv2.GaussianBlur(img, (0, 0), sig, borderType=cv2.BORDER_REFLECT) \
+            if sig > 0.05 else img
     if window_px == 1:
         return img
     if window == "box":
@@ -73,14 +102,95 @@ def _window_sum(img: np.ndarray, window_px: int, window: str) -> np.ndarray:
     return cv2.GaussianBlur(img, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
 
 
+def _channels(image, colour):
+    img = np.asarray(image)
+    if colour == "rgb" and img.ndim == 3:
+        return img.astype(np.float32, copy=False)
+    if colour not in COLOURS:
+        raise ValueError(f"colour must be one of {COLOURS}, not {colour!r}")
+    return to_grey(img)
+
+
+def _sum_channels(e):
+    if e.ndim == 2:
+        return e
+    return cv2.transform(e, np.ones((1, 3), np.float32))
+
+
+def _energy(g, operator):
+    """Per-pixel (unwindowed) energy of ``g`` (grey or 3-channel) for tenengrad and sml."""
+    border = cv2.BORDER_REFLECT
+    if operator == "tenengrad":
+        gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=border)
+        gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=border)
+        cv2.multiply(gx, gx, dst=gx)
+        cv2.multiply(gy, gy, dst=gy)
+        return _sum_channels(cv2.add(gx, gy, dst=gx))
+    mx = cv2.filter2D(g, cv2.CV_32F, _ML_KX, borderType=border)
+    my = cv2.filter2D(g, cv2.CV_32F, _ML_KX.T, borderType=border)
+    return _sum_channels(cv2.add(cv2.absdiff(mx, 0.0), cv2.absdiff(my, 0.0)))
+
+
+def focus_measures(image: np.ndarray, windows: Sequence[tuple[int, str, int]], *,
+                   operator: str = DEFAULT_OPERATOR,
+                   colour: str = DEFAULT_COLOUR) -> list[np.ndarray]:
+    """The focus measure of one slice for several windows.
+
+    Parameters
+    ----------
+    image : ndarray, shape (H, W) or (H, W, 3)
+        One slice (float, typically in [0, 1]).
+    windows : sequence of (window_px, window, downsample)
+        Odd window side, ``"gaussian"`` or ``"box"``, and 1 (full grid) or 2 (the result on
+        the grid ``[::2, ::2]``, shape ``((H+1)//2, (W+1)//2)``).
+    operator, colour
+        See :func:`focus_measure`.
+
+    Returns
+    -------
+    list of ndarray of float32
+        One map per window, non-negative, larger is sharper.
+    """
+    if operator not in OPERATORS:
+        raise ValueError(f"operator must be one of {OPERATORS}, not {operator!r}")
+    for px, win, ds in windows:
+        check_window(px, win)
+        if ds not in (1, 2):
+            raise ValueError(f"downsample must be 1 or 2, got {ds!r}")
+    g = _channels(image, colour)
+    out = []
+    if operator == "glv":
+        g2 = cv2.multiply(g, g)
+        half = None
+        for px, win, ds in windows:
+            a, b = g, g2
+            if ds == 2:
+                half = half or (cv2.pyrDown(g), cv2.pyrDown(g2))
+                a, b = half
+            m = _window_sum(a, px, win, ds)
+            v = cv2.subtract(_window_sum(b, px, win, ds), cv2.multiply(m, m))
+            out.append(cv2.max(_sum_channels(v), 0.0))
+        return out
+    e = _energy(g, operator)
+    e_half = None
+    for px, win, ds in windows:
+        if ds == 2:
+            e_half = cv2.pyrDown(e) if e_half is None else e_half
+            out.append(_window_sum(e_half, px, win, 2))
+        else:
+            out.append(_window_sum(e, px, win))
+    return out
+
+
 def focus_measure(image: np.ndarray, *, operator: str = DEFAULT_OPERATOR,
-                  window_px: int = DEFAULT_WINDOW_PX, window: str = DEFAULT_WINDOW) -> np.ndarray:
+                  window_px: int = DEFAULT_WINDOW_PX, window: str = DEFAULT_WINDOW,
+                  colour: str = DEFAULT_COLOUR) -> np.ndarray:
     """Focus measure of one slice.
 
     Parameters
     ----------
     image : ndarray, shape (H, W) or (H, W, 3)
-        One slice (float, typically in [0, 1]); RGB is reduced to luma.
+        One slice (float, typically in [0, 1]).
     operator : {"tenengrad", "sml", "glv"}
         ``"tenengrad"``: window mean of ``Gx² + Gy²`` (3×3 Sobel). ``"sml"``: window mean of the
         modified Laplacian ``|2I − I(x−1) − I(x+1)| + |2I − I(y−1) − I(y+1)|`` (Nayar & Nakagawa
@@ -89,6 +199,8 @@ def focus_measure(image: np.ndarray, *, operator: str = DEFAULT_OPERATOR,
         Odd window side in pixels.
     window : {"gaussian", "box"}
         Window shape; the Gaussian has σ = window_px/√12 (the box's standard deviation).
+    colour : {"luma", "rgb"}
+        Measure the luma of an RGB slice, or sum the measures of its three channels.
 
     Returns
     -------
@@ -96,24 +208,31 @@ def focus_measure(image: np.ndarray, *, operator: str = DEFAULT_OPERATOR,
         Non-negative; larger is sharper.
     """
     check_window(window_px, window)
-    g = to_grey(image)
-    border = cv2.BORDER_REFLECT
-    if operator == "tenengrad":
-        gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, borderType=border)
-        gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, borderType=border)
-        e = cv2.magnitude(gx, gy)
-        cv2.multiply(e, e, dst=e)
-        return _window_sum(e, window_px, window)
-    if operator == "sml":
-        mx = cv2.filter2D(g, cv2.CV_32F, _ML_KX, borderType=border)
-        my = cv2.filter2D(g, cv2.CV_32F, _ML_KX.T, borderType=border)
-        e = cv2.add(cv2.absdiff(mx, 0.0), cv2.absdiff(my, 0.0))
-        return _window_sum(e, window_px, window)
-    if operator == "glv":
-        m = _window_sum(g, window_px, window)
-        m2 = _window_sum(cv2.multiply(g, g), window_px, window)
-        v = cv2.subtract(m2, cv2.multiply(m, m))
-        return cv2.max(v, 0.0)
-    raise ValueError(f"operator must be one of {OPERATORS}, not {operator!r}")
+    return focus_measures(image, [(window_px, window, 1)], operator=operator,
+                          colour=colour)[0]
 
 
+_NOISE_SHAPE: dict = {}
+
+
+def noise_shape(*, operator: str, window_px: int, window: str, downsample: int,
+                colour: str, channels: int) -> float:
+    """Shape ``k = mean²/variance`` of the focus measure of white noise (measured once per
+    setting on a 256×256 noise image and cached).
+
+    For a quadratic measure (Tenengrad, GLV) of Gaussian noise the windowed value is close to
+    a Gamma variable with this shape: ``k`` is the number of independent noise samples the
+    window averages, which sets the false-peak threshold of the height step
+    (:func:`microfacet.focus.peaks.detection_threshold`).
+    """
+    key = (operator, int(window_px), window, int(downsample), colour, int(channels))
+    if key not in _NOISE_SHAPE:
+        rng = np.random.default_rng(12345)
+        shape = (256, 256, 3) if channels == 3 else (256, 256)
+        img = rng.standard_normal(shape).astype(np.float32)
+        f = focus_measures(img, [(window_px, window, downsample)], operator=operator,
+                           colour=colour)[0]
+        b = 16 // downsample
+        f = f[b:-b, b:-b].astype(np.float64)
+        _NOISE_SHAPE[key] = float(f.mean() ** 2 / max(f.var(), 1e-300))
+    return _NOISE_SHAPE[key]

@@ -1,7 +1,11 @@
-"""The synthetic scene: a surface of planar microfacets on macro waviness, oxide regions,
-and the noise-free image the microscope would see (:func:`render_scene`).
+"""The synthetic scene: a surface of microfacets on macro waviness, oxide regions, and the
+noise-free image the microscope would see (:func:`render_scene`).
 
-See :mod:`microfacet.forward.synth` for the parameters and the stack written from it.
+The facets are planar Voronoi cells by default; the variations of
+:class:`~microfacet.forward.synth_params.SynthParams` add other cell shapes, rounded facets,
+terraces, pits and scratches (:mod:`microfacet.forward.relief`), dust, tilt-dependent
+brightness, vignetting and white balance (:mod:`microfacet.forward.imaging`). See
+:mod:`microfacet.forward.synth` for the stack written from a scene.
 """
 
 from __future__ import annotations
@@ -13,13 +17,25 @@ import numpy as np
 
 from ..colour.table import build_colour_table
 from ..core.lazy import load
+from .imaging import apply_white_balance, pupil_fraction, pupil_limit_deg, vignetting_factor
+from .relief import (
+    FEATURE_CODES,
+    Carving,
+    carve_pits,
+    carve_scratches,
+    dome_relief,
+    dust_layer,
+    shaped_cells,
+    smooth_field,
+    terrace_offsets_um,
+)
 
-cv2 = load("cv2")
 ndimage = load("scipy.ndimage")
 
-__all__ = ["Scene", "render_scene"]
+__all__ = ["STREAMS", "Scene", "render_scene"]
 
-
+#: Random streams ``[seed, k]`` of the variations (k = 1 is the sensor noise's).
+STREAMS = {"facets": 2, "terraces": 3, "pits": 4, "scratches": 5, "dust": 6, "drift": 7}
 
 
 @dataclass
@@ -36,7 +52,11 @@ class Scene:
     region_thickness_nm: np.ndarray  # per region, before fine variation
     region_component: np.ndarray     # mixture component of each region
     groove: np.ndarray               # fraction of each pixel covered by a dark step wall
-    linear_rgb: np.ndarray           # H×W×3 sharp image, linear, exposure applied, unclipped
+    linear_rgb: np.ndarray           # H×W×3 sharp image, linear, every deterministic imaging
+    #                                  effect applied (exposure, brightness, dust, vignetting,
+    #                                  white balance), unclipped, float32
+    feature: np.ndarray | None = None  # uint8 FEATURE_CODES: facet, pit, scratch, dust
+    dust: np.ndarray | None = None     # dust coverage 0-1 (float32)
 
 
 def _voronoi(rng, shape, cell_px):
@@ -53,14 +73,6 @@ def _voronoi(rng, shape, cell_px):
     ids[ys, xs] = np.arange(ys.size)
     _, (iy, ix) = ndimage.distance_transform_edt(seeds, return_indices=True)
     return ids[iy, ix], ys, xs
-
-
-def _smooth_field(rng, shape, scale_px):
-    """Zero-mean, unit-SD Gaussian random field with correlation length ``scale_px``."""
-    f = rng.standard_normal(shape).astype(np.float32)
-    f = cv2.GaussianBlur(f, (0, 0), sigmaX=max(scale_px, 0.5), borderType=cv2.BORDER_REFLECT)
-    sd = float(f.std())
-    return (f / sd if sd > 0 else f).astype(np.float64)
 
 
 def _waviness(rng, p, yy_um, xx_um):
@@ -96,6 +108,13 @@ def render_scene(p, *, table=None) -> Scene:
     Returns
     -------
     Scene
+
+    Notes
+    -----
+    The default scene draws everything from one stream seeded with ``p.seed``. Each
+    variation draws from its own stream (``[seed, k]``), and the alternative facet cells
+    consume the default cells' draws first, so switching a variation on changes what it
+    should (the facets, a feature, the image) and leaves the other fields as they were.
     """
     p.validate()
     rng = np.random.default_rng(p.seed)
@@ -105,19 +124,50 @@ def render_scene(p, *, table=None) -> Scene:
 
     # Surface: macro waviness + planar facets through it.
     macro, mgy, mgx = _waviness(rng, p, yy, xx)
-    facet, fy, fx = _voronoi(rng, shape, p.facet_size_um / px)
-    nf = fy.size
     w = np.array([lb.weight for lb in p.tilt_lobes], dtype=np.float64)
-    lobe = rng.choice(len(p.tilt_lobes), size=nf, p=w / w.sum())
+    if p.default_facets:
+        facet, fy, fx = _voronoi(rng, shape, p.facet_size_um / px)
+        frng = rng
+    else:
+        _skip_default_facets(rng, shape, p.facet_size_um / px, w)
+        frng = np.random.default_rng([p.seed, STREAMS["facets"]])
+        facet, fy, fx = shaped_cells(frng, shape, p)
+    nf = fy.size
+    lobe = frng.choice(len(p.tilt_lobes), size=nf, p=w / w.sum())
     slope_sd = np.tan(np.deg2rad([lb.sd_deg for lb in p.tilt_lobes]))[lobe]
-    sy = rng.standard_normal(nf) * slope_sd + mgy[fy, fx]
-    sx = rng.standard_normal(nf) * slope_sd + mgx[fy, fx]
+    sy = frng.standard_normal(nf) * slope_sd + mgy[fy, fx]
+    sx = frng.standard_normal(nf) * slope_sd + mgx[fy, fx]
     cy, cx = fy * px, fx * px
     height = macro[fy, fx][facet] + sy[facet] * (yy - cy[facet]) + sx[facet] * (xx - cx[facet])
-    tilt = np.rad2deg(np.arctan(np.hypot(sy, sx)))[facet]
-    # Azimuth of the normal's horizontal component (the surface rises toward +slope, the
-    # normal leans the other way): normal ∝ (−sx, −sy, 1).
-    azimuth = np.rad2deg(np.arctan2(-sy, -sx))[facet] % 360.0
+    if p.terrace_step_um > 0:
+        trng = np.random.default_rng([p.seed, STREAMS["terraces"]])
+        height += terrace_offsets_um(trng, shape, fy, fx, p)[facet]
+    dgy = dgx = None
+    if p.facet_dome_deg > 0:
+        dz, dgy, dgx = dome_relief(yy, xx, facet, cy, cx, p)
+        height += dz
+    groove_height = height
+    feature = np.zeros(shape, dtype=np.uint8)
+    if p.pit_density_per_mm2 > 0 or p.scratch_density_per_mm2 > 0:
+        carving = Carving.empty(shape)
+        if p.pit_density_per_mm2 > 0:
+            carve_pits(np.random.default_rng([p.seed, STREAMS["pits"]]), shape, p, carving)
+        if p.scratch_density_per_mm2 > 0:
+            carve_scratches(np.random.default_rng([p.seed, STREAMS["scratches"]]), shape, p,
+                            carving)
+        height = height + carving.dz_um
+        dgy = carving.dgy if dgy is None else dgy + carving.dgy
+        dgx = carving.dgx if dgx is None else dgx + carving.dgx
+        feature = carving.feature
+    if dgy is None:
+        tilt = np.rad2deg(np.arctan(np.hypot(sy, sx)))[facet]
+        # Azimuth of the normal's horizontal component (the surface rises toward +slope,
+        # the normal leans the other way): normal ∝ (−sx, −sy, 1).
+        azimuth = np.rad2deg(np.arctan2(-sy, -sx))[facet] % 360.0
+    else:
+        gy, gx = sy[facet] + dgy, sx[facet] + dgx
+        tilt = np.rad2deg(np.arctan(np.hypot(gy, gx)))
+        azimuth = np.rad2deg(np.arctan2(-gy, -gx)) % 360.0
 
     # Thickness regions from the mixture, plus smooth fine variation.
     region, _, _ = _voronoi(rng, shape, p.region_size_um / px)
@@ -127,22 +177,51 @@ def render_scene(p, *, table=None) -> Scene:
     means = np.array([c.mean_nm for c in p.thickness])[comp]
     sds = np.array([c.sd_nm for c in p.thickness])[comp]
     region_d = np.maximum(means + sds * rng.standard_normal(nr), 0.0)
-    fine = _smooth_field(rng, shape, p.thickness_fine_scale_um / px) * p.thickness_fine_sd_nm
-    facet_dd = rng.standard_normal(nf) * p.thickness_facet_sd_nm
+    fine = smooth_field(rng, shape, p.thickness_fine_scale_um / px) * p.thickness_fine_sd_nm
+    facet_dd = frng.standard_normal(nf) * p.thickness_facet_sd_nm
     thickness = np.maximum(region_d[region] + fine + facet_dd[facet], 0.0)
 
     visible = tilt <= p.max_tilt_deg
     if table is None:
         table = _table_for(p, thickness)
-    rgb = table.linear_rgb_at(np.where(visible, tilt, 0.0), thickness).astype(np.float64)
-    rgb *= p.exposure
-    rgb[~visible] = p.dark_level * p.exposure
-    groove = _groove_coverage(facet, height, p)
+    if p.illumination_fill == 0:
+        rgb = table.linear_rgb_at(np.where(visible, tilt, 0.0), thickness).astype(np.float64)
+        rgb *= p.exposure
+        rgb[~visible] = p.dark_level * p.exposure
+    else:
+        frac = pupil_fraction(tilt, numerical_aperture=p.numerical_aperture,
+                              fill=p.illumination_fill).astype(np.float64)[..., None]
+        lit = frac[..., 0] > 0
+        rgb = table.linear_rgb_at(np.where(lit, tilt, 0.0), thickness).astype(np.float64)
+        rgb = (rgb * frac + (1.0 - frac) * p.dark_level) * p.exposure
+    groove = _groove_coverage(facet, groove_height, p)
     rgb = rgb * (1.0 - groove[..., None]) + groove[..., None] * p.dark_level * p.exposure
+    dust = np.zeros(shape, dtype=np.float32)
+    if p.dust_density_per_mm2 > 0:
+        dust, grey, _ = dust_layer(np.random.default_rng([p.seed, STREAMS["dust"]]), shape, p)
+        rgb = rgb * (1.0 - dust[..., None]) + (dust * grey * p.exposure)[..., None]
+        feature = np.where(dust >= 0.5, np.uint8(FEATURE_CODES["dust"]), feature)
+    rgb = rgb.astype(np.float32)
+    if p.vignetting_corner_loss > 0:
+        rgb *= vignetting_factor(shape, corner_loss=p.vignetting_corner_loss)[..., None]
+    if tuple(p.white_balance_gains) != (1.0, 1.0, 1.0):
+        rgb = apply_white_balance(rgb, p.white_balance_gains)
     return Scene(height.astype(np.float32), tilt.astype(np.float32), azimuth.astype(np.float32),
                  thickness.astype(np.float32), visible, facet.astype(np.int32),
                  region.astype(np.int32), region_d, comp, groove.astype(np.float32),
-                 rgb.astype(np.float32))
+                 rgb, feature, dust)
+
+
+def _skip_default_facets(rng, shape, cell_px, lobe_weights):
+    """Consume the default facets' draws (seeds, lobes, slopes) from the main stream."""
+    h, w = shape
+    n = max(1, int(round(h * w / (math.pi * (cell_px / 2) ** 2))))
+    ys = rng.integers(0, h, n)
+    xs = rng.integers(0, w, n)
+    nf = np.unique(ys * w + xs).size
+    rng.choice(lobe_weights.size, size=nf, p=lobe_weights / lobe_weights.sum())
+    rng.standard_normal(nf)
+    rng.standard_normal(nf)
 
 
 def _groove_coverage(facet, height, p):
@@ -166,8 +245,10 @@ def _groove_coverage(facet, height, p):
 def _table_for(p, thickness):
     lo = max(0.0, float(np.floor(thickness.min())) - 1.0)
     hi = float(np.ceil(thickness.max())) + 1.0
+    top = p.max_tilt_deg
+    if p.illumination_fill > 0:
+        top = min(89.0, pupil_limit_deg(numerical_aperture=p.numerical_aperture,
+                                        fill=p.illumination_fill))
     return build_colour_table(thickness_range_nm=(lo, hi),
-                              theta_range_deg=(0.0, p.max_tilt_deg + 0.5),
+                              theta_range_deg=(0.0, top + 0.5),
                               film=p.film, substrate=p.substrate, illuminant=p.illuminant)
-
-

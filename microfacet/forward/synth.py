@@ -27,8 +27,15 @@ Scene (seed §3.2-3.3, Fig. 13)
 * **Sensor**: shot noise (Gaussian approximation, ``full_well_e`` electrons at signal 1),
   read noise, clipping, sRGB encoding, 8- or 16-bit PNG slices.
 
-Everything is drawn from one ``numpy.random.Generator`` seeded with ``seed``; the same
-parameters and seed give the same bytes.
+Imaging variations (:class:`~microfacet.forward.synth_params.SynthParams`, all off by
+default): other facet shapes, rounded facets, terraces, pits, scratches, dust
+(:mod:`~microfacet.forward.relief`), tilt-dependent brightness, vignetting, white balance,
+drift between slices (:mod:`~microfacet.forward.imaging`), JPEG slices, other optical
+constants. docs/synthetic-stacks.md lists them.
+
+The default scene is drawn from one ``numpy.random.Generator`` seeded with ``seed``, the
+noise and each variation from their own (``[seed, k]``); the same parameters and seed give
+the same bytes.
 """
 
 from __future__ import annotations
@@ -49,177 +56,54 @@ from ..io.images import write_image
 from ..io.limits import check_memory
 from ..io.outdir import atomic_output_dir
 from ..io.stack import write_stack_json
-from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
-from .scene import render_scene
+from .imaging import drift_offsets_px, shift_image
+from .relief import FEATURE_CODES
+from .scene import STREAMS, render_scene
+from .synth_params import (
+    MAX_SLICES,
+    SynthParams,
+    ThicknessComponent,
+    TiltLobe,
+    parse_variation,
+)
 
 cv2 = load("cv2")
 
 __all__ = [
     "apply_sensor",
+    "MAX_SLICES",
     "PRESETS",
     "SynthParams",
     "SynthResult",
     "ThicknessComponent",
     "TiltLobe",
+    "defocus_sigma_px",
     "generate_stack",
+    "parse_variation",
     "preset",
     "render_scene",
+    "slice_positions_um",
+    "truth_summary",
 ]
 
 log = logging.getLogger(__name__)
 
-
-@dataclass(frozen=True)
-class TiltLobe:
-    """A zero-mean lobe of facet tilts: slopes (tan θ) in x and y are N(0, tan(sd_deg)²).
-
-    The tilt θ then has a Rayleigh-distributed tangent (a Beckmann-like lobe whose slope
-    standard deviation per axis is tan(sd_deg)); its mode in slope space is 0°.
-    """
-
-    weight: float
-    sd_deg: float
-
-
-@dataclass(frozen=True)
-class ThicknessComponent:
-    """One population of oxide thickness: N(mean_nm, sd_nm²) with a mixture weight."""
-
-    weight: float
-    mean_nm: float
-    sd_nm: float
-
-
-@dataclass(frozen=True)
-class SynthParams:
-    """Every parameter of a synthetic stack (all lengths in µm unless the name says nm).
-
-    Attributes
-    ----------
-    height_px, width_px : int
-        Image size.
-    n_slices : int
-        Focal planes.
-    pixel_size_um : float
-        Lateral pixel size on the sample (the seed's microscope: 347.8 µm / 1600 px ≈ 0.217).
-    numerical_aperture : float
-        Objective NA; facets tilted past asin(NA)/2 are dark.
-    facet_size_um : float
-        Mean facet diameter (Voronoi cells), 1-3 µm in the seed.
-    tilt_lobes : tuple of TiltLobe
-        Mixture of zero-mean facet-slope lobes.
-    waviness_amplitude_um, waviness_wavelength_um : float
-        RMS height and typical wavelength of the macro (roll-dull) waviness.
-    thickness : tuple of ThicknessComponent
-        Gaussian mixture of region thicknesses.
-    region_size_um : float
-        Mean diameter of the thickness regions.
-    thickness_fine_sd_nm, thickness_fine_scale_um : float
-        Smooth thickness variation inside regions (SD and correlation length).
-    thickness_facet_sd_nm : float
-        Per-facet thickness offset (SD; 0 in most presets): anodic growth can depend on
-        the grain underneath. It mimics tilt in colour (10° ≈ 0.3 nm), which is why the
-        ``grainy`` preset has it: the hard case where tilt cannot come from colour.
-    groove_wall_deg : float
-        Slope of the walls of the height steps between facets. Walls steeper than
-        asin(NA)/2 reflect outside the objective, so a step of height Δh images as a dark
-        groove of projected width Δh / tan(groove_wall_deg) (pixel coverage blended); 0
-        disables grooves. They give the images the texture focus needs.
-    exposure : float
-        Model linear sRGB → image linear sRGB.
-    dark_level : float
-        Linear signal of facets outside the objective's acceptance (relative to white).
-    full_well_e : float or None
-        Electrons at signal 1 (shot noise); None for no shot noise.
-    read_noise : float
-        Read-noise SD in linear signal units.
-    bit_depth : {8, 16}
-    z_margin_um : float
-        Extra focus range below the lowest and above the highest point.
-    write_exposure : bool
-        Write ``exposure`` into stack.json (else the analyser must estimate it).
-    film, substrate, illuminant : str
-    seed : int
-    """
-
-    height_px: int = 256
-    width_px: int = 256
-    n_slices: int = 24
-    pixel_size_um: float = 0.216
-    numerical_aperture: float = 0.8
-    facet_size_um: float = 2.0
-    tilt_lobes: tuple = (TiltLobe(1.0, 4.0),)
-    waviness_amplitude_um: float = 0.5
-    waviness_wavelength_um: float = 40.0
-    thickness: tuple = (ThicknessComponent(1.0, 51.0, 1.0),)
-    region_size_um: float = 25.0
-    thickness_fine_sd_nm: float = 0.3
-    thickness_facet_sd_nm: float = 0.0
-    groove_wall_deg: float = 45.0
-    thickness_fine_scale_um: float = 3.0
-    exposure: float = 1.0
-    dark_level: float = 0.02
-    full_well_e: float | None = 8000.0
-    read_noise: float = 0.002
-    bit_depth: int = 8
-    z_margin_um: float = 1.0
-    write_exposure: bool = False
-    film: str = DEFAULT_FILM
-    substrate: str = DEFAULT_SUBSTRATE
-    illuminant: str = "D65"
-    seed: int = 0
-    preset: str = "custom"
-
-    @property
-    def max_tilt_deg(self) -> float:
-        """Largest facet tilt whose reflection enters the objective: asin(NA)/2."""
-        return math.degrees(math.asin(self.numerical_aperture)) / 2.0
-
-    def validate(self) -> None:
-        """Raise ValueError naming the first parameter out of range."""
-        checks = [
-            ("height_px", self.height_px >= 16), ("width_px", self.width_px >= 16),
-            ("n_slices", 1 <= self.n_slices <= MAX_SLICES),
-            ("pixel_size_um", self.pixel_size_um > 0),
-            ("numerical_aperture", 0 < self.numerical_aperture < 1),
-            ("facet_size_um", self.facet_size_um > 0),
-            ("tilt_lobes", len(self.tilt_lobes) > 0
-             and all(lb.weight > 0 and 0 <= lb.sd_deg < 60 for lb in self.tilt_lobes)),
-            ("thickness", len(self.thickness) > 0
-             and all(c.weight > 0 and c.mean_nm >= 0 and c.sd_nm >= 0 for c in self.thickness)),
-            ("region_size_um", self.region_size_um > 0),
-            ("thickness_facet_sd_nm", self.thickness_facet_sd_nm >= 0),
-            ("groove_wall_deg", 0 <= self.groove_wall_deg < 90),
-            ("thickness_fine_sd_nm", self.thickness_fine_sd_nm >= 0),
-            ("exposure", self.exposure > 0), ("bit_depth", self.bit_depth in (8, 16)),
-            ("read_noise", self.read_noise >= 0),
-            ("full_well_e", self.full_well_e is None or self.full_well_e > 0),
-            ("z_margin_um", self.z_margin_um >= 0),
-        ]
-        for name, ok in checks:
-            if not ok:
-                raise ValueError(f"{name}: out of range ({getattr(self, name)!r})")
-
-    def to_json(self) -> dict:
-        d = dataclasses.asdict(self)
-        d["max_tilt_deg"] = self.max_tilt_deg
-        return d
-
-
-#: Most slices a synthetic stack may have.
-MAX_SLICES = 10_000
 #: Peak memory of :func:`generate_stack` ≈ base + per pixel × H × W (the blur ladder of ~12
 #: float32 RGB copies dominates), set just above what ``/usr/bin/time -f %M microfacet synth``
 #: measured: 248 and 513 MB at 0.26 and 1.05 MP (≈ 160 MB + 335 B/px).
 MEMORY_BASE_BYTES = 180 << 20
 MEMORY_BYTES_PER_PIXEL = 360
+#: Files of ``truth/`` (besides ``params.json``).
+TRUTH_ARRAYS = ("height_um", "tilt_deg", "azimuth_deg", "thickness_nm", "visible", "clipped",
+                "region_id", "groove", "facet_id", "feature")
 
 
 def _p(name, **kw):
     return SynthParams(preset=name, **kw)
 
 
-#: Named presets (see README): each a starting point; ``dataclasses.replace`` changes any field.
+#: Named presets (README, docs/synthetic-stacks.md): each a starting point;
+#: ``preset(name, **overrides)`` or ``dataclasses.replace`` changes any field.
 PRESETS: dict[str, SynthParams] = {
     # Cold-rolled SD sheet: smooth, one blue film (the seed's sample 2, ~51 nm).
     "sd": _p("sd", tilt_lobes=(TiltLobe(1.0, 3.0),), waviness_amplitude_um=0.3,
@@ -260,7 +144,14 @@ PRESETS: dict[str, SynthParams] = {
 
 
 def preset(name: str, **overrides) -> SynthParams:
-    """Parameters of a named preset, with field overrides (e.g. ``seed=3, n_slices=40``)."""
+    """Parameters of a named preset, with field overrides (e.g. ``seed=3, n_slices=40``).
+
+    Raises
+    ------
+    ValueError
+        An unknown preset (``preset``), an unknown field, or a value out of range (naming
+        the field).
+    """
     if name not in PRESETS:
         raise ValueError(f"preset: unknown preset {name!r}; known: {', '.join(PRESETS)}")
     fields = {f.name for f in dataclasses.fields(SynthParams)}
@@ -334,12 +225,17 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
 
     Notes
     -----
-    Layout: ``stack.json``, ``slices/000.png`` …, ``truth/height_um.npy``,
-    ``truth/tilt_deg.npy``, ``truth/azimuth_deg.npy``, ``truth/thickness_nm.npy``,
-    ``truth/visible.npy``, ``truth/clipped.npy``, ``truth/region_id.npy``,
-    ``truth/groove.npy`` (fraction of each pixel covered by a dark step wall),
-    ``truth/all_in_focus.png`` (noise-free sharp image) and ``truth/params.json``.
-    Memory: a ladder of ~12 blurred copies of the image, independent of the slice count.
+    Layout: ``stack.json``, ``slices/000.png`` … (``.jpg`` with ``jpeg_quality``),
+    ``truth/height_um.npy``, ``truth/tilt_deg.npy``, ``truth/azimuth_deg.npy``,
+    ``truth/thickness_nm.npy``, ``truth/visible.npy``, ``truth/clipped.npy``,
+    ``truth/region_id.npy``, ``truth/groove.npy`` (fraction of each pixel covered by a dark
+    step wall), ``truth/facet_id.npy`` (int32 facet cell), ``truth/feature.npy`` (uint8:
+    0 facet, 1 pit, 2 scratch, 3 dust), ``truth/all_in_focus.png`` (the noise-free sharp
+    image with every deterministic imaging effect: brightness, grooves, dust, vignetting,
+    white balance, clipping; no noise, blur, drift or JPEG) and ``truth/params.json``
+    (:func:`truth_summary`). With drift, the truth is in the frame of the slices' mean
+    position. Memory: a ladder of ~12 blurred copies of the image, independent of the
+    slice count.
 
     Examples
     --------
@@ -366,7 +262,12 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
     rows, cols = np.indices(scene.height_um.shape)
     dtype = np.uint8 if p.bit_depth == 8 else np.uint16
     clipped = np.any(scene.linear_rgb >= 1.0, axis=-1)
-    names = [f"slices/{k:03d}.png" for k in range(p.n_slices)]
+    names = [f"slices/{k:03d}{p.slice_suffix}" for k in range(p.n_slices)]
+    drift = np.zeros((p.n_slices, 2))
+    if p.drift_px_per_slice > 0:
+        drift = drift_offsets_px(np.random.default_rng([p.seed, STREAMS["drift"]]), p.n_slices,
+                                 step_px=p.drift_px_per_slice)
+    encode = () if p.jpeg_quality is None else (cv2.IMWRITE_JPEG_QUALITY, p.jpeg_quality)
 
     with atomic_output_dir(out, kind="synthetic stack", overwrite=overwrite,
                            expected_bytes=p.height_px * p.width_px * (3 * p.n_slices + 40)
@@ -379,32 +280,26 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
             i0 = u.astype(np.intp)
             f = (u - i0).astype(np.float32)[..., None]
             img = ladder[i0, rows, cols] * (1 - f) + ladder[i0 + 1, rows, cols] * f
+            if p.drift_px_per_slice > 0:
+                img = shift_image(img, *drift[k])
             img = apply_sensor(img, p, rng_noise)
             code = srgb_encode(img, dtype=dtype)
-            write_image(tmp / names[k], code)
+            write_image(tmp / names[k], code, params=encode)
             if progress is not None:
                 progress(k + 1, p.n_slices)
         t_slices = time.perf_counter() - t0 - t_scene
         truth = tmp / "truth"
-        np.save(truth / "height_um.npy", scene.height_um)
-        np.save(truth / "tilt_deg.npy", scene.tilt_deg)
-        np.save(truth / "azimuth_deg.npy", scene.azimuth_deg)
-        np.save(truth / "thickness_nm.npy", scene.thickness_nm)
-        np.save(truth / "visible.npy", scene.visible)
-        np.save(truth / "clipped.npy", clipped)
-        np.save(truth / "region_id.npy", scene.region_id)
-        np.save(truth / "groove.npy", scene.groove)
+        arrays = {"height_um": scene.height_um, "tilt_deg": scene.tilt_deg,
+                  "azimuth_deg": scene.azimuth_deg, "thickness_nm": scene.thickness_nm,
+                  "visible": scene.visible, "clipped": clipped, "region_id": scene.region_id,
+                  "groove": scene.groove, "facet_id": scene.facet_id, "feature": scene.feature}
+        for name in TRUTH_ARRAYS:
+            np.save(truth / f"{name}.npy", arrays[name])
         sharp = srgb_encode(np.clip(scene.linear_rgb, 0, 1), dtype=np.uint8)
         write_image(truth / "all_in_focus.png", sharp)
-        truth_meta = {
-            "format": "microfacet-synth-truth/1",
-            "params": p.to_json(),
-            "z_um": [float(v) for v in z],
-            "regions": [{"thickness_nm": float(t), "component": int(c)}
-                        for t, c in zip(scene.region_thickness_nm, scene.region_component)],
-            "visible_fraction": float(scene.visible.mean()),
-            "clipped_fraction": float(clipped.mean()),
-        }
+        truth_meta = {"format": "microfacet-synth-truth/1", "params": p.to_json(),
+                      "z_um": [float(v) for v in z], **truth_summary(scene, p, clipped=clipped),
+                      "drift_px": drift.round(6).tolist()}
         (truth / "params.json").write_text(json.dumps(truth_meta, indent=1))
         optional = {"illumination": {"geometry": "coaxial",
                                      "numerical_aperture": p.numerical_aperture},
@@ -418,6 +313,53 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
     log.info("synthetic stack %s: %d slices %dx%d in %.2f s", out, p.n_slices, p.height_px,
              p.width_px, timings["total"])
     return SynthResult(Path(out), p, z, timings)
+
+
+def truth_summary(scene, p, *, clipped) -> dict:
+    """What ``truth/params.json`` records about a scene besides its parameters.
+
+    Keys: ``regions`` (per thickness region: ``id``, ``component``, ``thickness_nm`` drawn
+    for the region, ``mean_thickness_nm`` over its pixels, ``area_fraction``),
+    ``populations`` (the mixture components with at least one region: ``component``,
+    ``mean_nm``, ``sd_nm``, ``n_regions``, ``area_fraction`` — their weights by area —
+    and ``mean_thickness_nm``), ``lobes`` (the true tilt lobes, weights normalised),
+    ``visibility_limit_deg`` (asin(NA)/2), ``visible_fraction``, ``clipped_fraction``,
+    ``groove_fraction`` (pixels with a groove wall), ``feature_codes`` and
+    ``feature_fractions``, ``variations`` (the imaging variations switched on) and
+    ``slice_format``.
+    """
+    rid = scene.region_id.ravel()
+    nr = scene.region_thickness_nm.size
+    area = np.bincount(rid, minlength=nr).astype(np.float64)
+    mean_d = np.bincount(rid, scene.thickness_nm.ravel().astype(np.float64),
+                         minlength=nr) / np.maximum(area, 1)
+    frac = area / rid.size
+    comp = np.asarray(scene.region_component)
+    regions = [{"thickness_nm": float(t), "component": int(c), "id": i,
+                "mean_thickness_nm": float(mean_d[i]), "area_fraction": float(frac[i])}
+               for i, (t, c) in enumerate(zip(scene.region_thickness_nm, comp))]
+    pops = []
+    for k, c in enumerate(p.thickness):
+        mine = comp == k
+        if mine.any():
+            a = float(frac[mine].sum())
+            pops.append({"component": k, "mean_nm": c.mean_nm, "sd_nm": c.sd_nm,
+                         "n_regions": int(mine.sum()), "area_fraction": a,
+                         "mean_thickness_nm": float((mean_d * frac)[mine].sum() / a)})
+    wsum = sum(lb.weight for lb in p.tilt_lobes)
+    feature = scene.feature if scene.feature is not None else np.zeros(rid.size, np.uint8)
+    counts = np.bincount(feature.ravel(), minlength=len(FEATURE_CODES)) / rid.size
+    return {"regions": regions, "populations": pops,
+            "lobes": [{"weight": lb.weight / wsum, "sd_deg": lb.sd_deg} for lb in p.tilt_lobes],
+            "visibility_limit_deg": p.max_tilt_deg,
+            "visible_fraction": float(scene.visible.mean()),
+            "clipped_fraction": float(clipped.mean()),
+            "groove_fraction": float(np.mean(scene.groove > 0)),
+            "feature_codes": dict(FEATURE_CODES),
+            "feature_fractions": {n: float(counts[c]) for n, c in FEATURE_CODES.items()},
+            "variations": {k: list(v) if isinstance(v, tuple) else v
+                           for k, v in p.variations_on().items()},
+            "slice_format": p.slice_suffix[1:]}
 
 
 def apply_sensor(img, p, rng):

@@ -63,6 +63,8 @@ TABLES = {
                       ("row0", "col0", "size", "thickness_nm", "mean_delta_e", "n_pixels")),
     "thickness_pdf": ("thickness_pdf.csv", ("thickness_nm", "density", "mixture_density")),
     "ndf_pdf": ("ndf_pdf.csv", ("tilt_deg", "density", "mixture_density")),
+    "facets": ("facets.csv", ("facet", "n_pixels", "tilt_deg", "tilt_sigma_deg",
+                              "height_plane", "thickness_nm", "thickness_sigma_nm")),
 }
 
 

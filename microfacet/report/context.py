@@ -67,6 +67,16 @@ class Context:
         self.geom = Geometry(positive(self.inputs.get("pixel_size_um")))
         self.mask = res.map("mask")
 
+    def identification(self, key) -> tuple[bool, str]:
+        """``(identified, reason)`` of the ``"thickness"`` or ``"ndf"`` distribution as
+        ``summary.json`` records it (identified when the key is absent: older results)."""
+        ident = self.res.get(key, "mixture", "identified")
+        if key == "ndf" and self.res.get("ndf", "identified") is not None:
+            ident = self.res.get("ndf", "identified")
+        reason = (self.res.get(key, "reason") if key == "ndf" else None) \
+            or self.res.get(key, "mixture", "reason") or ""
+        return ident is not False, str(reason)
+
     @classmethod
     def open(cls, results_dir) -> "Context":
         """The context of the results folder ``results_dir`` (raises as :class:`Results`)."""

@@ -26,6 +26,7 @@ from .layout import (
     histogram,
     number,
     quantile_range,
+    wrap,
 )
 
 __all__ = ["NAME", "TITLE", "draw"]
@@ -46,7 +47,10 @@ def draw(pg, ctx):
     ax_t, ax_n, ax_d, ax_e = (_hist_axes(pg, c) for c in cells)
     _thickness_panel(ax_t, ctx)
     x, dens = _tilt_panel(ax_n, ctx)
-    _ndf_panel(ax_d, x, dens, ctx.ndf, hi=float(ax_n.get_xlim()[1]))
+    ndf_ok, ndf_why = ctx.identification("ndf")
+    _ndf_panel(ax_d, x, dens, ctx.ndf if ndf_ok else None, hi=float(ax_n.get_xlim()[1]))
+    if not ndf_ok:
+        _not_identified(ax_d, ndf_why)
     _delta_e_panel(ax_e, ctx)
 
 
@@ -55,11 +59,23 @@ def _hist_axes(pg, cell):
     return pg.axes(x + 0.72, y + 0.48, w - 0.72 - 0.12, h - 0.48 - 0.30)
 
 
+def _not_identified(ax, reason):
+    """The plain statement, inside the panel, that its distribution was not identified (no
+    components are drawn)."""
+    text = "NOT IDENTIFIED: the fit is not a measurement\n" + "\n".join(wrap(reason, 60))
+    ax.text(0.5, 0.55, text, ha="center", va="center", transform=ax.transAxes, fontsize=7.5,
+            color="#a00000", bbox=dict(boxstyle="round", fc="white", ec="#a00000", lw=0.8),
+            zorder=10)
+
+
 def _thickness_panel(ax, ctx):
     """Seed Fig. 18a: thickness histogram, mixture components and the ROI thicknesses."""
+    ok, why = ctx.identification("thickness")
+    mix = ctx.thick if ok else None
     csv_t = ctx.density_table("thickness_pdf")
     if csv_t is not None:
         x, dens, mixd = csv_t["thickness_nm"], csv_t["density"], csv_t["mixture_density"]
+        mixd = mixd if ok else None
         src = "thickness_pdf.csv"
     else:
         lo_hi = ctx.thick.support_nm() if ctx.thick is not None else (None, None)
@@ -74,7 +90,7 @@ def _thickness_panel(ax, ctx):
         pad = max(0.06 * (rng[1] - rng[0]), 2.0)
         rng = (max(0.0, rng[0] - pad), rng[1] + pad)
     n = _density_panel(
-        ax, x, dens, mixd, ctx.thick, src=src, unit="nm", what="oxide thickness",
+        ax, x, dens, mixd, mix, src=src, unit="nm", what="oxide thickness",
         comp_pdf=lambda m, g: m.pdf(g),
         comp_label=lambda c: f"weight {c[0]:.2f}, mean {c[1]:.1f} nm, SD {c[2]:.2f} nm",
         xrange=rng or (0.0, 1.0))
@@ -87,6 +103,8 @@ def _thickness_panel(ax, ctx):
         n += 1
     _legend_room(ax, n, top=_clip_top(ax, x, dens, _curves(ax, x)))
     _legend(ax, x, dens)
+    if not ok:
+        _not_identified(ax, why)
     ax.set_title("oxide thickness distribution (seed Fig. 18a)")
 
 
@@ -96,9 +114,12 @@ def _tilt_panel(ax, ctx):
     mt = ctx.max_tilt()
     hi = mt or (float(min(89.0, 4.0 * ctx.ndf.sds_deg.max())) if ctx.ndf is not None
                 else 30.0)
+    ok, why = ctx.identification("ndf")
+    mix = ctx.ndf if ok else None
     csv_n = ctx.density_table("ndf_pdf")
     if csv_n is not None:
         x, dens, mixd = csv_n["tilt_deg"], csv_n["density"], csv_n["mixture_density"]
+        mixd = mixd if ok else None
         src = "ndf_pdf.csv"
     else:
         h = histogram(finite(ctx.res.map("tilt_deg"), ctx.mask), 0.0, hi, bins=60)
@@ -106,7 +127,7 @@ def _tilt_panel(ax, ctx):
         mixd, src = None, "tilt_deg.npy"
     top = float(cell_edges(x)[1][-1]) if x is not None else hi
     n = _density_panel(
-        ax, x, dens, mixd, ctx.ndf, src=src, unit="°", what="facet tilt from optical axis",
+        ax, x, dens, mixd, mix, src=src, unit="°", what="facet tilt from optical axis",
         comp_pdf=lambda m, g: m.tilt_pdf(g),
         comp_label=lambda c: (f"weight {c[0]:.2f}, slope SD {c[1]:.2f}° "
                               f"(tan {math.tan(math.radians(c[1])):.3f})"),
@@ -124,6 +145,8 @@ def _tilt_panel(ax, ctx):
         n += 1
     _legend_room(ax, n, top=_clip_top(ax, x, dens, _curves(ax, x)))
     _legend(ax, x, dens)
+    if not ok:
+        _not_identified(ax, why)
     ax.set_title("facet tilt distribution, per pixel (seed Fig. 19)")
     return x, dens
 

@@ -136,11 +136,18 @@ def _fit_note(res, key, mix):
     if ns is not None:
         parts.append(f"{ns:.0f} pixels" + (f", {ne:.0f} effective samples"
                                            if ne is not None else ""))
+    margin = number(res.get(key, "mixture", "bic_margin"))
+    if margin is not None:
+        parts.append(f"BIC margin {margin:.1f}")
     d = res.get(key, "mixture", "degenerate")
     if d is True:
         parts.append("degenerate fit")
     elif isinstance(d, str) and d:
         parts.append(d)
+    ident = res.get(key, "mixture", "identified")
+    if ident is False:
+        parts.insert(0, "NOT IDENTIFIED, not a measurement: "
+                     + str(res.get(key, "mixture", "reason") or ""))
     return "; ".join(parts)
 
 

@@ -358,7 +358,11 @@ def test_identical_slices_give_no_height_and_colour_only_tilts(sd, tmp_path, cap
     assert s["height"]["unreliable_fraction"] == 1.0
     assert np.isnan(np.load(tmp_path / "res" / "height_um.npy")).all()
     assert np.isnan(np.load(tmp_path / "res" / "normals.npy")).all()
-    assert s["ndf"]["mixture"]["components"] and s["thickness"]["mixture"]["components"]
+    # no height: the NDF is fitted for inspection but not identified, and says why
+    assert s["thickness"]["mixture"]["components"] and s["thickness"]["mixture"]["identified"]
+    assert s["ndf"]["identified"] is False and s["ndf"]["mixture"]["identified"] is False
+    assert "height from focus gives a plane on 0 of" in s["ndf"]["reason"]
+    assert any(w.startswith("NDF not identified") for w in s["warnings"])
 
 
 def test_peak_fit_of_a_flat_focus_curve_has_no_maximum():
@@ -386,8 +390,10 @@ def test_heavy_noise_gives_a_finite_result_that_reports_its_unreliability(sd, cl
     assert s["colour_noise_de"] > 10 * c["colour_noise_de"]
     assert s["height"]["unreliable_fraction"] > c["height"]["unreliable_fraction"] + 0.2
     assert s["delta_e"]["mean"] > 5 * c["delta_e"]["mean"]
-    assert (s["tilt_information"]["tilt_sigma_deg_median"]
-            > c["tilt_information"]["tilt_sigma_deg_median"])
+    # fewer facets get a tilt from the height map, and the NDF says whether it is measured
+    assert (s["facets"]["height_plane_area_fraction"]
+            < c["facets"]["height_plane_area_fraction"])
+    assert s["ndf"]["identified"] is False and s["ndf"]["reason"]
     ok = ~r.mask.mask
     for name in ("thickness_nm", "tilt_deg", "tilt_sigma_deg", "delta_e"):
         a = getattr(r, name)
@@ -529,8 +535,9 @@ def test_facet_planes_ignore_non_finite_heights():
     h[:, 10:] = np.where(rows[:, 10:] % 2 == 0, np.inf, np.nan)  # segment 1: no finite height
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        ff = fit_facet_planes(labels, h, np.ones_like(h), pixel_size_um=0.5,
-                              fallback_tilt_deg=np.full(h.shape, 7.0))
+        ff = fit_facet_planes(labels, h, height_sigma_um=np.full(h.shape, 0.01),
+                              reliable=np.isfinite(h), pixel_size_um=0.5)
     assert ff.fitted.tolist() == [True, False]
-    assert ff.tilt_deg[0] == pytest.approx(math.degrees(math.atan(0.1)), abs=1e-9)
-    assert ff.tilt_deg[1] == pytest.approx(7.0) and np.isfinite(ff.tilt_sigma_deg).all()
+    assert ff.tilt_deg[0] == pytest.approx(math.degrees(math.atan(0.1)), abs=1e-6)
+    # no height, no guess: the unfitted facet has no tilt
+    assert np.isnan(ff.tilt_deg[1]) and np.isfinite(ff.tilt_sigma_deg[0])

@@ -18,7 +18,8 @@ def test_each_reason_is_detected_and_named():
     assert m.shadow[10, 10] and not m.low_saturation[10, 10]
     assert m.mask.sum() == 5
     assert m.fraction == pytest.approx(5 / 400)
-    assert set(m.fractions()) == {"low_saturation", "dark", "clipped", "invalid", "shadow", "any"}
+    assert set(m.fractions()) == {"low_saturation", "dark", "clipped", "invalid", "shadow",
+                                   "steep", "any"}
 
 
 def test_saturation_threshold_is_on_the_0_255_scale():

@@ -69,3 +69,165 @@ def test_ndf_group(tilt_samples):
 def test_ndf_errors(bad, match):
     with pytest.raises(ValueError, match=match):
         fit_ndf_mixture(bad)
+
+
+# ------------------------------------------------------------------ added: deconvolution,
+# censoring, closed-form references, weights, width_relative_error
+
+from microfacet.analysis.ndf_fit import width_relative_error  # noqa: E402
+
+NA_LIMIT_DEG = math.degrees(math.asin(0.8)) / 2.0     # 26.57°: coaxial acceptance at NA 0.8
+
+
+def _measured_tilts(rng, sd_deg, n, noise=None):
+    """True slopes N(0, s² I), s = tan(sd_deg), plus slope noise N(0, noise_i² I)."""
+    s = math.tan(math.radians(sd_deg))
+    m = rng.normal(0.0, s, (2, n))
+    if noise is not None:
+        m = m + rng.normal(0.0, 1.0, (2, n)) * noise
+    return np.degrees(np.arctan(np.hypot(m[0], m[1])))
+
+
+def _sd_deg_se(sd_deg, v, a=None):
+    """1-σ error (deg) of a lobe's sd_deg from the Fisher information of s² in the
+    deconvolved Rayleigh model: I = Σ a_i / V_i², V_i = s² + v_i (independent of the code)."""
+    s2 = math.tan(math.radians(sd_deg)) ** 2
+    a = np.ones_like(v) if a is None else a
+    se_s = 1.0 / (2.0 * math.sqrt(s2) * math.sqrt(np.sum(a / (s2 + v) ** 2)))
+    return math.degrees(se_s / (1.0 + s2))            # d atan(s) / ds = 1 / (1 + s²)
+
+
+@pytest.mark.parametrize("sd_deg", [5.0, 10.0])
+def test_ndf_deconvolves_heteroscedastic_slope_noise(sd_deg):
+    rng = np.random.default_rng(30)
+    n = 4000
+    noise = rng.uniform(0.03, 0.12, n)          # per-axis slope noise, comparable to tan 5°
+    tilt = _measured_tilts(rng, sd_deg, n, noise)
+    fit = fit_ndf_mixture(tilt, slope_sigma=noise, max_components=3)
+    se = _sd_deg_se(sd_deg, noise ** 2)
+    naive = fit_ndf_mixture(tilt, max_components=1).mixture.sds_deg[0]
+    # what no deconvolution gives: atan sqrt(s² + mean σ²); the test tells it from sd_deg
+    convolved = math.degrees(math.atan(math.sqrt(math.tan(math.radians(sd_deg)) ** 2
+                                                 + np.mean(noise ** 2))))
+    assert convolved - sd_deg > 8 * se and naive - sd_deg > 8 * se
+    assert fit.n_components == 1
+    assert abs(fit.mixture.sds_deg[0] - sd_deg) < 4 * se
+
+
+def test_ndf_single_lobe_is_the_closed_form_mle():
+    # K = 1, exact slopes, weights: s² = Σ a m² / (2 Σ a) (Rayleigh MLE)
+    rng = np.random.default_rng(31)
+    tilt = _measured_tilts(rng, 7.0, 800)
+    a = rng.uniform(0.5, 2.0, 800)
+    fit = fit_ndf_mixture(tilt, weights=a, max_components=1)
+    m2 = np.tan(np.radians(tilt)) ** 2
+    s2 = np.sum(a * m2) / (2.0 * np.sum(a))
+    assert fit.mixture.sds_deg[0] == pytest.approx(math.degrees(math.atan(math.sqrt(s2))),
+                                                   abs=1e-3)
+
+
+def test_ndf_censoring_recovers_a_wide_lobe():
+    # a 22° lobe seen through NA 0.8: 46 % of the facets are past 26.6° (dark, unmeasured)
+    rng = np.random.default_rng(32)
+    n = 5000
+    tilt = _measured_tilts(rng, 22.0, n)
+    seen = tilt <= NA_LIMIT_DEG
+    n_obs, c = int(seen.sum()), float(n - seen.sum())
+    L2 = math.tan(math.radians(NA_LIMIT_DEG)) ** 2
+    assert c / n == pytest.approx(math.exp(-L2 / (2 * math.tan(math.radians(22.0)) ** 2)),
+                                  abs=0.03)
+    fit = fit_ndf_mixture(tilt[seen], censored_weight=c, censor_tilt_deg=NA_LIMIT_DEG,
+                          max_components=3)
+    dropped = fit_ndf_mixture(tilt[seen], max_components=3)
+    # censored exponential law of m² (mean 2s²): I(2s²) = n_obs / (2s²)², so the relative
+    # error of s is 1 / (2 sqrt(n_obs)): 0.19° here
+    s = math.tan(math.radians(22.0))
+    se = math.degrees(s / (2.0 * math.sqrt(n_obs)) / (1.0 + s * s))
+    assert fit.n_components == 1
+    assert abs(fit.mixture.sds_deg[0] - 22.0) < 4 * se
+    assert fit.info["censored_fraction"] == pytest.approx(c / n)
+    assert fit.n_effective == pytest.approx(n)          # censored weight counted in proportion
+    # dropped instead of censored: clearly narrower (docs: "a 22° lobe read as 12.5°")
+    assert dropped.mixture.rms_sd_deg < 22.0 - 5.0
+    # against the closed-form censored MLE of one lobe: s² = (Σ m² + C L²) / (2 n_obs)
+    one = fit_ndf_mixture(tilt[seen], censored_weight=c, censor_tilt_deg=NA_LIMIT_DEG,
+                          max_components=1)
+    m2 = np.tan(np.radians(tilt[seen])) ** 2
+    s2 = (m2.sum() + c * L2) / (2.0 * n_obs)
+    assert one.mixture.sds_deg[0] == pytest.approx(math.degrees(math.atan(math.sqrt(s2))),
+                                                   abs=0.01)
+
+
+def test_ndf_censored_weight_in_weight_units():
+    # the censored weight is an area, in the units of ``weights``: doubling both is the same
+    rng = np.random.default_rng(33)
+    tilt = _measured_tilts(rng, 20.0, 2000)
+    seen = tilt <= NA_LIMIT_DEG
+    c = float((~seen).sum())
+    a = fit_ndf_mixture(tilt[seen], censored_weight=c, censor_tilt_deg=NA_LIMIT_DEG,
+                        n_effective=500, max_components=1)
+    b = fit_ndf_mixture(tilt[seen], weights=np.full(int(seen.sum()), 2.0),
+                        censored_weight=2 * c, censor_tilt_deg=NA_LIMIT_DEG, n_effective=500,
+                        max_components=1)
+    assert a.mixture.sds_deg[0] == pytest.approx(b.mixture.sds_deg[0], abs=1e-6)
+    assert a.info["censored_fraction"] == pytest.approx(b.info["censored_fraction"])
+
+
+def test_ndf_integer_weights_equal_repeated_samples(tilt_samples):
+    rng = np.random.default_rng(34)
+    tilt = tilt_samples(rng, [(0.6, 3.0), (0.4, 10.0)], 600)
+    noise = rng.uniform(0.005, 0.02, 600)
+    w = rng.integers(1, 5, 600)
+    kw = dict(n_effective=150, max_components=3)
+    a = fit_ndf_mixture(tilt, slope_sigma=noise, weights=w, **kw)
+    b = fit_ndf_mixture(np.repeat(tilt, w), slope_sigma=np.repeat(noise, w), **kw)
+    assert a.n_components == b.n_components
+    np.testing.assert_allclose(np.array(a.mixture.components), np.array(b.mixture.components),
+                               rtol=1e-6)
+    for k in a.bic_by_k:
+        assert a.bic_by_k[k] == pytest.approx(b.bic_by_k[k], rel=1e-8)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_ndf_single_lobe_of_facets_gets_one_lobe(seed):
+    rng = np.random.default_rng(40 + seed)
+    noise = rng.uniform(0.01, 0.05, 300)
+    fit = fit_ndf_mixture(_measured_tilts(rng, 8.0, 300, noise), slope_sigma=noise,
+                          max_components=4)
+    assert fit.n_components == 1
+    assert abs(fit.mixture.sds_deg[0] - 8.0) < 4 * _sd_deg_se(8.0, noise ** 2)
+
+
+def test_width_relative_error_closed_forms():
+    rng = np.random.default_rng(35)
+    tilt = _measured_tilts(rng, 6.0, 400)
+    # exact slopes: 1 / (2 sqrt(n_eff)) whatever the tilts
+    for n_eff in (25.0, 100.0, 400.0):
+        assert width_relative_error(tilt, 0.0, 1.0, n_eff) == pytest.approx(
+            0.5 / math.sqrt(n_eff), rel=1e-6)
+    # one noise σ for all: the MLE is V = Σ m² / (2n), s² = V − σ², error V / (2 s² √n)
+    sigma = 0.04
+    noisy = _measured_tilts(rng, 6.0, 400, np.full(400, sigma))
+    V = np.mean(np.tan(np.radians(noisy)) ** 2) / 2.0
+    expected = V / (2.0 * (V - sigma ** 2) * math.sqrt(400))
+    assert width_relative_error(noisy, sigma, 1.0, 400) == pytest.approx(expected, rel=2e-3)
+    # heteroscedastic: the Fisher error at the true width, within the sampling spread
+    noise = rng.uniform(0.03, 0.12, 4000)
+    het = _measured_tilts(rng, 5.0, 4000, noise)
+    s = math.tan(math.radians(5.0))
+    ref = 1.0 / (2.0 * s * s * math.sqrt(np.sum(1.0 / (s * s + noise ** 2) ** 2)))
+    assert width_relative_error(het, noise, 1.0, 4000) == pytest.approx(ref, rel=0.1)
+    # NaN and zero-weight samples are left out; fewer than two: infinite
+    assert width_relative_error([5.0, np.nan], 0.0, 1.0, 10) == math.inf
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"censored_weight": 10.0}, "censor_tilt_deg"),
+    ({"censored_weight": 10.0, "censor_tilt_deg": 95.0}, "censor_tilt_deg"),
+    ({"censored_weight": -1.0, "censor_tilt_deg": 20.0}, "censored_weight"),
+    ({"slope_sigma": [0.1, -0.1, 0.1]}, "slope_sigma"),
+    ({"sd_floor_deg": 0.0}, "sd_floor_deg"),
+])
+def test_ndf_option_errors(kw, match):
+    with pytest.raises(ValueError, match=match):
+        fit_ndf_mixture([1.0, 2.0, 3.0], **kw)

@@ -127,11 +127,13 @@ def test_reliability_rejects_textureless_region(render_stack):
     for op in ("tenengrad", "sml", "glv"):
         res = height_from_focus(imgs, z_um=z, operator=op)
         thr = DEFAULT_MIN_RELIABILITY_DB[op]
+        # the coarse 15-px window reaches ~2.5 σ = 11 px into the flat half (there it
+        # legitimately carries the height of the textured neighbours)
         rel_tex = res.reliability_db[8:-8, 8:W // 2 - 8]
-        rel_flat = res.reliability_db[8:-8, W // 2 + 8:-8]
+        rel_flat = res.reliability_db[8:-8, W // 2 + 12:-8]
         assert np.mean(rel_tex >= thr) > 0.98, op
         assert np.mean(rel_flat < thr) > 0.98, op
-        assert np.isnan(res.height_um[8:-8, W // 2 + 8:-8]).mean() > 0.98
+        assert np.isnan(res.height_um[8:-8, W // 2 + 12:-8]).mean() > 0.98
         filled = height_from_focus(imgs, z_um=z, operator=op, fill=True)
         assert np.isfinite(filled.height_um).all()
         ok = res.reliable

@@ -1,8 +1,14 @@
 """The synthetic scene (microfacet.forward.scene): thickness regions follow the mixture,
-facet tilts the lobes and the acceptance angle."""
+facet tilts the lobes and the acceptance angle; each imaging variation changes what it
+should and nothing else."""
+
+import dataclasses
 
 import numpy as np
+import pytest
 
+from microfacet.forward.imaging import pupil_fraction
+from microfacet.forward.relief import FEATURE_CODES
 from microfacet.forward.scene import render_scene
 from microfacet.forward.synth import preset
 
@@ -18,3 +24,200 @@ def test_thickness_regions_follow_the_mixture_and_tilts_the_lobes():
     # The steepest visible facets are below the NA limit; beyond it pixels are marked dark.
     assert s.tilt_deg[s.visible].max() <= p.max_tilt_deg
     assert not s.visible[s.tilt_deg > p.max_tilt_deg].any()
+
+
+# ----------------------------------------------- each variation changes what it should, only
+
+FIELDS = ("height_um", "tilt_deg", "azimuth_deg", "thickness_nm", "visible", "facet_id",
+          "region_id", "region_thickness_nm", "region_component", "groove", "linear_rgb",
+          "feature", "dust")
+SURFACE = {"height_um", "tilt_deg", "azimuth_deg", "visible"}
+
+# variation -> (fields that must change, fields that may change as a consequence)
+CASES = {
+    "groove_wall_deg": (0.0, {"groove", "linear_rgb"}, set()),
+    "facet_aspect": (3.0, {"height_um", "tilt_deg", "facet_id", "groove", "linear_rgb"},
+                     SURFACE),
+    "facet_size_spread": (0.6, {"height_um", "tilt_deg", "facet_id", "groove", "linear_rgb"},
+                          SURFACE),
+    "facet_dome_deg": (6.0, {"height_um", "tilt_deg", "azimuth_deg", "linear_rgb"},
+                       SURFACE | {"groove"}),
+    "terrace_step_um": (1.0, {"height_um", "groove", "linear_rgb"}, set()),
+    "pit_density_per_mm2": (4000.0, {"height_um", "tilt_deg", "feature", "linear_rgb"},
+                            SURFACE),
+    "scratch_density_per_mm2": (3000.0, {"height_um", "tilt_deg", "feature", "linear_rgb"},
+                                SURFACE),
+    "dust_density_per_mm2": (6000.0, {"dust", "feature", "linear_rgb"}, set()),
+    "illumination_fill": (0.8, {"linear_rgb"}, set()),
+    "vignetting_corner_loss": (0.4, {"linear_rgb"}, set()),
+    "white_balance_gains": ((1.1, 1.0, 0.9), {"linear_rgb"}, set()),
+    "film": ("TiO2_Jolivet2023_anatase", {"linear_rgb"}, set()),
+}
+
+
+def _same(a, b):
+    return a.shape == b.shape and np.array_equal(a, b)
+
+
+@pytest.fixture(scope="module")
+def base_scene():
+    return render_scene(preset("nd", seed=3, height_px=128, width_px=128))
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_a_variation_changes_what_it_should_and_nothing_else(base_scene, name):
+    value, must, may = CASES[name]
+    s = render_scene(preset("nd", seed=3, height_px=128, width_px=128, **{name: value}))
+    changed = {f for f in FIELDS if not _same(getattr(base_scene, f), getattr(s, f))}
+    assert must <= changed, must - changed
+    assert changed <= must | may, changed - must - may
+
+
+def _pair(**kw):
+    base = preset("nd", seed=6, height_px=128, width_px=128)
+    return render_scene(base), render_scene(dataclasses.replace(base, **kw)), base
+
+
+def test_vignetting_darkens_the_corners_by_the_given_factor():
+    a, b, _ = _pair(vignetting_corner_loss=0.35)
+    ratio = b.linear_rgb / a.linear_rgb
+    assert ratio[0, 0] == pytest.approx([0.65] * 3, rel=1e-5)
+    assert ratio[-1, -1] == pytest.approx([0.65] * 3, rel=1e-5)
+    assert ratio[63:65, 63:65].min() > 0.999
+    diag = ratio[np.arange(64), np.arange(64), 0]   # corner to centre: monotone
+    assert np.all(np.diff(diag) > 0)
+
+
+def test_white_balance_scales_each_channel():
+    a, b, _ = _pair(white_balance_gains=(1.2, 1.0, 0.8))
+    np.testing.assert_allclose(b.linear_rgb / a.linear_rgb,
+                               np.broadcast_to([1.2, 1.0, 0.8], a.linear_rgb.shape), rtol=1e-5)
+
+
+def test_tilt_dependent_brightness_scales_the_film_colour_by_the_pupil_fraction():
+    a, b, p = _pair(illumination_fill=1.0)
+    f = pupil_fraction(a.tilt_deg, numerical_aperture=p.numerical_aperture, fill=1.0)
+    ok = a.visible & (a.groove == 0)
+    dark = p.dark_level * p.exposure
+    expect = f[..., None] * a.linear_rgb + (1 - f[..., None]) * dark
+    np.testing.assert_allclose(b.linear_rgb[ok], expect[ok], rtol=2e-3, atol=1e-4)
+    # steeper facets are darker
+    g = b.linear_rgb[ok].sum(axis=1) / a.linear_rgb[ok].sum(axis=1)
+    order = np.argsort(a.tilt_deg[ok])
+    assert np.corrcoef(a.tilt_deg[ok][order], g[order])[0, 1] < -0.9
+
+
+def test_pits_are_in_the_height_truth_with_dark_walls_and_a_visible_floor():
+    a, b, p = _pair(pit_density_per_mm2=5000.0, pit_radius_um=2.5)
+    pit = b.feature == FEATURE_CODES["pit"]
+    assert 0.02 < pit.mean() < 0.5
+    assert np.all(b.height_um[pit] < a.height_um[pit])
+    np.testing.assert_array_equal(b.height_um[~pit], a.height_um[~pit])
+    wall = pit & (b.tilt_deg > p.max_tilt_deg)
+    assert wall.sum() > 50
+    dark = p.dark_level * p.exposure
+    assert np.allclose(b.linear_rgb[wall], dark * (1 - a.groove[wall, None])
+                       + a.groove[wall, None] * dark)
+    # the floor keeps the facet's tilt and so its colour
+    floor = pit & (np.abs(b.tilt_deg - a.tilt_deg) < 1e-4)
+    assert floor.sum() > 50
+    np.testing.assert_array_equal(b.linear_rgb[floor], a.linear_rgb[floor])
+    # depth: (R/2) tan(wall) with R log-normal around 2.5 um
+    depth = (a.height_um - b.height_um)[pit].max()
+    assert 0.5 < depth < 6.0
+
+
+def test_scratches_follow_the_rolling_direction_and_have_dark_walls():
+    a, b, p = _pair(scratch_density_per_mm2=4000.0, scratch_spread_deg=0.0,
+                    rolling_direction_deg=30.0, scratch_length_um=60.0)
+    s = b.feature == FEATURE_CODES["scratch"]
+    assert 0.02 < s.mean() < 0.6
+    assert np.all(b.height_um[s] < a.height_um[s])
+    wall = s & (b.tilt_deg > p.max_tilt_deg)
+    assert wall.mean() > 0.5 * s.mean()
+    assert b.linear_rgb[wall].max() <= p.dark_level * p.exposure + 1e-6
+    # the trenches run along the rolling direction (x toward y): the carved depth slopes
+    # across it
+    gy = np.gradient(b.height_um - a.height_um, axis=0)[s]
+    gx = np.gradient(b.height_um - a.height_um, axis=1)[s]
+    across = np.rad2deg(np.arctan2(np.median(np.abs(gy)), np.median(np.abs(gx))))
+    assert across == pytest.approx(90 - 30, abs=8)
+
+
+def test_dust_is_grey_on_top_and_not_in_the_height():
+    a, b, p = _pair(dust_density_per_mm2=8000.0, dust_radius_um=1.5)
+    d = b.dust == 1.0
+    assert d.sum() > 100
+    rgb = b.linear_rgb[d]
+    np.testing.assert_allclose(rgb[:, 0], rgb[:, 1], rtol=1e-5)
+    np.testing.assert_allclose(rgb[:, 2], rgb[:, 1], rtol=1e-5)
+    assert rgb.min() > 0.019 and rgb.max() < 0.91
+    np.testing.assert_array_equal(a.height_um, b.height_um)
+    np.testing.assert_array_equal(a.thickness_nm, b.thickness_nm)
+
+
+def _cell_moments(labels):
+    """Per-cell pixel count and coordinate covariance (vectorised with bincount)."""
+    yy, xx = np.indices(labels.shape)
+    lab = labels.ravel()
+    n = np.bincount(lab).astype(float)
+    m = {}
+    for k, v in (("y", yy.ravel()), ("x", xx.ravel())):
+        m[k] = np.bincount(lab, v) / np.maximum(n, 1)
+    cyy = np.bincount(lab, (yy.ravel() - m["y"][lab]) ** 2) / np.maximum(n, 1)
+    cxx = np.bincount(lab, (xx.ravel() - m["x"][lab]) ** 2) / np.maximum(n, 1)
+    cxy = np.bincount(lab, (yy.ravel() - m["y"][lab]) * (xx.ravel() - m["x"][lab])) \
+        / np.maximum(n, 1)
+    return n, cyy, cxx, cxy
+
+
+@pytest.mark.parametrize("angle", [0.0, 60.0])
+def test_elongated_facets_are_longer_along_the_rolling_direction(angle):
+    _, b, _ = _pair(facet_aspect=3.0, rolling_direction_deg=angle)
+    n, cyy, cxx, cxy = _cell_moments(b.facet_id)
+    big = n > 30
+    cov = np.array([[cxx[big].mean(), cxy[big].mean()], [cxy[big].mean(), cyy[big].mean()]])
+    w, v = np.linalg.eigh(cov)
+    main = np.rad2deg(np.arctan2(v[1, 1], v[0, 1])) % 180
+    assert min(abs(main - angle), 180 - abs(main - angle)) < 8
+    assert np.sqrt(w[1] / w[0]) > 2.0
+    a, _, _ = _pair()
+    n0, cyy0, cxx0, cxy0 = _cell_moments(a.facet_id)
+    w0 = np.linalg.eigvalsh([[cxx0[n0 > 30].mean(), cxy0[n0 > 30].mean()],
+                             [cxy0[n0 > 30].mean(), cyy0[n0 > 30].mean()]])
+    assert np.sqrt(w0[1] / w0[0]) < 1.3
+
+
+def test_size_spread_widens_the_facet_size_distribution():
+    a, b, _ = _pair(facet_size_spread=0.7)
+    na, nb = np.bincount(a.facet_id.ravel()), np.bincount(b.facet_id.ravel())
+    cv_a, cv_b = na.std() / na.mean(), nb.std() / nb.mean()
+    assert cv_b > 1.5 * cv_a
+
+
+def test_rounded_facets_vary_in_tilt_inside_a_facet():
+    a, b, _ = _pair(facet_dome_deg=6.0)
+    n = np.bincount(a.facet_id.ravel())
+
+    def spread(s):
+        lab = s.facet_id.ravel()
+        t = s.tilt_deg.ravel().astype(float)
+        m = np.bincount(lab, t) / n
+        return np.sqrt(np.bincount(lab, (t - m[lab]) ** 2) / n)[n > 30]
+
+    assert np.all(spread(a) < 1e-3)
+    assert np.median(spread(b)) > 1.5
+    np.testing.assert_array_equal(a.facet_id, b.facet_id)
+
+
+def test_terraces_raise_whole_facets_by_whole_steps():
+    a, b, _ = _pair(terrace_step_um=0.8, terrace_size_um=12.0)
+    steps = (b.height_um - a.height_um) / 0.8
+    np.testing.assert_allclose(steps, np.round(steps), atol=1e-4)
+    assert set(np.unique(np.round(steps))) == {0.0, 1.0, 2.0}
+    np.testing.assert_array_equal(a.tilt_deg, b.tilt_deg)
+    lab = a.facet_id.ravel()
+    per = np.round(steps).ravel()
+    assert np.all(np.bincount(lab, per) == per[np.unique(lab, return_index=True)[1]]
+                  * np.bincount(lab))           # one level per facet
+    assert b.groove.sum() > a.groove.sum()      # the terrace edges are dark walls

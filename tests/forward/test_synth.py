@@ -19,6 +19,7 @@ from microfacet.forward.synth import (
     preset,
     slice_positions_um,
 )
+from microfacet.forward.synth_params import IMAGING_VARIATIONS, SynthParams
 from microfacet.io.stack import read_stack
 
 FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "stacks" / "nd-fixture"
@@ -163,9 +164,14 @@ def test_bundled_fixture_is_what_its_recorded_parameters_generate(tmp_path):
     rec = meta["params"]
     p = preset(rec["preset"], seed=rec["seed"], height_px=rec["height_px"],
                width_px=rec["width_px"], n_slices=rec["n_slices"])
-    assert json.loads(json.dumps(p.to_json())) == rec     # nothing else was changed
+    now = json.loads(json.dumps(p.to_json()))
+    assert {k: now[k] for k in rec} == rec                # nothing else was changed
+    assert set(now) - set(rec) <= set(IMAGING_VARIATIONS)  # added later: the variations, off
+    assert p.variations_on() == {}
     generate_stack(tmp_path / "again", p)
-    assert _layout(tmp_path / "again") == _layout(FIXTURE)
+    again, bundled = _layout(tmp_path / "again"), _layout(FIXTURE)
+    assert {k: again[k] for k in bundled} == bundled
+    assert set(again) - set(bundled) == {"truth/facet_id.npy", "truth/feature.npy"}
     bundled = json.loads((FIXTURE / "stack.json").read_text())
     again = json.loads((tmp_path / "again" / "stack.json").read_text())
     z_bundled, z_again = bundled.pop("z_um"), again.pop("z_um")
@@ -211,3 +217,131 @@ def test_bundled_fixture_truth_agrees_with_its_images():
     assert region.max() + 1 == regions.size
     for r in np.unique(region):
         assert abs(np.median(d[region == r]) - regions[r]) < 1.0, r
+
+
+def test_default_variations_regenerate_the_bundled_fixture_truth(tmp_path):
+    """With every variation off, the generator reproduces the fixture's truth (arrays to
+    float rounding, regions and components exactly, the sharp image within one code)."""
+    rec = json.loads((FIXTURE / "truth" / "params.json").read_text())["params"]
+    p = preset(rec["preset"], seed=rec["seed"], height_px=rec["height_px"],
+               width_px=rec["width_px"], n_slices=2)
+    generate_stack(tmp_path / "s", p)
+    t, f = tmp_path / "s" / "truth", FIXTURE / "truth"
+    for name in ("region_id", "visible", "clipped"):
+        np.testing.assert_array_equal(np.load(t / f"{name}.npy"), np.load(f / f"{name}.npy"))
+    for name in ("height_um", "tilt_deg", "azimuth_deg", "thickness_nm", "groove"):
+        np.testing.assert_allclose(np.load(t / f"{name}.npy"), np.load(f / f"{name}.npy"),
+                                   rtol=0, atol=1e-4, err_msg=name)
+    a = cv2.imread(str(t / "all_in_focus.png")).astype(int)
+    b = cv2.imread(str(f / "all_in_focus.png")).astype(int)
+    assert np.abs(a - b).max() <= 1
+
+
+def test_variations_at_their_off_values_give_the_same_bytes(tmp_path):
+    """Every variation set explicitly to its default (off) value: the same stack, byte for
+    byte; and a zero-strength variation is the same as off."""
+    kw = dict(seed=7, height_px=48, width_px=56, n_slices=3)
+    defaults = {f.name: f.default for f in SynthParams.__dataclass_fields__.values()
+                if f.name in IMAGING_VARIATIONS}
+    generate_stack(tmp_path / "a", preset("nd", **kw))
+    generate_stack(tmp_path / "b", preset("nd", **kw, **defaults))
+    generate_stack(tmp_path / "c", preset("nd", **kw, pit_radius_um=3.0, scratch_wall_deg=70.0,
+                                          dust_radius_um=2.0, terrace_size_um=9.0,
+                                          rolling_direction_deg=33.0))
+    assert _digest(tmp_path / "a") == _digest(tmp_path / "b")
+    # strengths of features that are off change nothing but the recorded parameters
+    for name in ("slices/000.png", "slices/002.png", "truth/height_um.npy",
+                 "truth/all_in_focus.png"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "c" / name).read_bytes()
+
+
+def test_truth_records_populations_regions_lobes_and_limit(tmp_path):
+    p = preset("nd", seed=5, height_px=128, width_px=128, n_slices=3)
+    generate_stack(tmp_path / "s", p)
+    t = tmp_path / "s" / "truth"
+    meta = json.loads((t / "params.json").read_text())
+    region, d = np.load(t / "region_id.npy"), np.load(t / "thickness_nm.npy")
+    facet = np.load(t / "facet_id.npy")
+    assert facet.dtype == np.int32 and facet.shape == (128, 128) and facet.min() == 0
+    assert np.load(t / "feature.npy").dtype == np.uint8
+    regs = meta["regions"]
+    assert [r["id"] for r in regs] == list(range(region.max() + 1))
+    for r in regs:
+        assert r["mean_thickness_nm"] == pytest.approx(d[region == r["id"]].mean(), abs=1e-3)
+        assert r["area_fraction"] == pytest.approx(np.mean(region == r["id"]))
+    pops = meta["populations"]
+    assert sum(q["area_fraction"] for q in pops) == pytest.approx(1.0)
+    present = {r["component"] for r in regs}
+    assert {q["component"] for q in pops} == present
+    for q in pops:
+        assert q["n_regions"] == sum(r["component"] == q["component"] for r in regs)
+        assert q["mean_nm"] == p.thickness[q["component"]].mean_nm
+    assert meta["lobes"] == [{"weight": lb.weight, "sd_deg": lb.sd_deg} for lb in p.tilt_lobes]
+    assert meta["visibility_limit_deg"] == pytest.approx(p.max_tilt_deg)
+    assert meta["drift_px"] == [[0.0, 0.0]] * 3 and meta["slice_format"] == "png"
+    assert meta["variations"] == {}
+
+
+def test_truth_image_has_no_noise(tmp_path):
+    kw = dict(seed=2, height_px=64, width_px=64, n_slices=3, vignetting_corner_loss=0.3,
+              white_balance_gains=(1.1, 1.0, 0.9), dust_density_per_mm2=3000.0)
+    generate_stack(tmp_path / "noisy", preset("noisy", **kw))
+    generate_stack(tmp_path / "clean", preset("noisy", **kw, full_well_e=None, read_noise=0.0))
+    a, b = tmp_path / "noisy", tmp_path / "clean"
+    aif = "truth/all_in_focus.png"
+    assert (a / aif).read_bytes() == (b / aif).read_bytes()
+    assert (a / "slices/001.png").read_bytes() != (b / "slices/001.png").read_bytes()
+
+
+def test_jpeg_slices_decode_close_to_the_png_ones(tmp_path):
+    kw = dict(seed=3, height_px=96, width_px=96, n_slices=3, full_well_e=None, read_noise=0.0)
+    generate_stack(tmp_path / "png", preset("nd", **kw))
+    generate_stack(tmp_path / "jpg", preset("nd", **kw, jpeg_quality=90))
+    st = read_stack(tmp_path / "jpg")
+    assert st.n_slices == 3
+    meta = json.loads((tmp_path / "jpg" / "stack.json").read_text())
+    assert all(s.endswith(".jpg") for s in meta["slices"])
+    assert (tmp_path / "jpg/truth/all_in_focus.png").read_bytes() == \
+        (tmp_path / "png/truth/all_in_focus.png").read_bytes()
+    for k in range(3):
+        a = cv2.imread(str(tmp_path / f"png/slices/{k:03d}.png")).astype(float)
+        b = cv2.imread(str(tmp_path / f"jpg/slices/{k:03d}.jpg")).astype(float)
+        err = np.abs(a - b)
+        assert 0 < err.mean() < 2.0 and np.percentile(err, 99) < 12
+    with pytest.raises(ValueError, match="jpeg_quality"):
+        preset("nd", jpeg_quality=90, bit_depth=16)
+
+
+def test_drift_shifts_each_slice_by_the_recorded_offset(tmp_path):
+    """Registration (OpenCV's ECC, independent of the bicubic shift used) of slice k with
+    drift onto slice k without finds the offset recorded in truth/params.json."""
+    kw = dict(seed=4, height_px=128, width_px=128, n_slices=6, full_well_e=None,
+              read_noise=0.0, z_margin_um=0.3)
+    generate_stack(tmp_path / "still", preset("nd", **kw))
+    generate_stack(tmp_path / "drift", preset("nd", **kw, drift_px_per_slice=0.6))
+    off = np.array(json.loads((tmp_path / "drift/truth/params.json").read_text())["drift_px"])
+    assert off.shape == (6, 2) and np.allclose(off.mean(axis=0), 0, atol=1e-5)
+    assert np.abs(np.diff(off, axis=0)).max() > 0.1
+    for k in range(6):
+        a = cv2.imread(str(tmp_path / f"still/slices/{k:03d}.png"), 0).astype(np.float32)
+        b = cv2.imread(str(tmp_path / f"drift/slices/{k:03d}.png"), 0).astype(np.float32)
+        crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200, 1e-6)
+        _, w = cv2.findTransformECC(a, b, np.eye(2, 3, dtype=np.float32),
+                                    cv2.MOTION_TRANSLATION, crit, None, 1)
+        assert np.hypot(w[1, 2] - off[k, 0], w[0, 2] - off[k, 1]) < 0.15, k
+    still = np.load(tmp_path / "still/truth/height_um.npy")
+    np.testing.assert_array_equal(still, np.load(tmp_path / "drift/truth/height_um.npy"))
+
+
+def test_other_optical_constants_are_named_in_stack_json(tmp_path):
+    kw = dict(seed=1, height_px=48, width_px=48, n_slices=2)
+    generate_stack(tmp_path / "a", preset("sd", **kw))
+    generate_stack(tmp_path / "b", preset("sd", **kw, film="TiO2_Devore1951_rutile_o",
+                                          substrate="Ti_Palm2018"))
+    st = json.loads((tmp_path / "b" / "stack.json").read_text())
+    assert st["film"] == "TiO2_Devore1951_rutile_o" and st["substrate"] == "Ti_Palm2018"
+    a = cv2.imread(str(tmp_path / "a/truth/all_in_focus.png")).astype(int)
+    b = cv2.imread(str(tmp_path / "b/truth/all_in_focus.png")).astype(int)
+    assert np.abs(a - b).mean() > 3
+    with pytest.raises(ValueError, match="film"):
+        preset("sd", film="TiO2_nonexistent")

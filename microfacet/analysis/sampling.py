@@ -1,0 +1,133 @@
+"""How many independent samples a thickness map holds: its regions.
+
+Neighbouring facets of one thickness region are not independent samples of the thickness
+distribution: a region of many facets holds one draw of it. :func:`thickness_regions`
+merges neighbouring facets while their values agree (beyond their errors and the scatter
+between facets of one region); the area-weighted (Kish) number of the regions is the
+number of independent samples the mixtures' model choice counts (:mod:`.mixtures`,
+:mod:`.identification`).
+
+A spatial-autocorrelation estimate (integral area of the map's autocorrelation) was tried
+first and dropped: on the generalization sweep it gave 0.6–3× the true regions' count,
+erratically, where the region count gives 1–2× (docs/accuracy.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.lazy import load
+
+stats = load("scipy.stats")
+
+__all__ = ["Regions", "thickness_regions"]
+
+
+@dataclass
+class Regions:
+    """Patches merged into regions of one value (:func:`thickness_regions`).
+
+    Attributes
+    ----------
+    patch_region : ndarray of int, shape (S,)
+        Region of each patch (-1: the patch has no value).
+    value, sigma : ndarray, shape (R,)
+        Weighted mean value of each region and its 1-σ error.
+    area : ndarray, shape (R,)
+        Pixels per region.
+    scatter : float
+        τ: the scatter between neighbouring patches of one region beyond their errors.
+    """
+
+    patch_region: np.ndarray
+    value: np.ndarray
+    sigma: np.ndarray
+    area: np.ndarray
+    scatter: float
+
+    @property
+    def count(self) -> int:
+        return int(self.value.size)
+
+    @property
+    def effective_count(self) -> float:
+        """Area-weighted (Kish) number of regions, (Σ a)² / Σ a²: small regions split off
+        at noisy patches count for little (measured on synthetic scenes: 1–2× the true
+        regions' own Kish count, where the plain count is 3–8×)."""
+        a = self.area.astype(np.float64)
+        return float(a.sum() ** 2 / np.sum(a * a)) if a.size and a.sum() > 0 else 0.0
+
+
+def thickness_regions(labels, value, sigma, *, alpha=0.01) -> Regions:
+    """Regions the data can tell apart: neighbouring patches merged while their values agree.
+
+    Each patch (a facet: one thickness ± σ) also scatters about its region's value by τ,
+    the robust SD of the differences between neighbouring patches beyond their errors
+    (most neighbours share a region; the steps between regions are the outliers).
+    Neighbouring regions are merged, mutual best pairs first, while their means (weights
+    1/(σ² + τ²)) differ by less than chance allows (χ² with one degree of freedom,
+    ``p > alpha``). Every region is then one draw of the thickness distribution: the
+    independent samples the mixture's model choice counts.
+
+    Parameters
+    ----------
+    labels : ndarray of int, shape (H, W)
+        Patches 0..S-1.
+    value, sigma : ndarray, shape (S,)
+        Value of each patch and its 1-σ error (NaN value: the patch takes no part).
+
+    Returns
+    -------
+    Regions
+
+    Examples
+    --------
+    >>> labels = np.repeat(np.arange(6), 5)[None, :].repeat(3, 0)   # 6 patches in a row
+    >>> r = thickness_regions(labels, np.array([1.0, 1.1, 0.9, 5.0, 5.05, 4.95]),
+    ...                       np.full(6, 0.1))
+    >>> r.count, r.patch_region.tolist(), [round(float(v), 2) for v in r.value]
+    (2, [0, 0, 0, 1, 1, 1], [1.0, 5.0])
+    """
+    from .segmentation import merge_adjacent, neighbour_pairs
+
+    threshold = float(stats.chi2.isf(alpha, 1))
+    labels = np.asarray(labels)
+    S = int(labels.max()) + 1
+    val = np.asarray(value, dtype=np.float64)
+    sg = np.nan_to_num(np.asarray(sigma, dtype=np.float64), nan=np.inf)
+    ok = np.isfinite(val) & np.isfinite(sg)
+    pairs = neighbour_pairs(labels)
+    both = ok[pairs[:, 0]] & ok[pairs[:, 1]] if pairs.size else np.zeros(0, bool)
+    tau2 = 0.0
+    if both.sum() >= 10:
+        i, j = pairs[both, 0], pairs[both, 1]
+        d = val[i] - val[j]
+        mad = 1.4826 * float(np.median(np.abs(d - np.median(d))))
+        tau2 = max(0.0, mad ** 2 / 2.0 - float(np.median((sg[i] ** 2 + sg[j] ** 2) / 2.0)))
+    w = np.where(ok, 1.0 / np.maximum(sg ** 2 + tau2, 1e-12), 0.0)
+    area = np.bincount(labels.ravel(), minlength=S).astype(np.float64)
+    moments = np.stack([w, w * np.where(ok, val, 0.0), np.where(ok, area, 0.0)], axis=1)
+
+    def cost(mi, mj):
+        wi, wj = mi[:, 0], mj[:, 0]
+        good = (wi > 0) & (wj > 0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            d2 = (mi[:, 1] / wi - mj[:, 1] / wj) ** 2 / (1.0 / wi + 1.0 / wj)
+        d2 = np.where(good, d2, np.inf)
+        return good & (d2 < threshold), d2
+
+    merged, m = merge_adjacent(labels, moments, cost, max_rounds=500)
+    # the region of each patch (a patch lies in one region: take any of its pixels)
+    first = np.full(S, -1, np.int64)
+    flat_l, flat_m = labels.ravel(), merged.ravel()
+    first[flat_l] = flat_m
+    has = m[:, 0] > 0
+    index = np.full(m.shape[0], -1, np.int64)
+    index[has] = np.arange(int(has.sum()))
+    patch_region = np.where(ok & (first >= 0), index[np.maximum(first, 0)], -1)
+    mh = m[has]
+    return Regions(patch_region, mh[:, 1] / mh[:, 0], 1.0 / np.sqrt(mh[:, 0]), mh[:, 2],
+                   math.sqrt(tau2))

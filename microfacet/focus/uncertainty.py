@@ -1,0 +1,296 @@
+"""From the streamed focus curves of one window to a height, its uncertainty and a decision.
+
+For every window (:class:`~microfacet.focus.stream.PeakTracker`) :func:`fit_window` fits the
+peak (:mod:`microfacet.focus.peaks`) and tests its significance; :func:`add_relief_terms`
+adds what the fit cannot see — the window mixes the heights of its pixels (slope, curvature,
+a widened curve); :func:`combine` gives each pixel the window with the smallest uncertainty.
+
+The uncertainty of a height, in z steps (docs/height-from-focus.md for the calibration)::
+
+    σ² = σ_fit² + (κ_s·|∇h|·σ_w)² + (κ_c·|∂²h|·σ_w²)² + (κ_b·√(w² − (ρ·w_med)²)₊)² + σ_0²
+
+* ``σ_fit``: delta method on the weighted least squares, with the residual variance pooled
+  with its image-wide median among pixels of similar peak significance (empirical Bayes;
+  a residual of 2 degrees of freedom alone is too noisy);
+* ``|∇h|`` and ``|∂²h|`` (largest curvature) of the window's own height map, smoothed by the
+  window's spread ``σ_w = √(window_px²/12 + 1)`` px: a tilted window sees a range of heights
+  (random error ∝ slope·σ_w) and a curved one is biased (≈ curvature·σ_w²/2);
+* ``w``: the fitted curve's width; much wider than the image's median ``w_med`` means the
+  window holds several heights (a step);
+* ``σ_0``: the floor of the curve model.
+
+Significance: the peak excess ``F_max − μ`` over the tails' mean μ, in units of the tails'
+noise ``max(√(Σd²/6N), μ/√k)`` (``d`` second differences along z, ``k`` the Gamma shape of
+the measure of white noise), against :func:`~microfacet.focus.peaks.detection_threshold`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.lazy import load
+from .peaks import detection_threshold, fit_peak, pertuz_db
+
+cv2 = load("cv2")
+
+__all__ = ["WindowFit", "add_relief_terms", "combine", "fit_window", "window_spread_px"]
+
+
+@dataclass
+class WindowFit:
+    """Per-pixel results of one window (on its own grid until :meth:`upsampled`)."""
+
+    window_px: int
+    downsample: int
+    height_um: np.ndarray       # fitted height (z units)
+    sigma_fit: np.ndarray       # σ_fit, z steps
+    sigma: np.ndarray           # total σ, z steps (after add_relief_terms)
+    width: np.ndarray           # width of the fitted curve, z steps (inf without a peak)
+    detected: np.ndarray        # significant peak
+    significance: np.ndarray    # peak excess / detection threshold (≥ 1 where detected)
+    pertuz_db: np.ndarray | None
+
+    def upsampled(self, shape) -> WindowFit:
+        """The maps on the full grid (bilinear; a coarse pixel (i, j) is pixel (2i, 2j))."""
+        if self.downsample == 1:
+            return self
+        H, W = shape
+        m = np.array([[1.0 / self.downsample, 0, 0], [0, 1.0 / self.downsample, 0]])
+
+        def up(a, interp=cv2.INTER_LINEAR):
+            return cv2.warpAffine(np.ascontiguousarray(a), m, (W, H),
+                                  flags=interp | cv2.WARP_INVERSE_MAP,
+                                  borderMode=cv2.BORDER_REPLICATE)
+
+        finite = np.isfinite(self.sigma)
+        sig = up(np.where(finite, self.sigma, 1e6).astype(np.float32))
+        det = up(self.detected.astype(np.uint8), cv2.INTER_NEAREST).astype(bool)
+        return WindowFit(self.window_px, 1, up(self.height_um), up(self.sigma_fit),
+                         np.where(sig >= 1e5, np.inf, sig).astype(np.float32), up(self.width),
+                         det, up(self.significance),
+                         None if self.pertuz_db is None else up(self.pertuz_db))
+
+
+def window_spread_px(window_px: int) -> float:
+    """Spread (σ, px) of a window with the 3×3 operator: √(window_px²/12 + 1)."""
+    return math.sqrt(window_px * window_px / 12.0 + 1.0)
+
+
+def fit_window(tracker, zs, step, *, interpolation, shape_k, alpha, prior_dof,
+               pertuz=False, window_px=7, downsample=1) -> WindowFit:
+    """Peak fit, significance and σ_fit of every pixel of one window.
+
+    Parameters
+    ----------
+    tracker : PeakTracker
+        After :meth:`~microfacet.focus.stream.PeakTracker.finish`.
+    zs : ndarray
+        Sorted slice heights; ``step`` their median spacing (the unit of the fit).
+    interpolation : {"lorentz", "lsq", "gauss3", "none"}
+    shape_k, alpha : float
+        Gamma shape of the measure of noise and the nominal false-peak rate.
+    prior_dof : float
+        Weight (degrees of freedom) of the image-wide residual variance in σ_fit.
+    pertuz : bool
+        Also compute the Pertuz reliability (dB).
+    window_px, downsample : int
+        The window's side (px) and grid (1 full, 2 half), recorded in the result.
+
+    Returns
+    -------
+    WindowFit
+        On the tracker's grid: height in the unit of ``zs``; ``sigma_fit`` (= ``sigma``
+        until :func:`add_relief_terms`) and ``width`` in z steps, inf without a peak;
+        ``detected`` where the peak is significant.
+    """
+    n = zs.size
+    r = tracker.r
+    K = tracker.k
+    H, W = tracker.best.shape
+    height = np.empty((H, W), np.float32)
+    var_unit = np.empty((H, W), np.float32)
+    s2res = np.empty((H, W), np.float32)
+    dof = np.empty((H, W), np.float32)
+    width = np.empty((H, W), np.float32)
+    signif = np.empty((H, W), np.float32)
+    ok_all = np.empty((H, W), bool)
+    pz = np.empty((H, W), np.float32) if pertuz else None
+    thr = detection_threshold(n, shape_k, alpha)
+    model = "gauss" if interpolation in ("lsq", "gauss3") else "lorentz"
+    uniform = n < 3 or bool(np.allclose(np.diff(zs), step, rtol=1e-6, atol=0.0))
+    offsets = (np.arange(K) - r).astype(np.float32)
+    sub = slice(r - 1, r + 2) if interpolation == "gauss3" else slice(0, K)
+    rows = max(1, (1 << 18) // max(1, W))
+    for r0 in range(0, H, rows):
+        sl = slice(r0, min(H, r0 + rows))
+        br = tracker.best_rank[sl]
+        vals = tracker.window[:, sl]
+        fmax = tracker.best[sl]
+        zc = zs[br]
+        if uniform:
+            xz = offsets          # NaN values mark the neighbours beyond the stack
+        else:
+            ranks = br[None] + (np.arange(K) - r)[:, None, None]
+            inside = (ranks >= 0) & (ranks < n)
+            xz = np.where(inside, (zs[np.clip(ranks, 0, n - 1)] - zc) / step,
+                          np.nan).astype(np.float32)
+        fit = fit_peak(vals[sub], xz[sub], model=model, weighted=(interpolation != "gauss3"),
+                       dtype=np.float32, vmax=fmax)
+        if interpolation == "none":
+            off = np.zeros(br.shape, np.float32)
+            var_unit[sl] = np.where(fit.ok, 1.0 / 12.0, np.inf)
+            s2res[sl] = 1.0
+            dof[sl] = 1e6
+        else:
+            off = fit.offset
+            var_unit[sl] = fit.var_unit
+            d = np.maximum(fit.n_valid - 3, 0).astype(np.float32)
+            dof[sl] = d
+            s2res[sl] = np.where(d > 0, fit.rss / np.maximum(d, 1.0), np.nan)
+        height[sl] = zc + off * step
+        width[sl] = fit.width
+        ok_all[sl] = fit.ok & (fmax > 0)
+        # significance: peak excess over the tails, in units of the tails' noise
+        lo_rank = np.maximum(br - r, 0)
+        hi_rank = np.minimum(br + r, n - 1)
+        nin = hi_rank - lo_rank + 1
+        nt = n - nin
+        vsum = np.zeros(br.shape, np.float32)
+        for k in range(K):
+            vsum += np.nan_to_num(vals[k])
+        if (nt >= 2).all():
+            mu = (tracker.fsum[sl] - vsum) / nt
+        else:
+            vmin = np.nanmin(vals, axis=0)
+            mu = np.where(nt >= 2, (tracker.fsum[sl] - vsum) / np.maximum(nt, 1), vmin)
+        d2in = np.zeros(br.shape, np.float32)
+        nd2in = np.zeros(br.shape, np.int32)
+        for j in range(1, K - 1):          # second differences inside the window
+            has = (br - r + j - 1 >= 0) & (br - r + j + 1 <= n - 1)
+            d2 = vals[j - 1] - 2.0 * vals[j] + vals[j + 1]
+            d2in += np.where(has, d2 * d2, 0.0)
+            nd2in += has
+        nd2 = (n - 2) - nd2in
+        tail_var = np.maximum(tracker.d2sum[sl] - d2in, 0.0) / (6.0 * np.maximum(nd2, 1))
+        tail_var = np.where(nd2 >= 1, tail_var, 0.0)
+        noise = np.sqrt(np.maximum(tail_var, mu * mu / shape_k))
+        excess = fmax - mu
+        signif[sl] = np.where(noise > 0, excess / np.maximum(noise, 1e-30) / thr,
+                              np.where(excess > 0, np.inf, 0.0))
+        if pertuz:
+            xp = np.where(np.isfinite(vals[sub]), (xz[sub] if xz.ndim > 1
+                                                   else xz[sub][:, None, None]), np.nan)
+            pz[sl] = pertuz_db(vals[sub], xp, fit, model, fmax, tracker.fsum[sl], n)
+    detected = ok_all & (signif >= 1.0)
+    # empirical-Bayes residual variance: pooled with its median at similar significance
+    prior = _binned_prior(s2res, dof, signif, detected | ok_all)
+    s2 = np.where(dof > 0, (dof * np.nan_to_num(s2res) + prior_dof * prior)
+                  / (dof + prior_dof), prior)
+    if interpolation == "none":
+        s2 = np.ones_like(s2)
+    sigma_fit = np.sqrt(np.maximum(s2 * var_unit, 0.0)).astype(np.float32)
+    sigma_fit = np.where(ok_all, sigma_fit, np.inf).astype(np.float32)
+    return WindowFit(int(window_px), int(downsample), height, sigma_fit, sigma_fit.copy(),
+                     np.where(ok_all, width, np.inf).astype(np.float32), detected,
+                     signif, pz)
+
+
+def _binned_prior(s2res, dof, signif, use, bins=16):
+    """Median residual variance (÷ ln 2, the median of χ²₂/2) per significance bin."""
+    ls = np.log(np.maximum(np.where(np.isfinite(signif), signif, 1e6), 1e-6)).astype(np.float32)
+    sel = use & (dof > 0) & np.isfinite(s2res)
+    flat_s, flat_v = ls[sel], s2res[sel]
+    stride = max(1, flat_s.size // 200_000)
+    flat_s, flat_v = flat_s[::stride], flat_v[::stride]
+    if flat_s.size < bins:
+        med = float(np.median(flat_v)) / math.log(2.0) if flat_v.size else 1.0
+        return np.full(s2res.shape, med, np.float32)
+    edges = np.quantile(flat_s, np.linspace(0.0, 1.0, bins + 1))
+    idx = np.clip(np.searchsorted(edges, flat_s, side="right") - 1, 0, bins - 1)
+    med = np.full(bins, np.nan)
+    for i in range(bins):
+        v = flat_v[idx == i]
+        if v.size:
+            med[i] = np.median(v) / math.log(2.0)
+    med = np.where(np.isfinite(med), med, np.nanmax(med))
+    full = np.clip(np.searchsorted(edges, ls, side="right") - 1, 0, bins - 1)
+    return med[full].astype(np.float32)
+
+
+def _normalised(a, w, sigma):
+    num = cv2.GaussianBlur(a * w, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+    den = cv2.GaussianBlur(w, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+    return num / np.maximum(den, 1e-6)
+
+
+def add_relief_terms(fit: WindowFit, step, model: dict) -> None:
+    """Add the slope, curvature and width terms and the floor to ``fit.sigma`` (in place).
+
+    Parameters
+    ----------
+    fit : WindowFit
+        From :func:`fit_window`; its ``height_um`` is differentiated (units of ``step``).
+    step : float
+        The z step in the unit of ``fit.height_um`` (µm): the terms are in z steps.
+    model : dict
+        Coefficients ``slope``, ``curv``, ``broad``, ``broad_ratio`` and ``floor`` (z steps),
+        see :data:`microfacet.focus.defaults.SIGMA_MODEL` and the module docstring.
+    """
+    ds = fit.downsample
+    spread = window_spread_px(fit.window_px)
+    s = spread / ds                                   # on the window's grid
+    w = fit.detected.astype(np.float32)
+    if not w.any():
+        w = np.isfinite(fit.sigma_fit).astype(np.float32)
+    h = np.where(np.isfinite(fit.height_um), fit.height_um / step, 0.0).astype(np.float32)
+    sm = _normalised(h, w, s)
+    gx = cv2.Sobel(sm, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REFLECT) / 8.0
+    gy = cv2.Sobel(sm, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REFLECT) / 8.0
+    slope = np.sqrt(gx * gx + gy * gy) / ds                    # z steps per full-grid pixel
+    hxx = cv2.Sobel(sm, cv2.CV_32F, 2, 0, ksize=3, borderType=cv2.BORDER_REFLECT) / 4.0
+    hyy = cv2.Sobel(sm, cv2.CV_32F, 0, 2, ksize=3, borderType=cv2.BORDER_REFLECT) / 4.0
+    hxy = cv2.Sobel(sm, cv2.CV_32F, 1, 1, ksize=3, borderType=cv2.BORDER_REFLECT) / 4.0
+    curv = (np.abs(0.5 * (hxx + hyy)) + np.sqrt(0.25 * (hxx - hyy) ** 2 + hxy * hxy)) / ds ** 2
+    wd = fit.width[fit.detected & np.isfinite(fit.width)]
+    w_med = float(np.median(wd)) if wd.size else np.inf
+    broad = np.sqrt(np.maximum(np.where(np.isfinite(fit.width), fit.width, 0.0) ** 2
+                               - (model["broad_ratio"] * w_med) ** 2, 0.0))
+    var = (fit.sigma_fit.astype(np.float64) ** 2 + (model["slope"] * slope * spread) ** 2
+           + (model["curv"] * curv * spread ** 2) ** 2 + (model["broad"] * broad) ** 2
+           + model["floor"] ** 2)
+    fit.sigma = np.sqrt(var).astype(np.float32)
+
+
+def combine(fits: list[WindowFit], primary: int, step, *, prefer: float = 1.0):
+    """Per pixel the window with the smallest σ among those with a significant peak.
+
+    ``fits`` are on one grid and sorted by window size. A larger window's σ first gets the
+    part of its disagreement with the next smaller window that their σ_fit does not explain
+    (a larger window is biased more by relief). ``prefer`` < 1 favours ``fits[primary]``: another
+    window is taken only where its σ is below ``prefer`` times the primary's.
+
+    Returns
+    -------
+    index : ndarray of int8
+        Chosen window per pixel (among all windows by σ where no peak is significant).
+    sigma : ndarray of float32
+        Its σ, z steps.
+    detected : ndarray of bool
+        True where at least one window has a significant peak.
+    """
+    for lo, hi in zip(fits[:-1], fits[1:]):
+        both = lo.detected & hi.detected
+        d2 = ((hi.height_um - lo.height_um) / step) ** 2 - hi.sigma_fit ** 2 - lo.sigma_fit ** 2
+        extra = np.where(both & np.isfinite(d2), np.maximum(d2, 0.0), 0.0)
+        hi.sigma = np.sqrt(hi.sigma.astype(np.float64) ** 2 + extra).astype(np.float32)
+    raw = np.stack([f.sigma for f in fits])
+    det = np.stack([f.detected for f in fits])
+    score = np.minimum(np.where(np.isfinite(raw), raw, 1e5), 1e5).astype(np.float64)
+    score[[i for i in range(len(fits)) if i != primary]] /= prefer
+    score = np.where(det, score, score + 1e7)
+    idx = np.argmin(score, axis=0).astype(np.int8)
+    sigma = np.take_along_axis(raw, idx[None].astype(np.intp), 0)[0]
+    return idx, sigma.astype(np.float32), det.any(0)

@@ -1,0 +1,250 @@
+"""Relief of a synthetic surface beyond planar Voronoi facets: elongated and wide-size-spread
+facet cells, rounded (dome) facets, terraces, etch pits, scratches — and dust lying on top.
+
+Each function draws from the ``numpy.random.Generator`` it is given (the scene gives every
+variation its own stream, so switching one on does not move the others) and works on
+float64 µm coordinates; features are carved in crops around each one, so the cost grows with
+their area, not with the image. Docs: docs/synthetic-stacks.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.lazy import load
+
+cv2 = load("cv2")
+spatial = load("scipy.spatial")
+
+__all__ = ["FEATURE_CODES", "Carving", "carve_pits", "carve_scratches", "dome_relief",
+           "dust_layer", "shaped_cells", "smooth_field", "terrace_offsets_um"]
+
+#: Codes of ``truth/feature.npy``.
+FEATURE_CODES = {"facet": 0, "pit": 1, "scratch": 2, "dust": 3}
+
+
+def smooth_field(rng, shape, scale_px):
+    """Zero-mean, unit-SD Gaussian random field with correlation length ``scale_px``."""
+    f = rng.standard_normal(shape).astype(np.float32)
+    f = cv2.GaussianBlur(f, (0, 0), sigmaX=max(scale_px, 0.5), borderType=cv2.BORDER_REFLECT)
+    sd = float(f.std())
+    return (f / sd if sd > 0 else f).astype(np.float64)
+
+
+def _axes(p):
+    """Unit vectors (x, y) along and across the rolling direction."""
+    a = math.radians(p.rolling_direction_deg)
+    return (math.cos(a), math.sin(a)), (-math.sin(a), math.cos(a))
+
+
+def shaped_cells(rng, shape, p):
+    """Facet cells other than isotropic Poisson-Voronoi: elongated and/or of varied size.
+
+    Seeds are drawn with a density ∝ exp(−2 s G) (G a smooth unit random field with a
+    correlation length of 5 facets, s = ``facet_size_spread``, so the local cell diameter
+    ∝ exp(s G)), and each pixel goes to the nearest seed in coordinates scaled by
+    1/√aspect along and √aspect across the rolling direction (cells ``facet_aspect`` times
+    longer than wide, with the mean area of ``facet_size_um`` discs).
+
+    Returns
+    -------
+    labels : ndarray of int64 (H, W)
+    ys, xs : ndarray of int (n,)
+        Seed pixels, unique, in raster order.
+    """
+    h, w = shape
+    cell_px = p.facet_size_um / p.pixel_size_um
+    n = max(1, int(round(h * w / (math.pi * (cell_px / 2) ** 2))))
+    if p.facet_size_spread > 0:
+        g = np.clip(smooth_field(rng, shape, 5.0 * cell_px), -2.0, 2.0)
+        dens = np.exp(-2.0 * p.facet_size_spread * g).ravel()
+        flat = rng.choice(h * w, size=n, p=dens / dens.sum())
+    else:
+        flat = rng.integers(0, h, n) * w + rng.integers(0, w, n)
+    flat = np.unique(flat)
+    ys, xs = flat // w, flat % w
+    (ax, ay), (cx, cy) = _axes(p)
+    k = math.sqrt(p.facet_aspect)
+
+    def warp(y, x):
+        return np.stack([(x * ax + y * ay) / k, (x * cx + y * cy) * k], axis=-1)
+
+    tree = spatial.cKDTree(warp(ys.astype(np.float64), xs.astype(np.float64)))
+    labels = np.empty(h * w, dtype=np.int64)
+    rows = max(1, (1 << 18) // w)
+    xx = np.arange(w, dtype=np.float64)
+    for r0 in range(0, h, rows):       # row blocks keep the query's memory small
+        yy = np.arange(r0, min(h, r0 + rows), dtype=np.float64)
+        pts = warp(np.repeat(yy, w), np.tile(xx, yy.size))
+        labels[r0 * w:r0 * w + pts.shape[0]] = tree.query(pts, workers=-1)[1]
+    return labels.reshape(shape), ys, xs
+
+
+def dome_relief(yy_um, xx_um, facet, cy_um, cx_um, p):
+    """Height and slope of rounded facets: a paraboloid cap per facet (0 at its seed).
+
+    The cap's extra slope is tan(``facet_dome_deg``) at the mean cell radius, in the same
+    stretched coordinates as the cells (so elongated cells get elongated caps).
+
+    Returns
+    -------
+    dz_um, dgy, dgx : ndarray of float64 (H, W)
+    """
+    r_um = 0.5 * p.facet_size_um / math.tan(math.radians(p.facet_dome_deg))  # curvature radius
+    (ax, ay), (cx, cy) = _axes(p)
+    a = p.facet_aspect
+    dy, dx = yy_um - cy_um[facet], xx_um - cx_um[facet]
+    u = dx * ax + dy * ay          # along
+    v = dx * cx + dy * cy          # across
+    dz = -(u * u / a + v * v * a) / (2.0 * r_um)
+    du, dv = -u / (a * r_um), -v * a / r_um
+    return dz, du * ay + dv * cy, du * ax + dv * cx
+
+
+def terrace_offsets_um(rng, shape, fy, fx, p):
+    """Per-facet height offsets: 0, 1 or 2 × ``terrace_step_um`` by terrace (Voronoi cells
+    of ``terrace_size_um``; a facet belongs to the terrace of its seed)."""
+    h, w = shape
+    cell_px = p.terrace_size_um / p.pixel_size_um
+    n = max(1, int(round(h * w / (math.pi * (cell_px / 2) ** 2))))
+    ty, tx = rng.uniform(0, h, n), rng.uniform(0, w, n)
+    level = rng.integers(0, 3, n)
+    tree = spatial.cKDTree(np.stack([ty, tx], axis=-1))
+    which = tree.query(np.stack([fy, fx], axis=-1).astype(np.float64))[1]
+    return level[which] * p.terrace_step_um
+
+
+@dataclass
+class Carving:
+    """Depressions carved into the facet surface: depth (≤ 0, µm), its slope and which
+    feature made it (:data:`FEATURE_CODES`)."""
+
+    dz_um: np.ndarray
+    dgy: np.ndarray
+    dgx: np.ndarray
+    feature: np.ndarray
+
+    @classmethod
+    def empty(cls, shape):
+        return cls(np.zeros(shape), np.zeros(shape), np.zeros(shape),
+                   np.zeros(shape, dtype=np.uint8))
+
+    def add(self, box, dz, gy, gx, code):
+        """Keep, per pixel of ``box`` (a pair of slices), the deeper of the two surfaces."""
+        deeper = dz < self.dz_um[box]
+        for arr, new in ((self.dz_um, dz), (self.dgy, gy), (self.dgx, gx)):
+            arr[box] = np.where(deeper, new, arr[box])
+        self.feature[box] = np.where(deeper, code, self.feature[box])
+
+
+def _count(rng, density_per_mm2, shape, p):
+    area_mm2 = shape[0] * shape[1] * (p.pixel_size_um * 1e-3) ** 2
+    return int(rng.poisson(density_per_mm2 * area_mm2))
+
+
+def _box(shape, y0, y1, x0, x1):
+    """Pixel slices covering [y0, y1] × [x0, x1] (pixel units), clipped; None if empty."""
+    r0, r1 = max(0, int(math.floor(y0))), min(shape[0], int(math.ceil(y1)) + 1)
+    c0, c1 = max(0, int(math.floor(x0))), min(shape[1], int(math.ceil(x1)) + 1)
+    if r0 >= r1 or c0 >= c1:
+        return None
+    return slice(r0, r1), slice(c0, c1)
+
+
+def _grid_um(box, px):
+    ys = np.arange(box[0].start, box[0].stop, dtype=np.float64)[:, None] * px
+    xs = np.arange(box[1].start, box[1].stop, dtype=np.float64)[None, :] * px
+    return ys, xs
+
+
+def carve_pits(rng, shape, p, carving):
+    """Etch pits: flat floor (radius R/2, depth (R/2) tan wall) and a conical wall to the rim
+    at radius R; ``carving`` is updated in place. Returns the number of pits."""
+    px = p.pixel_size_um
+    n = _count(rng, p.pit_density_per_mm2, shape, p)
+    cy, cx = rng.uniform(0, shape[0], n) * px, rng.uniform(0, shape[1], n) * px
+    rad = p.pit_radius_um * np.exp(0.3 * rng.standard_normal(n))
+    slope = math.tan(math.radians(p.pit_wall_deg))
+    for y0, x0, r in zip(cy, cx, rad):
+        box = _box(shape, (y0 - r) / px, (y0 + r) / px, (x0 - r) / px, (x0 + r) / px)
+        if box is None:
+            continue
+        ys, xs = _grid_um(box, px)
+        dy, dx = ys - y0, xs - x0
+        d = np.hypot(dy, dx)
+        floor = 0.5 * r
+        depth = floor * slope
+        wall = (d > floor) & (d < r)
+        dz = np.where(d <= floor, -depth, np.where(wall, -slope * (r - d), 0.0))
+        k = np.where(wall, slope / np.maximum(d, 1e-12), 0.0)   # radial slope, rising out
+        carving.add(box, dz, k * dy, k * dx, FEATURE_CODES["pit"])
+    return n
+
+
+def carve_scratches(rng, shape, p, carving):
+    """Scratches: V-shaped trenches (half-width w/2, depth (w/2) tan wall) along segments
+    around the rolling direction; ``carving`` is updated in place. Returns their number."""
+    px = p.pixel_size_um
+    n = _count(rng, p.scratch_density_per_mm2, shape, p)
+    cy, cx = rng.uniform(0, shape[0], n) * px, rng.uniform(0, shape[1], n) * px
+    ang = np.deg2rad(p.rolling_direction_deg
+                     + rng.uniform(-p.scratch_spread_deg, p.scratch_spread_deg, n))
+    length = np.clip(rng.exponential(p.scratch_length_um, n), 2 * p.scratch_width_um,
+                     4 * p.scratch_length_um)
+    half = 0.5 * p.scratch_width_um * np.exp(0.2 * rng.standard_normal(n))
+    slope = math.tan(math.radians(p.scratch_wall_deg))
+    for y0, x0, a, ln, hw in zip(cy, cx, ang, length, half):
+        ux, uy = math.cos(a), math.sin(a)
+        ay_, ax_ = y0 - 0.5 * ln * uy, x0 - 0.5 * ln * ux     # start point
+        by_, bx_ = y0 + 0.5 * ln * uy, x0 + 0.5 * ln * ux     # end point
+        box = _box(shape, (min(ay_, by_) - hw) / px, (max(ay_, by_) + hw) / px,
+                   (min(ax_, bx_) - hw) / px, (max(ax_, bx_) + hw) / px)
+        if box is None:
+            continue
+        ys, xs = _grid_um(box, px)
+        t = np.clip((xs - ax_) * ux + (ys - ay_) * uy, 0.0, ln)
+        dy, dx = ys - (ay_ + t * uy), xs - (ax_ + t * ux)       # from the nearest axis point
+        d = np.hypot(dy, dx)
+        inside = d < hw
+        dz = np.where(inside, -slope * (hw - d), 0.0)
+        k = np.where(inside, slope / np.maximum(d, 1e-12), 0.0)
+        carving.add(box, dz, k * dy, k * dx, FEATURE_CODES["scratch"])
+    return n
+
+
+def dust_layer(rng, shape, p):
+    """Dust flakes: coverage (0-1, anti-aliased ellipses) and their grey linear reflectance.
+
+    Returns
+    -------
+    coverage, grey : ndarray of float32 (H, W)
+    n : int
+        Number of particles.
+    """
+    px = p.pixel_size_um
+    n = _count(rng, p.dust_density_per_mm2, shape, p)
+    cy, cx = rng.uniform(0, shape[0], n) * px, rng.uniform(0, shape[1], n) * px
+    ra = p.dust_radius_um * np.exp(0.4 * rng.standard_normal(n))
+    rb = ra * rng.uniform(0.5, 1.0, n)
+    phi = rng.uniform(0, math.pi, n)
+    bright = rng.random(n) < p.dust_bright_fraction
+    grey = np.where(bright, rng.uniform(0.5, 0.9, n), rng.uniform(0.02, 0.08, n))
+    cov = np.zeros(shape, dtype=np.float32)
+    level = np.zeros(shape, dtype=np.float32)
+    for y0, x0, a, b, f, g in zip(cy, cx, ra, rb, phi, grey):
+        box = _box(shape, (y0 - a) / px - 1, (y0 + a) / px + 1, (x0 - a) / px - 1,
+                   (x0 + a) / px + 1)
+        if box is None:
+            continue
+        ys, xs = _grid_um(box, px)
+        u = (xs - x0) * math.cos(f) + (ys - y0) * math.sin(f)
+        v = -(xs - x0) * math.sin(f) + (ys - y0) * math.cos(f)
+        rho = np.sqrt((u / a) ** 2 + (v / b) ** 2)
+        c = np.clip((1.0 - rho) * b / px + 0.5, 0.0, 1.0).astype(np.float32)
+        more = c > cov[box]
+        cov[box] = np.where(more, c, cov[box])
+        level[box] = np.where(more, np.float32(g), level[box])
+    return cov, level, n

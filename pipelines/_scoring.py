@@ -1,0 +1,264 @@
+"""Fair scores of an analysis against synthetic truth (used by ``generalization.py``).
+
+Not a script. Every function takes plain arrays (or the dicts of ``truth/params.json`` and
+``summary.json``), so it can be checked alone: ``python -m doctest pipelines/_scoring.py``.
+
+What is scored, and why it is fair to the analysis:
+
+* **Thickness per true region**: the median of the per-pixel estimate over the region's
+  interior (pixels at least ``erode_px`` from any other region, so mixed boundary pixels do
+  not count) against the region's true mean thickness; MAE and median absolute error over
+  the regions of a scene. A region with fewer than ``min_pixels`` estimated interior pixels
+  is not scored.
+* **Populations**: the fitted mixture's component count against the populations present,
+  i.e. the truth's mixture components with at least one region covering, together, at least
+  ``min_area_fraction`` of the field (a population on a few pixels at the border cannot be
+  seen by anyone).
+* **NDF**: Wasserstein-1 between the fitted lobes' tilt density and the true per-pixel tilt
+  distribution, both truncated to the visibility limit asin(NA)/2 and renormalised (nothing
+  beyond the limit is observable).
+* **Texture**: a scene is *textured* when the median 5×5 local SD of the grey level of its
+  noise-free truth image is at least ``TEXTURE_MIN_CODES`` 8-bit code values (grooves give
+  3-10; planar facets without grooves 0.1-0.7): enough focus texture to measure a height.
+* **Colour**: the analysis's mean ΔE00 against the scene's colour noise floor, the mean
+  CIEDE2000 between the analysed all-in-focus image and the noise-free truth image over
+  the unmasked pixels.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from microfacet.colour import delta_e_2000, srgb_to_lab
+from microfacet.core.distributions import NDFMixture
+
+#: Median local SD (8-bit code values) of the truth image above which a scene is textured.
+TEXTURE_MIN_CODES = 2.0
+
+
+def interior(labels, erode_px=3):
+    """Pixels whose (2·erode_px+1)² neighbourhood holds only their own label.
+
+    >>> lab = np.zeros((7, 7), int); lab[:, 4:] = 1
+    >>> interior(lab, 1).astype(int)[3].tolist()
+    [1, 1, 1, 0, 0, 1, 1]
+    """
+    size = 2 * erode_px + 1
+    lo = ndimage.minimum_filter(labels, size=size, mode="nearest")
+    hi = ndimage.maximum_filter(labels, size=size, mode="nearest")
+    return (lo == labels) & (hi == labels)
+
+
+def region_thickness_errors(est_nm, region_id, true_mean_nm, *, erode_px=3, min_pixels=50):
+    """Per true region: median estimate over its interior minus its true mean thickness.
+
+    Parameters
+    ----------
+    est_nm : ndarray (H, W)
+        Estimated thickness per pixel (NaN where not estimated).
+    region_id : ndarray of int (H, W)
+    true_mean_nm : sequence
+        True mean thickness of each region id.
+
+    Returns
+    -------
+    dict
+        ``errors_nm`` (signed, per scored region), ``ids``, ``mae_nm``, ``median_ae_nm``
+        (NaN when no region is scored), ``n_scored``, ``n_regions``.
+
+    Examples
+    --------
+    >>> rid = np.zeros((20, 20), int); rid[:, 10:] = 1
+    >>> est = np.where(rid == 0, 100.0, 131.0); est[:, 9:11] = 500.0   # a bad boundary
+    >>> r = region_thickness_errors(est, rid, [100.5, 130.0], erode_px=2, min_pixels=10)
+    >>> r["errors_nm"].tolist(), r["mae_nm"], r["n_scored"]
+    ([-0.5, 1.0], 0.75, 2)
+    """
+    inner = interior(region_id, erode_px) & np.isfinite(est_nm)
+    ids, errs = [], []
+    lab = region_id[inner]
+    vals = est_nm[inner]
+    order = np.argsort(lab, kind="stable")
+    lab, vals = lab[order], vals[order]
+    uniq, start = np.unique(lab, return_index=True)
+    for k, r in enumerate(uniq):
+        v = vals[start[k]:(start[k + 1] if k + 1 < uniq.size else vals.size)]
+        if v.size >= min_pixels:
+            ids.append(int(r))
+            errs.append(float(np.median(v)) - float(true_mean_nm[r]))
+    errs = np.array(errs)
+    return {"ids": ids, "errors_nm": errs, "n_scored": len(ids),
+            "n_regions": len(true_mean_nm),
+            "mae_nm": float(np.mean(np.abs(errs))) if errs.size else math.nan,
+            "median_ae_nm": float(np.median(np.abs(errs))) if errs.size else math.nan}
+
+
+def true_population_count(populations, *, min_area_fraction=0.02):
+    """Number of true thickness populations present (``populations`` of params.json).
+
+    >>> true_population_count([{"area_fraction": 0.7}, {"area_fraction": 0.29},
+    ...                        {"area_fraction": 0.01}])
+    2
+    """
+    return sum(1 for q in populations if q["area_fraction"] >= min_area_fraction)
+
+
+def truncated_w1(grid, pdf, samples, limit):
+    """W1 between a density on ``grid`` and a sample, both truncated to [grid[0], limit].
+
+    The density's CDF is its cumulative trapezoid integral over the grid up to ``limit``,
+    renormalised; the sample's is its empirical CDF on the same grid.
+
+    >>> g = np.linspace(0, 10, 2001)
+    >>> pdf = np.ones_like(g)                       # uniform on [0, 10]
+    >>> round(truncated_w1(g, pdf, np.linspace(0, 10, 100001), 10.0), 3)
+    0.0
+    >>> round(truncated_w1(g, pdf, np.full(10, 5.0), 10.0), 3)    # all mass at 5
+    2.5
+    """
+    g = np.asarray(grid, float)
+    keep = g <= limit
+    g, p = g[keep], np.asarray(pdf, float)[keep]
+    s = np.sort(np.asarray(samples, float))
+    s = s[np.isfinite(s) & (s <= limit) & (s >= g[0])]
+    if s.size == 0 or g.size < 2:
+        return math.nan
+    c = np.concatenate([[0.0], np.cumsum(0.5 * (p[1:] + p[:-1]) * np.diff(g))])
+    if c[-1] <= 0:
+        return math.nan
+    f_fit = c / c[-1]
+    f_true = np.searchsorted(s, g, side="right") / s.size
+    d = np.abs(f_fit - f_true)
+    return float(np.sum(0.5 * (d[1:] + d[:-1]) * np.diff(g)))
+
+
+def ndf_w1_deg(lobes, true_tilt_deg, limit_deg, *, step_deg=0.02):
+    """W1 (degrees) between fitted NDF lobes and the true per-pixel tilts, truncated to
+    ``limit_deg``. ``lobes``: ``[(weight, sd_deg), ...]``; NaN without lobes.
+
+    >>> rng = np.random.default_rng(0)
+    >>> s = np.tan(np.deg2rad(6.0))
+    >>> tilt = np.rad2deg(np.arctan(np.hypot(*rng.normal(0, s, (2, 200000)))))
+    >>> [round(ndf_w1_deg([(1.0, sd)], tilt, 26.57), 1) for sd in (6.0, 8.0)]
+    [0.0, 2.4]
+    """
+    if not lobes:
+        return math.nan
+    grid = np.arange(0.0, limit_deg + step_deg / 2, step_deg)
+    pdf = NDFMixture(lobes).tilt_pdf(grid)
+    return truncated_w1(grid, pdf, np.ravel(true_tilt_deg), limit_deg)
+
+
+def texture_codes(truth_rgb8, window_px=5):
+    """Median over pixels of the local SD (``window_px``², reflected borders) of the grey
+    level (mean of R, G, B) of an 8-bit image, in code values.
+
+    >>> flat = np.full((20, 20, 3), 100, np.uint8)
+    >>> texture_codes(flat)
+    0.0
+    >>> checker = ((np.indices((20, 20)).sum(0) % 2) * 40).astype(np.uint8)
+    >>> round(texture_codes(np.dstack([checker] * 3)), 1)
+    20.0
+    """
+    g = np.asarray(truth_rgb8, np.float32).mean(axis=-1)
+    m = cv2.blur(g, (window_px, window_px), borderType=cv2.BORDER_REFLECT)
+    v = cv2.blur(g * g, (window_px, window_px), borderType=cv2.BORDER_REFLECT) - m * m
+    return float(np.median(np.sqrt(np.maximum(v, 0.0))))
+
+
+def colour_floor_de(analysed_srgb, truth_srgb, used):
+    """Mean CIEDE2000 between two sRGB-encoded images (float 0-1 or uint8) over ``used``.
+
+    >>> a = np.full((4, 4, 3), 0.5, np.float32)
+    >>> colour_floor_de(a, a, np.ones((4, 4), bool))
+    0.0
+    >>> round(colour_floor_de(a, a * 1.02, np.ones((4, 4), bool)), 2)
+    0.96
+    """
+    if not np.any(used):
+        return math.nan
+    la = srgb_to_lab(np.asarray(analysed_srgb)[used])
+    lb = srgb_to_lab(np.asarray(truth_srgb)[used])
+    return float(np.mean(delta_e_2000(la, lb)))
+
+
+def ndf_identified(summary):
+    """``summary.json`` ``ndf.identified``; a missing key counts as identified.
+
+    >>> ndf_identified({"ndf": {}}), ndf_identified({"ndf": {"identified": False}})
+    (True, False)
+    """
+    v = (summary.get("ndf") or {}).get("identified", True)
+    return bool(v) if v is not None else True
+
+
+def fraction(flags):
+    """Fraction of True among the non-None ``flags`` (NaN if none).
+
+    >>> fraction([True, False, None, True])
+    0.6666666666666666
+    """
+    v = [bool(f) for f in flags if f is not None]
+    return sum(v) / len(v) if v else math.nan
+
+
+def finite_median(values):
+    """Median of the finite values (NaN if none).
+
+    >>> finite_median([1.0, float("nan"), 3.0, None])
+    2.0
+    """
+    v = [float(x) for x in values if x is not None and np.isfinite(x)]
+    return float(np.median(v)) if v else math.nan
+
+
+#: The issue's targets: (row label, score key, target text, passes(value)).
+TARGETS = (
+    ("region thickness MAE, median over scenes (nm)", "region_mae_median_nm", "≤ 0.5",
+     lambda v: v <= 0.5),
+    ("scenes with the true number of thickness populations", "populations_ok", "≥ 90 %",
+     lambda v: v >= 0.9),
+    ("scenes with the true number of NDF lobes", "lobes_ok", "–", None),
+    ("NDF identified, all scenes", "identified_all", "–", None),
+    ("NDF identified, textured scenes", "identified_textured", "≥ 80 %", lambda v: v >= 0.8),
+    ("NDF W1, identified textured scenes, median (°)", "w1_identified_textured_deg", "≤ 1.5",
+     lambda v: v <= 1.5),
+    ("NDF W1, all scenes, median (°)", "w1_all_deg", "–", None),
+    ("mean ΔE00 − noise floor, median over scenes", "de_excess_median", "≤ 1.0",
+     lambda v: v <= 1.0),
+    ("scenes with mean ΔE00 − floor ≤ 1.0", "de_excess_ok", "–", None),
+)
+
+
+def summarize(rows):
+    """The summary scores of one mode's per-scene rows (keys of :data:`TARGETS`).
+
+    >>> rows = [dict(status="done", region_mae_nm=0.3, pops_found=2, pops_true=2,
+    ...              lobes_found=1, lobes_true=1, identified=True, textured=True,
+    ...              ndf_w1_deg=1.0, de_excess=0.5)]
+    >>> s = summarize(rows)
+    >>> s["region_mae_median_nm"], s["populations_ok"], s["w1_identified_textured_deg"]
+    (0.3, 1.0, 1.0)
+    """
+    ok = [r for r in rows if r.get("status") == "done"]
+    tex = [r for r in ok if r.get("textured")]
+    good = [r for r in tex if r.get("identified")]
+    return {
+        "scenes": len(rows), "failed": len(rows) - len(ok), "textured": len(tex),
+        "region_mae_median_nm": finite_median(r.get("region_mae_nm") for r in ok),
+        "populations_ok": fraction(r["pops_found"] == r["pops_true"] if r.get("pops_found")
+                                   is not None else False for r in ok),
+        "lobes_ok": fraction(r["lobes_found"] == r["lobes_true"] if r.get("lobes_found")
+                             is not None else False for r in ok),
+        "identified_all": fraction(r.get("identified") for r in ok),
+        "identified_textured": fraction(r.get("identified") for r in tex),
+        "w1_identified_textured_deg": finite_median(r.get("ndf_w1_deg") for r in good),
+        "w1_all_deg": finite_median(r.get("ndf_w1_deg") for r in ok),
+        "de_excess_median": finite_median(r.get("de_excess") for r in ok),
+        "de_excess_ok": fraction(r["de_excess"] <= 1.0 if r.get("de_excess") is not None
+                                 and np.isfinite(r["de_excess"]) else False for r in ok),
+    }

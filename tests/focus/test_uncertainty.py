@@ -1,0 +1,205 @@
+"""Height uncertainty, significance and the choice of window (microfacet.focus.uncertainty),
+against analytic height maps and rendered stacks of known height (the ``render_contrast``
+fixture of conftest.py)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from microfacet.focus.defaults import DEFAULT_MIN_RELIABILITY_DB, SIGMA_MODEL
+from microfacet.focus.height import height_from_focus
+from microfacet.focus.measures import focus_measure
+from microfacet.focus.uncertainty import (
+    WindowFit,
+    add_relief_terms,
+    combine,
+    fit_window,
+    window_spread_px,
+)
+
+N = 24
+Z = np.arange(N, dtype=float)
+
+
+def window_fit(height, *, sigma_fit=0.0, width=1.0, window_px=7, detected=True):
+    shape = np.shape(height)
+    full = np.full(shape, 1.0, np.float32)
+    return WindowFit(window_px, 1, np.asarray(height, np.float32), sigma_fit * full,
+                     sigma_fit * full, width * full, np.full(shape, detected), 2 * full, None)
+
+
+@pytest.mark.parametrize("px", [7, 15])
+def test_window_spread_matches_tenengrad_impulse_response(px):
+    """The spatial spread of the Tenengrad response to a point (Sobel² then the window)
+    is within 5 % of window_spread_px."""
+    img = np.zeros((81, 81), np.float32)
+    img[40, 40] = 1.0
+    f = focus_measure(img, window_px=px).astype(np.float64)
+    x = np.arange(81) - 40.0
+    var_x = float((f.sum(0) * x * x).sum() / f.sum())
+    assert abs(np.sqrt(var_x) / window_spread_px(px) - 1.0) < 0.05
+
+
+def test_relief_terms_on_analytic_plane_and_paraboloid():
+    """σ² = (κ_s·|∇h|·σ_w)² + (κ_c·|∂²h|·σ_w²)² + σ_0² for σ_fit = 0 and equal widths."""
+    m = SIGMA_MODEL
+    yy, xx = np.mgrid[0:64, 0:64].astype(np.float64)
+    spread = window_spread_px(7)
+    inner = (slice(16, -16), slice(16, -16))
+    a = 0.12                                           # z steps per pixel
+    fit = window_fit(3.0 + a * xx + 0.5 * a * yy)
+    add_relief_terms(fit, 1.0, m)
+    ref = np.sqrt((m["slope"] * a * np.hypot(1, 0.5) * spread) ** 2 + m["floor"] ** 2)
+    np.testing.assert_allclose(fit.sigma[inner], ref, rtol=2e-3)
+    c = 0.01                                           # curvature, steps per pixel²
+    fit = window_fit(5.0 + 0.5 * c * (xx - 32) ** 2)
+    add_relief_terms(fit, 1.0, m)
+    ref = np.sqrt((m["slope"] * c * np.abs(xx - 32) * spread) ** 2
+                  + (m["curv"] * c * spread ** 2) ** 2 + m["floor"] ** 2)
+    np.testing.assert_allclose(fit.sigma[inner], ref[inner], rtol=0.02)
+    # a plane in µm with a 0.5 µm step: the same in steps
+    fit = window_fit(0.5 * (3.0 + a * xx))
+    add_relief_terms(fit, 0.5, m)
+    np.testing.assert_allclose(fit.sigma[inner], np.sqrt((m["slope"] * a * spread) ** 2
+                                                         + m["floor"] ** 2), rtol=2e-3)
+
+
+def test_relief_width_term():
+    """A curve much wider than the image's median (several heights in the window) adds
+    κ_b·√(w² − (ρ·w_med)²)."""
+    m = SIGMA_MODEL
+    fit = window_fit(np.full((32, 32), 4.0), width=1.0)
+    fit.width[10, 10] = 3.0
+    add_relief_terms(fit, 1.0, m)
+    broad = np.sqrt(3.0 ** 2 - (m["broad_ratio"] * 1.0) ** 2)
+    assert abs(fit.sigma[10, 10] - np.hypot(m["broad"] * broad, m["floor"])) < 1e-5
+    assert abs(fit.sigma[20, 20] - m["floor"]) < 1e-6
+
+
+def test_combine_takes_the_smaller_sigma_of_a_significant_peak():
+    h = np.zeros((1, 4), np.float32)
+    small = window_fit(h, sigma_fit=0.2, window_px=7)
+    large = window_fit(h + np.array([[0.0, 0.0, 1.0, 0.0]], np.float32), sigma_fit=0.1,
+                       window_px=15)
+    small.sigma[:] = [[0.3, 0.05, 0.3, 0.3]]
+    large.detected[0, 3] = False
+    idx, sigma, detected = combine([small, large], 0, 1.0)
+    # pixel 0: large (0.1 < 0.3); 1: small (0.05); 2: the windows disagree by 1 step, which
+    # σ_fit (0.2, 0.1) does not explain: large gets √(0.1² + 1 − 0.05) > 0.3; 3: not detected
+    assert idx.tolist() == [[1, 0, 0, 0]]
+    np.testing.assert_allclose(sigma, [[0.1, 0.05, 0.3, 0.3]], rtol=1e-6)
+    np.testing.assert_allclose(large.sigma[0, 2], np.sqrt(0.01 + 1.0 - 0.04 - 0.01), rtol=1e-6)
+    assert detected.all()
+    idx, _, _ = combine([small, large], 0, 1.0, prefer=0.2)     # keep the primary
+    assert idx[0, 0] == 0
+
+
+def test_upsampled_maps_coarse_pixel_to_even_pixel():
+    coarse = window_fit(np.arange(20, dtype=np.float32).reshape(4, 5), window_px=15)
+    coarse.downsample = 2
+    up = coarse.upsampled((8, 10))
+    assert up.height_um.shape == (8, 10) and up.downsample == 1
+    np.testing.assert_allclose(up.height_um[::2, ::2], coarse.height_um)
+    np.testing.assert_allclose(up.height_um[0, 1], 0.5 * (coarse.height_um[0, 0]
+                                                         + coarse.height_um[0, 1]))
+
+
+def test_no_significant_peak_on_pure_noise():
+    """Textureless slices with sensor noise: the false-peak rate stays far below 1 %."""
+    rng = np.random.default_rng(4)
+    imgs = [np.clip(0.5 + 0.01 * rng.standard_normal((96, 96)), 0, 1).astype(np.float32)
+            for _ in Z]
+    res = height_from_focus(imgs, z_um=Z)
+    assert res.detected.mean() < 0.01
+    assert res.reliable.mean() < 0.01
+    assert np.all(res.reliability_db[~res.detected] <= 0.0)
+
+
+@pytest.fixture(scope="module")
+def terraces():
+    """Terraces of 0.5-3 z steps (sharp relief) plus a gentle tilt, in z steps."""
+    yy, xx = np.mgrid[0:96, 0:96].astype(np.float32)
+    seq = np.array([0.0, 1.0, 3.0, 2.5, 0.5])
+    return 10.0 + seq[np.minimum((xx // 20).astype(int), 4)] + 0.01 * yy
+
+
+@pytest.mark.parametrize("contrast", [0.025, 0.1])
+def test_sigma_is_calibrated_on_known_relief(render_contrast, terraces, contrast):
+    """|error| ≤ 2σ for about 95 % of the reliable pixels (90-99.5 %), and σ tracks the
+    actual error: the RMS error of the pixels with σ < 0.15 step is below that of the rest."""
+    errs, sigs = [], []
+    for seed in range(2):
+        imgs = render_contrast(terraces, Z, contrast=contrast, seed=seed)
+        res = height_from_focus(imgs, z_um=Z)
+        ok = res.reliable.copy()
+        ok[:8] = ok[-8:] = ok[:, :8] = ok[:, -8:] = False
+        errs.append(res.height_um[ok] - terraces[ok])
+        sigs.append(res.height_sigma_um[ok])
+    e, s = np.concatenate(errs), np.concatenate(sigs)
+    assert e.size > 0.4 * 2 * 80 * 80
+    cut = 10 ** (-DEFAULT_MIN_RELIABILITY_DB["tenengrad"] / 20)    # σ / step at the cut
+    assert np.max(s) <= cut * 1.001, np.max(s)
+    inside = np.mean(np.abs(e) <= 2 * s)
+    assert 0.90 <= inside <= 0.995, inside
+    lo = s < 0.15
+    if lo.sum() > 100 and (~lo).sum() > 100:
+        assert np.sqrt(np.mean(e[lo] ** 2)) < np.sqrt(np.mean(e[~lo] ** 2))
+
+
+def test_coarse_window_raises_coverage_where_texture_is_weak(render_contrast):
+    """Weak texture (luma SD 0.012, noise 0.01): the 15-px window covers more pixels than
+    the 7-px one alone, at a comparable error."""
+    yy, xx = np.mgrid[0:96, 0:96].astype(np.float32)
+    h = 11.5 + 2.5 * np.sin(xx / 17.0) * np.cos(yy / 23.0)
+    imgs = render_contrast(h, Z, contrast=0.012, seed=1)
+    one = height_from_focus(imgs, z_um=Z, coarse_window_px=None)
+    two = height_from_focus(imgs, z_um=Z)
+    assert two.reliable.mean() > one.reliable.mean() + 0.2
+    rmse = np.sqrt(np.nanmean((two.height_um - h) ** 2))
+    assert rmse < 0.35
+    assert set(np.unique(two.window_px_map[two.reliable])) <= {7, 15}
+
+
+def test_fit_window_height_on_analytic_curves():
+    """fit_window on a tracker fed analytic Lorentz focus curves recovers the peak heights."""
+    from microfacet.focus.stream import PeakTracker
+
+    rng = np.random.default_rng(5)
+    mu = rng.uniform(3.0, 8.0, (6, 7))
+    tr = PeakTracker(mu.shape, radius=2, n_slices=12)
+    for k in range(12):
+        tr.push((1.0 / (1.0 + (k - mu) ** 2) ** 2 + 1e-3).astype(np.float32), k)
+    tr.finish()
+    zs = np.arange(12.0) * 0.5
+    fit = fit_window(tr, zs, 0.5, interpolation="lorentz", shape_k=10.0, alpha=1e-5,
+                     prior_dof=8.0)
+    assert fit.detected.all()
+    assert np.max(np.abs(fit.height_um - 0.5 * mu)) < 0.01 * 0.5
+
+
+def test_rgb_stack_of_isoluminant_texture(render_contrast):
+    """colour="rgb" gives heights where only colour texture exists."""
+    yy, xx = np.mgrid[0:64, 0:64].astype(np.float32)
+    h = 11.0 + 0.03 * xx
+    imgs = render_contrast(h, Z, contrast=0.0, chroma=0.08, rgb=True, seed=2)
+    luma = height_from_focus(imgs, z_um=Z)
+    rgb = height_from_focus(imgs, z_um=Z, colour="rgb")
+    assert luma.reliable.mean() < 0.05
+    assert rgb.reliable.mean() > 0.8
+    assert np.sqrt(np.nanmean((rgb.height_um - h) ** 2)) < 0.3
+
+
+def test_textured_vs_blank_detection(render_contrast):
+    """Contrast 0.05 is detected almost everywhere; the blank half only near the textured
+    one (the 15-px window reaches ~11 px)."""
+    h = np.full((64, 96), 11.3, np.float32)
+    imgs = render_contrast(h, Z, contrast=0.05, seed=3)
+    blank = np.clip(0.5 + 0.01 * np.random.default_rng(0).standard_normal((N, 64, 48)), 0, 1)
+    imgs = [np.concatenate([im[:, :48], b.astype(np.float32)], axis=1)
+            for im, b in zip(imgs, blank)]
+    res = height_from_focus(imgs, z_um=Z)
+    assert res.detected[8:-8, 8:40].mean() > 0.98
+    assert res.detected[8:-8, 48 + 12:-8].mean() < 0.02
+    assert cv2.countNonZero(res.reliable[8:-8, 8:40].astype(np.uint8)) > 0.95 * 48 * 32
