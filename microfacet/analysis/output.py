@@ -24,9 +24,9 @@ from .identification import AMBIGUOUS_ORDER_DE, MEDIAN_NOISE_FLOOR_FACTOR, NOISE
 
 __all__ = ["build_summary", "results_size_bytes", "save_results", "write_results"]
 
-#: Bytes per pixel of the results folder (float32 maps, normals, mask, facets, PNG) and the
-#: report's size.
-_RESULT_BYTES_PER_PIXEL = 64
+#: Bytes per pixel of the results folder (float32 maps, normals, mask, facets, PNG, the
+#: float32 TIFF copies for microscopy tools and the .x3p height map) and the report's size.
+_RESULT_BYTES_PER_PIXEL = 85
 _REPORT_BYTES = 8 << 20
 _ROI_COLUMNS = ["row0", "col0", "size", "thickness_nm", "mean_delta_e", "n_pixels", "width",
                 "runner_up_thickness_nm", "runner_up_delta_e", "ambiguity_delta_e",

@@ -6,6 +6,7 @@ from ..core.lazy import attach
 
 __getattr__, __dir__, __all__ = attach(__name__, submodules=("runner", "summary", "executors"),
                                        submod_attrs={
-                                           "runner": ["BatchResult", "analyse_to_folder",
+                                           "runner": ["BatchInterrupted", "BatchResult",
+                                                      "analyse_to_folder", "open_stack",
                                                       "run_batch"],
                                            "summary": ["SUMMARY_COLUMNS", "result_names"]})

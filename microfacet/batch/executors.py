@@ -3,8 +3,11 @@ loky backend), or on a Dask distributed cluster."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import re
+import signal
 import time
 import traceback
 
@@ -15,7 +18,7 @@ distributed = load("distributed")
 
 joblib = load("joblib")
 
-__all__ = ["close_dask", "dask_client", "dask_results", "local_results"]
+__all__ = ["check_scheduler", "close_dask", "dask_client", "dask_results", "local_results"]
 
 log = logging.getLogger("microfacet.batch")
 
@@ -33,9 +36,37 @@ def local_results(fn, tasks, jobs):
     yield from parallel(joblib.delayed(fn)(*t, threads=1) for t in tasks)
 
 
+#: A Dask scheduler address: an optional scheme, a host name, IPv4 or [IPv6] address, a port.
+_ADDRESS = re.compile(r"(?:(?:tcp|tls|ucx|ws|wss)://)?"
+                      r"(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_][A-Za-z0-9_.-]*):(\d{1,5})")
+
+
+def check_scheduler(scheduler) -> None:
+    """Raise :class:`~microfacet.core.errors.InputError` unless ``scheduler`` is ``"local"``
+    or has the form of a Dask scheduler address (``tcp://10.0.0.5:8786``, ``head:8786``).
+
+    Checked before a Client is made: Dask takes any string and fails only after its connect
+    timeout, and then once more on closing the half-made Client.
+
+    >>> check_scheduler("tcp://10.0.0.5:8786"); check_scheduler("local")
+    >>> try:
+    ...     check_scheduler("locl")
+    ... except InputError as exc:
+    ...     print(exc.param)
+    scheduler
+    """
+    if scheduler == "local":
+        return
+    m = _ADDRESS.fullmatch(scheduler) if isinstance(scheduler, str) else None
+    if m is None or not 0 < int(m.group(1)) < 65536:
+        raise InputError(f"{scheduler!r} is neither 'local' nor a scheduler address with a "
+                         f"port such as tcp://10.0.0.5:8786", param="scheduler")
+
+
 def dask_client(scheduler, timeout_s, jobs=None):
     """``(client, cluster)``: a Client of the scheduler at ``scheduler``, or of a new
     LocalCluster for ``"local"`` (``cluster`` is None for an existing scheduler)."""
+    check_scheduler(scheduler)
     try:
         Client, LocalCluster = distributed.Client, distributed.LocalCluster
     except ImportError:  # the lazy module is imported here: dask[distributed] is optional
@@ -44,9 +75,14 @@ def dask_client(scheduler, timeout_s, jobs=None):
     if not log.isEnabledFor(logging.DEBUG):  # Dask's INFO chatter only with -vv
         logging.getLogger("distributed").setLevel(logging.WARNING)
     if scheduler == "local":
-        # workers are processes with one thread each; the cluster closes with the client
-        cluster = LocalCluster(n_workers=jobs or os.cpu_count() or 1, threads_per_worker=1,
-                               processes=True, host="127.0.0.1", dashboard_address=":0")
+        # workers are processes with one thread each; the cluster closes with the client.
+        # They start with Ctrl-C ignored: this process handles it and closes them (else each
+        # idle worker prints its KeyboardInterrupt traceback). Their own logging (read from
+        # the environment when they start) stays at errors unless -vv.
+        quiet = {} if log.isEnabledFor(logging.DEBUG) else {"DASK_LOGGING__DISTRIBUTED": "error"}
+        with _environ(quiet), _ignoring_sigint():
+            cluster = LocalCluster(n_workers=jobs or os.cpu_count() or 1, threads_per_worker=1,
+                                   processes=True, host="127.0.0.1", dashboard_address=":0")
         log.info("Dask LocalCluster at %s, dashboard %s", cluster.scheduler_address,
                  cluster.dashboard_link)
         return Client(cluster, set_as_default=False), cluster
@@ -57,12 +93,44 @@ def dask_client(scheduler, timeout_s, jobs=None):
                          param="scheduler") from None
 
 
+@contextlib.contextmanager
+def _environ(values: dict):
+    """Set environment variables for the block (for the processes started in it)."""
+    saved = {k: os.environ.get(k) for k in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+@contextlib.contextmanager
+def _ignoring_sigint():
+    """SIGINT ignored in the block: processes started in it inherit that (not restored by
+    exec), while this process's handler comes back afterwards."""
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: signals are not ours to change
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def close_dask(dask):
-    """Close a :func:`dask_client` pair."""
+    """Close a :func:`dask_client` pair; closing it again does nothing."""
     client, cluster = dask
-    client.close()
-    if cluster is not None:
-        cluster.close()
+    if client.status not in ("closed", "closing"):
+        client.close()
+    if cluster is not None and str(getattr(cluster, "status", "")).split(".")[-1] != "closed":
+        with contextlib.suppress(RuntimeError):  # its event loop is already gone
+            cluster.close()
 
 
 def dask_results(fn, tasks, dask):
@@ -83,6 +151,10 @@ def dask_results(fn, tasks, dask):
                 yield {"stack": stack, "results": out, "status": "failed",
                        "reason": f"{type(exc).__name__}: {' '.join(str(exc).split())}",
                        "traceback": traceback.format_exc(), "time_s": None, "worker": ""}
+    except BaseException:  # Ctrl-C or closed early: the cluster's shutdown warnings are noise
+        if not log.isEnabledFor(logging.DEBUG):
+            logging.getLogger("distributed").setLevel(logging.ERROR)
+        raise
     finally:
         close_dask(dask)
 

@@ -11,6 +11,10 @@ stack folder. It is made for drawers full of stacks:
   cluster, so thousands of stacks scale out without new code. Workers read the stacks and
   write the results themselves: the stack paths and the output folder must be visible to the
   workers under the same paths (a shared file system); they are sent as absolute paths.
+* **Checked up front.** Every stack to analyse is read and validated here
+  (:func:`~microfacet.io.stack.read_stack`: ``stack.json`` and the image headers) before
+  any analysis starts; a broken one is logged in one line, skipped and recorded as failed
+  with the reason, so a long batch does not stop hours later on a typo.
 * **A failing stack does not stop the others.** Its row in ``batch_summary.csv`` has
   ``status = failed`` and a one-line ``reason``; the full traceback goes to
   ``batch_errors.log``. Results folders are written atomically, so a failed or killed analysis
@@ -22,7 +26,8 @@ stack folder. It is made for drawers full of stacks:
   the user passes ``overwrite``.
 * ``batch_summary.csv`` has one row per stack, in input order, with the main numbers (see
   :data:`SUMMARY_COLUMNS`); it is rewritten (atomically) after every finished stack, so it is
-  useful while a long batch runs and after it was interrupted.
+  useful while a long batch runs and after it was interrupted. Ctrl-C raises
+  :class:`BatchInterrupted`, which says how many stacks are done.
 
 Examples
 --------
@@ -35,6 +40,7 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import logging
 import os
 import socket
@@ -49,12 +55,12 @@ from ..analysis.pipeline import analyze_stack, check_analysis_memory
 from ..core.errors import InputError
 from ..io.outdir import OutputFolder, check_output, sweep_stale
 from ..io.results import Results, json_safe
-from ..io.stack import read_stack
+from ..io.stack import read_stack, stack_from_images
 from ..report.writer import write_report
-from .executors import close_dask, dask_client, dask_results, local_results
+from .executors import check_scheduler, close_dask, dask_client, dask_results, local_results
 from .summary import ERRORS_FILE, SUMMARY_FILE, result_names, row_from_results, write_summary
 
-__all__ = ["BatchResult", "analyse_to_folder", "run_batch"]
+__all__ = ["BatchInterrupted", "BatchResult", "analyse_to_folder", "run_batch"]
 
 log = logging.getLogger("microfacet.batch")
 
@@ -84,8 +90,62 @@ class BatchResult:
         return self.count("failed")
 
 
+class BatchInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`run_batch`, after the finished stacks were recorded in
+    ``batch_summary.csv``; a rerun resumes.
+
+    Attributes
+    ----------
+    done : int
+        Stacks whose results are complete (analysed now or skipped as complete).
+    total : int
+        Stacks of the batch.
+    summary_csv : pathlib.Path
+    """
+
+    def __init__(self, done: int, total: int, summary_csv: Path):
+        super().__init__(f"interrupted; {done} of {total} stacks done")
+        self.done, self.total, self.summary_csv = done, total, summary_csv
+
+
+def open_stack(stack, *, limits=None, pixel_size_um=None, z_step_um=None):
+    """The validated :class:`~microfacet.io.stack.Stack` of a stack folder, or of a plain
+    folder of images with ``pixel_size_um`` and ``z_step_um`` (natural file order, nothing
+    written).
+
+    With ``io.stack.read_stack`` that takes ``pixel_size_um``/``z_step_um`` they are passed
+    to it; otherwise a folder without stack.json is read by ``io.stack.stack_from_images``.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, pathlib
+    >>> from microfacet.io.images import write_image
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> for i in (1, 2, 10):
+    ...     write_image(d / f"img_{i}.png", np.full((4, 5), 20 * i, np.uint8))
+    >>> st = open_stack(d, pixel_size_um=0.5, z_step_um=2.0)
+    >>> st.n_slices, [float(z) for z in st.z_um]
+    (3, [0.0, 2.0, 4.0])
+    """
+    if pixel_size_um is None and z_step_um is None:
+        return read_stack(stack, limits=limits)
+    if "pixel_size_um" in inspect.signature(read_stack).parameters:
+        return read_stack(stack, limits=limits, pixel_size_um=pixel_size_um,
+                          z_step_um=z_step_um)
+    folder = Path(stack)
+    folder = folder.parent if folder.name == "stack.json" else folder
+    if (folder / "stack.json").is_file():  # the stack.json's values are used
+        return read_stack(stack, limits=limits)
+    if pixel_size_um is None or z_step_um is None:
+        raise InputError(f"{folder}: no stack.json; give both `pixel_size_um` and "
+                         f"`z_step_um` to read the images in the folder as a stack",
+                         param="pixel_size_um" if pixel_size_um is None else "z_step_um")
+    return stack_from_images(folder, pixel_size_um=pixel_size_um, z_step_um=z_step_um,
+                             limits=limits)
+
+
 def analyse_to_folder(stack, out, *, options=None, overwrite=False, report=True, limits=None,
-                      progress=None):
+                      progress=None, pixel_size_um=None, z_step_um=None):
     """One stack end to end: claim ``out``, analyse, write the results and the report into it
     in one atomic step (``microfacet analyze`` and each batch worker).
 
@@ -102,6 +162,8 @@ def analyse_to_folder(stack, out, *, options=None, overwrite=False, report=True,
         Image-size limits for reading the stack.
     progress : callable, optional
         ``progress(stage_name)`` per analysis stage, then ``"write"`` and ``"report"``.
+    pixel_size_um, z_step_um : float, optional
+        For a plain folder of images without stack.json (see :func:`open_stack`).
 
     Returns
     -------
@@ -111,7 +173,8 @@ def analyse_to_folder(stack, out, *, options=None, overwrite=False, report=True,
     options.validate()
     check_output(out, kind="results", inputs=[getattr(stack, "path", stack)],
                  overwrite=overwrite)
-    st = read_stack(stack, limits=limits) if not hasattr(stack, "path") else stack
+    st = (open_stack(stack, limits=limits, pixel_size_um=pixel_size_um, z_step_um=z_step_um)
+          if not hasattr(stack, "path") else stack)
     check_analysis_memory(st)
     step = progress or (lambda name: None)
     with OutputFolder(out, kind="results", inputs=[st.path], overwrite=overwrite,
@@ -190,7 +253,10 @@ def run_batch(stacks, out_dir, *, options=None, jobs=None, scheduler=None, overw
     ------
     InputError
         Bad arguments, naming the parameter: no stacks, the same stack twice, ``jobs`` < 1, an
-        unreachable scheduler, an ``out_dir`` that breaks the output rules.
+        unreachable scheduler or one that is not an address, an ``out_dir`` that breaks
+        the output rules.
+    BatchInterrupted
+        Ctrl-C while stacks run; ``batch_summary.csv`` holds the finished ones.
     """
     t0 = time.perf_counter()
     options = AnalysisOptions() if options is None else options
@@ -200,6 +266,8 @@ def run_batch(stacks, out_dir, *, options=None, jobs=None, scheduler=None, overw
         raise InputError("no stacks given", param="stacks")
     if jobs is not None and jobs < 1:
         raise InputError(f"must be >= 1, got {jobs}", param="jobs")
+    if scheduler:
+        check_scheduler(scheduler)
     out_dir = Path(os.path.abspath(out_dir))
     # the batch folder is reused, never replaced: an existing batch output is fine
     check_output(out_dir, kind="batch", inputs=stacks, overwrite=True)
@@ -243,6 +311,10 @@ def _run_claimed(stacks, names, out_dir, options, dask, jobs, overwrite, report,
             rows[i] = {"stack": stack, "results": out, "status": "failed",
                        "reason": refused or why}
             log.warning("%s: failed: %s", stack, refused or why)
+        elif (invalid := _invalid_stack(stack)):
+            rows[i] = {"stack": stack, "results": out, "status": "failed", "reason": invalid,
+                       "worker": ""}
+            log.warning("%s: skipped: %s", stack, invalid)
         else:
             index[stack] = i
             tasks.append((stack, out, options, overwrite, report))
@@ -250,6 +322,7 @@ def _run_claimed(stacks, names, out_dir, options, dask, jobs, overwrite, report,
     summary_csv = out_dir / SUMMARY_FILE
     errors_log = out_dir / ERRORS_FILE  # this run's failures only
     errors_log.unlink(missing_ok=True)
+    _log_errors(errors_log, [r for r in rows if r is not None and r["status"] == "failed"])
     done = len(stacks) - len(tasks)
     log.info("batch: %d stacks, %d to analyse, %d already complete or refused",
              len(stacks), len(tasks), done)
@@ -263,9 +336,7 @@ def _run_claimed(stacks, names, out_dir, options, dask, jobs, overwrite, report,
         done += 1
         if row["status"] == "failed":
             log.warning("%s: failed: %s", row["stack"], row["reason"])
-            with open(errors_log, "a") as fh:
-                fh.write(f"== {time.strftime('%Y-%m-%d %H:%M:%S')} {row['stack']}\n"
-                         f"{tb or row['reason']}\n")
+            _log_errors(errors_log, [row], tb)
         else:
             log.info("%s: done in %.1f s", row["stack"], row.get("time_s") or 0.0)
         write_summary(summary_csv, [r for r in rows if r is not None])
@@ -282,6 +353,12 @@ def _run_claimed(stacks, names, out_dir, options, dask, jobs, overwrite, report,
         try:
             for row in results:
                 finish(row)
+        except KeyboardInterrupt:
+            results.close()  # stops the workers' queue (and closes a Dask client)
+            finished = [r for r in rows if r is not None]
+            write_summary(summary_csv, finished)
+            n_done = sum(1 for r in finished if r["status"] in ("done", "skipped"))
+            raise BatchInterrupted(n_done, len(stacks), summary_csv) from None
         except Exception as exc:  # the pool itself broke (a worker was killed, ...)
             reason = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
             for stack, i in index.items():
@@ -293,3 +370,26 @@ def _run_claimed(stacks, names, out_dir, options, dask, jobs, overwrite, report,
         close_dask(dask)
     write_summary(summary_csv, rows)
     return BatchResult(rows=rows, summary_csv=summary_csv, elapsed_s=time.perf_counter() - t0)
+
+
+def _invalid_stack(stack: str) -> str:
+    """Why ``stack`` cannot be analysed (its :func:`read_stack` error, one line), or ``""``.
+
+    Reads ``stack.json`` and the image headers only, in this process: a batch checks every
+    stack before any analysis starts.
+    """
+    try:
+        read_stack(stack)
+    except (ValueError, OSError) as exc:
+        return " ".join(str(exc).split()) or type(exc).__name__
+    return ""
+
+
+def _log_errors(errors_log: Path, rows, tb: str | None = None) -> None:
+    """Append failed ``rows`` to ``batch_errors.log`` (the traceback ``tb`` or the reason)."""
+    if not rows:
+        return
+    with open(errors_log, "a") as fh:
+        for row in rows:
+            fh.write(f"== {time.strftime('%Y-%m-%d %H:%M:%S')} {row['stack']}\n"
+                     f"{tb or row['reason']}\n")

@@ -2,21 +2,23 @@
 
 from __future__ import annotations
 
+import json
 import logging
-import sys
 import time
 from pathlib import Path
 
-from .. import batch
+from .. import batch, io
 from .options import (
     HelpFormatter,
     add_analysis_options,
     add_limit_options,
+    add_plain_folder_options,
     analysis_options,
     example_epilog,
     limits_from_args,
+    plain_folder_values,
 )
-from .progress import Progress
+from .progress import ANALYZE_STAGE_WEIGHTS, StageProgress
 
 
 def register(sub):
@@ -31,15 +33,22 @@ def register(sub):
             "tilt_sigma_deg.npy, thickness_roi.csv, thickness_pdf.csv, ndf_pdf.csv, report.pdf."),
         epilog=example_epilog("microfacet analyze fixtures/stacks/nd-fixture --out out/nd",
                               "microfacet analyze my-stack --out res --mode seed "
-                              "--roi-size-px 128"),
+                              "--roi-size-px 128",
+                              "microfacet analyze folder-of-jpegs --pixel-size-um 0.5 "
+                              "--z-step-um 1 --out res --json"),
         formatter_class=HelpFormatter,
     )
-    p.add_argument("stack", metavar="STACK", help="stack folder (microfacet-stack/1)")
+    p.add_argument("stack", metavar="STACK",
+                   help="stack folder (microfacet-stack/1), or a plain folder of images with "
+                        "--pixel-size-um and --z-step-um")
     p.add_argument("--out", required=True, metavar="OUT",
                    help="results folder (new, empty, or an earlier results folder with "
                         "--overwrite; never an input or a folder holding one)")
     add_analysis_options(p)
+    add_plain_folder_options(p)
     add_limit_options(p)
+    p.add_argument("--json", action="store_true",
+                   help="print a JSON summary of the results on stdout instead of the text")
     p.add_argument("--no-report", action="store_true", help="skip report.pdf")
     p.add_argument("--overwrite", action="store_true",
                    help="replace OUT if it is an earlier microfacet results folder")
@@ -47,37 +56,56 @@ def register(sub):
     return p
 
 
+#: Keys of summary.json that ``--json`` prints (with ``results``, the output folder).
+JSON_KEYS = ("mode", "thickness", "ndf", "exposure", "exposure_source", "delta_e",
+             "masked_fraction", "warnings", "timings_s")
+
+
+def json_summary(out: Path) -> dict:
+    """The ``--json`` summary of the results folder ``out``: its path, the stack, and the
+    :data:`JSON_KEYS` of its ``summary.json`` (mixtures with ``identified`` and ``reason``)."""
+    res = io.results.Results(out)
+    return {"results": str(out), "stack": res.get("inputs", "stack"),
+            **{k: res.get(k) for k in JSON_KEYS}}
+
+
+def _text_summary(result, out: Path, elapsed_s: float) -> str:
+    fit = result.thickness_fit
+    comps = ", ".join(f"{m:.1f} nm ({100 * w:.0f}%)" for w, m, _ in fit.mixture.components) \
+        if fit else "none"
+    lobes = ", ".join(f"{s:.1f}° ({100 * w:.0f}%)"
+                      for w, s in result.ndf_fit.mixture.components) \
+        if result.ndf_fit else "none"
+    if fit is not None and not fit.identified:
+        comps += " -- NOT IDENTIFIED"
+    if result.ndf_fit is None or not result.ndf_fit.identified:
+        lobes += " -- NOT IDENTIFIED, not a measurement"
+    de = result.delta_e_stats
+    return (f"wrote {out} in {elapsed_s:.1f} s\n"
+            f"  thickness: {comps}\n  NDF lobes (slope SD): {lobes}\n"
+            f"  exposure {result.exposure:.3f} ({result.exposure_source}), "
+            f"mean dE00 {de['mean'] if de['mean'] is None else round(de['mean'], 2)}, "
+            f"masked {100 * result.mask.fraction:.1f}%")
+
+
 def run(args) -> int:
+    """The results summary goes to stdout (text, or JSON with ``--json``); logs, warnings
+    and the progress bar to stderr."""
     out = Path(args.out)
     opts = analysis_options(args)
+    pixel_size_um, z_step_um = plain_folder_values(args)
     t0 = time.perf_counter()
-    stages = ["height from focus", "colour", "colour table", "thickness per ROI",
-              "tilt per pixel", "distributions", "write", "report"]
-    with Progress("analyze", total=len(stages), unit="stages", quiet=args.quiet) as bar:
-        def progress(name):
-            bar.update(stages.index(name) if name in stages else 0)
-
+    skip = ("report",) if args.no_report else ()
+    with StageProgress("analyze", ANALYZE_STAGE_WEIGHTS, skip=skip, quiet=args.quiet) as bar:
         result = batch.analyse_to_folder(args.stack, out, options=opts,
                                          overwrite=args.overwrite, report=not args.no_report,
-                                         limits=limits_from_args(args), progress=progress)
-        bar.update(len(stages))
-    if not args.quiet:
-        fit = result.thickness_fit
-        comps = ", ".join(f"{m:.1f} nm ({100 * w:.0f}%)" for w, m, _ in fit.mixture.components) \
-            if fit else "none"
-        lobes = ", ".join(f"{s:.1f}° ({100 * w:.0f}%)"
-                          for w, s in result.ndf_fit.mixture.components) \
-            if result.ndf_fit else "none"
-        if fit is not None and not fit.identified:
-            comps += " -- NOT IDENTIFIED"
-        if result.ndf_fit is None or not result.ndf_fit.identified:
-            lobes += " -- NOT IDENTIFIED, not a measurement"
-        de = result.delta_e_stats
-        print(f"wrote {out} in {time.perf_counter() - t0:.1f} s\n"
-              f"  thickness: {comps}\n  NDF lobes (slope SD): {lobes}\n"
-              f"  exposure {result.exposure:.3f} ({result.exposure_source}), "
-              f"mean dE00 {de['mean'] if de['mean'] is None else round(de['mean'], 2)}, "
-              f"masked {100 * result.mask.fraction:.1f}%", file=sys.stderr)
+                                         limits=limits_from_args(args), progress=bar.stage,
+                                         pixel_size_um=pixel_size_um, z_step_um=z_step_um)
+        bar.finish()
     for w in result.warnings:
         logging.getLogger(__name__).warning("%s: %s", out, w)
+    if args.json:
+        print(json.dumps(json_summary(out), indent=1))
+    elif not args.quiet:
+        print(_text_summary(result, out, time.perf_counter() - t0))
     return 0

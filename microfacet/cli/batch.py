@@ -12,6 +12,8 @@ from .progress import Progress
 
 #: Exit status when the batch ran but at least one stack failed.
 EXIT_SOME_FAILED = 1
+#: Exit status after Ctrl-C (128 + SIGINT), as for every command.
+EXIT_INTERRUPTED = 130
 
 
 def register(sub):
@@ -87,11 +89,14 @@ def run(args) -> int:
                                scheduler=args.scheduler, overwrite=args.overwrite,
                                report=not args.no_report,
                                progress=lambda done, total, row: bar.update(done, total))
-        except ValueError as exc:  # name the command-line option
-            msg = str(exc)
-            if msg.startswith(("scheduler:", "jobs:")):
-                raise ValueError(f"--{msg}") from None
-            raise
+        except batch.runner.BatchInterrupted as exc:
+            interrupted = exc
+        else:
+            interrupted = None
+    if interrupted is not None:  # after the bar's line is ended
+        print(f"microfacet batch: interrupted; {interrupted.done} of {interrupted.total} "
+              f"stacks done, rerun to resume", file=sys.stderr)
+        return EXIT_INTERRUPTED
     n_failed = result.n_failed
     if not args.quiet:
         print(f"{len(result.rows)} stacks: {result.count('done')} done, "

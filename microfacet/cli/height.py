@@ -26,7 +26,13 @@ from ..focus.defaults import (
     INTERPOLATIONS,
     OPERATORS,
 )
-from .options import HelpFormatter, add_limit_options, limits_from_args
+from .options import (
+    HelpFormatter,
+    add_limit_options,
+    add_plain_folder_options,
+    limits_from_args,
+    plain_folder_values,
+)
 from .progress import Progress
 
 cv2 = load("cv2")
@@ -72,10 +78,7 @@ def register(subparsers) -> argparse.ArgumentParser:
                    help="register slices to a reference first (default method: ecc)")
     p.add_argument("--smooth-sigma-px", type=float, default=0.0, metavar="S",
                    help="Gaussian smoothing of the slopes for the normals, px (default: 0)")
-    p.add_argument("--pixel-size-um", type=float, default=None, metavar="UM",
-                   help="for a plain image folder without stack.json: pixel size in µm")
-    p.add_argument("--z-step-um", type=float, default=None, metavar="UM",
-                   help="for a plain image folder without stack.json: z step in µm")
+    add_plain_folder_options(p)
     add_limit_options(p)
     p.add_argument("--overwrite", action="store_true",
                    help="replace OUT if it is an earlier microfacet height folder")
@@ -84,19 +87,13 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def _load_stack(args):
-    path = Path(args.stack)
-    folder = path.parent if path.name == "stack.json" else path
-    if folder.is_dir() and not (folder / "stack.json").exists() and (
-            args.pixel_size_um is not None or args.z_step_um is not None):
-        if args.pixel_size_um is None or args.z_step_um is None:
-            raise InputError(f"{folder}: no stack.json; give both --pixel-size-um and "
-                             f"--z-step-um to read the images in the folder as a stack")
-        return io.stack.stack_from_images(folder, pixel_size_um=args.pixel_size_um,
-                                 z_step_um=args.z_step_um, limits=limits_from_args(args))
-    if folder.is_dir() and not (folder / "stack.json").exists():
-        raise InputError(f"{folder / 'stack.json'}: missing stack.json (for a plain folder of "
-                         f"images give --pixel-size-um and --z-step-um)")
-    return io.stack.read_stack(path, limits=limits_from_args(args))
+    pixel_size_um, z_step_um = plain_folder_values(args)
+    if pixel_size_um is not None:
+        path = Path(args.stack)
+        return io.stack.stack_from_images(path.parent if path.name == "stack.json" else path,
+                                          pixel_size_um=pixel_size_um, z_step_um=z_step_um,
+                                          limits=limits_from_args(args))
+    return io.stack.read_stack(args.stack, limits=limits_from_args(args))
 
 
 def _height_png(h):

@@ -25,6 +25,7 @@ from ..core.errors import InputError, one_line
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = (
+    "init",
     "analyze",
     "height",
     "synth",
@@ -54,6 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     parser.add_argument("--version", action="version", version=f"microfacet {__version__}")
+    _add_verbosity(parser, dest_prefix="global_")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         try:
@@ -62,12 +64,24 @@ def build_parser() -> argparse.ArgumentParser:
             if exc.name != f"microfacet.cli.{name}":
                 raise
             continue
-        p = module.register(sub)
-        p.add_argument("-v", "--verbose", action="count", default=0,
-                       help="log progress (-v) and debug details (-vv); show tracebacks")
-        p.add_argument("-q", "--quiet", action="store_true",
-                       help="no progress bars or log messages")
+        _add_verbosity(module.register(sub))
     return parser
+
+
+def _add_verbosity(p: argparse.ArgumentParser, dest_prefix: str = "") -> None:
+    """``-v``/``-q`` on the main parser (``dest_prefix="global_"``) and on every command, so
+    they work before and after the command name. The two sets have their own ``dest``: a
+    subparser's defaults would otherwise overwrite what the main parser read."""
+    p.add_argument("-v", "--verbose", action="count", default=0, dest=f"{dest_prefix}verbose",
+                   help="log progress (-v) and debug details (-vv); show tracebacks")
+    p.add_argument("-q", "--quiet", action="store_true", dest=f"{dest_prefix}quiet",
+                   help="no progress bars or log messages")
+
+
+def merge_verbosity(args: argparse.Namespace) -> None:
+    """``args.verbose``/``args.quiet`` from the options given before and after the command."""
+    args.verbose = getattr(args, "verbose", 0) + getattr(args, "global_verbose", 0)
+    args.quiet = bool(getattr(args, "quiet", False) or getattr(args, "global_quiet", False))
 
 
 def _setup_logging(verbose: int, quiet: bool) -> None:
@@ -129,8 +143,9 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "run", None) is None:
         parser.print_help()
         return EXIT_USER_ERROR
-    verbose = getattr(args, "verbose", 0)
-    _setup_logging(verbose, getattr(args, "quiet", False))
+    merge_verbosity(args)
+    verbose = args.verbose
+    _setup_logging(verbose, args.quiet)
     prog = f"microfacet {args.command}"
     previous = None
     try:

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import logging
+import math
 import textwrap
+from pathlib import Path
 
 from .. import analysis, optics
 from ..core.errors import InputError
@@ -54,6 +57,51 @@ def limits_from_args(args):
     ``--max-stack-megapixels``."""
     return limits.Limits(max_megapixels=args.max_megapixels,
                   max_stack_megapixels=args.max_stack_megapixels)
+
+
+def add_plain_folder_options(p: argparse.ArgumentParser) -> None:
+    """``--pixel-size-um``, ``--z-step-um``: read a plain folder of images (no stack.json) as a
+    stack (``height``, ``analyze``)."""
+    p.add_argument("--pixel-size-um", type=float, default=None, metavar="UM",
+                   help="for a plain image folder without stack.json: pixel size in µm")
+    p.add_argument("--z-step-um", type=float, default=None, metavar="UM",
+                   help="for a plain image folder without stack.json: z step in µm")
+
+
+def plain_folder_values(args) -> tuple[float | None, float | None]:
+    """``(pixel_size_um, z_step_um)`` to read ``args.stack`` with: both None for a stack with a
+    stack.json, both given for a plain folder of images.
+
+    Options given for a stack that has a stack.json are ignored, with a one-line warning each
+    (the stack.json's values are used); a folder without stack.json needs both options (an
+    :class:`~microfacet.core.errors.InputError` names the missing stack.json or option).
+    """
+    path = Path(args.stack)
+    folder = path.parent if path.name == "stack.json" else path
+    given = {"--pixel-size-um": args.pixel_size_um, "--z-step-um": args.z_step_um}
+    jpath = folder / "stack.json"
+    if jpath.is_file():
+        what = {"--pixel-size-um": "pixel size", "--z-step-um": "slice heights"}
+        for option, value in given.items():
+            if value is not None:
+                logging.getLogger("microfacet.cli").warning(
+                    "%s %g ignored: %s gives the %s", option, value, jpath, what[option])
+        return None, None
+    if not folder.is_dir():  # read_stack says what is wrong with it
+        return None, None
+    if all(v is None for v in given.values()):
+        raise InputError(f"{jpath}: missing stack.json (for a plain folder of images give "
+                         f"--pixel-size-um and --z-step-um)")
+    if any(v is None for v in given.values()):
+        raise InputError(f"{folder}: no stack.json; give both --pixel-size-um and "
+                         f"--z-step-um to read the images in the folder as a stack")
+    if not (math.isfinite(args.pixel_size_um) and args.pixel_size_um > 0):
+        raise InputError(f"must be a finite number > 0, got {args.pixel_size_um}",
+                         param="pixel_size_um")
+    if not (math.isfinite(args.z_step_um) and args.z_step_um != 0):
+        raise InputError(f"must be a finite non-zero number, got {args.z_step_um}",
+                         param="z_step_um")
+    return args.pixel_size_um, args.z_step_um
 
 
 def pair_type(sep: str, cast, example: str):

@@ -16,6 +16,10 @@ Multi-page TIFFs are read through :class:`MultiPageTiff`, one pass over the page
 
 Images are channels-last, RGB order: grey ``(H, W)`` or colour ``(H, W, 3)``; alpha is dropped.
 
+Writing: PNG/TIFF/JPEG images through OpenCV (PNGs optionally with a ``pHYs`` chunk giving the
+pixel size, :func:`png_pixel_size_um` reads it back) and float maps as calibrated float32
+ImageJ TIFFs for Fiji (:func:`write_float_tiff`).
+
 Examples
 --------
 >>> import tempfile, pathlib
@@ -33,6 +37,7 @@ import contextlib
 import os
 import struct
 import threading
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,10 +49,10 @@ from ..core.lazy import load
 cv2 = load("cv2")
 tifffile = load("tifffile")
 
-__all__ = ["IMAGE_SUFFIXES", "ImageInfo", "MultiPageTiff", "convert_samples", "decode_image",
-           "image_info", "npy_info", "read_png", "read_tiff_headers", "tiff_page_info",
-           "to_code_values",
-           "to_rgb_or_grey", "write_image"]
+__all__ = ["IMAGE_SUFFIXES", "ImageInfo", "MultiPageTiff", "convert_samples",
+           "decode_image", "image_info", "npy_info", "png_pixel_size_um", "read_png",
+           "read_tiff_headers", "tiff_page_info", "to_code_values",
+           "to_rgb_or_grey", "write_float_tiff", "write_image"]
 
 #: File suffixes accepted for slices and export images (lower case).
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
@@ -386,8 +391,11 @@ def to_code_values(image, *, bit_depth=8):
     return np.round(np.clip(np.nan_to_num(img, nan=0.0), 0, 1) * top).astype(dtype)
 
 
-def write_image(path, image, *, bit_depth=8, params=()):
+def write_image(path, image, *, bit_depth=8, params=(), pixel_size_um=None):
     """Write an (H, W) grey or (H, W, 3) RGB image; floats are [0, 1] encoded values.
+
+    ``pixel_size_um`` (a float or ``(y, x)``, µm) adds a PNG ``pHYs`` chunk: pixels per
+    metre, rounded to whole pixels (read back by :func:`png_pixel_size_um`, PIL, GIMP).
 
     Raises
     ------
@@ -397,5 +405,93 @@ def write_image(path, image, *, bit_depth=8, params=()):
     img = to_code_values(image, bit_depth=bit_depth)
     if img.ndim == 3:
         img = img[..., ::-1]  # OpenCV writes BGR
-    if not cv2.imwrite(str(path), np.ascontiguousarray(img), list(params)):
+    img = np.ascontiguousarray(img)
+    if pixel_size_um is None or Path(path).suffix.lower() != ".png":
+        if not cv2.imwrite(str(path), img, list(params)):
+            raise OSError(f"cannot write {path}")
+        return
+    ok, buf = cv2.imencode(".png", img, list(params))
+    if not ok:
         raise OSError(f"cannot write {path}")
+    Path(path).write_bytes(_with_phys(buf.tobytes(), pixel_size_um))
+
+
+def _png_chunks(data: bytes):
+    """``(offset, length, type)`` of each chunk of a PNG byte string."""
+    pos = 8
+    while pos + 8 <= len(data):
+        length, ctype = struct.unpack(">I4s", data[pos:pos + 8])
+        yield pos, length, ctype
+        pos += 12 + length
+
+
+def _with_phys(png: bytes, pixel_size_um) -> bytes:
+    py, px = np.broadcast_to(np.asarray(pixel_size_um, dtype=np.float64), (2,))
+    ppm = [round(1e6 / float(v)) if np.isfinite(v) and v > 0 else 0 for v in (px, py)]
+    if not all(0 < v < 2**32 for v in ppm):
+        raise ValueError(f"pixel_size_um: {pixel_size_um!r} does not fit a PNG pHYs chunk")
+    body = b"pHYs" + struct.pack(">IIB", ppm[0], ppm[1], 1)
+    chunk = struct.pack(">I", 9) + body + struct.pack(">I", zlib.crc32(body))
+    out = bytearray(png[:8])
+    for pos, length, ctype in _png_chunks(png):
+        if ctype != b"pHYs":
+            out += png[pos:pos + 12 + length]
+        if ctype == b"IHDR":
+            out += chunk
+    return bytes(out)
+
+
+def png_pixel_size_um(path) -> tuple[float, float] | None:
+    """The pixel size ``(y, x)`` in µm from a PNG's ``pHYs`` chunk in metres, else None.
+
+    Raises
+    ------
+    InputError
+        Naming the file, if it cannot be read.
+    """
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise InputError(f"{one_line(path)}: cannot read ({exc.strerror or exc})") from None
+    for pos, length, ctype in _png_chunks(data):
+        if ctype == b"pHYs" and length == 9:
+            ppx, ppy, unit = struct.unpack(">IIB", data[pos + 8:pos + 17])
+            return (1e6 / ppy, 1e6 / ppx) if unit == 1 and ppx and ppy else None
+        if ctype == b"IDAT":
+            break
+    return None
+
+
+# ------------------------------------------------------------------------- float TIFF (maps)
+
+def write_float_tiff(path, image, *, pixel_size_um=None, value_unit=None) -> None:
+    """Write a 2-D map as a float32 ImageJ TIFF that Fiji and tifffile calibrate.
+
+    Parameters
+    ----------
+    path : path-like
+    image : array_like (H, W)
+        Values (NaN stays NaN).
+    pixel_size_um : float or (float, float), optional
+        Pixel size in µm, one value or ``(y, x)``: written as ImageJ ``unit=um`` and the
+        resolution tags in pixels per µm.
+    value_unit : str, optional
+        The unit of the values (``"um"``, ``"nm"``, ``"degree"``), ImageJ ``vunit``.
+    """
+    img = np.asarray(image, dtype=np.float32)
+    if img.ndim != 2:
+        raise ValueError(f"image: expected a 2-D map, got shape {img.shape}")
+    meta = {"axes": "YX"}
+    kw = {}
+    if pixel_size_um is not None:
+        py, px = (float(v) for v in np.broadcast_to(np.asarray(pixel_size_um, float), (2,)))
+        if not (np.isfinite([py, px]).all() and min(py, px) > 0):
+            raise ValueError(f"pixel_size_um: must be positive and finite, got {pixel_size_um!r}")
+        meta["unit"] = "um"
+        kw["resolution"] = (1.0 / px, 1.0 / py)
+    if value_unit is not None:
+        meta["vunit"] = str(value_unit)
+    finite = img[np.isfinite(img)]
+    if finite.size:  # Fiji's initial display range
+        meta["min"], meta["max"] = float(finite.min()), float(finite.max())
+    tifffile.imwrite(path, img, imagej=True, metadata=meta, **kw)

@@ -32,11 +32,12 @@ import numpy as np
 
 from ..core.distributions import NDFMixture, ThicknessMixture
 from ..core.errors import InputError, one_line
-from .images import read_png, write_image
+from .images import read_png, write_float_tiff, write_image
 from .jsonfile import read_json
+from .x3p import write_x3p
 
-__all__ = ["FORMAT", "IMAGES", "MAPS", "Results", "TABLES", "json_safe",
-           "write_results_files"]
+__all__ = ["FORMAT", "IMAGES", "MAPS", "Results", "TABLES", "TIFF_COPIES", "X3P_COPIES",
+           "json_safe", "pixel_size_of", "write_results_files"]
 
 FORMAT = "microfacet-results/1"
 #: Maps of a results folder: name -> (file, what it holds). Shapes are H×W (H×W×3 for the
@@ -57,6 +58,16 @@ MAPS = {
 _NDIM = {"normals": 3}
 #: Images: name -> file.
 IMAGES = {"all_in_focus": "all_in_focus.png"}
+#: Copies of maps for microscopy tools (Fiji, tifffile): map name -> (file, value unit);
+#: float32 ImageJ TIFFs calibrated with the pixel size (``unit=um``, pixels per µm).
+TIFF_COPIES = {
+    "height_um": ("height_um.tif", "um"),
+    "thickness_nm": ("thickness_nm.tif", "nm"),
+    "tilt_deg": ("tilt_deg.tif", "degree"),
+    "tilt_sigma_deg": ("tilt_sigma_deg.tif", "degree"),
+}
+#: ISO 25178-72 copies (Gwyddion, MountainsMap): map name -> file; need the pixel size.
+X3P_COPIES = {"height_um": "height_um.x3p"}
 #: Tables: name -> (file, columns that must be there).
 TABLES = {
     "thickness_roi": ("thickness_roi.csv",
@@ -96,8 +107,24 @@ def _dump(path: Path, summary: dict) -> None:
     os.replace(tmp, path)
 
 
+def pixel_size_of(summary: dict) -> tuple[float, float] | None:
+    """The pixel size ``(y, x)`` in µm of ``summary["inputs"]["pixel_size_um"]`` (one number
+    or a pair), or None when it is absent or not positive and finite.
+
+    >>> pixel_size_of({"inputs": {"pixel_size_um": 0.5}}), pixel_size_of({})
+    ((0.5, 0.5), None)
+    """
+    inputs = summary.get("inputs") if isinstance(summary, dict) else None
+    value = inputs.get("pixel_size_um") if isinstance(inputs, dict) else None
+    try:
+        p = np.broadcast_to(np.asarray(value, dtype=np.float64), (2,))
+    except (TypeError, ValueError):
+        return None
+    return (float(p[0]), float(p[1])) if np.all(np.isfinite(p)) and np.all(p > 0) else None
+
+
 def write_results_files(folder, *, summary: dict, maps: dict, images: dict | None = None,
-                        tables: dict | None = None) -> None:
+                        tables: dict | None = None, tool_copies: bool = True) -> None:
     """Write the files of a results folder into ``folder`` (which exists; normally the
     temporary folder of a :class:`~microfacet.io.outdir.OutputFolder`).
 
@@ -113,6 +140,11 @@ def write_results_files(folder, *, summary: dict, maps: dict, images: dict | Non
         Names of :data:`IMAGES` → (image in [0, 1] or code values, bit depth 8 or 16).
     tables : dict of str to (ndarray (N, C), list of str, list of str), optional
         Names of :data:`TABLES` → (rows, column names, printf formats).
+    tool_copies : bool
+        Also write the copies for microscopy tools: :data:`TIFF_COPIES` (calibrated float32
+        TIFFs) and, when the pixel size is known, :data:`X3P_COPIES`; PNG images get a
+        ``pHYs`` chunk. The pixel size is ``summary["inputs"]["pixel_size_um"]``
+        (:func:`pixel_size_of`).
 
     Raises
     ------
@@ -120,6 +152,7 @@ def write_results_files(folder, *, summary: dict, maps: dict, images: dict | Non
         An unknown name.
     """
     folder = Path(folder)
+    pixel = pixel_size_of(summary) if tool_copies else None
     for name, arr in maps.items():
         if name not in MAPS:
             raise ValueError(f"maps: unknown map {name!r}; known: {', '.join(MAPS)}")
@@ -129,10 +162,15 @@ def write_results_files(folder, *, summary: dict, maps: dict, images: dict | Non
         a = (a.astype(bool) if name == "mask" else a.astype(np.int32) if name == "facets"
              else a.astype(np.float32))
         np.save(folder / MAPS[name][0], a)
+        if tool_copies and name in TIFF_COPIES and a.ndim == 2:
+            file, unit = TIFF_COPIES[name]
+            write_float_tiff(folder / file, a, pixel_size_um=pixel, value_unit=unit)
+        if tool_copies and name in X3P_COPIES and a.ndim == 2 and pixel is not None:
+            write_x3p(folder / X3P_COPIES[name], a, pixel)
     for name, (img, bit_depth) in (images or {}).items():
         if name not in IMAGES:
             raise ValueError(f"images: unknown image {name!r}; known: {', '.join(IMAGES)}")
-        write_image(folder / IMAGES[name], img, bit_depth=bit_depth)
+        write_image(folder / IMAGES[name], img, bit_depth=bit_depth, pixel_size_um=pixel)
     for name, (rows, columns, fmt) in (tables or {}).items():
         if name not in TABLES:
             raise ValueError(f"tables: unknown table {name!r}; known: {', '.join(TABLES)}")

@@ -31,8 +31,9 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
-import re
+import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,7 +45,7 @@ from ..core.lazy import load
 from .images import IMAGE_SUFFIXES, MultiPageTiff, convert_samples, decode_image, write_image
 from .jsonfile import read_json
 from .limits import Limits
-from .stack_checks import DEFAULT_ILLUMINATION, FORMAT, stack_fields
+from .stack_checks import DEFAULT_ILLUMINATION, FORMAT, find_images, stack_fields, warn_height_unit
 
 cv2 = load("cv2")
 tifffile = load("tifffile")
@@ -52,6 +53,7 @@ tifffile = load("tifffile")
 __all__ = [
     "FORMAT",
     "Stack",
+    "find_images",
     "read_stack",
     "stack_from_images",
     "write_stack",
@@ -73,8 +75,11 @@ class Stack:
     ----------
     path : Path
         The stack folder (absolute).
+    pixel_size_yx_um : tuple of float
+        ``(y, x)`` size of one pixel on the sample, µm (equal for square pixels).
     pixel_size_um : float
-        Lateral size of one pixel on the sample, µm.
+        The size of a square pixel, µm; raises :class:`InputError` for non-square pixels,
+        which are read but not yet analysed.
     z_um : ndarray of float64, shape (N,)
         Stage height of each slice in file order, µm (any order, any spacing, no duplicates).
         Empty for an export-only stack.
@@ -102,10 +107,14 @@ class Stack:
         The microscope export: height map in µm (TIFF or ``.npy``) and its colour image.
     meta : dict
         The whole stack.json as read (extra keys included).
+    sources : dict
+        Where ``"pixel_size_um"`` and ``"z_um"`` came from: ``"stack.json"``, ``"given"``
+        (the caller's value), ``"instrument file NAME"`` or ``"ImageJ metadata of NAME"`` (or
+        OME, TIFF resolution tags).
     """
 
     path: Path
-    pixel_size_um: float
+    pixel_size_yx_um: tuple[float, float]
     z_um: np.ndarray
     slice_paths: tuple[Path, ...]
     tiff_path: Path | None
@@ -121,6 +130,7 @@ class Stack:
     export_height_path: Path | None = None
     export_image_path: Path | None = None
     meta: dict = field(default_factory=dict)
+    sources: dict = field(default_factory=dict)
     tiff_uniform: bool = field(default=False, repr=False)
 
     def __post_init__(self):
@@ -128,6 +138,30 @@ class Stack:
         object.__setattr__(self, "_tiff", reader)
 
     # -- properties ----------------------------------------------------------------------
+    @property
+    def square_pixels(self) -> bool:
+        """True when the pixel is as tall as it is wide (to 1 part in 10⁶)."""
+        y, x = self.pixel_size_yx_um
+        return math.isclose(y, x, rel_tol=1e-6)
+
+    @property
+    def pixel_size_um(self) -> float:
+        """Size of a square pixel on the sample, µm.
+
+        Raises
+        ------
+        InputError
+            For non-square pixels: they are read (:attr:`pixel_size_yx_um`) but the analysis
+            (normals, facet sizes) assumes square pixels and is not ready for them.
+        """
+        if not self.square_pixels:
+            y, x = self.pixel_size_yx_um
+            raise InputError(f"{one_line(self.path / 'stack.json')}: key 'pixel_size_um': "
+                             f"non-square pixels ({y:g} µm high, {x:g} µm wide, from "
+                             f"{self.sources.get('pixel_size_um', 'stack.json')}) are read "
+                             f"but not yet analysed; resample the images to square pixels")
+        return float(self.pixel_size_yx_um[1])
+
     @property
     def n_slices(self) -> int:
         """Number of focal planes (0 for an export-only stack)."""
@@ -221,11 +255,13 @@ class Stack:
         p = self.export_height_path
         if p.suffix.lower() == ".npy":
             h = np.load(p, allow_pickle=False)
-        else:
+        elif p.suffix.lower() in (".tif", ".tiff"):
             h = tifffile.imread(p)
-        h = np.asarray(h, dtype=np.float32)
+        else:  # an instrument file, validated by read_stack
+            h = load("microfacet.io.instruments").read_height_map(p).height_um
+        h = np.array(h, dtype=np.float32)
         h[~np.isfinite(h)] = np.nan
-        _warn_height_unit(h, self.pixel_size_um, self.path / "stack.json")
+        warn_height_unit(h, self.pixel_size_yx_um, self.path / "stack.json")
         return h
 
     def read_export_image(self, dtype=np.float32) -> np.ndarray:
@@ -238,31 +274,20 @@ class Stack:
                                 channels=self.channels), dtype)
 
 
-#: Median |slope| of a height map above which its unit is almost surely wrong (real
-#: surfaces, even roll-dull or sand-blasted, have median slopes well below 1, i.e. 45°).
-_IMPLAUSIBLE_MEDIAN_SLOPE = 5.0
-
-
-def _warn_height_unit(h: np.ndarray, pixel_size_um: float, jpath: Path) -> None:
-    """Warn when a height map in µm has slopes no surface has (heights in nm, most likely)."""
-    step = max(1, min(h.shape) // 256)
-    sub = h[::step, ::step]
-    d = np.abs(np.diff(sub, axis=1)) / (pixel_size_um * step)
-    d = d[np.isfinite(d)]
-    if d.size and float(np.median(d)) > _IMPLAUSIBLE_MEDIAN_SLOPE:
-        log.warning("%s: key 'height_um': the median surface slope is %.3g (%.2f°), which no "
-                    "surface has; if the heights are in nm, divide them by 1000 (or check "
-                    "pixel_size_um)", one_line(jpath), float(np.median(d)),
-                    float(np.degrees(np.arctan(np.median(d)))))
-
-
-def read_stack(path, *, limits: Limits | None = None) -> Stack:
-    """Read and validate a stack folder (or its ``stack.json``).
+def read_stack(path, *, pixel_size_um: float | None = None, z_step_um: float | None = None,
+               limits: Limits | None = None) -> Stack:
+    """Read and validate a stack folder (or its ``stack.json``), or a plain folder of images.
 
     Parameters
     ----------
     path : str or Path
-        The stack folder, or the ``stack.json`` file inside it.
+        The stack folder, or the ``stack.json`` file inside it. A folder without stack.json
+        is read as in :func:`stack_from_images`; nothing is written into it.
+    pixel_size_um : float, optional
+        Pixel size on the sample, µm, used when stack.json has none; it wins over the images'
+        metadata (OME-TIFF, ImageJ TIFF), and a stack.json value wins over it.
+    z_step_um : float, optional
+        Slice *i* is at ``i * z_step_um`` µm, with the same precedence.
     limits : Limits, optional
         Largest image and stack, checked from the headers before anything is decoded
         (default :class:`microfacet.io.limits.Limits`).
@@ -270,13 +295,15 @@ def read_stack(path, *, limits: Limits | None = None) -> Stack:
     Returns
     -------
     Stack
-        The validated stack; no pixels are decoded.
+        The validated stack; no pixels are decoded. ``Stack.sources`` says where the pixel
+        size and the z positions came from.
 
     Raises
     ------
     InputError
         For every breach of the format, with one message naming the file and the key or
-        slice at fault; also for images over ``limits``.
+        slice at fault (for a plain folder without the values: the parameters to give);
+        also for images over ``limits``.
 
     Notes
     -----
@@ -297,70 +324,92 @@ def read_stack(path, *, limits: Limits | None = None) -> Stack:
     root = path.resolve()
     jpath = root / "stack.json"
     if not jpath.is_file():
-        raise InputError(f"{one_line(jpath)}: missing stack.json")
+        return stack_from_images(root, pixel_size_um=pixel_size_um, z_step_um=z_step_um,
+                                 limits=limits)
     meta = read_json(jpath)
     if not isinstance(meta, dict):
         raise InputError(f"{one_line(jpath)}: must hold a JSON object")
-    return Stack(**stack_fields(root, meta, jpath, limits or Limits()))
+    return Stack(**stack_fields(root, meta, jpath, limits or Limits(),
+                                given={"pixel_size_um": pixel_size_um, "z_step_um": z_step_um}))
 
 
-def _natural_key(name: str):
-    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
+def stack_from_images(folder, *, pixel_size_um: float | None = None,
+                      z_step_um: float | None = None, z_um: Sequence[float] | None = None,
+                      limits: Limits | None = None) -> Stack:
+    """A validated stack from a plain folder of images, ignoring any stack.json in it.
 
-
-def stack_from_images(folder, *, pixel_size_um: float, z_step_um: float | None = None,
-                      z_um: Sequence[float] | None = None, limits: Limits | None = None
-                      ) -> Stack:
-    """A validated stack from a plain folder of images that has no stack.json.
-
-    The images (``.png``, ``.tif``, ``.tiff``, ``.jpg``, ``.jpeg``, any case) are taken in
-    natural order (``image_2`` before ``image_10``); nothing is written. Validation is the
-    same as :func:`read_stack`, as if a stack.json with these keys existed.
+    The images (``.png``, ``.tif``, ``.tiff``, ``.jpg``, ``.jpeg``, any case) are found by
+    :func:`find_images`; nothing is written. Validation is the same as :func:`read_stack`,
+    as if a stack.json with these keys existed. Values not given are taken from the first
+    TIFF's metadata (:func:`~microfacet.io.tiff_meta.tiff_scale`).
 
     Parameters
     ----------
     folder : str or Path
-    pixel_size_um : float
+    pixel_size_um : float, optional
         Lateral pixel size on the sample, µm.
     z_step_um : float, optional
-        Slice *i* is at ``i * z_step_um`` (give this or ``z_um``).
+        Slice *i* is at ``i * z_step_um`` µm.
     z_um : sequence of float, optional
-        Slice heights in the natural file order, µm.
+        Slice heights in the natural file order, µm (instead of ``z_step_um``).
+    limits : Limits, optional
+        As in :func:`read_stack`.
     """
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(f"{folder}: not a folder")
     root = folder.resolve()
-    names = sorted((p.name for p in root.iterdir()
-                    if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES), key=_natural_key)
-    if not names:
-        raise InputError(f"{root}: no images ({', '.join(IMAGE_SUFFIXES)}) in the folder")
-    meta: dict = {"format": FORMAT, "pixel_size_um": pixel_size_um, "slices": names}
-    if z_step_um is not None:
-        meta["z_step_um"] = z_step_um
+    found = find_images(root)
+    if not found:
+        raise InputError(f"{one_line(root / 'stack.json')}: missing stack.json (and no images "
+                         f"({', '.join(IMAGE_SUFFIXES)}) in the folder)" if not
+                         (root / "stack.json").is_file() else
+                         f"{one_line(root)}: no images ({', '.join(IMAGE_SUFFIXES)}) in the "
+                         f"folder itself")
+    meta: dict = {"format": FORMAT, **found}
     if z_um is not None:
         meta["z_um"] = list(z_um)
-    return Stack(**stack_fields(root, meta, root / "(no stack.json)", limits or Limits()))
+    st = Stack(**stack_fields(root, meta, root / "(no stack.json)", limits or Limits(),
+                              given={"pixel_size_um": pixel_size_um,
+                                     "z_step_um": None if z_um is not None else z_step_um},
+                              plain=True))
+    names = found.get("slices") or [found.get("tiff", "")]
+    z = np.asarray(st.z_um, dtype=float)
+    log.info("%s: plain folder, %d slices in natural order (%s ... %s), z %.4g to %.4g µm (%s), "
+             "pixel size %s µm (%s)", one_line(root), st.n_slices, one_line(names[0]),
+             one_line(names[-1]), float(z.min()) if z.size else 0.0,
+             float(z.max()) if z.size else 0.0, st.sources.get("z_step_um", "given"),
+             "x".join(f"{v:g}" for v in st.pixel_size_yx_um),
+             st.sources.get("pixel_size_um", "given"))
+    return st
 
 
 # --------------------------------------------------------------------------------------------
 # writing
 
 
-def write_stack_json(folder, *, pixel_size_um: float, slices: Sequence[str] | None = None,
+def write_stack_json(folder, *, pixel_size_um=None, slices: Sequence[str] | None = None,
                      tiff: str | None = None, z_um: Sequence[float] | None = None,
                      z_step_um: float | None = None, validate: bool = True,
-                     **optional) -> Path:
+                     limits: Limits | None = None, **optional) -> Path:
     """Write ``folder/stack.json`` for images that are already there.
+
+    With ``validate`` (the default) the file is written under a temporary name, read back
+    and validated as :func:`read_stack` does, and only then renamed to ``stack.json``: an
+    invalid stack.json is never left on disk, and an existing one is replaced only by a
+    valid one.
 
     Parameters
     ----------
     folder : str or Path
         The stack folder (must exist).
-    pixel_size_um : float
-        Lateral pixel size on the sample, µm.
+    pixel_size_um : float or (float, float), optional
+        Lateral pixel size on the sample, µm, or ``(y, x)`` for non-square pixels. Omitted
+        from the file when None (then the instrument file or the TIFF metadata gives it).
     slices : sequence of str, optional
-        Relative image paths, one per slice, in file order. Give this or ``tiff``.
+        Relative image paths, one per slice, in file order. Give this or ``tiff``; when
+        neither (nor an export ``height_um``) is given the folder's images are found by
+        :func:`find_images`.
     tiff : str, optional
         Relative path of a multi-page TIFF.
     z_um : sequence of float, optional
@@ -368,7 +417,10 @@ def write_stack_json(folder, *, pixel_size_um: float, slices: Sequence[str] | No
     z_step_um : float, optional
         Slice *i* is at ``i * z_step_um``.
     validate : bool
-        Read the stack back with :func:`read_stack` (raises on any problem).
+        Validate before the file is put in place (raises on any problem, leaving the folder
+        as it was). ``False`` writes the keys as given (tests write invalid files so).
+    limits : Limits, optional
+        As in :func:`read_stack`.
     **optional
         Further keys written as given (``color_space``, ``illuminant``, ``illumination``,
         ``film``, ``substrate``, ``exposure``, ``height_um``, ``image``, or project keys).
@@ -377,9 +429,25 @@ def write_stack_json(folder, *, pixel_size_um: float, slices: Sequence[str] | No
     -------
     Path
         The path of the written stack.json.
+
+    Raises
+    ------
+    InputError
+        When the folder holds no images to list, or (with ``validate``) the stack is invalid.
     """
     folder = Path(folder)
-    meta: dict = {"format": FORMAT, "pixel_size_um": float(pixel_size_um)}
+    if not folder.is_dir():
+        raise InputError(f"{one_line(folder)}: not a folder")
+    meta: dict = {"format": FORMAT}
+    if pixel_size_um is not None:
+        meta["pixel_size_um"] = (float(pixel_size_um) if np.ndim(pixel_size_um) == 0
+                                 else [float(v) for v in pixel_size_um])
+    if slices is None and tiff is None and "height_um" not in optional:
+        found = find_images(folder)
+        if not found:
+            raise InputError(f"{one_line(folder)}: no images ({', '.join(IMAGE_SUFFIXES)}) "
+                             f"in the folder to list in stack.json")
+        slices, tiff = found.get("slices"), found.get("tiff")
     if slices is not None:
         meta["slices"] = [str(s) for s in slices]
     if tiff is not None:
@@ -390,11 +458,19 @@ def write_stack_json(folder, *, pixel_size_um: float, slices: Sequence[str] | No
         meta["z_step_um"] = float(z_step_um)
     meta.update(optional)
     out = folder / "stack.json"
-    tmp = folder / ".stack.json.tmp"
-    tmp.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, out)
-    if validate:
-        read_stack(folder)
+    fd, name = tempfile.mkstemp(prefix=".stack.json.", suffix=".tmp", dir=folder)
+    tmp = Path(name)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(json.dumps(meta, indent=2) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o644)
+        if validate:  # exactly the bytes that will be stack.json, named as stack.json
+            Stack(**stack_fields(folder.resolve(), read_json(tmp), out, limits or Limits()))
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
     return out
 
 

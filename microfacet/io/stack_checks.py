@@ -6,6 +6,11 @@
 :class:`~microfacet.core.errors.InputError` with one message naming the file and the key or
 slice at fault. Keys the format does not define, and valid values that are almost surely a
 unit mistake, are logged as warnings (docs/stack-format.md).
+
+The pixel size and the z spacing come, in this order of precedence, from stack.json, from the
+values the caller gives (``given``), from a microscope export's instrument file, or from the
+metadata of the first TIFF (:func:`~.tiff_meta.tiff_scale`: OME-XML, ImageJ, resolution tags
+in cm).
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ import difflib
 import logging
 import math
 import os
+import re
 import stat
 from pathlib import Path
 
@@ -22,12 +28,14 @@ import numpy as np
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, known_sets
-from .images import ImageInfo, image_info, npy_info, read_tiff_headers
+from .images import IMAGE_SUFFIXES, ImageInfo, image_info, npy_info, read_tiff_headers
 from .limits import Limits
+from .tiff_meta import tiff_scale
 
 tifffile = load("tifffile")
 
-__all__ = ["DEFAULT_ILLUMINATION", "KNOWN_KEYS", "PLAUSIBLE_PIXEL_SIZE_UM", "stack_fields"]
+__all__ = ["DEFAULT_ILLUMINATION", "KNOWN_KEYS", "PLAUSIBLE_PIXEL_SIZE_UM", "find_images",
+           "stack_fields", "warn_height_unit"]
 
 log = logging.getLogger("microfacet.io.stack")
 
@@ -53,6 +61,16 @@ def _is_number(v) -> bool:
     except OverflowError:
         return False
     return True
+
+
+def _pixel_size_value(ps, where: str) -> tuple[float, float]:
+    """A stack.json ``pixel_size_um`` (a number, or ``[y, x]``) as ``(y, x)`` µm."""
+    vals = ps if isinstance(ps, list) else [ps]
+    if len(vals) not in (1, 2) or not all(
+            _is_number(v) and math.isfinite(v) and v > 0 for v in vals):
+        raise InputError(f"{where}: must be a finite number > 0, got {ps!r} (or a list "
+                         f"[y, x] of two)")
+    return (float(vals[0]), float(vals[-1]))
 
 
 def _resolve_inside(root: Path, rel, where: str) -> Path:
@@ -111,18 +129,19 @@ def _warn_unknown_keys(meta: dict, jpath: Path) -> None:
                             hint)
 
 
-def _warn_implausible(jpath: Path, pixel_size_um: float, z_um: np.ndarray, shape) -> None:
+def _warn_implausible(jpath: Path, pixel_size_yx_um, z_um: np.ndarray, shape) -> None:
     """Valid values that are almost surely a unit mistake (warnings, not errors)."""
     lo, hi = PLAUSIBLE_PIXEL_SIZE_UM
-    if not lo <= pixel_size_um <= hi:
-        log.warning("%s: key 'pixel_size_um': %g µm per pixel is outside %g-%g µm, where "
-                    "optical microscopes are; check the unit (µm)", one_line(jpath),
-                    pixel_size_um, lo, hi)
+    for size in sorted(set(pixel_size_yx_um)):
+        if not lo <= size <= hi:
+            log.warning("%s: key 'pixel_size_um': %g µm per pixel is outside %g-%g µm, where "
+                        "optical microscopes are; check the unit (µm)", one_line(jpath),
+                        size, lo, hi)
     if z_um.size >= 2:
         zs = np.sort(z_um)
         span = float(zs[-1] - zs[0])
         step = float(np.median(np.diff(zs)))
-        field_um = max(shape) * pixel_size_um
+        field_um = max(s * p for s, p in zip(shape, pixel_size_yx_um))
         if span > field_um:
             log.warning("%s: key 'z_um': the slices span %g µm, more than the field of view "
                         "(%g µm wide); if z is in nm, divide it by 1000", one_line(jpath),
@@ -132,10 +151,39 @@ def _warn_implausible(jpath: Path, pixel_size_um: float, z_um: np.ndarray, shape
                         "step; if z is in mm, multiply it by 1000", one_line(jpath), step)
 
 
-def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits) -> dict:
+def _differs(given, used, where: str) -> None:
+    """Warn when the caller gave a value that stack.json overrides."""
+    if given is not None and _is_number(used) and not math.isclose(given, used, rel_tol=1e-9):
+        log.warning("%s: %g µm is used, not the given %g µm (stack.json wins)", where, used,
+                    given)
+
+
+def _missing(root: Path, meta: dict, plain: bool, where: str, *, need_z: bool,
+             has_ps: bool = False) -> None:
+    """Raise the one-line error for a pixel size or z spacing found nowhere."""
+    if not plain:
+        hint = "give 'z_um' or 'z_step_um'" if has_ps else "not in the image metadata either"
+        raise InputError(f"{where}: missing ({hint})")
+    what = " and ".join(n for n, need in (("`pixel_size_um`", not has_ps),
+                                           ("`z_step_um`", need_z)) if need)
+    found = meta.get("slices") or [meta.get("tiff")]
+    raise InputError(f"{one_line(root / 'stack.json')}: missing stack.json; to read the "
+                     f"{len(found)} image(s) in the folder ({one_line(found[0])} ...) as a "
+                     f"stack give {what} (their metadata has no such value), or write a "
+                     f"stack.json (microfacet init)")
+
+
+def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
+                 given: dict | None = None, plain: bool = False) -> dict:
     """Validate the stack.json ``meta`` of the folder ``root`` (``jpath`` names it in
-    messages); the keyword arguments of :class:`~microfacet.io.stack.Stack`."""
+    messages); the keyword arguments of :class:`~microfacet.io.stack.Stack`.
+
+    ``given`` holds the caller's ``pixel_size_um`` and ``z_step_um`` (None when not given),
+    used where stack.json has no value; ``plain`` says ``meta`` was made up for a folder
+    without stack.json (the messages for a missing value say so).
+    """
     shown = one_line(jpath)
+    given = given or {}
 
     def where(key):
         return f"{shown}: key {key!r}"
@@ -149,10 +197,14 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits) -> dict:
         raise InputError(f"{where('format')}: {fmt!r} is not {FORMAT!r}")
 
     ps = meta.get("pixel_size_um")
-    if ps is None:
-        raise InputError(f"{where('pixel_size_um')}: missing")
-    if not _is_number(ps) or not math.isfinite(ps) or ps <= 0:
-        raise InputError(f"{where('pixel_size_um')}: must be a finite number > 0, got {ps!r}")
+    ps_yx = None if ps is None else _pixel_size_value(ps, where("pixel_size_um"))
+    for key, value in given.items():
+        if value is None:
+            continue
+        if not _is_number(value) or not math.isfinite(value) or value == 0 or (
+                key == "pixel_size_um" and value < 0):
+            need = "> 0" if key == "pixel_size_um" else "!= 0"
+            raise InputError(f"must be a finite number {need}, got {value!r}", param=key)
 
     # --- optional keys -------------------------------------------------------------------
     color_space = meta.get("color_space", "sRGB")
@@ -188,7 +240,7 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits) -> dict:
 
     # --- export ----------------------------------------------------------------------------
     export_height = export_image = None
-    export_shape = None
+    export_shape = export_px = None
     has_h, has_img = "height_um" in meta, "image" in meta
     if has_h != has_img:
         missing = "image" if has_h else "height_um"
@@ -213,8 +265,17 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits) -> dict:
                 raise InputError(f"{wh}: truncated TIFF")
             if hdtype.kind != "f":
                 raise InputError(f"{wh}: height map must be floating point, got {hdtype}")
-        else:
-            raise InputError(f"{wh}: height map must be a TIFF or .npy file")
+        else:  # an instrument file (Keyence, Zygo, Digital Surf, ...)
+            try:
+                # looked up here, not at import: the module may not be installed
+                hm = load("microfacet.io.instruments").read_height_map(export_height)
+            except ModuleNotFoundError as exc:
+                if exc.name != "microfacet.io.instruments":
+                    raise
+                raise InputError(f"{wh}: height map must be a TIFF or .npy file") from None
+            except (InputError, OSError, ValueError) as exc:
+                raise InputError(f"{wh}: {one_line(exc)}") from None
+            hshape, export_px = tuple(hm.height_um.shape), hm.pixel_size_um
         if len(hshape) != 2:
             raise InputError(f"{wh}: height map must be 2-D, got shape {hshape}")
         limits.check_image(hshape, wh)
@@ -252,13 +313,10 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits) -> dict:
     else:
         n = 0
 
-    # z
-    if n != 0:
-        has_z, has_step = "z_um" in meta, "z_step_um" in meta
-        if has_z and has_step:
-            raise InputError(f"{where('z_step_um')}: give either 'z_um' or 'z_step_um', not both")
-        if not has_z and not has_step:
-            raise InputError(f"{where('z_um')}: missing (give 'z_um' or 'z_step_um')")
+    # z (where it comes from is settled below, once the first TIFF can be asked)
+    has_z, has_step = "z_um" in meta, "z_step_um" in meta
+    if n != 0 and has_z and has_step:
+        raise InputError(f"{where('z_step_um')}: give either 'z_um' or 'z_step_um', not both")
 
     # headers, each checked against the limits and against the first as soon as it is read
     infos: list[tuple[str, ImageInfo]] = []
@@ -277,8 +335,47 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits) -> dict:
             raise InputError(f"{where('tiff')} ({tiff_path.name}): TIFF has no pages")
         limits.check_stack(n, infos[0][1].shape, where("tiff"))
 
+    # --- pixel size and z: stack.json, else given, else instrument file, else TIFF metadata
+    first_tiff = tiff_path or next((p for p in slice_paths[:1] + [export_height]
+                                    if p is not None and p.suffix.lower() in (".tif", ".tiff")),
+                                   None)
+    scale = None
+    if first_tiff is not None and (ps_yx is None and given.get("pixel_size_um") is None
+                                   and export_px is None
+                                   or n and not has_z and not has_step
+                                   and given.get("z_step_um") is None):
+        scale = tiff_scale(first_tiff, where("tiff" if tiff_path else "slices"))
+    sources = {}
+    if ps_yx is not None:
+        sources["pixel_size_um"] = "stack.json"
+        _differs(given.get("pixel_size_um"), ps_yx[1], where("pixel_size_um"))
+    elif given.get("pixel_size_um") is not None:
+        ps_yx, sources["pixel_size_um"] = (float(given["pixel_size_um"]),) * 2, "given"
+    elif export_px is not None:
+        ps_yx = _pixel_size_value([float(v) for v in export_px], where("height_um"))
+        sources["pixel_size_um"] = f"instrument file {one_line(export_height.name)}"
+    elif scale is not None and scale.pixel_size_yx_um is not None:
+        ps_yx, sources["pixel_size_um"] = scale.pixel_size_yx_um, scale.source
+    else:
+        _missing(root, meta, plain, where("pixel_size_um"),
+                 need_z=n and not has_z and not has_step and given.get("z_step_um") is None
+                 and (scale is None or scale.z_step_um is None))
+    step = None
+    if n and (has_z or has_step):
+        sources["z_um"] = "given" if plain else "stack.json"
+        if has_step:
+            _differs(given.get("z_step_um"), meta["z_step_um"], where("z_step_um"))
+    elif n and given.get("z_step_um") is not None:
+        step, sources["z_um"] = float(given["z_step_um"]), "given"
+    elif n and scale is not None and scale.z_step_um is not None:
+        step, sources["z_um"] = scale.z_step_um, scale.source
+    elif n:
+        _missing(root, meta, plain, where("z_um"), need_z=True, has_ps=True)
+
     if n:
-        if "z_um" in meta:
+        if step is not None:
+            z_um = np.arange(n, dtype=np.float64) * step
+        elif "z_um" in meta:
             z = meta["z_um"]
             if not isinstance(z, list):
                 raise InputError(f"{where('z_um')}: must be a list of numbers")
@@ -311,11 +408,12 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits) -> dict:
     if infos and export_shape is not None and export_shape.shape != ref_info.shape:
         raise InputError(f"{where('image')}: export size {export_shape.shape} differs from the "
                          f"slices {ref_info.shape}")
-    _warn_implausible(jpath, float(ps), z_um, ref_info.shape)
+    _warn_implausible(jpath, ps_yx, z_um, ref_info.shape)
 
     return dict(
         path=root,
-        pixel_size_um=float(ps),
+        pixel_size_yx_um=ps_yx,
+        sources=sources,
         z_um=z_um,
         slice_paths=tuple(slice_paths),
         tiff_path=tiff_path,
@@ -335,3 +433,54 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits) -> dict:
     )
 
 
+#: Median |slope| of a height map above which its unit is almost surely wrong (real
+#: surfaces, even roll-dull or sand-blasted, have median slopes well below 1, i.e. 45°).
+_IMPLAUSIBLE_MEDIAN_SLOPE = 5.0
+
+
+def warn_height_unit(h: np.ndarray, pixel_size_yx_um, jpath: Path) -> None:
+    """Warn when a height map in µm has slopes no surface has (heights in nm, most likely)."""
+    step = max(1, min(h.shape) // 256)
+    sub = h[::step, ::step]
+    d = np.abs(np.diff(sub, axis=1)) / (pixel_size_yx_um[1] * step)
+    d = d[np.isfinite(d)]
+    if d.size and float(np.median(d)) > _IMPLAUSIBLE_MEDIAN_SLOPE:
+        log.warning("%s: key 'height_um': the median surface slope is %.3g (%.2f°), which no "
+                    "surface has; if the heights are in nm, divide them by 1000 (or check "
+                    "pixel_size_um)", one_line(jpath), float(np.median(d)),
+                    float(np.degrees(np.arctan(np.median(d)))))
+
+
+def _natural_key(name: str):
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
+
+
+def find_images(folder) -> dict:
+    """The images of a plain folder as stack.json keys: ``{"slices": [...]}`` in natural
+    order (``img_2`` before ``img_10``), or ``{"tiff": name}`` when the folder holds one TIFF
+    (a multi-page stack). Hidden files (``.name``, as macOS leaves) are skipped.
+
+    Parameters
+    ----------
+    folder : str or Path
+
+    Returns
+    -------
+    dict
+        Empty when the folder holds no image.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> for n in ("img_10.png", "img_2.png", ".img_1.png", "notes.txt"):
+    ...     _ = (d / n).write_bytes(b"")
+    >>> find_images(d)
+    {'slices': ['img_2.png', 'img_10.png']}
+    """
+    root = Path(folder)
+    names = sorted((p.name for p in root.iterdir() if not p.name.startswith(".")
+                    and p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()), key=_natural_key)
+    if len(names) == 1 and Path(names[0]).suffix.lower() in (".tif", ".tiff"):
+        return {"tiff": names[0]}
+    return {"slices": names} if names else {}

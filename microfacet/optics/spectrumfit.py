@@ -8,10 +8,19 @@ start. We therefore scan a global thickness grid fine enough to resolve every mi
 samples each several dozen times), then refine the best few minima with a bounded scalar
 search, and report the best and the runner-up (the best *other* local minimum), so a
 user sees how ambiguous the answer is.
+
+The absolute level of a measured spectrum is rarely right to better than 10-20 % (the
+reference mirror's own reflectance, lamp drift between reference and sample, the
+collection of a microscope objective on a tilted or rough facet), while the thickness is
+carried by where the fringes are. So one multiplicative scale is fitted by default
+(``fit_scale=True``: a spectrum measured at 0.8 of its true level still returns its
+thickness); with ``fit_scale=False`` the level is trusted, and a warning is logged when a
+free scale would have fitted far better (the data look scaled).
 """
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +38,15 @@ MAX_THICKNESS_NM = 10_000.0
 #: Fewest distinct wavelengths a fit accepts.
 MIN_WAVELENGTHS = 3
 _SCAN_ELEMENTS = 1 << 21   # thickness x wavelength evaluations per block of the scan
+#: A fitted scale outside this range is warned about (the level is off by more than a
+#: reference or alignment error explains).
+PLAUSIBLE_SCALE = (0.5, 2.0)
+#: With the scale fixed, a free scale that lowers the RMS residual by at least this factor
+#: and moves the scale by more than :data:`SCALED_BY` means the data are scaled (warned).
+SCALED_RESIDUAL_RATIO = 0.5
+SCALED_BY = 0.05
+
+log = logging.getLogger(__name__)
 
 __all__ = ["SpectrumFit", "fit_thickness"]
 
@@ -47,7 +65,8 @@ class SpectrumFit:
         The best other local minimum (NaN if the grid has only one).
     runner_up_residual_rms : float
     scale : float
-        Multiplier applied to the model (1 unless ``fit_scale``).
+        Multiplier applied to the model (fitted unless ``fit_scale=False``, then 1).
+    angle_deg : float
     grid_thickness_nm, grid_residual_rms : ndarray
         The global scan.
     """
@@ -60,6 +79,7 @@ class SpectrumFit:
     angle_deg: float
     grid_thickness_nm: np.ndarray
     grid_residual_rms: np.ndarray
+    scale_fitted: bool = True
 
 
 def _model(wl, angle, d, n1, n2):
@@ -78,7 +98,7 @@ def _residual(model, meas, fit_scale):
 
 def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FILM,
                   substrate=DEFAULT_SUBSTRATE, thickness_range_nm=(0.0, 1000.0),
-                  grid_step_nm=1.0, fit_scale=False) -> SpectrumFit:
+                  grid_step_nm=1.0, fit_scale=True) -> SpectrumFit:
     """Film thickness whose modelled spectrum best matches a measured one.
 
     Parameters
@@ -96,7 +116,9 @@ def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FIL
     grid_step_nm : float
         Step of the global scan (default 1 nm; must stay well below λ/(4n) ≈ 40 nm).
     fit_scale : bool
-        Also fit one multiplicative scale (for spectra with an uncertain absolute level).
+        Fit one multiplicative scale of the model (default; a measured level is rarely
+        better than 10-20 %). ``False`` trusts the absolute level, and logs a warning when
+        a free scale fits far better.
 
     Returns
     -------
@@ -110,6 +132,9 @@ def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FIL
     >>> R = reflectance(wl, 0.0, 121.4, "TiO2_Jolivet2023_amorphous", "Ti_JohnsonChristy1974")
     >>> round(fit_thickness(wl, R).thickness_nm, 2)
     121.4
+    >>> fit = fit_thickness(wl, 0.8 * R)      # a measured level 20 % low
+    >>> round(fit.thickness_nm, 2), round(fit.scale, 3)
+    (121.4, 0.8)
     """
     wl = np.asarray(wavelength_nm, dtype=np.float64)
     y = np.asarray(reflectance, dtype=np.float64)
@@ -134,7 +159,25 @@ def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FIL
                          param="angle_deg")
     n1 = resolve_index(film, wl)
     n2 = resolve_index(substrate, wl)
+    fit = _fit(wl, y, angle_deg, n1, n2, lo, hi, grid_step_nm, fit_scale)
+    if fit_scale and not PLAUSIBLE_SCALE[0] <= fit.scale <= PLAUSIBLE_SCALE[1]:
+        log.warning("the fitted scale is %.3g: the measured level is off by more than a "
+                    "reference or alignment error explains (wrong unit or column?); the "
+                    "thickness rests on the fringe positions alone", fit.scale)
+    if not fit_scale and fit.residual_rms > 0:
+        free = _fit(wl, y, angle_deg, n1, n2, lo, hi, grid_step_nm, True)
+        if (free.residual_rms < SCALED_RESIDUAL_RATIO * fit.residual_rms
+                and abs(free.scale - 1) > SCALED_BY):
+            log.warning("the spectrum looks scaled: with its level trusted the best thickness "
+                        "is %.1f nm (RMS residual %.3g), with a fitted scale %.3g it is %.1f nm "
+                        "(RMS residual %.3g); fit the scale unless the level is calibrated",
+                        fit.thickness_nm, fit.residual_rms, free.scale, free.thickness_nm,
+                        free.residual_rms)
+    return fit
 
+
+def _fit(wl, y, angle_deg, n1, n2, lo, hi, grid_step_nm, fit_scale) -> SpectrumFit:
+    """The global scan and refinement of :func:`fit_thickness` (arguments checked)."""
     grid = np.linspace(lo, hi, int(np.ceil((hi - lo) / grid_step_nm)) + 1)
     res = np.empty(grid.size)
     block = max(1, _SCAN_ELEMENTS // wl.size)   # bounded memory whatever the range
@@ -172,4 +215,4 @@ def fit_thickness(wavelength_nm, reflectance, *, angle_deg=0.0, film=DEFAULT_FIL
     return SpectrumFit(
         thickness_nm=best_d, residual_rms=best_r, runner_up_thickness_nm=float(runner[1]),
         runner_up_residual_rms=float(runner[0]), scale=float(s[0]), angle_deg=float(angle_deg),
-        grid_thickness_nm=grid, grid_residual_rms=res)
+        grid_thickness_nm=grid, grid_residual_rms=res, scale_fitted=bool(fit_scale))

@@ -36,7 +36,7 @@ def test_local_batch_records_failure_finishes_the_rest_and_resumes(batch_drawer,
     assert [Path(r["stack"]).name for r in rows] == ["a", "broken", "b"]  # input order
     assert [r["status"] for r in rows] == ["done", "failed", "done"]
     assert "stack.json" in rows[1]["reason"] and "format" in rows[1]["reason"]
-    assert "Traceback" in (out / "batch_errors.log").read_text()
+    assert rows[1]["reason"] in (out / "batch_errors.log").read_text()
     assert not (out / "broken").exists() and _no_partial_folders(out)
 
     # the summary's numbers are those of each results folder
@@ -143,3 +143,88 @@ def test_scheduler_local_starts_and_closes_a_local_cluster(batch_drawer, tmp_pat
                  "--jobs", "1", *FAST]) == 0
     row = _rows(out)[0]
     assert row["status"] == "done" and Results.complete(row["results"])[0]
+
+
+def test_every_stack_is_validated_before_any_analysis(batch_drawer, tmp_path, monkeypatch,
+                                                      caplog):
+    from microfacet.batch import runner
+
+    events = []
+    caplog.set_level("WARNING", logger="microfacet.batch")
+    monkeypatch.setattr(caplog.handler, "emit",
+                        lambda rec: events.append(("logged", rec.getMessage())))
+
+    def fake_analyse(stack, out, *a, **k):
+        events.append(("analysed", stack))
+        return {"stack": stack, "results": out, "status": "done", "reason": "", "worker": ""}
+
+    monkeypatch.setattr(runner, "_analyse_one", fake_analyse)
+    stacks = [batch_drawer / "a", batch_drawer / "broken", tmp_path / "missing",
+              batch_drawer / "b"]
+    res = run_batch(stacks, tmp_path / "res", jobs=1, report=False)
+    assert [r["status"] for r in res.rows] == ["done", "failed", "failed", "done"]
+    assert "format" in res.rows[1]["reason"] and "not found" in res.rows[2]["reason"]
+    kinds = [kind for kind, _ in events]
+    assert kinds == ["logged", "logged", "analysed", "analysed"]   # both listed up front
+    assert all(len(msg.splitlines()) == 1 for kind, msg in events if kind == "logged")
+    rows = _rows(tmp_path / "res")
+    assert [r["status"] for r in rows] == ["done", "failed", "failed", "done"]
+    assert rows[2]["reason"] == res.rows[2]["reason"]
+
+
+def test_mistyped_scheduler_fails_fast_without_a_client(batch_drawer, tmp_path, capfd,
+                                                        monkeypatch):
+    import time
+
+    from microfacet.batch import executors
+
+    def no_client(*a, **k):
+        raise AssertionError("a Client was made for a malformed address")
+
+    distributed = pytest.importorskip("distributed")
+    monkeypatch.setattr(distributed, "Client", no_client)
+    t0 = time.perf_counter()
+    rc = main(["batch", str(batch_drawer / "a"), "--out", str(tmp_path / "o"),
+               "--scheduler", "locl"])
+    assert time.perf_counter() - t0 < 2.0        # generous: it fails before any connection
+    err = capfd.readouterr().err
+    assert rc == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert err.startswith("microfacet batch: error: --scheduler: 'locl' is neither 'local'")
+    assert not (tmp_path / "o").exists()
+    for good in ("tcp://10.0.0.5:8786", "head:8786", "tls://[::1]:8786", "local"):
+        executors.check_scheduler(good)
+    for bad in ("tcp://head", "locl", "http://head:8786", "head:99999", ""):
+        with pytest.raises(ValueError, match="scheduler"):
+            executors.check_scheduler(bad)
+
+
+def test_ctrl_c_during_a_dask_run_says_how_far_it_got_and_exits_130(batch_drawer, tmp_path,
+                                                                    capfd, monkeypatch):
+    from microfacet.batch import runner
+
+    closed = []
+
+    def interrupted_after_one(fn, tasks, dask):
+        try:
+            yield fn(*tasks[0])                  # the first stack really is analysed
+            raise KeyboardInterrupt
+        finally:
+            closed.append(dask)
+
+    monkeypatch.setattr(runner, "dask_client", lambda *a, **k: ("client", None))
+    monkeypatch.setattr(runner, "close_dask", lambda dask: closed.append(dask))
+    monkeypatch.setattr(runner, "dask_results", interrupted_after_one)
+    out = tmp_path / "res"
+    stacks = [str(batch_drawer / "a"), str(batch_drawer / "b")]
+    rc = main(["batch", *stacks, "--out", str(out), "--scheduler", "tcp://127.0.0.1:8786",
+               *FAST[:-1]])
+    err = capfd.readouterr().err
+    assert rc == 130 and "Traceback" not in err
+    assert err.strip().splitlines() == [
+        "microfacet batch: interrupted; 1 of 2 stacks done, rerun to resume"]
+    assert closed                                # the client was closed
+    assert [r["status"] for r in _rows(out)] == ["done"]
+    assert _no_partial_folders(out)
+    # rerun to resume: the finished stack is skipped
+    assert main(["batch", *stacks, "--out", str(out), "--jobs", "1", *FAST]) == 0
+    assert [r["status"] for r in _rows(out)] == ["skipped", "done"]

@@ -18,3 +18,59 @@ def test_bad_inputs_exit_2_and_leave_nothing(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "Traceback" not in err and "Nope" in err and "thickness-range-nm" in err
     assert list(tmp_path.iterdir()) == []
+
+
+FAST = ["--roi-size-px", "48", "--no-report"]
+
+
+def test_summary_on_stdout_logs_on_stderr_and_json(batch_drawer, tmp_path, capsys, caplog):
+    import json
+
+    out = tmp_path / "res"
+    # a pixel size for a stack with stack.json: ignored, with one warning line
+    assert main(["analyze", str(batch_drawer / "a"), "--out", str(out), "--pixel-size-um", "9",
+                 *FAST]) == 0
+    cap = capsys.readouterr()
+    assert cap.out.startswith(f"wrote {out}") and "thickness:" in cap.out
+    assert "NDF lobes" in cap.out and "wrote" not in cap.err
+    warn = [r.getMessage() for r in caplog.records if "--pixel-size-um" in r.getMessage()]
+    assert len(warn) == 1 and "ignored" in warn[0] and "stack.json" in warn[0]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["inputs"]["pixel_size_um"] != 9
+
+    assert main(["analyze", str(batch_drawer / "a"), "--out", str(out), "--overwrite",
+                 "--json", "-q", *FAST]) == 0
+    cap = capsys.readouterr()
+    data = json.loads(cap.out)                       # stdout is JSON and nothing else
+    summary = json.loads((out / "summary.json").read_text())
+    assert data["results"] == str(out) and data["stack"] == str(batch_drawer / "a")
+    for key in ("thickness", "ndf", "delta_e", "warnings"):
+        assert data[key] == summary[key], key
+    assert isinstance(data["ndf"]["identified"], bool) and "reason" in data["ndf"]
+
+
+def test_plain_folder_of_images_with_pixel_size_and_z_step(batch_drawer, tmp_path, capsys):
+    import json
+    import shutil
+
+    src = batch_drawer / "a"
+    meta = json.loads((src / "stack.json").read_text())
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    for k, name in enumerate(meta["slices"]):
+        shutil.copy(src / name, plain / f"img_{k + 1}{Path(name).suffix}")
+    out = tmp_path / "res"
+    assert main(["analyze", str(plain), "--out", str(out), "--json", "--pixel-size-um", "0.4",
+                 "--z-step-um", "0.5", *FAST]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["inputs"]["pixel_size_um"] == 0.4
+    assert summary["inputs"]["n_slices"] == len(meta["slices"])
+    assert not (plain / "stack.json").exists()          # nothing written into the input
+    capsys.readouterr()
+    # without the options, or with one: one line naming what is missing
+    assert main(["analyze", str(plain), "--out", str(tmp_path / "o2")]) == 2
+    assert main(["analyze", str(plain), "--out", str(tmp_path / "o2"), "--z-step-um", "1"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2 and "missing stack.json" in err[0] and "--pixel-size-um" in err[0]
+    assert "give both --pixel-size-um and --z-step-um" in err[1]
+    assert not (tmp_path / "o2").exists()

@@ -147,3 +147,15 @@ def test_progress_bar_on_terminal(small_stack, tmp_path, monkeypatch, capsys):
     assert main(["height", str(d), "--out", str(tmp_path / "o")]) == 0
     err = capsys.readouterr().err
     assert "13/13 slices" in err
+
+
+def test_options_overridden_by_stack_json_are_ignored_with_a_warning(batch_drawer, tmp_path,
+                                                                     caplog):
+    out = tmp_path / "o"
+    assert main(["height", str(batch_drawer / "a"), "--out", str(out), "--z-step-um", "7",
+                 "--pixel-size-um", "9"]) == 0
+    err = [r.getMessage() for r in caplog.records if "ignored" in r.getMessage()]
+    assert len(err) == 2 and all("ignored" in line and "stack.json" in line for line in err)
+    assert "--z-step-um 7" in err[0] + err[1] and "--pixel-size-um 9" in err[0] + err[1]
+    meta = json.loads((out / "height.json").read_text())
+    assert meta["pixel_size_um"] != 9.0

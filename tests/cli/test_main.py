@@ -23,7 +23,8 @@ def test_every_registered_command_has_help_with_an_example(capsys):
 
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")
-    assert set(sub.choices) == {"analyze", "height", "synth", "simulate", "fit-spectrum", "batch"}
+    assert set(sub.choices) == {"init", "analyze", "height", "synth", "simulate", "fit-spectrum",
+                                "batch"}
     for name, p in sub.choices.items():
         assert "example" in (p.epilog or ""), name
 
@@ -53,3 +54,35 @@ def test_console_script_runs_as_module():
     out = subprocess.run([sys.executable, "-m", "microfacet", "--version"], capture_output=True,
                          text=True)
     assert out.returncode == 0 and "microfacet" in out.stdout
+
+
+@pytest.mark.parametrize("argv, verbose, quiet", [
+    (["-v", "height", "s", "--out", "o"], 1, False),
+    (["height", "s", "--out", "o", "-v"], 1, False),
+    (["-v", "height", "s", "--out", "o", "-v"], 2, False),
+    (["-q", "batch", "s", "--out", "o"], 0, True),
+    (["batch", "s", "--out", "o", "-q"], 0, True),
+    (["analyze", "s", "--out", "o"], 0, False),
+])
+def test_verbosity_before_or_after_the_command(argv, verbose, quiet):
+    from microfacet.cli.main import build_parser, merge_verbosity
+
+    args = build_parser().parse_args(argv)
+    merge_verbosity(args)
+    assert (args.verbose, args.quiet) == (verbose, quiet)
+
+
+def test_verbose_before_the_command_shows_the_traceback(tmp_path, capsys):
+    # -v is the switch for tracebacks: it must take effect wherever it is given
+    with pytest.raises(ValueError):
+        main(["-v", "fit-spectrum", str(tmp_path / "s.csv"), "--angle-deg", "95"])
+    assert main(["fit-spectrum", str(tmp_path / "s.csv"), "--angle-deg", "95"]) == 2
+
+
+def test_help_imports_no_heavy_module_per_importtime():
+    out = subprocess.run([sys.executable, "-X", "importtime", "-m", "microfacet", "--help"],
+                         capture_output=True, text=True, check=True)
+    imported = {line.split("|")[-1].strip().split(".")[0]
+                for line in out.stderr.splitlines() if line.startswith("import time:")}
+    assert "usage: microfacet" in out.stdout
+    assert not imported & {*HEAVY, "distributed", "dask", "joblib", "tifffile"}

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 import pytest
 import tifffile
+from PIL import Image
 
 from microfacet.core.errors import InputError
 from microfacet.io.images import (
@@ -24,9 +25,11 @@ from microfacet.io.images import (
     decode_image,
     image_info,
     npy_info,
+    png_pixel_size_um,
     read_png,
     read_tiff_headers,
     to_code_values,
+    write_float_tiff,
     write_image,
 )
 
@@ -302,3 +305,68 @@ def test_read_png_of_a_broken_file_names_it(tmp_path):
     p.write_bytes(b"\x89PNG\r\n\x1a\n" + b"\x00" * 40)
     with pytest.raises(InputError, match=r"broken\.png.*cannot decode"):
         read_png(p)
+
+
+# ---------------------------------------------------------------- outputs for microscopy tools
+
+
+@pytest.mark.parametrize("pixel, channels, bit_depth", [(0.5, 3, 8), ((0.25, 0.4), 1, 16)])
+def test_png_phys_chunk_gives_the_pixel_size(tmp_path, pixel, channels, bit_depth):
+    s = _samples(channels, bit_depth, seed=6)
+    p = tmp_path / "p.png"
+    write_image(p, s, pixel_size_um=pixel)
+    py, px = np.broadcast_to(pixel, (2,))
+    assert png_pixel_size_um(p) == pytest.approx((py, px), rel=1e-6)
+    with Image.open(p) as im:                                   # PIL: dpi from pHYs (metre)
+        dpi_x, dpi_y = im.info["dpi"]
+    assert (25400 / dpi_y, 25400 / dpi_x) == pytest.approx((py, px), rel=1e-6)
+    np.testing.assert_array_equal(decode_image(p, WHERE, channels=channels), s)  # pixels kept
+    write_image(p, s)                                           # without: no pHYs
+    assert png_pixel_size_um(p) is None
+
+
+def test_phys_chunk_has_a_valid_crc_and_sits_before_idat(tmp_path):
+    p = tmp_path / "p.png"
+    write_image(p, np.zeros((H, W), np.uint8), pixel_size_um=2.0)
+    data = p.read_bytes()
+    pos, kinds = 8, []
+    while pos < len(data):
+        n, kind = struct.unpack(">I4s", data[pos:pos + 8])
+        body = data[pos + 4:pos + 8 + n]
+        assert struct.unpack(">I", data[pos + 8 + n:pos + 12 + n])[0] == zlib.crc32(body)
+        if kind == b"pHYs":
+            assert struct.unpack(">IIB", body[4:]) == (500000, 500000, 1)   # px per metre
+        kinds.append(kind)
+        pos += 12 + n
+    assert kinds.count(b"pHYs") == 1 and kinds.index(b"pHYs") < kinds.index(b"IDAT")
+
+
+def test_float_tiff_round_trip_with_calibration(tmp_path):
+    rng = np.random.default_rng(7)
+    a = rng.normal(100, 5, (H, W))
+    a[2, 3] = np.nan
+    p = tmp_path / "m.tif"
+    write_float_tiff(p, a, pixel_size_um=(0.25, 0.5), value_unit="nm")
+    with tifffile.TiffFile(p) as tf:
+        page = tf.pages[0]
+        got = page.asarray()
+        meta = tf.imagej_metadata
+        xres, yres = page.resolution
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got, a.astype(np.float32))
+    assert meta["unit"] == "um" and meta["vunit"] == "nm"
+    assert (1 / yres, 1 / xres) == pytest.approx((0.25, 0.5), rel=1e-7)   # px per µm
+    assert meta["min"] == pytest.approx(np.nanmin(a)) and meta["max"] == pytest.approx(
+        np.nanmax(a))
+
+
+def test_float_tiff_without_pixel_size_and_bad_arguments(tmp_path):
+    p = tmp_path / "m.tif"
+    write_float_tiff(p, np.full((2, 3), np.nan))
+    with tifffile.TiffFile(p) as tf:
+        assert "unit" not in tf.imagej_metadata
+        assert np.isnan(tf.asarray()).all()
+    with pytest.raises(ValueError, match="image"):
+        write_float_tiff(p, np.zeros(3))
+    with pytest.raises(ValueError, match="pixel_size_um"):
+        write_float_tiff(p, np.zeros((2, 2)), pixel_size_um=-1.0)

@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 import pytest
+import tifffile
+from PIL import Image
 
 from microfacet.core.distributions import NDFMixture, ThicknessMixture
 from microfacet.core.errors import InputError
@@ -18,10 +20,14 @@ from microfacet.io.results import (
     IMAGES,
     MAPS,
     TABLES,
+    TIFF_COPIES,
+    X3P_COPIES,
     Results,
     json_safe,
+    pixel_size_of,
     write_results_files,
 )
+from microfacet.io.x3p import read_x3p
 
 H, W = 6, 9
 G = ThicknessMixture([(0.4, 112.0, 3.0), (0.6, 130.0, 2.5)])
@@ -62,7 +68,9 @@ def test_written_files_are_read_back(folder):
     path, maps, img, rows = folder
     names = sorted(p.name for p in path.iterdir())
     assert names == sorted(["summary.json", "all_in_focus.png", "ndf_pdf.csv"]
-                           + [MAPS[k][0] for k, v in maps.items() if v is not None])
+                           + [MAPS[k][0] for k, v in maps.items() if v is not None]
+                           + [TIFF_COPIES[k][0] for k, v in maps.items()
+                              if v is not None and k in TIFF_COPIES])   # no pixel size: no x3p
     r = Results(path)
     for name, arr in maps.items():
         got = r.map(name)
@@ -227,3 +235,75 @@ def test_json_safe_makes_strict_json():
     assert json.loads(json.dumps(y, allow_nan=False)) == y
     assert type(y["a"][3]) is int and type(y["b"][0]) is bool and type(y["1"]) is float
     assert json_safe(math.nan) is None and json_safe(True) is True
+
+
+# ---------------------------------------------------------------- copies for microscopy tools
+
+
+def _tool_folder(tmp_path, pixel_size_um, **kw):
+    rng = np.random.default_rng(8)
+    maps = {"height_um": np.where(rng.random((H, W)) < 0.1, np.nan, rng.normal(5, 2, (H, W))),
+            "thickness_nm": rng.uniform(100, 150, (H, W)).astype(np.float32),
+            "tilt_deg": rng.uniform(0, 20, (H, W)), "tilt_sigma_deg": rng.uniform(0, 2, (H, W)),
+            "delta_e": rng.uniform(0, 3, (H, W))}
+    img = rng.integers(0, 256, (H, W, 3)).astype(np.uint8)
+    write_results_files(tmp_path, summary={"inputs": {"pixel_size_um": pixel_size_um}},
+                        maps=maps, images={"all_in_focus": (img, 8)}, **kw)
+    return maps
+
+
+def test_tiff_copies_carry_values_pixel_size_and_units(tmp_path):
+    maps = _tool_folder(tmp_path, 0.65)
+    units = {"height_um": "um", "thickness_nm": "nm", "tilt_deg": "degree",
+             "tilt_sigma_deg": "degree"}
+    assert set(TIFF_COPIES) == set(units)
+    for name, (file, unit) in TIFF_COPIES.items():
+        with tifffile.TiffFile(tmp_path / file) as tf:
+            got = tf.asarray()
+            meta = tf.imagej_metadata
+            xres, yres = tf.pages[0].resolution
+        assert got.dtype == np.float32 and unit == units[name]
+        np.testing.assert_array_equal(got, np.asarray(maps[name], np.float32))
+        assert meta["unit"] == "um" and meta["vunit"] == unit
+        assert (1 / yres, 1 / xres) == pytest.approx((0.65, 0.65), rel=1e-7)
+    assert not (tmp_path / "delta_e.tif").exists()              # only the listed maps
+
+
+def test_x3p_copy_and_png_pixel_size(tmp_path):
+    maps = _tool_folder(tmp_path, [0.5, 0.25])                  # (y, x)
+    m = read_x3p(tmp_path / X3P_COPIES["height_um"])
+    np.testing.assert_array_equal(m.height_um, maps["height_um"].astype(np.float32))
+    np.testing.assert_array_equal(m.height_um, Results(tmp_path).map("height_um"))
+    assert m.pixel_size_um == (0.5, 0.25)
+    with Image.open(tmp_path / IMAGES["all_in_focus"]) as im:   # pHYs, read by PIL
+        dpi_x, dpi_y = im.info["dpi"]
+    assert (25400 / dpi_y, 25400 / dpi_x) == pytest.approx((0.5, 0.25), rel=1e-6)
+
+
+def test_without_pixel_size_or_copies(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir()
+    b.mkdir()
+    _tool_folder(a, None)
+    assert not (a / "height_um.x3p").exists()
+    with tifffile.TiffFile(a / "height_um.tif") as tf:
+        assert "unit" not in tf.imagej_metadata
+    with Image.open(a / "all_in_focus.png") as im:
+        assert "dpi" not in im.info
+    _tool_folder(b, 0.5, tool_copies=False)
+    assert sorted(p.suffix for p in b.iterdir()) == [".json"] + [".npy"] * 5 + [".png"]
+    with Image.open(b / "all_in_focus.png") as im:
+        assert "dpi" not in im.info
+
+
+@pytest.mark.parametrize("summary, expected", [
+    ({"inputs": {"pixel_size_um": 2}}, (2.0, 2.0)),
+    ({"inputs": {"pixel_size_um": [1.5, 0.5]}}, (1.5, 0.5)),
+    ({"inputs": {"pixel_size_um": None}}, None),
+    ({"inputs": {"pixel_size_um": -1.0}}, None),
+    ({"inputs": {"pixel_size_um": "x"}}, None),
+    ({"inputs": {"pixel_size_um": [1, 2, 3]}}, None),
+    ({"inputs": []}, None),
+])
+def test_pixel_size_of(summary, expected):
+    assert pixel_size_of(summary) == expected

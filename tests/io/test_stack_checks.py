@@ -125,3 +125,49 @@ def test_mismatched_sizes_depths_channels(good_stack):
     cv2.imwrite(str(d / "slices/001.png"), np.zeros((H, W, 3), np.uint8))
     with pytest.raises(InputError, match=r"slices\[1\].*mixed grey and colour"):
         read_stack(d)
+
+
+@pytest.mark.parametrize("value", [[0.2], [0.2, -1.0], [0.1, 0.2, 0.3], [], ["0.2", 0.2],
+                                   [0.2, float("inf")]])
+def test_bad_pixel_size_pair(good_stack, value):
+    d = good_stack()
+    _patch(d, pixel_size_um=value)
+    if value == [0.2]:                       # one value in a list: a square pixel
+        assert read_stack(d).pixel_size_yx_um == (0.2, 0.2)
+        return
+    with pytest.raises(InputError, match=r"stack\.json: key 'pixel_size_um': must be a finite "
+                                         r"number > 0.*\[y, x\]"):
+        read_stack(d)
+
+
+def test_unknown_keys_warn_with_the_nearest_known_key(good_stack, caplog):
+    d = good_stack()
+    _patch(d, colour_space="sRGB", numerical_apperture=0.5, operator="Ada",
+           illumination={"geometry": "coaxial", "numerical_apperture": 0.5})
+    st = read_stack(d)
+    assert st.meta["operator"] == "Ada"                  # kept
+    lines = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert all("\n" not in line for line in lines)
+    text = "\n".join(lines)
+    assert "unknown key 'colour_space'; did you mean 'color_space'?" in text
+    assert "unknown key 'numerical_apperture'; did you mean 'numerical_aperture'?" in text
+    assert "key 'illumination': unknown key 'numerical_apperture'; did you mean " \
+           "'numerical_aperture'?" in text
+    assert "unknown key 'operator' (kept, not used)" in text
+    assert len(lines) == 4
+
+
+@pytest.mark.parametrize("kw,option", [({"pixel_size_um": -1.0}, "--pixel-size-um"),
+                                       ({"pixel_size_um": float("nan")}, "--pixel-size-um"),
+                                       ({"z_step_um": 0.0}, "--z-step-um")])
+def test_bad_given_values_name_the_option(tmp_path, kw, option):
+    d = tmp_path / "p"
+    d.mkdir()
+    for i in range(3):
+        cv2.imwrite(str(d / f"{i}.png"), np.zeros((H, W), np.uint8))
+    values = {"pixel_size_um": 1.0, "z_step_um": 1.0, **kw}
+    with pytest.raises(InputError) as ei:
+        read_stack(d, **values)
+    assert ei.value.cli_message().startswith(f"{option}: must be a finite number")
+
+

@@ -1,9 +1,13 @@
 """Thickness from a spectrum (microfacet.optics.spectrumfit): recovery of known thicknesses,
-the runner-up, scale fitting. Reading spectrum CSVs: tests/io/test_spectrum.py."""
+the runner-up, the scale fitted by default (and the warning when it is fixed). Reading
+spectrum files: tests/io/test_spectrum.py."""
+
+import logging
 
 import numpy as np
 import pytest
 
+from microfacet.optics.constants import resolve_index
 from microfacet.optics.spectrumfit import fit_thickness
 from microfacet.optics.thinfilm import reflectance
 
@@ -48,3 +52,48 @@ def test_scale_fit_recovers_a_scaled_spectrum():
     fit = fit_thickness(WL, R, fit_scale=True)
     assert fit.thickness_nm == pytest.approx(95.0, abs=0.05)
     assert fit.scale == pytest.approx(0.8, rel=1e-3)
+
+
+def test_model_spectrum_agrees_with_tmm():
+    """The model the scale tests rely on, checked at one point against ``tmm``."""
+    tmm = pytest.importorskip("tmm")
+    wl, d, th = 550.0, 80.0, 30.0
+    n1 = complex(resolve_index(FILM, np.array([wl]))[0])
+    n2 = complex(resolve_index(SUB, np.array([wl]))[0])
+    ref = np.mean([tmm.coh_tmm(pol, [1.0, n1, n2], [np.inf, d, np.inf], np.deg2rad(th), wl)["R"]
+                   for pol in ("s", "p")])
+    assert float(reflectance(np.array([wl]), th, d, FILM, SUB)[0]) == pytest.approx(ref, abs=1e-10)
+
+
+def test_a_spectrum_scaled_by_0_8_returns_its_thickness_by_default(caplog):
+    R = 0.8 * reflectance(WL, 0.0, 80.0, FILM, SUB)
+    fit = fit_thickness(WL, R)                          # the scale is fitted by default
+    assert fit.scale_fitted
+    assert fit.thickness_nm == pytest.approx(80.0, abs=0.05)
+    assert fit.scale == pytest.approx(0.8, rel=1e-3)
+    with caplog.at_level(logging.WARNING, logger="microfacet.optics.spectrumfit"):
+        fixed = fit_thickness(WL, R, fit_scale=False)   # the level trusted: a wrong thickness
+    assert not fixed.scale_fitted and fixed.scale == 1.0
+    assert abs(fixed.thickness_nm - 80.0) > 3
+    assert "the spectrum looks scaled" in caplog.text
+    assert "fitted scale 0.8 it is 80.0 nm" in caplog.text
+
+
+def test_fixed_scale_on_calibrated_data_agrees_and_is_quiet(caplog):
+    rng = np.random.default_rng(3)
+    R = reflectance(WL, 0.0, 80.0, FILM, SUB) + rng.normal(0, 0.005, WL.size)
+    with caplog.at_level(logging.WARNING, logger="microfacet.optics.spectrumfit"):
+        fixed = fit_thickness(WL, R, fit_scale=False)
+        free = fit_thickness(WL, R)
+    assert fixed.thickness_nm == pytest.approx(80.0, abs=1.0)
+    assert free.thickness_nm == pytest.approx(fixed.thickness_nm, abs=0.5)
+    assert free.scale == pytest.approx(1.0, abs=0.02)
+    assert caplog.text == ""
+
+
+def test_an_implausible_fitted_scale_is_warned(caplog):
+    R = 0.2 * reflectance(WL, 0.0, 80.0, FILM, SUB)
+    with caplog.at_level(logging.WARNING, logger="microfacet.optics.spectrumfit"):
+        fit = fit_thickness(WL, R)
+    assert fit.thickness_nm == pytest.approx(80.0, abs=0.05)
+    assert "the fitted scale is 0.2" in caplog.text
