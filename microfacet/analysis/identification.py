@@ -39,9 +39,10 @@ from .ndf_fit import fit_ndf_mixture, width_relative_error
 from .sampling import thickness_regions
 
 __all__ = ["AMBIGUOUS_ORDER_DE", "EXCESS_DELTA_E", "MAX_WIDTH_ERROR", "MEDIAN_NOISE_FLOOR_FACTOR",
-           "MIN_NDF_FACETS", "NOISE_FLOOR_FACTOR", "UNEXPLAINED_MADS", "analysis_warnings",
-           "colour_tilt_contrast", "fit_joint_distributions", "fit_seed_distributions",
-           "thickness_reason", "unexplained_facets"]
+           "MIN_NDF_FACETS", "NOISE_FLOOR_FACTOR", "NO_SAMPLES", "UNEXPLAINED_MADS",
+           "analysis_warnings", "colour_tilt_contrast", "fit_joint_distributions",
+           "fit_seed_distributions", "identification", "thickness_reason",
+           "unexplained_facets"]
 
 #: Fewest facets with a height tilt for an identified NDF.
 MIN_NDF_FACETS = 20
@@ -271,6 +272,22 @@ def fit_seed_distributions(pixels, *, roi, table, exposure, noise_de, max_compon
     return tfit, nfit
 
 
+#: The reason given when a distribution has no samples at all to fit.
+NO_SAMPLES = {"thickness": "no thickness values to fit", "ndf": "no facet tilts to fit"}
+
+
+def identification(fit, what) -> tuple[bool, str]:
+    """``(identified, reason)`` of a fit of ``what`` (``"thickness"`` or ``"ndf"``); a
+    missing fit (None: no samples) is not identified, with :data:`NO_SAMPLES`' reason.
+
+    >>> identification(None, "ndf")
+    (False, 'no facet tilts to fit')
+    """
+    if fit is None:
+        return False, NO_SAMPLES[what]
+    return bool(fit.identified), fit.reason
+
+
 def analysis_warnings(*, thickness_fit, ndf_fit, roi, delta_e_median, noise_de) -> list[str]:
     """One line per thing a user must know before trusting the distributions.
 
@@ -292,14 +309,14 @@ def analysis_warnings(*, thickness_fit, ndf_fit, roi, delta_e_median, noise_de) 
     median dE00 4.00 is 2.46 above the image
     """
     out = []
-    for what, fit, missing in (("thickness distribution", thickness_fit,
-                                "no thickness values to fit"),
-                               ("NDF", ndf_fit, "no facet tilts to fit")):
+    for what, fit, key in (("thickness distribution", thickness_fit, "thickness"),
+                           ("NDF", ndf_fit, "ndf")):
+        ok, reason = identification(fit, key)
         if fit is None:
-            out.append(f"{what} not identified: {missing}")
-        elif not fit.identified:
+            out.append(f"{what} not identified: {reason}")
+        elif not ok:
             out.append(f"{what} not identified (the fit is written for inspection only): "
-                       f"{fit.reason}")
+                       f"{reason}")
     fit = np.isfinite(roi.thickness_nm)
     amb = int(np.sum(fit & (np.nan_to_num(roi.ambiguity_delta_e, nan=np.inf)
                             < AMBIGUOUS_ORDER_DE)))

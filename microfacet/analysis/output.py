@@ -20,7 +20,12 @@ from .. import __version__
 from ..core.densities import cell_edges, pdf_table
 from ..io.outdir import atomic_output_dir
 from ..io.results import json_safe, write_results_files
-from .identification import AMBIGUOUS_ORDER_DE, MEDIAN_NOISE_FLOOR_FACTOR, NOISE_FLOOR_FACTOR
+from .identification import (
+    AMBIGUOUS_ORDER_DE,
+    MEDIAN_NOISE_FLOOR_FACTOR,
+    NOISE_FLOOR_FACTOR,
+    identification,
+)
 
 __all__ = ["build_summary", "results_size_bytes", "save_results", "write_results"]
 
@@ -93,12 +98,6 @@ def _facet_rows(joint):
     return np.column_stack([np.arange(area.size), area, pl.tilt_deg, pl.tilt_sigma_deg,
                             pl.fitted.astype(int), pl.slope_sigma, th.thickness_nm, th.sigma_nm,
                             th.delta_e, th.delta_e_other_order, cens])
-
-
-def _identification(fit, missing):
-    if fit is None:
-        return {"identified": False, "reason": missing}
-    return {"identified": bool(fit.identified), "reason": fit.reason}
 
 
 def save_results(result, folder) -> None:
@@ -182,8 +181,9 @@ def build_summary(r) -> dict:
     ndf_mix = r.ndf_fit.to_json() if r.ndf_fit is not None else empty_mix
     ok_roi = np.isfinite(roi.thickness_nm)
     floor = NOISE_FLOOR_FACTOR * r.noise_de
-    ndf_id = _identification(r.ndf_fit, "no facet tilts to fit")
-    thick_mix.update(_identification(r.thickness_fit, "no thickness values to fit"))
+    ndf_id = dict(zip(("identified", "reason"), identification(r.ndf_fit, "ndf")))
+    thick_mix.update(zip(("identified", "reason"), identification(r.thickness_fit,
+                                                                  "thickness")))
     ndf_mix.update(ndf_id)
     s = {
         "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),

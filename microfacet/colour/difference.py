@@ -26,9 +26,9 @@ from .arrays import channels
 __all__ = ["METHODS", "delta_e", "delta_e_2000", "delta_e_76", "delta_e_94"]
 
 
-
-def _pair(lab1: Any, lab2: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, ...], type]:
-    """Validate, broadcast and transpose to contiguous (3, n) component planes."""
+def _broadcast(lab1: Any, lab2: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, ...], type]:
+    """Validated Lab arrays, their broadcast shape and the working dtype (float32 only when
+    both are float32)."""
     x1 = channels(lab1, "lab1")
     x2 = channels(lab2, "lab2")
     dtype = np.float32 if (x1.dtype == np.float32 and x2.dtype == np.float32) else np.float64
@@ -38,6 +38,12 @@ def _pair(lab1: Any, lab2: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]
         raise ValueError(
             f"lab1 {x1.shape} and lab2 {x2.shape} do not broadcast against each other"
         ) from None
+    return x1, x2, shape, dtype
+
+
+def _pair(lab1: Any, lab2: Any) -> tuple[np.ndarray, np.ndarray, tuple[int, ...], type]:
+    """Validate, broadcast and transpose to contiguous (3, n) component planes."""
+    x1, x2, shape, dtype = _broadcast(lab1, lab2)
     n = math.prod(shape[:-1])
     p1 = np.empty((3, n), dtype=dtype)
     p2 = np.empty((3, n), dtype=dtype)
@@ -205,15 +211,7 @@ def delta_e_2000(lab1: Any, lab2: Any) -> np.ndarray:
     >>> round(float(delta_e_2000([50.0, 2.6772, -79.7751], [50.0, 0.0, -82.7485])), 4)
     2.0425
     """
-    x1 = channels(lab1, "lab1")
-    x2 = channels(lab2, "lab2")
-    dtype = np.float32 if (x1.dtype == np.float32 and x2.dtype == np.float32) else np.float64
-    try:
-        shape = np.broadcast_shapes(x1.shape, x2.shape)
-    except ValueError:
-        raise ValueError(
-            f"lab1 {x1.shape} and lab2 {x2.shape} do not broadcast against each other"
-        ) from None
+    x1, x2, shape, dtype = _broadcast(lab1, lab2)
     f1 = np.broadcast_to(x1, shape).reshape(-1, 3)  # a view unless broadcasting/strided
     f2 = np.broadcast_to(x2, shape).reshape(-1, 3)
     n = f1.shape[0]

@@ -22,7 +22,11 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, known_sets
+from ..core.lazy import load
+from ..optics.defaults import DEFAULT_FILM, DEFAULT_SUBSTRATE
+
+# numpy-backed, needed only to validate: not imported by `microfacet --help`
+constants = load("microfacet.optics.constants")
 
 __all__ = ["IMAGING_VARIATIONS", "MAX_SLICES", "VARIATIONS", "SynthParams",
            "ThicknessComponent", "TiltLobe", "parse_variation"]
@@ -257,7 +261,7 @@ class SynthParams:
 
     def validate(self) -> None:
         """Raise ValueError naming the first parameter out of range."""
-        known = known_sets()
+        known = constants.known_sets()
         gains = self.white_balance_gains
         checks = [
             ("height_px", self.height_px >= 16), ("width_px", self.width_px >= 16),

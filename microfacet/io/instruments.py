@@ -41,7 +41,7 @@ import numpy as np
 
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
-from .tiff_meta import tiff_scale, unit_um
+from .tiff_meta import scale_of, unit_um
 from .x3p import HeightMap, read_x3p
 
 tifffile = load("tifffile")
@@ -52,6 +52,7 @@ __all__ = ["HeightMap", "NATIVE_SUFFIXES", "read_height_map"]
 #: Suffixes read without SurfaceTopography.
 NATIVE_SUFFIXES = (".npy", ".tif", ".tiff", ".x3p")
 _EXTRA = 'pip install "microfacet[instruments]"'
+
 
 def read_height_map(path) -> HeightMap:
     """Read an instrument's height map (see the module's table of formats).
@@ -122,11 +123,11 @@ def _read_tiff(path, where) -> HeightMap:
         with tifffile.TiffFile(path) as tf:
             page = tf.pages[0]
             img = page.asarray()
+            pixel = scale_of(tf, one_line(Path(path).name)).pixel_size_yx_um
             meta = (tf.imagej_metadata or {}) if tf.is_imagej else {}
             kind = "OME-TIFF" if tf.is_ome else "ImageJ TIFF" if tf.is_imagej else "TIFF"
     except Exception as exc:  # tifffile raises assorted errors on corrupt files
         raise InputError(f"{where}: unreadable TIFF ({one_line(exc)})") from None
-    pixel = tiff_scale(Path(path), where).pixel_size_yx_um
     img = np.squeeze(img)
     if img.ndim != 2:
         raise InputError(f"{where}: TIFF image of shape {img.shape} is not one 2-D map")

@@ -22,7 +22,7 @@ from ..core.lazy import load
 
 tifffile = load("tifffile")
 
-__all__ = ["TiffScale", "tiff_scale", "unit_um"]
+__all__ = ["TiffScale", "scale_of", "tiff_scale", "unit_um"]
 
 log = logging.getLogger("microfacet.io.stack")
 
@@ -125,26 +125,30 @@ def tiff_scale(path: Path, where: str) -> TiffScale:
     InputError
         When the file is not a readable TIFF.
     """
-    name = one_line(path.name)
     try:
         with tifffile.TiffFile(path) as tf:
-            if tf.is_ome and tf.ome_metadata:
-                return _ome_scale(tf.ome_metadata, f"OME metadata of {name}")
-            tags = tf.pages[0].tags
-            per_x, per_y = _per_unit(tags.get("XResolution")), _per_unit(tags.get("YResolution"))
-            if tf.is_imagej:
-                ij = tf.imagej_metadata or {}
-                unit = ij.get("unit")
-                one = _length_um(1.0, unit) if unit is not None else None
-                yx = (one / per_y, one / per_x) if one and per_x and per_y else None
-                z = _length_um(ij.get("spacing"), unit) if one else None
-                return TiffScale(yx, z, f"ImageJ metadata of {name}")
-            unit_tag = tags.get("ResolutionUnit")
-            if unit_tag is not None and int(unit_tag.value) == 3 and per_x and per_y:
-                return TiffScale((1e4 / per_y, 1e4 / per_x), None,
-                                 f"TIFF resolution tags of {name}")
+            return scale_of(tf, one_line(Path(path).name))
     except InputError:
         raise
     except Exception as exc:  # tifffile raises assorted errors on corrupt files
         raise InputError(f"{where}: unreadable TIFF ({exc})") from None
+
+
+def scale_of(tf, name: str) -> TiffScale:
+    """:func:`tiff_scale` of an open ``tifffile.TiffFile`` (``name`` for the source text),
+    for a caller that reads the pixels from the same open file."""
+    if tf.is_ome and tf.ome_metadata:
+        return _ome_scale(tf.ome_metadata, f"OME metadata of {name}")
+    tags = tf.pages[0].tags
+    per_x, per_y = _per_unit(tags.get("XResolution")), _per_unit(tags.get("YResolution"))
+    if tf.is_imagej:
+        ij = tf.imagej_metadata or {}
+        unit = ij.get("unit")
+        one = _length_um(1.0, unit) if unit is not None else None
+        yx = (one / per_y, one / per_x) if one and per_x and per_y else None
+        z = _length_um(ij.get("spacing"), unit) if one else None
+        return TiffScale(yx, z, f"ImageJ metadata of {name}")
+    unit_tag = tags.get("ResolutionUnit")
+    if unit_tag is not None and int(unit_tag.value) == 3 and per_x and per_y:
+        return TiffScale((1e4 / per_y, 1e4 / per_x), None, f"TIFF resolution tags of {name}")
     return TiffScale(None, None, f"metadata of {name}")
