@@ -97,7 +97,8 @@ def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size
         1-σ height error per pixel (µm): weights 1/σ².
     reliable : ndarray of bool, shape (H, W)
         Pixels whose height may be used (the others, however plausible, are not).
-    pixel_size_um : float
+    pixel_size_um : float or (float, float)
+        Lateral pixel size in µm, ``(y, x)`` for non-square pixels.
     min_pixels : int
         Fewest reliable pixels for a plane (3 determine it; the default leaves 5 degrees of
         freedom for the residual that scales its covariance).

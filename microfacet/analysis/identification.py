@@ -288,13 +288,50 @@ def identification(fit, what) -> tuple[bool, str]:
     return bool(fit.identified), fit.reason
 
 
-def analysis_warnings(*, thickness_fit, ndf_fit, roi, delta_e_median, noise_de) -> list[str]:
+#: A sample is reported as tilted when its mean plane's tilt exceeds this fraction of the NDF's
+#: rms lobe width: the zero-mean lobes are tilts against the optical axis, and a
+#: tilted mounting m widens a lobe σ to about √(σ² + m²) (+12 % at m = σ/2).
+SAMPLE_TILT_WARN_FRACTION = 0.5
+
+
+def mean_plane_tilt_deg(joint) -> float | None:
+    """Tilt of the sample's mean plane against the optical axis, degrees: the area-weighted
+    mean facet slope (None without fitted facet planes).
+
+    >>> from types import SimpleNamespace as NS
+    >>> planes = NS(fitted=np.array([True, True, False]), slope_x=np.array([0.1, 0.3, 9.0]),
+    ...             slope_y=np.array([0.0, 0.0, 9.0]))
+    >>> round(mean_plane_tilt_deg(NS(planes=planes, area_px=np.array([1, 1, 5]))), 3)
+    11.31
+    """
+    if joint is None:
+        return None
+    f = np.asarray(joint.planes.fitted, bool)
+    w = np.asarray(joint.area_px, np.float64) * f
+    if not f.any() or w.sum() <= 0:
+        return None
+    a = float(np.sum(w * np.where(f, joint.planes.slope_x, 0.0)) / w.sum())
+    b = float(np.sum(w * np.where(f, joint.planes.slope_y, 0.0)) / w.sum())
+    return float(np.degrees(np.arctan(np.hypot(a, b))))
+
+
+def _ndf_width_deg(ndf_fit):
+    mix = getattr(ndf_fit, "mixture", ndf_fit)
+    try:
+        return float(mix.rms_sd_deg)
+    except (AttributeError, TypeError, ValueError):
+        return None
+
+
+def analysis_warnings(*, thickness_fit, ndf_fit, roi, delta_e_median, noise_de,
+                      mean_plane_tilt_deg=None) -> list[str]:
     """One line per thing a user must know before trusting the distributions.
 
     An unidentified (or missing) thickness mixture or NDF, ambiguous interference orders
     (ROIs whose runner-up order fits within :data:`AMBIGUOUS_ORDER_DE`), and a median ΔE00
     more than :data:`EXCESS_DELTA_E` above its noise floor
-    (:data:`MEDIAN_NOISE_FLOOR_FACTOR` × ``noise_de``).
+    (:data:`MEDIAN_NOISE_FLOOR_FACTOR` × ``noise_de``), and a sample whose mean plane is
+    tilted by more than :data:`SAMPLE_TILT_WARN_FRACTION` of the NDF's rms lobe width.
 
     Examples
     --------
@@ -328,4 +365,10 @@ def analysis_warnings(*, thickness_fit, ndf_fit, roi, delta_e_median, noise_de) 
         out.append(f"median dE00 {delta_e_median:.2f} is {delta_e_median - floor:.2f} above the "
                    f"image's noise floor {floor:.2f}: the model does not explain the colours "
                    f"(wrong film, illuminant or exposure?)")
+    width = _ndf_width_deg(ndf_fit)
+    if mean_plane_tilt_deg is not None and width is not None \
+            and mean_plane_tilt_deg > SAMPLE_TILT_WARN_FRACTION * width:
+        out.append(f"the sample's mean plane is tilted by {mean_plane_tilt_deg:.2f} deg against "
+                   f"the optical axis: the NDF is of facet tilts against the axis, not the "
+                   f"surface; level the sample on the stage for an NDF of the surface")
     return out

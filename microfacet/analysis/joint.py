@@ -24,6 +24,7 @@ import numpy as np
 
 from ..colour.colorimetry import xyz_to_lab
 from ..colour.difference import delta_e
+from ..core.pixels import pixel_area_side
 from .facets import (
     FacetFit,
     FacetThickness,
@@ -173,7 +174,9 @@ def joint_tilts(colour, surface, roi, table, *, theta_grid_deg, max_tilt_deg, ex
         From the ROI stage.
     estimate_exposure : bool
         Refine the exposure on facets.
-    facet_size_um, pixel_size_um : float
+    facet_size_um : float
+    pixel_size_um : float or (float, float)
+        ``(y, x)`` for non-square pixels (facet sizes in pixels use the geometric mean).
     from_focus : bool
         The height comes from focus (its reliable pixels) rather than an export.
     timer : StageTimer, optional
@@ -189,7 +192,7 @@ def joint_tilts(colour, surface, roi, table, *, theta_grid_deg, max_tilt_deg, ex
     thick_roi_px = roi.thickness_nm[roi.index_map(shape)]
     usable = ~colour.mask.mask & np.isfinite(thick_roi_px)
     h, h_sig, rel, corr_px = height_inputs(surface, from_focus=from_focus)
-    facet_px = facet_size_um / pixel_size_um
+    facet_px = facet_size_um / pixel_area_side(pixel_size_um)
     facets = segment_facets(lab, facet_px=facet_px, noise_de=colour.noise_de,
                             height_um=np.where(rel, h, np.nan), height_sigma_um=h_sig,
                             pixel_size_um=pixel_size_um)

@@ -25,6 +25,7 @@ from .identification import (
     MEDIAN_NOISE_FLOOR_FACTOR,
     NOISE_FLOOR_FACTOR,
     identification,
+    mean_plane_tilt_deg,
 )
 
 __all__ = ["build_summary", "results_size_bytes", "save_results", "write_results"]
@@ -207,6 +208,7 @@ def build_summary(r) -> dict:
                     "ambiguous_delta_e": AMBIGUOUS_ORDER_DE},
         },
         "ndf": {**ndf_id, "mixture": ndf_mix, "max_tilt_deg": r.max_tilt_deg,
+                "mean_plane_tilt_deg": mean_plane_tilt_deg(r.joint),
                 "histogram": "per-pixel tilt of unmasked pixels (projected-area density)"},
         "facets": _facet_summary(r.joint),
         "exposure": r.exposure,

@@ -36,7 +36,12 @@ from ..core.timing import StageTimer
 from ..io.limits import check_memory
 from ..io.stack import Stack, read_stack
 from .colour_image import measure_colour, no_colour_message
-from .identification import analysis_warnings, fit_joint_distributions, fit_seed_distributions
+from .identification import (
+    analysis_warnings,
+    fit_joint_distributions,
+    fit_seed_distributions,
+    mean_plane_tilt_deg,
+)
 from .joint import joint_tilts
 from .options import AnalysisOptions, scene_optics
 from .roi import thickness_per_roi
@@ -109,7 +114,8 @@ class AnalysisResult:
         :func:`~microfacet.analysis.identification.analysis_warnings`)."""
         return analysis_warnings(thickness_fit=self.thickness_fit, ndf_fit=self.ndf_fit,
                                  roi=self.roi, delta_e_median=self.delta_e_stats["median"],
-                                 noise_de=self.noise_de)
+                                 noise_de=self.noise_de,
+                                 mean_plane_tilt_deg=mean_plane_tilt_deg(self.joint))
 
     @property
     def delta_e_stats(self) -> dict:
@@ -178,7 +184,7 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
     timer.start("height from focus")
     focus = measure_height(st, operator=opt.operator, window_px=opt.window_px, align=opt.align)
     timer.lap("height_from_focus")
-    surface = surface_normals(focus, pixel_size_um=st.pixel_size_um, where=str(st.path))
+    surface = surface_normals(focus, pixel_size_um=st.pixel_size_yx_um, where=str(st.path))
     timer.lap("normals")
 
     timer.start("colour")
@@ -222,7 +228,7 @@ def analyze_stack(stack, options: AnalysisOptions | None = None, *, progress=Non
         joint = joint_tilts(
             colour, surface, roi, table, theta_grid_deg=grid, max_tilt_deg=optics.max_tilt_deg,
             exposure=roi.exposure, estimate_exposure=source == "estimated",
-            facet_size_um=opt.facet_size_um, pixel_size_um=st.pixel_size_um,
+            facet_size_um=opt.facet_size_um, pixel_size_um=st.pixel_size_yx_um,
             from_focus=st.has_slices, seed=opt.seed, timer=timer,
             delta_e_method=opt.delta_e_method)
         pixels, exposure = joint.pixels, joint.exposure

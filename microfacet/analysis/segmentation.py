@@ -31,6 +31,7 @@ import warnings
 import numpy as np
 
 from ..core.lazy import load
+from ..core.pixels import pixel_size_yx
 
 measure = load("skimage.measure")
 segmentation = load("skimage.segmentation")
@@ -54,8 +55,9 @@ def plane_moments(labels, height_um, weight, *, pixel_size_um, n_labels=None) ->
         Height (µm; NaN = no height, weight 0).
     weight : ndarray, shape (H, W)
         Non-negative weights (1/σ² for a χ²-scaled residual).
-    pixel_size_um : float
-        x = columns, y = rows, both in µm, centred on the image.
+    pixel_size_um : float or (float, float)
+        x = columns, y = rows, both in µm, centred on the image; ``(y, x)`` for non-square
+        pixels.
     n_labels : int, optional
         S (default ``labels.max() + 1``).
 
@@ -70,9 +72,10 @@ def plane_moments(labels, height_um, weight, *, pixel_size_um, n_labels=None) ->
     z = np.asarray(height_um, dtype=np.float64)
     wt = np.where(np.isfinite(z), np.asarray(weight, dtype=np.float64), 0.0).ravel()
     z = np.where(np.isfinite(z), z, 0.0).ravel()
+    py, px = pixel_size_yx(pixel_size_um)
     yy, xx = np.mgrid[0:h, 0:w]
-    x = ((xx - (w - 1) / 2.0) * pixel_size_um).ravel()
-    y = ((yy - (h - 1) / 2.0) * pixel_size_um).ravel()
+    x = ((xx - (w - 1) / 2.0) * px).ravel()
+    y = ((yy - (h - 1) / 2.0) * py).ravel()
     lab = labels.ravel()
     terms = (1.0, x, y, z, x * x, x * y, y * y, x * z, y * z, z * z)
     return np.stack([np.bincount(lab, weights=wt * t, minlength=S) for t in terms], axis=1)
@@ -137,11 +140,12 @@ def _precise_slopes(height_um, height_sigma_um, pixel_size_um):
     ok = np.isfinite(h) & np.isfinite(sg)
     if ok.mean() < 0.5:
         return None
-    s_slope = math.sqrt(2.0) * float(np.median(sg[ok])) / pixel_size_um
-    if not 0 < s_slope <= MAX_SLOPE_NOISE:
+    py, px = pixel_size_yx(pixel_size_um)
+    s_slope = math.sqrt(2.0) * float(np.median(sg[ok])) / np.array([px, py])  # (x, y)
+    if not np.all((s_slope > 0) & (s_slope <= MAX_SLOPE_NOISE)):
         return None
     hf = np.where(ok, h, float(np.median(h[ok])))
-    gy, gx = np.gradient(hf, pixel_size_um)
+    gy, gx = np.gradient(hf, py, px)
     return np.stack([np.where(ok, gx, 0.0), np.where(ok, gy, 0.0)], axis=-1) / s_slope
 
 
@@ -167,8 +171,9 @@ def segment_facets(lab, *, facet_px, noise_de=None, height_um=None, height_sigma
     height_um, height_sigma_um : ndarray, shape (H, W), optional
         Height and its 1-σ error per pixel (NaN = no height there). Without them segments
         are merged on colour alone.
-    pixel_size_um : float
-        Lateral pixel size (only the ratio to the height units matters).
+    pixel_size_um : float or (float, float)
+        Lateral pixel size, ``(y, x)`` for non-square pixels (only the ratio to the height
+        units matters).
     alpha : float
         Significance of the merge tests: a true edge is kept when its colour or plane
         difference would arise by chance with probability below ``alpha``.

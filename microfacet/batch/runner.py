@@ -40,7 +40,6 @@ Examples
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import logging
 import os
 import socket
@@ -55,7 +54,7 @@ from ..analysis.pipeline import analyze_stack, check_analysis_memory
 from ..core.errors import InputError
 from ..io.outdir import OutputFolder, check_output, sweep_stale
 from ..io.results import Results, json_safe
-from ..io.stack import read_stack, stack_from_images
+from ..io.stack import read_stack
 from ..report.writer import write_report
 from .executors import check_scheduler, close_dask, dask_client, dask_results, local_results
 from .summary import ERRORS_FILE, SUMMARY_FILE, result_names, row_from_results, write_summary
@@ -113,9 +112,6 @@ def open_stack(stack, *, limits=None, pixel_size_um=None, z_step_um=None):
     folder of images with ``pixel_size_um`` and ``z_step_um`` (natural file order, nothing
     written).
 
-    With ``io.stack.read_stack`` that takes ``pixel_size_um``/``z_step_um`` they are passed
-    to it; otherwise a folder without stack.json is read by ``io.stack.stack_from_images``.
-
     Examples
     --------
     >>> import numpy as np, tempfile, pathlib
@@ -127,21 +123,7 @@ def open_stack(stack, *, limits=None, pixel_size_um=None, z_step_um=None):
     >>> st.n_slices, [float(z) for z in st.z_um]
     (3, [0.0, 2.0, 4.0])
     """
-    if pixel_size_um is None and z_step_um is None:
-        return read_stack(stack, limits=limits)
-    if "pixel_size_um" in inspect.signature(read_stack).parameters:
-        return read_stack(stack, limits=limits, pixel_size_um=pixel_size_um,
-                          z_step_um=z_step_um)
-    folder = Path(stack)
-    folder = folder.parent if folder.name == "stack.json" else folder
-    if (folder / "stack.json").is_file():  # the stack.json's values are used
-        return read_stack(stack, limits=limits)
-    if pixel_size_um is None or z_step_um is None:
-        raise InputError(f"{folder}: no stack.json; give both `pixel_size_um` and "
-                         f"`z_step_um` to read the images in the folder as a stack",
-                         param="pixel_size_um" if pixel_size_um is None else "z_step_um")
-    return stack_from_images(folder, pixel_size_um=pixel_size_um, z_step_um=z_step_um,
-                             limits=limits)
+    return read_stack(stack, limits=limits, pixel_size_um=pixel_size_um, z_step_um=z_step_um)
 
 
 def analyse_to_folder(stack, out, *, options=None, overwrite=False, report=True, limits=None,

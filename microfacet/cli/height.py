@@ -138,7 +138,7 @@ def run(args) -> int:
                 align=args.align or False, progress=bar.update)
         t1 = time.perf_counter()
         normals = focus.normals.normals_from_height(res.height_um,
-                                                    pixel_size_um=stack.pixel_size_um,
+                                                    pixel_size_um=stack.pixel_size_yx_um,
                                       smooth_sigma_px=args.smooth_sigma_px)
         tilt, _ = focus.normals.tilt_azimuth_deg(normals)
         t2 = time.perf_counter()

@@ -18,7 +18,13 @@ from pathlib import Path
 
 from .. import io, optics
 from ..core.errors import InputError, one_line
-from .options import HelpFormatter, add_limit_options, example_epilog, limits_from_args
+from .options import (
+    HelpFormatter,
+    add_limit_options,
+    example_epilog,
+    limits_from_args,
+    pixel_size_arg,
+)
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -36,8 +42,9 @@ def register(subparsers) -> argparse.ArgumentParser:
             "--numerical-aperture 0.9"),
         formatter_class=HelpFormatter)
     p.add_argument("folder", metavar="FOLDER", help="folder holding the slice images")
-    p.add_argument("--pixel-size-um", type=float, default=None, metavar="UM",
-                   help="pixel size on the sample in µm (default: from the image metadata)")
+    p.add_argument("--pixel-size-um", type=pixel_size_arg, default=None, metavar="UM",
+                   help="pixel size on the sample in µm, Y,X for non-square pixels (default: "
+                        "from the image metadata)")
     p.add_argument("--z-step-um", type=float, default=None, metavar="UM",
                    help="stage step between slices in µm, slice i at i*UM (default: from the "
                         "image metadata)")
@@ -132,7 +139,7 @@ def _init(args) -> int:
                    f"{stack.n_slices - 1}"])
     kind = "RGB" if stack.channels == 3 else "grey"
     pixel_text = (f"{x:g} µm" if stack.square_pixels
-                  else f"{y:g} µm high x {x:g} µm wide (non-square: read, not yet analysed)")
+                  else f"{y:g} µm high x {x:g} µm wide (non-square)")
     print(f"wrote {one_line(path)}")
     print(f"  slices:     {stack.n_slices} ({stack.shape[1]}x{stack.shape[0]} px, "
           f"{stack.dtype.itemsize * 8}-bit {kind})")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from .. import analysis, optics
 from ..core.errors import InputError
+from ..core.pixels import pixel_size_value
 from ..io import limits
 from ..io.limits import DEFAULT_MAX_MEGAPIXELS, DEFAULT_MAX_STACK_MEGAPIXELS
 from ..optics.defaults import DEFAULT_FILM, DEFAULT_SUBSTRATE
@@ -62,8 +63,9 @@ def limits_from_args(args):
 def add_plain_folder_options(p: argparse.ArgumentParser) -> None:
     """``--pixel-size-um``, ``--z-step-um``: read a plain folder of images (no stack.json) as a
     stack (``height``, ``analyze``)."""
-    p.add_argument("--pixel-size-um", type=float, default=None, metavar="UM",
-                   help="for a plain image folder without stack.json: pixel size in µm")
+    p.add_argument("--pixel-size-um", type=pixel_size_arg, default=None, metavar="UM",
+                   help="for a plain image folder without stack.json: pixel size in µm "
+                        "(Y,X for non-square pixels)")
     p.add_argument("--z-step-um", type=float, default=None, metavar="UM",
                    help="for a plain image folder without stack.json: z step in µm")
 
@@ -85,7 +87,7 @@ def plain_folder_values(args) -> tuple[float | None, float | None]:
         for option, value in given.items():
             if value is not None:
                 logging.getLogger("microfacet.cli").warning(
-                    "%s %g ignored: %s gives the %s", option, value, jpath, what[option])
+                    "%s %s ignored: %s gives the %s", option, value, jpath, what[option])
         return None, None
     if not folder.is_dir():  # read_stack says what is wrong with it
         return None, None
@@ -95,13 +97,25 @@ def plain_folder_values(args) -> tuple[float | None, float | None]:
     if any(v is None for v in given.values()):
         raise InputError(f"{folder}: no stack.json; give both --pixel-size-um and "
                          f"--z-step-um to read the images in the folder as a stack")
-    if not (math.isfinite(args.pixel_size_um) and args.pixel_size_um > 0):
-        raise InputError(f"must be a finite number > 0, got {args.pixel_size_um}",
-                         param="pixel_size_um")
     if not (math.isfinite(args.z_step_um) and args.z_step_um != 0):
         raise InputError(f"must be a finite non-zero number, got {args.z_step_um}",
                          param="z_step_um")
     return args.pixel_size_um, args.z_step_um
+
+
+def pixel_size_arg(text: str):
+    """argparse type of ``--pixel-size-um``: one size in µm, or ``Y,X`` for non-square pixels.
+
+    >>> pixel_size_arg("0.5"), pixel_size_arg("0.25,0.5")
+    (0.5, [0.25, 0.5])
+    """
+    try:
+        parts = [float(v) for v in text.replace(";", ",").split(",")]
+        return pixel_size_value(parts[0] if len(parts) == 1 else parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be a finite number > 0 (µm), or Y,X for non-square pixels (e.g. 0.25,0.5), "
+            f"got {text!r}") from None
 
 
 def pair_type(sep: str, cast, example: str):

@@ -4,7 +4,7 @@ shared result types (the angular map) and stage timing. Imports nothing else of 
 from .lazy import attach
 
 __getattr__, __dir__, __all__ = attach(__name__, submodules=(
-    "angular", "densities", "distributions", "errors", "lazy", "timing"), submod_attrs={
+    "angular", "densities", "distributions", "errors", "lazy", "pixels", "timing"), submod_attrs={
     "distributions": ["NDFMixture", "ThicknessMixture"],
     "errors": ["InputError"],
     "angular": ["AngularMap"],

@@ -31,6 +31,7 @@ import math
 import numpy as np
 
 from ..core.lazy import load
+from ..core.pixels import pixel_size_yx
 
 cv2 = load("cv2")
 
@@ -71,8 +72,8 @@ def gradient_nan(height: np.ndarray, spacing: float = 1.0):
     ----------
     height : ndarray, shape (H, W)
         NaN or ±inf marks unknown pixels (both are treated as missing).
-    spacing : float
-        Sample spacing (e.g. the pixel size in µm).
+    spacing : float or (float, float)
+        Sample spacing (e.g. the pixel size in µm); a pair is ``(rows, columns)``.
 
     Returns
     -------
@@ -84,6 +85,7 @@ def gradient_nan(height: np.ndarray, spacing: float = 1.0):
     finite = np.isfinite(h)
     if not finite.all():
         h = np.where(finite, h, np.nan)  # ±inf is missing too (and inf − inf warns)
+    spacing_rc = np.broadcast_to(np.asarray(spacing, dtype=np.float64), (2,))
     out = []
     for axis in (0, 1):
         fwd = np.full_like(h, np.nan)
@@ -100,13 +102,13 @@ def gradient_nan(height: np.ndarray, spacing: float = 1.0):
         cnt = fv.astype(np.int8) + bv
         s = np.where(fv, fwd, 0.0) + np.where(bv, bwd, 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            g = np.where(cnt > 0, s / np.maximum(cnt, 1), np.nan) / spacing
+            g = np.where(cnt > 0, s / np.maximum(cnt, 1), np.nan) / spacing_rc[axis]
         g[~np.isfinite(h)] = np.nan
         out.append(g)
     return out[0], out[1]
 
 
-def normals_from_height(height_um: np.ndarray, *, pixel_size_um: float,
+def normals_from_height(height_um: np.ndarray, *, pixel_size_um,
                         smooth_sigma_px: float = 0.0) -> np.ndarray:
     """Unit surface normals (z up) from a height map.
 
@@ -114,8 +116,8 @@ def normals_from_height(height_um: np.ndarray, *, pixel_size_um: float,
     ----------
     height_um : ndarray, shape (H, W)
         Height in µm; NaN (or ±inf) marks unknown pixels.
-    pixel_size_um : float, keyword-only
-        Lateral pixel size on the sample, µm (> 0).
+    pixel_size_um : float or (float, float), keyword-only
+        Lateral pixel size on the sample, µm (> 0); ``(y, x)`` for non-square pixels.
     smooth_sigma_px : float, keyword-only
         NaN-aware Gaussian smoothing (normalised convolution) of the slopes ∂h/∂x, ∂h/∂y,
         σ in pixels; equivalent to smoothing the height in the interior, but exact for planes
@@ -130,12 +132,10 @@ def normals_from_height(height_um: np.ndarray, *, pixel_size_um: float,
     h = np.asarray(height_um)
     if h.ndim != 2:
         raise ValueError(f"height_um must be 2-D (H, W), got shape {h.shape}")
-    if isinstance(pixel_size_um, bool) or not isinstance(pixel_size_um, (int, float, np.floating)) \
-            or not math.isfinite(pixel_size_um) or pixel_size_um <= 0:
-        raise ValueError(f"pixel_size_um must be a finite number > 0, got {pixel_size_um!r}")
+    pixel_yx = pixel_size_yx(pixel_size_um)
     if not math.isfinite(smooth_sigma_px) or smooth_sigma_px < 0:
         raise ValueError(f"smooth_sigma_px must be >= 0, got {smooth_sigma_px!r}")
-    d_row, d_col = gradient_nan(h, float(pixel_size_um))
+    d_row, d_col = gradient_nan(h, pixel_yx)
     if smooth_sigma_px > 0:
         # smoothing the slopes (not the height) keeps planes exact up to the borders
         d_row = smooth_nan(d_row, smooth_sigma_px).astype(np.float64)

@@ -45,6 +45,7 @@ import numpy as np
 
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
+from ..core.pixels import pixel_size_yx
 
 cv2 = load("cv2")
 tifffile = load("tifffile")
@@ -484,9 +485,7 @@ def write_float_tiff(path, image, *, pixel_size_um=None, value_unit=None) -> Non
     meta = {"axes": "YX"}
     kw = {}
     if pixel_size_um is not None:
-        py, px = (float(v) for v in np.broadcast_to(np.asarray(pixel_size_um, float), (2,)))
-        if not (np.isfinite([py, px]).all() and min(py, px) > 0):
-            raise ValueError(f"pixel_size_um: must be positive and finite, got {pixel_size_um!r}")
+        py, px = pixel_size_yx(pixel_size_um)
         meta["unit"] = "um"
         kw["resolution"] = (1.0 / px, 1.0 / py)
     if value_unit is not None:

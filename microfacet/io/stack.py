@@ -77,9 +77,8 @@ class Stack:
         The stack folder (absolute).
     pixel_size_yx_um : tuple of float
         ``(y, x)`` size of one pixel on the sample, µm (equal for square pixels).
-    pixel_size_um : float
-        The size of a square pixel, µm; raises :class:`InputError` for non-square pixels,
-        which are read but not yet analysed.
+    pixel_size_um : float or list of float
+        As ``stack.json`` writes it: one number for square pixels, else ``[y, x]``.
     z_um : ndarray of float64, shape (N,)
         Stage height of each slice in file order, µm (any order, any spacing, no duplicates).
         Empty for an export-only stack.
@@ -145,22 +144,11 @@ class Stack:
         return math.isclose(y, x, rel_tol=1e-6)
 
     @property
-    def pixel_size_um(self) -> float:
-        """Size of a square pixel on the sample, µm.
-
-        Raises
-        ------
-        InputError
-            For non-square pixels: they are read (:attr:`pixel_size_yx_um`) but the analysis
-            (normals, facet sizes) assumes square pixels and is not ready for them.
-        """
-        if not self.square_pixels:
-            y, x = self.pixel_size_yx_um
-            raise InputError(f"{one_line(self.path / 'stack.json')}: key 'pixel_size_um': "
-                             f"non-square pixels ({y:g} µm high, {x:g} µm wide, from "
-                             f"{self.sources.get('pixel_size_um', 'stack.json')}) are read "
-                             f"but not yet analysed; resample the images to square pixels")
-        return float(self.pixel_size_yx_um[1])
+    def pixel_size_um(self) -> float | list[float]:
+        """The pixel size as ``stack.json`` writes it, µm: one number for square pixels,
+        else ``[y, x]`` (arithmetic uses :attr:`pixel_size_yx_um`)."""
+        y, x = self.pixel_size_yx_um
+        return float(x) if y == x else [float(y), float(x)]
 
     @property
     def n_slices(self) -> int:

@@ -27,6 +27,7 @@ import numpy as np
 
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
+from ..core.pixels import pixel_size_yx
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, known_sets
 from .images import IMAGE_SUFFIXES, ImageInfo, image_info, npy_info, read_tiff_headers
 from .limits import Limits
@@ -201,6 +202,13 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
     for key, value in given.items():
         if value is None:
             continue
+        if key == "pixel_size_um":
+            try:
+                pixel_size_yx(value)
+            except ValueError:
+                raise InputError(f"must be a finite number > 0 or a [y, x] pair, got "
+                                 f"{value!r}", param=key) from None
+            continue
         if not _is_number(value) or not math.isfinite(value) or value == 0 or (
                 key == "pixel_size_um" and value < 0):
             need = "> 0" if key == "pixel_size_um" else "!= 0"
@@ -348,9 +356,11 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
     sources = {}
     if ps_yx is not None:
         sources["pixel_size_um"] = "stack.json"
-        _differs(given.get("pixel_size_um"), ps_yx[1], where("pixel_size_um"))
+        if given.get("pixel_size_um") is not None:
+            for g, used in zip(pixel_size_yx(given["pixel_size_um"]), ps_yx):
+                _differs(g, used, where("pixel_size_um"))
     elif given.get("pixel_size_um") is not None:
-        ps_yx, sources["pixel_size_um"] = (float(given["pixel_size_um"]),) * 2, "given"
+        ps_yx, sources["pixel_size_um"] = pixel_size_yx(given["pixel_size_um"]), "given"
     elif export_px is not None:
         ps_yx = _pixel_size_value([float(v) for v in export_px], where("height_um"))
         sources["pixel_size_um"] = f"instrument file {one_line(export_height.name)}"

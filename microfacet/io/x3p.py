@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError, one_line
+from ..core.pixels import pixel_size_yx
 
 __all__ = ["DATA_TYPES", "HeightMap", "read_x3p", "write_x3p"]
 
@@ -253,13 +254,6 @@ def _read_surface(zf, root, where) -> HeightMap:
 # ------------------------------------------------------------------------------------ writing
 
 
-def _pixel_pair(pixel_size_um):
-    p = np.broadcast_to(np.asarray(pixel_size_um, dtype=np.float64), (2,))
-    if not (np.all(np.isfinite(p)) and np.all(p > 0)):
-        raise ValueError(f"pixel_size_um: must be positive and finite, got {pixel_size_um!r}")
-    return float(p[0]), float(p[1])
-
-
 def _quantize(h, dtype):
     info = np.iinfo(dtype)
     ok = np.isfinite(h)
@@ -339,7 +333,7 @@ def write_x3p(path, height_um, pixel_size_um, *, data_type=None, model="height f
         data_type = "F" if h.dtype == np.float32 else "D"
     if data_type not in DATA_TYPES:
         raise ValueError(f"data_type: must be one of {', '.join(DATA_TYPES)}, got {data_type!r}")
-    py, px = _pixel_pair(pixel_size_um)
+    py, px = pixel_size_yx(pixel_size_um)
     dtype = DATA_TYPES[data_type]
     invalid = ~np.isfinite(h)
     if data_type in "FD":

@@ -64,7 +64,7 @@ class Context:
         self.inputs = inputs if isinstance(inputs, dict) else {}
         self.stack = (self.inputs.get("stack") or self.inputs.get("stack_path")
                       or self.inputs.get("path"))
-        self.geom = Geometry(positive(self.inputs.get("pixel_size_um")))
+        self.geom = Geometry(self.inputs.get("pixel_size_um"))
         self.mask = res.map("mask")
 
     def identification(self, key) -> tuple[bool, str]:

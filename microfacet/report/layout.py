@@ -31,6 +31,7 @@ import numpy as np
 
 from ..core.densities import histogram_density
 from ..core.lazy import load
+from ..core.pixels import pixel_size_yx
 
 mpl = load("matplotlib")
 mcolors = load("matplotlib.colors")
@@ -289,16 +290,46 @@ class Page:
 
 
 class Geometry:
-    """Axis units for the maps: µm if the pixel size is known, else pixels."""
+    """Axis units for the maps: µm if the pixel size is known (one number or ``[y, x]``),
+    else pixels.
+
+    >>> g = Geometry([0.25, 0.5])
+    >>> g.extent((10, 20)), g.height_ratio((10, 20)), g.size_text(), g.field_text((10, 20))
+    ((0.0, 10.0, 2.5, 0.0), 0.25, '0.25 × 0.5 µm (y × x)', '10 × 2.5 µm')
+    >>> Geometry(None).unit, Geometry(-1.0).yx
+    ('pixel', None)
+    """
 
     def __init__(self, pixel_size_um):
-        self.px = pixel_size_um
-        self.unit = "µm" if pixel_size_um else "pixel"
+        try:
+            self.yx = None if pixel_size_um is None else pixel_size_yx(pixel_size_um)
+        except ValueError:
+            self.yx = None
+        self.unit = "µm" if self.yx else "pixel"
 
     def extent(self, shape, block=1):
         """``imshow`` extent of a map of ``shape`` whose pixels are ``block`` pixels."""
-        s = (self.px or 1.0) * block
-        return (0.0, shape[1] * s, shape[0] * s, 0.0)
+        py, px = self.yx or (1.0, 1.0)
+        return (0.0, shape[1] * px * block, shape[0] * py * block, 0.0)
+
+    def height_ratio(self, shape):
+        """Height / width of a map of ``shape`` on the sample (pixels when unknown)."""
+        py, px = self.yx or (1.0, 1.0)
+        return shape[0] * py / (shape[1] * px)
+
+    def size_text(self):
+        """The pixel size for a table."""
+        if not self.yx:
+            return "unknown (axes in pixels)"
+        py, px = self.yx
+        return f"{px:.4g} µm" if py == px else f"{py:.4g} × {px:.4g} µm (y × x)"
+
+    def field_text(self, shape):
+        """Width × height of the field for a table."""
+        if not self.yx or not shape:
+            return "—"
+        py, px = self.yx
+        return f"{shape[1] * px:.4g} × {shape[0] * py:.4g} µm"
 
     def label(self, ax):
         """Label the axes of a map."""
@@ -315,13 +346,14 @@ def colormap(name):
     return mpl.colormaps[name].with_extremes(bad=NO_VALUE)
 
 
-def image_axes(pg, cell, shape):
-    """Axes in ``cell`` whose box has exactly the image's aspect (so a colour bar beside it
-    is as tall as the image), as large as the margins allow, centred; and that box."""
+def image_axes(pg, cell, shape, geom=None):
+    """Axes in ``cell`` whose box has exactly the image's aspect on the sample (``geom``, a
+    :class:`Geometry`; pixels when None), so a colour bar beside it is as tall as the image,
+    as large as the margins allow, centred; and that box."""
     x, y, w, h = cell
     m = _MAP_MARGINS
     aw, ah = w - m["left"] - m["right"], h - m["top"] - m["bottom"]
-    r = shape[0] / shape[1]
+    r = geom.height_ratio(shape) if geom is not None else shape[0] / shape[1]
     iw, ih = (aw, aw * r) if aw * r <= ah else (ah / r, ah)
     x0 = x + m["left"] + 0.5 * (aw - iw)
     y0 = y + m["bottom"] + 0.5 * (ah - ih)
@@ -371,7 +403,7 @@ def map_panel(pg, cell, a, geom, *, title, label, cmap, limits=None, lo=1.0, hi=
     if limits is None:
         limits = colour_limits(a, lo, hi, floor=floor)
     vmin, vmax, extend = limits
-    ax, box = image_axes(pg, cell, small.shape)
+    ax, box = image_axes(pg, cell, small.shape, geom)
     im = ax.imshow(small, cmap=colormap(cmap), vmin=vmin, vmax=vmax, aspect="auto",
                    extent=geom.extent(small.shape, block))
     colourbar(pg, im, box, label, extend=extend, no_value=float(np.mean(~np.isfinite(a))))
@@ -386,7 +418,7 @@ def category_panel(pg, cell, codes, geom, *, colours, names, title, label, no_va
     small = codes[::block, ::block]  # nearest: averaging would mix categories
     k = len(colours)
     cm = mcolors.ListedColormap(list(colours)).with_extremes(bad=NO_VALUE)
-    ax, box = image_axes(pg, cell, small.shape)
+    ax, box = image_axes(pg, cell, small.shape, geom)
     data = np.ma.masked_less(small.astype(np.float32), -0.5)
     im = ax.imshow(data, cmap=cm, vmin=-0.5, vmax=k - 0.5, aspect="auto",
                    extent=geom.extent(small.shape, block))

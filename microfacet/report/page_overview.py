@@ -52,7 +52,7 @@ def draw(pg, ctx):
     # ---- maps
     if aif is not None:
         small, block = downsample(aif)
-        ax, box = image_axes(pg, cells[0], small.shape)
+        ax, box = image_axes(pg, cells[0], small.shape, geom)
         ax.imshow(small, cmap="gray" if small.ndim == 2 else None, vmin=0, vmax=1,
                   aspect="auto", extent=geom.extent(small.shape, block),
                   interpolation="antialiased")
@@ -61,11 +61,13 @@ def draw(pg, ctx):
     else:
         blank_panel(pg, cells[0], "all_in_focus.png is not in the folder",
                     "all-in-focus image")
+    source = ("microscope export" if ctx.inputs.get("height_source") == "microscope export"
+              else "from focus")
     if height is not None:
-        map_panel(pg, cells[1], height, geom, title="height from focus",
+        map_panel(pg, cells[1], height, geom, title=f"height ({source})",
                   label="height (µm)", cmap=CMAPS["height"])
     else:
-        blank_panel(pg, cells[1], "height_um.npy is not in the folder", "height from focus")
+        blank_panel(pg, cells[1], "height_um.npy is not in the folder", f"height ({source})")
     if mask is not None:
         frac = float(np.mean(mask))
         category_panel(pg, cells[2], mask.astype(np.int8), geom,
@@ -100,9 +102,8 @@ def _input_rows(ctx):
         rows.append(["stack", shorten(ctx.stack, 38)])
     rows += [
         ["image size", f"{shape[1]} × {shape[0]} pixels" if shape else "—"],
-        ["pixel size", fmt(geom.px, ".4g", "µm") if geom.px else "unknown (axes in pixels)"],
-        ["field of view", (f"{shape[1] * geom.px:.4g} × {shape[0] * geom.px:.4g} µm"
-                           if shape and geom.px else "—")],
+        ["pixel size", geom.size_text()],
+        ["field of view", geom.field_text(shape)],
     ]
     z = inputs.get("z_um_range")
     n = inputs.get("n_slices")

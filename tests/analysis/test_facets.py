@@ -57,6 +57,23 @@ def test_planes_are_recovered_exactly_without_noise():
     np.testing.assert_allclose(ff.tilt_deg, np.degrees(np.arctan(np.hypot(a, b))), atol=1e-7)
 
 
+def test_planes_on_non_square_pixels_are_the_planes_on_the_sample():
+    """Slopes are dz/dx and dz/dy in µm/µm on (y, x) = (0.2, 0.5) µm pixels; read as square
+    pixels the x slopes would come out 2.5× too steep."""
+    labels = _block_labels(10, 4, 5)
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(0, 0.3, 20), rng.normal(0, 0.3, 20)
+    yy, xx = np.mgrid[0:labels.shape[0], 0:labels.shape[1]]
+    h = a[labels] * xx * 0.5 + b[labels] * yy * 0.2
+    rel = np.ones(h.shape, bool)
+    ff = fit_facet_planes(labels, h, height_sigma_um=0.01, reliable=rel,
+                          pixel_size_um=(0.2, 0.5))
+    np.testing.assert_allclose(ff.slope_x, a, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ff.slope_y, b, rtol=0, atol=1e-9)
+    sq = fit_facet_planes(labels, h, height_sigma_um=0.01, reliable=rel, pixel_size_um=0.2)
+    np.testing.assert_allclose(sq.slope_x, 2.5 * a, rtol=1e-9, atol=1e-9)
+
+
 def test_only_reliable_heights_are_used():
     """Unreliable pixels, however wrong, change nothing; NaN heights are skipped; a facet
     with fewer than ``min_pixels`` reliable heights, or all on one line, gets no tilt (NaN),

@@ -24,6 +24,7 @@ from microfacet.analysis.identification import (
     analysis_warnings,
     colour_tilt_contrast,
     fit_joint_distributions,
+    mean_plane_tilt_deg,
     thickness_reason,
     unexplained_facets,
 )
@@ -290,3 +291,35 @@ def test_joint_ndf_mostly_censored_is_not_identified(nd):
     assert f"{100 * frac:.0f} % of the surface is tilted past" in nfit.reason
     assert nfit.info["censored_fraction"] == pytest.approx(frac, rel=1e-9)
     assert nfit.n_samples == int(used.sum())
+
+
+def _joint_with_planes(slope_x, slope_y, area):
+    planes = NS(fitted=np.isfinite(slope_x), slope_x=np.nan_to_num(slope_x),
+                slope_y=np.nan_to_num(slope_y))
+    return NS(planes=planes, area_px=np.asarray(area))
+
+
+def test_mean_plane_tilt_is_the_area_weighted_facet_slope():
+    rng = np.random.default_rng(3)
+    n = 400
+    a = 0.1 + rng.normal(0, 0.05, n)               # a 5.7° mounting tilt along x
+    b = rng.normal(0, 0.05, n)
+    area = rng.integers(5, 50, n)
+    a[:10] = np.nan                                # facets without a plane do not count
+    tilt = mean_plane_tilt_deg(_joint_with_planes(a, b, area))
+    ok = np.isfinite(a)
+    expect = np.degrees(np.arctan(np.hypot(np.average(a[ok], weights=area[ok]),
+                                           np.average(b[ok], weights=area[ok]))))
+    assert tilt == pytest.approx(expect, rel=1e-12)
+    assert mean_plane_tilt_deg(None) is None
+    assert mean_plane_tilt_deg(_joint_with_planes(np.full(3, np.nan), np.zeros(3), [1, 1, 1])) \
+        is None
+
+
+@pytest.mark.parametrize("tilt,warned", [(1.9, False), (2.1, True)])
+def test_a_sample_tilted_by_half_the_ndf_width_is_reported(tilt, warned):
+    ndf = NS(mixture=NS(rms_sd_deg=4.0), identified=True, reason="")
+    roi = NS(thickness_nm=np.array([100.0]), ambiguity_delta_e=np.array([9.0]))
+    w = analysis_warnings(thickness_fit=None, ndf_fit=ndf, roi=roi, delta_e_median=None,
+                          noise_de=1.0, mean_plane_tilt_deg=tilt)
+    assert any("mean plane is tilted" in x for x in w) == warned

@@ -7,10 +7,14 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
+import tifffile
+from PIL import Image
 
 from microfacet.analysis import AnalysisOptions, analyze_stack
 from microfacet.cli import main
 from microfacet.core.densities import wasserstein1
+from microfacet.io.x3p import read_x3p
 
 FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "stacks" / "nd-fixture"
 TRUTH = FIXTURE / "truth"
@@ -69,6 +73,71 @@ def test_microscope_export_is_analysed_without_slices(tmp_path):
     t_h = np.load(out / "tilt_height_deg.npy")
     vis = np.load(truth / "visible.npy") & np.isfinite(t_h)
     assert np.median(np.abs(t_h[vis] - np.load(truth / "tilt_deg.npy")[vis])) < 2.5
+
+
+def test_non_square_pixels_are_analysed_on_the_sample(tmp_path):
+    """The export of the test above with every other column dropped: pixels 0.216 µm high
+    and 0.432 µm wide. Height tilts still match the truth (read as square pixels the x slopes
+    would double); summary, TIFF resolution, x3p axes and the report keep both spacings."""
+    truth = FIXTURE / "truth"
+    st = tmp_path / "export"
+    st.mkdir()
+    np.save(st / "height_um.npy", np.load(truth / "height_um.npy")[:, ::2])
+    img = np.asarray(Image.open(truth / "all_in_focus.png"))[:, ::2]
+    Image.fromarray(np.ascontiguousarray(img)).save(st / "image.png")
+    (st / "stack.json").write_text(json.dumps({
+        "format": "microfacet-stack/1", "pixel_size_um": [0.216, 0.432],
+        "height_um": "height_um.npy", "image": "image.png"}))
+    out = tmp_path / "res"
+    assert main(["analyze", str(st), "--out", str(out), "-q"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["inputs"]["pixel_size_um"] == [0.216, 0.432]
+    t_h = np.load(out / "tilt_height_deg.npy")
+    vis = np.load(truth / "visible.npy")[:, ::2] & np.isfinite(t_h)
+    err = np.abs(t_h[vis] - np.load(truth / "tilt_deg.npy")[:, ::2][vis])
+    assert vis.mean() > 0.5 and np.median(err) < 2.5
+    with tifffile.TiffFile(out / "height_um.tif") as tf:
+        page = tf.pages[0]
+        xres, yres = (page.tags[k].value for k in ("XResolution", "YResolution"))
+        assert (xres[1] / xres[0], yres[1] / yres[0]) == pytest.approx((0.432, 0.216), 1e-4)
+    assert read_x3p(out / "height_um.x3p").pixel_size_um == pytest.approx((0.216, 0.432))
+    assert (out / "report.pdf").stat().st_size > 0
+
+
+def test_an_instrument_file_export_is_analysed_with_its_own_pixel_size(tmp_path):
+    """A real Alicona .al3d as the export's height (no pixel_size_um in stack.json) with the
+    colour a 70 nm film shows at its tilts: the pixel size is the file's, the thickness is
+    found, and the 12.6° mounting tilt of that measurement is reported."""
+    pytest.importorskip("SurfaceTopography")
+    from microfacet.colour.srgb import srgb_encode
+    from microfacet.colour.table import build_colour_table
+    from microfacet.focus.normals import normals_from_height, tilt_azimuth_deg
+    from microfacet.io.images import write_image
+    from microfacet.io.instruments import read_height_map
+
+    src = Path(__file__).resolve().parents[2] / "fixtures" / "instrument-heights" / "al3d-1.al3d"
+    m = read_height_map(src)
+    tilt, _ = tilt_azimuth_deg(normals_from_height(m.height_um, pixel_size_um=m.pixel_size_um))
+    table = build_colour_table(thickness_range_nm=(60, 80), theta_range_deg=(0, 40))
+    rgb = table.linear_rgb_at(np.clip(tilt, 0, 40), np.full(tilt.shape, 70.0))
+    st = tmp_path / "export"
+    st.mkdir()
+    shutil.copy(src, st / src.name)
+    write_image(st / "image.png", srgb_encode(np.clip(rgb / rgb.max() * 0.8, 0, 1),
+                                              dtype=np.uint8))
+    (st / "stack.json").write_text(json.dumps({
+        "format": "microfacet-stack/1", "height_um": src.name, "image": "image.png"}))
+    out = tmp_path / "res"
+    assert main(["analyze", str(st), "--out", str(out), "--no-report", "-q",
+                 "--facet-size-um", "4.4"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["inputs"]["pixel_size_um"] == pytest.approx(m.pixel_size_um[1], rel=1e-12)
+    assert np.nanmedian(np.load(out / "thickness_nm.npy")) == pytest.approx(70.0, abs=1.0)
+    # the mean plane of this measurement: arctan of its mean gradient
+    gy, gx = np.gradient(m.height_um.astype(np.float64), *m.pixel_size_um)
+    plane = np.degrees(np.arctan(np.hypot(gx.mean(), gy.mean())))
+    assert s["ndf"]["mean_plane_tilt_deg"] == pytest.approx(plane, abs=0.25)
+    assert any("mean plane is tilted" in w for w in s["warnings"])
 
 
 def test_the_colour_difference_formula_reaches_every_stage(tmp_path):

@@ -294,9 +294,12 @@ def test_batch_resume_sweeps_what_killed_workers_left(tmp_path):
 @pytest.mark.parametrize("sig, status", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 def test_signals_during_writing_leave_nothing(tmp_path, sig, status):
     out = tmp_path / "big"
+    # SIGINT at its default in the child: a pytest started in the background of a
+    # non-interactive shell ignores SIGINT, and its children would inherit that
     proc = subprocess.Popen([sys.executable, "-m", "microfacet", "synth", str(out),
                              "--preset", "nd", "--size", "768x768", "--slices", "200"],
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and not list(tmp_path.glob(".big.partial-*/slices/0*")):
         time.sleep(0.05)

@@ -74,6 +74,17 @@ def test_init_takes_values_from_imagej_metadata(tmp_path, cli, capsys):
                     "z_step_um": 0.25}
 
 
+def test_init_and_analyze_take_non_square_pixels_as_y_x(tmp_path, cli, capsys):
+    d = _folder(tmp_path / "p", ["a.png", "b.png", "c.png"])
+    assert cli(["init", str(d), "--pixel-size-um", "0.2,0.3", "--z-step-um", "1"]) == 0
+    assert "pixel size: 0.2 µm high x 0.3 µm wide (non-square)" in capsys.readouterr().out
+    assert json.loads((d / "stack.json").read_text())["pixel_size_um"] == [0.2, 0.3]
+    assert read_stack(d).pixel_size_yx_um == (0.2, 0.3)
+    e = _folder(tmp_path / "q", ["a.png", "b.png", "c.png"])
+    st = read_stack(e, pixel_size_um=[0.2, 0.3], z_step_um=1.0)
+    assert st.pixel_size_yx_um == (0.2, 0.3) and st.sources["pixel_size_um"] == "given"
+
+
 def test_init_refuses_to_overwrite_and_names_missing_options(tmp_path, cli, capsys):
     d = _folder(tmp_path / "p", ["a.png", "b.png", "c.png"])
     assert cli(["init", str(d)]) == 2

@@ -34,6 +34,22 @@ def test_tilted_plane_exact(gx, gy, px):
         assert np.abs(d).max() < 1e-2
 
 
+@settings(max_examples=30, deadline=None)
+@given(gx=st.floats(-2, 2), gy=st.floats(-2, 2), py=st.floats(0.05, 5), ratio=st.floats(0.2, 5))
+def test_non_square_pixels_give_the_plane_of_square_ones(gx, gy, py, ratio):
+    """The same plane sampled on (y, x) = (py, py·ratio) pixels has the normal of the plane;
+    read as square pixels of either size it would not (unless the plane is level along x)."""
+    px = py * ratio
+    rows, cols = np.mgrid[0:6, 0:8]
+    h = gx * cols * px - gy * rows * py
+    n = normals_from_height(h, pixel_size_um=(py, px))
+    expect = np.array([-gx, -gy, 1.0]) / np.sqrt(1 + gx * gx + gy * gy)
+    np.testing.assert_allclose(n, np.broadcast_to(expect, n.shape), atol=2e-6)
+    if abs(gx) > 0.05 and abs(ratio - 1) > 0.1:
+        wrong = normals_from_height(h, pixel_size_um=py)
+        assert angle_deg(wrong, np.broadcast_to(expect, n.shape)).min() > 0.1
+
+
 def test_pixel_size_matters():
     h = np.tile(np.arange(10.0), (5, 1))          # 1 µm per pixel along x
     t1, _ = tilt_azimuth_deg(normals_from_height(h, pixel_size_um=1.0))
@@ -94,6 +110,9 @@ def test_bad_arguments():
         normals_from_height(np.zeros((3, 3)), pixel_size_um=0)
     with pytest.raises(ValueError, match="pixel_size_um"):
         normals_from_height(np.zeros((3, 3)), pixel_size_um=float("nan"))
+    for bad in ([1.0, 2.0, 3.0], [1.0, -1.0], "0.5", True):
+        with pytest.raises(ValueError, match="pixel_size_um"):
+            normals_from_height(np.zeros((3, 3)), pixel_size_um=bad)
     with pytest.raises(ValueError, match="height_um"):
         normals_from_height(np.zeros(3), pixel_size_um=1.0)
     with pytest.raises(ValueError, match="smooth_sigma_px"):

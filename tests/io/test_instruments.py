@@ -46,6 +46,29 @@ def test_alicona_al3d_matches_its_published_values():
     assert 7e4 < m.offset_um < 8e4 and abs(float(np.median(h))) < 1e-3
 
 
+@pytest.mark.parametrize("name,shape,size_xy_um,rms_um,rms_gradient,maker", [
+    ("plu-1.plu", (576, 768), (1274.88, 956.160), 2.83439, 0.00898358, "Sensofar"),
+    ("mnt-1.mnt", (600, 960), (1779.26, 1112.73), 0.0245602, 0.0198990, "mnt"),
+])
+def test_sensofar_and_mountainsmap_match_their_published_values(name, shape, size_xy_um,
+                                                               rms_um, rms_gradient, maker):
+    """Grid, physical size, RMS height and RMS gradient from fixtures/instrument-heights/
+    README.md (RMS gradient to 2e-5, its six published digits). The .mnt grid is 0.06 %
+    non-square: with the x and y spacings swapped its RMS gradient moves by 2e-4."""
+    pytest.importorskip("SurfaceTopography")
+    m = read_height_map(FIXTURES / name)
+    h = m.height_um.astype(np.float64) + m.offset_um
+    assert m.height_um.shape == shape and np.isfinite(h).all()
+    assert m.pixel_size_um == pytest.approx((size_xy_um[1] / shape[0], size_xy_um[0] / shape[1]),
+                                            rel=1e-5)
+    assert np.sqrt(np.mean((h - h.mean()) ** 2)) == pytest.approx(rms_um, rel=1e-4)
+    assert _rms_gradient(h, m.pixel_size_um) == pytest.approx(rms_gradient, rel=2e-5)
+    assert maker in m.source
+    if name.endswith(".mnt"):
+        swapped = _rms_gradient(h, m.pixel_size_um[::-1])
+        assert abs(swapped / rms_gradient - 1) > 1e-4
+
+
 def test_missing_extra_is_one_line_with_the_pip_command(tmp_path, monkeypatch):
     f = tmp_path / "scan.plu"
     f.write_bytes(b"\0" * 64)
