@@ -222,12 +222,97 @@ def _facet_means(labels, lab, usable, interior, values):
 
 
 def _scan(table, centre, tilt, mean_lab, offsets, exposure, white, method):
+    """ΔE of each facet's mean Lab at ``centre + offsets`` (offsets (k,) or per facet
+    (S, k)), clipped to the table; returns the thicknesses and the ΔE, both (S, k)."""
     lo, hi = float(table.thickness_nm[0]), float(table.thickness_nm[-1])
-    grid = np.clip(centre[:, None] + offsets[None, :], lo, hi)
+    off = np.asarray(offsets, dtype=np.float64)
+    grid = np.clip(centre[:, None] + (off if off.ndim == 2 else off[None, :]), lo, hi)
     xyz = table.xyz_at(tilt[:, None], grid) * exposure
     model = xyz_to_lab(xyz.astype(np.float32), white=white)
     de = delta_e(model, mean_lab[:, None, :].astype(np.float32), method=method)
     return grid, de.astype(np.float64)
+
+
+def _fine_scan(table, centre, tilt, mean_lab, fine, exposure, white, method, stride=5):
+    """The fine scan ``centre + fine`` (uniform offsets) coarse-to-fine: every ``stride``-th
+    offset, then each offset within ±``stride`` of the best (ΔE is unimodal over ±1 nm).
+
+    Returns the scanned thicknesses and ΔE (S, m), and two column indices into them: the
+    least ΔE, and the node about which a full scan fits its parabola (its
+    ``clip(k, 1, n − 2)``; different from the first exactly when the minimum is at an end of
+    ``fine``).
+    """
+    n = fine.size
+    r = np.arange(centre.size)
+    if n < 4 * stride:
+        grid, de = _scan(table, centre, tilt, mean_lab, fine, exposure, white, method)
+        k = np.argmin(de, axis=1)
+        return grid, de, k, np.clip(k, 1, n - 2)
+    idx_a = np.unique(np.r_[np.arange(0, n, stride), n - 1])
+    _, de_a = _scan(table, centre, tilt, mean_lab, fine[idx_a], exposure, white, method)
+    best_a = idx_a[np.argmin(de_a, axis=1)]
+    # offsets within ±stride of the best (clamped to the scan), plus one more each side
+    idx = np.clip(best_a[:, None] + np.arange(-stride - 1, stride + 2)[None, :], 0, n - 1)
+    grid, de = _scan(table, centre, tilt, mean_lab, fine[idx], exposure, white, method)
+    inner = np.full(idx.shape[1], np.inf)
+    inner[1:-1] = 0.0
+    kw = np.argmin(de + inner[None, :], axis=1)
+    # the node a full scan would fit its parabola about, clip(k, 1, n − 2), found in this
+    # scan (it is kw itself unless the minimum is at an end of ``fine``)
+    target = np.clip(idx[r, kw], 1, n - 2)
+    km = np.argmax(idx == target[:, None], axis=1)
+    return grid, de, kw, km
+
+
+def _window_minimum(table, centre, tilt, mean_lab, offsets, exposure, white, method):
+    """The node of least ΔE among ``centre + offsets`` (a uniform grid): every other node,
+    then the two next to the best. Returns the thickness, the node's index and its ΔE."""
+    r = np.arange(centre.size)
+    n = offsets.size
+    idx2 = np.unique(np.r_[np.arange(0, n, 2), n - 1])
+    _, de2 = _scan(table, centre, tilt, mean_lab, offsets[idx2], exposure, white, method)
+    k2 = idx2[np.argmin(de2, axis=1)]
+    best = de2[r, np.argmin(de2, axis=1)]
+    nb = np.clip(k2[:, None] + np.array([-1, 1])[None, :], 0, n - 1)
+    grid_nb, de_nb = _scan(table, centre, tilt, mean_lab, offsets[nb], exposure, white, method)
+    j = np.argmin(de_nb, axis=1)
+    better = de_nb[r, j] < best
+    k = np.where(better, nb[r, j], k2)
+    lo, hi = float(table.thickness_nm[0]), float(table.thickness_nm[-1])
+    return np.clip(centre + offsets[k], lo, hi), k, np.where(better, de_nb[r, j], best)
+
+
+def _order_scan(table, centre, tilt, mean_lab, hw, exposure, white, method):
+    """Least ΔE inside the order window ±``hw`` about ``centre`` and the best thickness
+    outside it, on the table's whole range at 1 nm: a 2 nm scan, then the 1 nm nodes next to
+    each side's best (the ΔE curve's basins are several nm wide), half the evaluations of a
+    1 nm scan.
+
+    Returns
+    -------
+    best_in, d_out, de_out : ndarray, shape (S,)
+    """
+    lo, hi = float(table.thickness_nm[0]), float(table.thickness_nm[-1])
+    r = np.arange(centre.size)
+    coarse, de = _scan(table, np.zeros(centre.size), tilt, mean_lab,
+                       np.arange(lo, hi + 1e-9, 2.0), exposure, white, method)
+    inside = np.abs(coarse - centre[:, None]) <= hw
+    results = []
+    for want_inside in (True, False):
+        sel = inside if want_inside else ~inside
+        k = np.argmin(np.where(sel, de, np.inf), axis=1)
+        grid, de_n = _scan(table, coarse[r, k], tilt, mean_lab, np.array([-1.0, 1.0]),
+                           exposure, white, method)
+        ok_n = (np.abs(grid - centre[:, None]) <= hw) == want_inside
+        ok_n &= (grid > lo - 1e-9) & (grid < hi + 1e-9) & (grid != coarse[r, k][:, None])
+        de_n = np.where(ok_n, de_n, np.inf)
+        best = np.where(sel[r, k], de[r, k], np.inf)
+        j = np.argmin(de_n, axis=1)
+        better = de_n[r, j] < best
+        results.append((np.where(better, grid[r, j], coarse[r, k]),
+                        np.where(better, de_n[r, j], best)))
+    (_, best_in), (d_out, de_out) = results
+    return best_in, d_out, de_out
 
 
 #: A facet leaves its ROI's interference order when a thickness outside it fits its colour
@@ -242,7 +327,7 @@ ORDER_SWITCH_RATIO = 0.5
 def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table, *,
                     exposure, tilt_sigma_deg=None, noise_de=1.0, half_width_nm=None,
                     step_nm=0.05, interior=None, delta_e_method="CIEDE2000",
-                    order_switch_de=ORDER_SWITCH_DE) -> FacetThickness:
+                    order_switch_de=ORDER_SWITCH_DE, other_orders=True) -> FacetThickness:
     """Thickness per facet from its mean Lab at its tilt, within its interference order.
 
     The order is the ROI's (the window ±``half_width_nm`` about the ROI thickness) unless a
@@ -279,6 +364,8 @@ def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table
         ``"CIEDE2000"``, ``"CIE94"`` or ``"CIE76"``.
     order_switch_de : float or None
         None: stay in the ROI's order (no whole-range scan).
+    other_orders : bool
+        Scan the neighbouring orders for ``delta_e_other_order`` (NaN without the scan).
 
     Returns
     -------
@@ -305,24 +392,16 @@ def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table
         th = np.clip(tilt[ii], t_lo, t_hi)
         if order_switch_de is not None:
             cen = centre[ii]
-            full, de_full = _scan(table, np.zeros(ii.size), th, mean_lab[ii],
-                                  np.arange(d_lo, d_hi + 1e-9, 1.0), exposure, white,
-                                  delta_e_method)
-            inside = np.abs(full - cen[:, None]) <= hw
-            best_in = np.where(inside, de_full, np.inf).min(axis=1)
-            k_out = np.argmin(np.where(inside, np.inf, de_full), axis=1)
-            de_out = de_full[r, k_out]
+            best_in, full_out, de_out = _order_scan(table, cen, th, mean_lab[ii], hw,
+                                                    exposure, white, delta_e_method)
             switch = (de_out < best_in - order_switch_de) & (de_out < ORDER_SWITCH_RATIO
                                                              * best_in)
-            centre[ii] = np.where(switch, full[r, k_out], cen)
-        grid, de = _scan(table, centre[ii], th, mean_lab[ii], coarse, exposure, white,
-                         delta_e_method)
-        k = np.argmin(de, axis=1)
+            centre[ii] = np.where(switch, full_out, cen)
+        d_k, k, _ = _window_minimum(table, centre[ii], th, mean_lab[ii], coarse, exposure,
+                                    white, delta_e_method)
         edge[ii] = (k == 0) | (k == coarse.size - 1)
-        grid, de = _scan(table, grid[r, k], th, mean_lab[ii], fine, exposure, white,
-                         delta_e_method)
-        k = np.argmin(de, axis=1)
-        km = np.clip(k, 1, fine.size - 2)
+        grid, de, k, km = _fine_scan(table, d_k, th, mean_lab[ii], fine, exposure, white,
+                                     delta_e_method)
         y0, y1, y2 = de[r, km - 1] ** 2, de[r, km] ** 2, de[r, km + 1] ** 2
         den = y0 - 2 * y1 + y2
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -347,13 +426,13 @@ def facet_thickness(labels, lab, usable, facet_tilt_deg, roi_thickness_px, table
         out["d"][ii], out["de"][ii], out["s"][ii] = d_best, de_best, np.where(
             np.isfinite(s_tot), s_tot, hw / math.sqrt(3.0))
         alt = np.full(ii.size, np.inf)
-        for shift in (-period, period):
+        for shift in (-period, period) if other_orders else ():
             c2 = d_best + shift
             inside = (c2 + hw >= d_lo) & (c2 - hw <= d_hi)
             if inside.any():
-                _, de2 = _scan(table, c2[inside], th[inside], mean_lab[ii[inside]], coarse,
-                               exposure, white, delta_e_method)
-                alt[inside] = np.minimum(alt[inside], de2.min(axis=1))
+                *_, de2 = _window_minimum(table, c2[inside], th[inside], mean_lab[ii[inside]],
+                                          coarse, exposure, white, delta_e_method)
+                alt[inside] = np.minimum(alt[inside], de2)
         out["alt"][ii] = np.where(np.isfinite(alt), alt, np.nan)
     return FacetThickness(out["d"], out["s"], out["de"], edge, cnt.astype(np.int64),
                           out["alt"])
@@ -381,7 +460,8 @@ def refine_exposure_on_facets(facets, lab, usable, tilt_f, thick_roi_px, table, 
     def objective(log_e):
         ft = facet_thickness(facets, lab, sel, tilt, thick_roi_px, table,
                              exposure=math.exp(log_e), interior=interior, step_nm=0.1,
-                             delta_e_method=delta_e_method, order_switch_de=None)
+                             delta_e_method=delta_e_method, order_switch_de=None,
+                             other_orders=False)
         return float(np.nanmedian(ft.delta_e))
 
     lo, hi = math.log(exposure / 1.5), math.log(exposure * 1.5)

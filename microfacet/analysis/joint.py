@@ -128,18 +128,20 @@ def _colour_sigma(labels, lab, usable, table, d_f, t_f, exposure, noise_de, s_d,
                   delta_e_method):
     """Per facet: √(max(noise², mean ΔE²/3) + (∂ΔE/∂d · σ_d)²), ΔE of its pixels to its model."""
     S = d_f.size
-    yy, xx = np.nonzero(usable)
-    fid = labels[yy, xx]
-    ok = np.isfinite(d_f[fid]) & np.isfinite(t_f[fid])
-    yy, xx, fid = yy[ok], xx[ok], fid[ok]
+    good_f = np.isfinite(d_f) & np.isfinite(t_f)
+    flat = np.flatnonzero(usable & good_f[labels])
+    fid = labels.reshape(-1)[flat]
+    lab_flat = lab.reshape(-1, 3)
     white = table.white_xyz.astype(np.float32)
     th = np.clip(t_f, table.theta_deg[0], table.theta_deg[-1])
+    # one model colour per facet (its thickness at its tilt), compared with its pixels
+    model_f = np.full((S, 3), np.nan, np.float32)
+    model_f[good_f] = xyz_to_lab((table.xyz_at(th[good_f], d_f[good_f]) * exposure).astype(
+        np.float32), white=white)
     de = np.empty(fid.size, np.float32)
     for a in range(0, fid.size, 262144):
         f = fid[a:a + 262144]
-        model = xyz_to_lab((table.xyz_at(th[f], d_f[f]) * exposure).astype(np.float32),
-                           white=white)
-        de[a:a + 262144] = delta_e(model, lab[yy[a:a + 262144], xx[a:a + 262144]],
+        de[a:a + 262144] = delta_e(model_f[f], lab_flat[flat[a:a + 262144]],
                                    method=delta_e_method)
     cnt = np.bincount(fid, minlength=S)
     ms = np.bincount(fid, weights=de.astype(np.float64) ** 2, minlength=S) / np.maximum(cnt, 1)
@@ -225,17 +227,19 @@ def joint_tilts(colour, surface, roi, table, *, theta_grid_deg, max_tilt_deg, ex
     d_f = ft.thickness_nm
     c_sig = _colour_sigma(facets, lab, usable, table, d_f, tilt_f, exposure, colour.noise_de,
                           ft.sigma_nm, delta_e_method)
-    yy, xx = np.nonzero(usable & np.isfinite(d_f)[facets])
-    fid = facets[yy, xx]
+    flat = np.flatnonzero(usable & np.isfinite(d_f)[facets])   # flat indices: 8 B/px
+    fid = facets.reshape(-1)[flat]
     rows_lab = model_lab_rows(table, np.where(np.isfinite(d_f), d_f, table.thickness_nm[0]),
                               theta_grid_deg, exposure=exposure)
-    inv = invert_tilt(lab[yy, xx], rows_lab, fid, theta_grid_deg, table=table,
-                      thickness_px=d_f[fid], exposure=exposure, noise_de=c_sig[fid],
-                      prior_deg=tilt_f[fid], prior_sigma_deg=tsig_f[fid],
+    # thickness, noise and prior are the facet's: given per row, gathered chunk by chunk
+    inv = invert_tilt(lab.reshape(-1, 3)[flat], rows_lab, fid, theta_grid_deg, table=table,
+                      thickness_px=d_f, exposure=exposure, noise_de=c_sig,
+                      prior_deg=tilt_f, prior_sigma_deg=tsig_f, by_row=True,
                       delta_e_method=delta_e_method)
     out = PixelEstimates.empty(shape)
-    out.thickness_nm[yy, xx] = d_f[fid]
-    out.fill(yy, xx, inv)
+    out.thickness_nm.reshape(-1)[flat] = d_f[fid]
+    out.fill(flat, None, inv)
+    del inv, flat, fid
     out.thickness_group = facets
     # facets tilted past the acceptance: more than half their pixels far darker than film
     dark = np.bincount(facets.ravel(), weights=colour.mask.steep.ravel(), minlength=S)

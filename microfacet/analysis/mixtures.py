@@ -33,6 +33,13 @@ Model choice with an honest number of independent samples (both fitters)
     earn "positive evidence"). ``bic_margin`` is the least BIC of the other admissible K minus
     that of the chosen one (≥ 10: very strong evidence for the choice; near 0 or negative,
     down to −2: a toss-up decided for the simpler model).
+
+The EM (both fitters)
+    For each K a few starts (quantiles, the K − 1 solution split or with a component added)
+    take 25 EM updates, and the most likely is run to convergence (:func:`run_em`).
+    Identical samples are fitted as one, with their summed weight
+    (:func:`~microfacet.analysis.sampling.collapse`); the updates are computed from sums
+    over (component, sample) arrays, without per-update temporaries.
 """
 
 from __future__ import annotations
@@ -44,6 +51,7 @@ import numpy as np
 
 from ..core.distributions import ThicknessMixture
 from ..core.lazy import load
+from .sampling import collapse, positive_int, prepare
 
 threadpoolctl = load("threadpoolctl")
 
@@ -56,6 +64,7 @@ __all__ = [
     "k_note",
     "positive_int",
     "prepare",
+    "run_em",
     "single_thread",
 ]
 
@@ -138,86 +147,6 @@ def _json_float(x):
     return x if math.isfinite(x) else None
 
 
-# ----------------------------------------------------------------------------- inputs
-
-
-def positive_int(x, name):
-    if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < 1:
-        raise ValueError(f"{name}: expected an integer >= 1, got {x!r}")
-    return int(x)
-
-
-def _array(values, name, size=None, shape=None):
-    try:
-        a = np.asarray(values, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected an array of numbers") from None
-    if size is not None and a.size != size:
-        raise ValueError(f"{name}: shape {a.shape} does not match {shape}")
-    return a.ravel()
-
-
-def prepare(values, name, weights, group, max_samples, random_state, *, sigma=None,
-            sigma_name="sigma", n_effective=None):
-    """Flatten, drop NaN / zero weight, subsample reproducibly.
-
-    Returns
-    -------
-    x, w, s : ndarray
-        Values, weights (ones without ``weights``) and per-sample noise (zeros without
-        ``sigma``) of the fitted samples.
-    n : int
-        Finite samples given.
-    n_eff : float
-        Independent observations for the BIC (see the module notes).
-    """
-    x = _array(values, name)
-    shape = np.shape(values)
-    if np.isinf(x).any():
-        raise ValueError(f"{name}: contains infinite values")
-    keep = ~np.isnan(x)
-    w = np.ones(x.size)
-    if weights is not None:
-        w = _array(weights, "weights", x.size, shape)
-        if not np.all(np.isfinite(w)) or np.any(w < 0):
-            raise ValueError("weights: must be finite and >= 0")
-        keep &= w > 0
-    s = np.zeros(x.size)
-    if sigma is not None:
-        s = np.broadcast_to(_array(sigma, sigma_name), x.shape) if np.size(sigma) == 1 else \
-            _array(sigma, sigma_name, x.size, shape)
-        if np.any(np.asarray(s)[keep] < 0) or np.isinf(np.asarray(s)[keep]).any():
-            raise ValueError(f"{sigma_name}: must be finite and >= 0")
-        keep &= np.isfinite(s)
-    g = None
-    if group is not None:
-        g = np.asarray(group)
-        if g.size != x.size:
-            raise ValueError(f"group: shape {g.shape} does not match {name} {shape}")
-        g = g.ravel()
-    n = int(keep.sum())
-    if n == 0:
-        raise ValueError(f"{name}: no finite values" + (" with weight > 0" if weights is not None
-                                                        else ""))
-    x, w, s = x[keep], w[keep], np.asarray(s, dtype=np.float64)[keep]
-    p = w / w.sum()
-    kish = 1.0 / float(np.sum(p * p))
-    if n > max_samples:
-        idx = np.sort(np.random.default_rng(random_state).choice(n, size=max_samples,
-                                                                 replace=False))
-        x, w, s = x[idx], w[idx], s[idx]
-        kish = min(kish, float(max_samples))
-    if n_effective is not None:
-        n_eff = float(n_effective)
-        if not (math.isfinite(n_eff) and n_eff > 0):
-            raise ValueError(f"n_effective: must be finite and > 0, got {n_effective!r}")
-    elif g is not None:
-        n_eff = float(min(np.unique(g[keep]).size, kish))
-    else:
-        n_eff = kish
-    return x, w, s, n, n_eff
-
-
 def single_thread():
     """Limit BLAS/OpenMP to one thread: 1-D mixtures gain nothing from threads, and on a
     busy machine thread contention makes them many times slower."""
@@ -267,7 +196,22 @@ def choose_k(fits, n_eff, min_component_samples):
     return k_best, margin, ok
 
 
-# -------------------------------------------------------------------------- thickness
+# -------------------------------------------------------------------------------- EM
+
+
+def run_em(step, params, *, max_iter, tol):
+    """Iterate an EM map from ``params``; returns ``(params, ℓ(params))``.
+
+    ``step(params) -> (ℓ(params), next params)``. Stops after ``max_iter`` updates or when an
+    update raises ℓ by at most ``tol``, returning the last parameters evaluated.
+    """
+    ll0, p1 = step(params)
+    for _ in range(max_iter):
+        ll1, p2 = step(p1)
+        if ll1 - ll0 <= tol:
+            return p1, ll1
+        ll0, params, p1 = ll1, p1, p2
+    return params, ll0
 
 
 def _xd_em(x, v, a, w, mu, s2, s2_floor, *, bg=0.0, max_iter=300, tol=1e-8):
@@ -275,42 +219,67 @@ def _xd_em(x, v, a, w, mu, s2, s2_floor, *, bg=0.0, max_iter=300, tol=1e-8):
 
     ``bg`` > 0: a uniform background of that density (1/span) joins the Gaussians with its
     own weight ``w_bg`` (the samples no population explains); ``w`` and ``w_bg`` sum to 1.
+    Stops when an iteration raises ℓ by less than ``tol`` × total weight (:func:`run_em`).
+
+    The arrays are laid out (component, sample), reused, and the M-step uses the sums
+    ``Σ q d``, ``Σ q d²/V`` and ``Σ q σ²`` (``q = a r / V``, ``d = x − μ``): with the
+    posterior mean ``b = μ + s² d / V`` and variance ``B = s² σ² / V`` of the true value,
+    ``Σ a r b = n μ + s² Σ q d`` and ``Σ a r ((b − μ′)² + B) = s⁴ Σ q d²/V + s² Σ q σ²
+    − n (μ′ − μ)²``: the textbook updates without their (K, n) temporaries.
     """
-    W = a.sum()
-    k = len(mu)
-    w = np.asarray(w, float) / np.sum(w)
+    W = float(a.sum())
+    w = np.asarray(w, dtype=np.float64) / np.sum(w)
     w_bg = 0.0
     if bg > 0:
         w, w_bg = w * 0.95, 0.05
-    mu = np.asarray(mu, float).copy()
-    s2 = np.maximum(np.asarray(s2, float), s2_floor)
-    xc = x[:, None]
-    vc = v[:, None]
-    prev, ll = -np.inf, -np.inf
-    for it in range(max_iter + 1):
-        V = s2[None, :] + vc
-        lp = np.log(np.maximum(w, 1e-300)) - 0.5 * (_LOG_2PI + np.log(V)) - (xc - mu) ** 2 / (
-            2.0 * V)
+    work = [np.empty((len(w), x.size)) for _ in range(3)]     # reused (K, n) arrays
+    log_bg = math.log(bg) if bg > 0 else 0.0
+    x0 = float(np.mean(x))
+    x_rel = x - x0                                # Σ q d = Σ q (x − x0) − (μ − x0) Σ q
+
+    def step(p):
+        w, mu, s2, w_bg = p
+        lp, iv, z = work
+        np.add(s2[:, None], v, out=lp)            # V = s² + σ²
+        np.divide(1.0, lp, out=iv)
+        np.log(lp, out=lp)
+        np.subtract(x, mu[:, None], out=z)
+        z *= z
+        z *= iv                                   # (x − μ)² / V
+        lp += z
+        lp *= -0.5
+        lp += (np.log(np.maximum(w, 1e-300)) - 0.5 * _LOG_2PI)[:, None]
+        m = lp.max(axis=0)
         if bg > 0:
-            lp = np.column_stack([lp, np.full(x.size, math.log(max(w_bg, 1e-300) * bg))])
-        m = lp.max(axis=1, keepdims=True)
-        e = np.exp(lp - m)
-        tot = e.sum(axis=1, keepdims=True)
-        ll = float(np.sum(a * (m[:, 0] + np.log(tot[:, 0]))))
-        if it == max_iter or ll - prev <= tol * W:
-            break
-        prev = ll
-        r_all = a[:, None] * (e / tot)
-        ar = r_all[:, :k]
-        nk = np.maximum(ar.sum(axis=0), 1e-300)
-        b = mu + s2 / V * (xc - mu)
-        B = s2 * vc / V
-        mu = (ar * b).sum(axis=0) / nk
-        s2 = np.maximum((ar * ((b - mu) ** 2 + B)).sum(axis=0) / nk, s2_floor)
-        w = nk / W
+            lbg = math.log(max(w_bg, 1e-300)) + log_bg
+            np.maximum(m, lbg, out=m)
+        lp -= m
+        e = np.exp(lp, out=lp)
+        tot = e.sum(axis=0)
         if bg > 0:
-            w_bg = float(r_all[:, k].sum() / W)
+            e_bg = np.exp(lbg - m)
+            tot += e_bg
+        lt = np.log(tot)
+        lt += m
+        ll = float(a @ lt)
+        at = np.divide(a, tot, out=tot)           # a r = e · a / tot
+        n_raw = e @ at
+        nk = np.maximum(n_raw, 1e-300)
+        q = e
+        q *= at
+        q *= iv                                   # a r / V
+        shift = s2 * (q @ x_rel - (mu - x0) * q.sum(axis=1)) / nk
+        s2_new = (s2 * s2 * np.einsum("kn,kn->k", q, z) + s2 * (q @ v)) / nk - shift * shift
+        return ll, (nk / W, np.where(n_raw > 0, mu + shift, 0.0),
+                    np.maximum(s2_new, s2_floor), float(at @ e_bg / W) if bg > 0 else 0.0)
+
+    p0 = (w, np.array(mu, dtype=np.float64),
+          np.maximum(np.asarray(s2, dtype=np.float64), s2_floor), w_bg)
+    (w, mu, s2, w_bg), ll = run_em(step, p0, max_iter=max_iter, tol=tol * W)
     return w, mu, s2, ll, w_bg
+
+
+# -------------------------------------------------------------------------- thickness
 
 
 def _unexplained_cluster(x, a, dens, floor_density, *, width=2.0):
@@ -415,6 +384,8 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
                           f"{sd_floor_nm:g} nm", x.size, {1: ll})
 
     k_max = k_max_for(max_components, uniq.size, n_eff, 3, -1)
+    # the EM on distinct (value, error) pairs (the starts below on the samples as given)
+    ac, xc, vc = collapse(a, x, v)
     # With measurement errors well above the floor, a component at the floor has a bounded
     # likelihood (its spread is below the resolution, e.g. a population seen in one region):
     # admissible. Without, it is a spike on repeated values: not admissible.
@@ -449,7 +420,7 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
                 c = _unexplained_cluster(x, a, dens, max(bg, 1e-3 / max(spread, 1e-9)))
                 starts.append((np.append(wp * 0.9, 0.1), np.append(mp, c),
                                np.append(sp, max(float(np.median(v)), s2_floor))))
-            runs = [_xd_em(x, v, a, *st, s2_floor, bg=bg, max_iter=25) for st in starts]
+            runs = [_xd_em(xc, vc, ac, *st, s2_floor, bg=bg, max_iter=25) for st in starts]
 
             def admissible(r):
                 return k == 1 or (np.min(r[0]) * n_eff >= min_component_samples and not (
@@ -458,7 +429,7 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
             # the most likely admissible start, converged (a spike on a few samples may be
             # more likely, and is not a population); then checked again
             pre = [r for r in runs if admissible(r)] or runs
-            w, mu, s2, ll, w_bg = _xd_em(x, v, a, *max(pre, key=lambda r: r[3])[:3],
+            w, mu, s2, ll, w_bg = _xd_em(xc, vc, ac, *max(pre, key=lambda r: r[3])[:3],
                                          s2_floor, bg=bg)
             good = admissible((w, mu, s2))
             bgw[k] = w_bg

@@ -37,10 +37,10 @@ from .mixtures import (
     choose_k,
     k_max_for,
     k_note,
-    positive_int,
-    prepare,
+    run_em,
     single_thread,
 )
+from .sampling import collapse, positive_int, prepare
 
 optimize = load("scipy.optimize")
 
@@ -56,40 +56,54 @@ def _rayleigh_em(m2, v, a, C, L2, w, s2, s2_floor, max_iter=1000, tol=1e-7):
 
     ``m2`` squared measured slopes, ``v`` their noise variance per axis, ``a`` weights,
     ``C`` the censored weight (slopes above ``√L2``). ℓ′ omits the model-independent
-    Σ a log m̂ term. Stops when an iteration raises ℓ′ by less than ``tol`` × total weight.
+    Σ a log m̂ term. Stops when an iteration raises ℓ′ by less than ``tol`` × total weight
+    (:func:`~.mixtures.run_em`).
+
+    The arrays are laid out (lobe, sample), reused, and the M-step uses the sums
+    ``Σ q m̂²/V`` and ``Σ q σ²`` (``q = a r / V``): ``Σ a r E[|m|²] = s⁴ Σ q m̂²/V + 2 s² Σ q σ²``.
     """
     W = float(a.sum() + C)
-    w = np.asarray(w, dtype=np.float64) / np.sum(w)
-    s2 = np.clip(np.asarray(s2, dtype=np.float64), s2_floor, _S2_CEIL)
-    m2c, vc = m2[:, None], v[:, None]
-    prev, ll = -np.inf, -np.inf
-    for it in range(max_iter + 1):
-        V = s2[None, :] + vc
+    half_m2 = 0.5 * m2
+    work = [np.empty((len(s2), m2.size)) for _ in range(3)]     # reused (K, n) arrays
+
+    def step(p):
+        w, s2 = p
+        lp, iv, h = work
         lw = np.log(np.maximum(w, 1e-300))
-        lp = lw - np.log(V) - m2c / (2.0 * V)
-        mx = lp.max(axis=1, keepdims=True)
-        e = np.exp(lp - mx)
-        tot = e.sum(axis=1, keepdims=True)
-        ll = float(np.sum(a * (mx[:, 0] + np.log(tot[:, 0]))))
+        np.add(s2[:, None], v, out=lp)            # V = s² + σ²
+        np.divide(1.0, lp, out=iv)
+        np.log(lp, out=lp)
+        np.multiply(half_m2, iv, out=h)           # m̂² / 2V
+        lp += h
+        np.subtract(lw[:, None], lp, out=lp)      # log w − log V − m̂² / 2V
+        mx = lp.max(axis=0)
+        lp -= mx
+        e = np.exp(lp, out=lp)
+        tot = e.sum(axis=0)
+        lt = np.log(tot)
+        lt += mx
+        ll = float(a @ lt)
         if C > 0:
             lc = lw - L2 / (2.0 * s2)
             mc = lc.max()
             ec = np.exp(lc - mc)
             ll += C * float(mc + np.log(ec.sum()))
-        if it == max_iter or ll - prev <= tol * W:
-            break
-        prev = ll
-        ar = a[:, None] * (e / tot)
-        E = (s2 / V) ** 2 * m2c + 2.0 * s2 * vc / V
-        num = 0.5 * (ar * E).sum(axis=0)
-        nk = ar.sum(axis=0)
+        at = np.divide(a, tot, out=tot)           # a r = e · a / tot
+        nk = e @ at
+        q = e
+        q *= at
+        q *= iv                                   # a r / V
+        num = s2 * s2 * np.einsum("kn,kn->k", q, h) + s2 * (q @ v)
         if C > 0:
             rc = C * ec / ec.sum()
             num = num + 0.5 * rc * (L2 + 2.0 * s2)
             nk = nk + rc
         nk = np.maximum(nk, 1e-300)
-        w = nk / W
-        s2 = np.clip(num / nk, s2_floor, _S2_CEIL)
+        return ll, (nk / W, np.clip(num / nk, s2_floor, _S2_CEIL))
+
+    p0 = (np.asarray(w, dtype=np.float64) / np.sum(w),
+          np.clip(np.asarray(s2, dtype=np.float64), s2_floor, _S2_CEIL))
+    (w, s2), ll = run_em(step, p0, max_iter=max_iter, tol=tol * W)
     return w, s2, ll
 
 
@@ -236,6 +250,8 @@ def fit_ndf_mixture(tilt_deg, *, slope_sigma=None, weights=None, censored_weight
                           th.size, {1: ll}, info=info)
 
     k_max = k_max_for(max_components, uniq.size + (C > 0), n_eff, 2, -1)
+    # the EM on distinct (tilt, noise) pairs (the starts below on the samples as given)
+    ac, m2c, vc = collapse(a, m2, v)
     order = np.sort(m2)
     base = max(float(np.average(np.maximum(m2 - 2 * v, 0.0), weights=a)) / 2.0, s2_floor)
     if C > 0:
@@ -262,10 +278,10 @@ def fit_ndf_mixture(tilt_deg, *, slope_sigma=None, weights=None, censored_weight
                 ws[j] /= 2.0
                 ss[j] /= 1.5
                 starts.append((np.append(ws, wp[j] / 2.0), np.append(ss, sp[j] * 1.5)))
-            runs = [_rayleigh_em(m2, v, a, C, L2, w0, s0, s2_floor, max_iter=25)
+            runs = [_rayleigh_em(m2c, vc, ac, C, L2, w0, s0, s2_floor, max_iter=25)
                     for w0, s0 in starts]
             w0, s0, _ = max(runs, key=lambda r: r[2])
-            w, s2, ll = _rayleigh_em(m2, v, a, C, L2, w0, s0, s2_floor)
+            w, s2, ll = _rayleigh_em(m2c, vc, ac, C, L2, w0, s0, s2_floor)
             sols[k] = (w, s2)
             lls[k] = max(ll + const, lls.get(k - 1, -np.inf))
             at_floor = (k > 1 and bool(np.any(s2 <= s2_floor * 1.0001))

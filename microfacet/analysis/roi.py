@@ -233,6 +233,16 @@ def _local_minima(curve):
     return idx[np.argsort(c[idx])]
 
 
+def _fine_minimum(curve_at, centre, half_width, lo, hi, step):
+    """The node of least ``curve_at`` on a ``step`` grid within ±``half_width`` of
+    ``centre`` (clipped to [lo, hi])."""
+    nodes = np.arange(centre - half_width, centre + half_width + 1e-9, step)
+    nodes = nodes[(nodes >= lo) & (nodes <= hi)]
+    if nodes.size == 0:
+        return float(np.clip(centre, lo, hi))
+    return float(nodes[int(np.argmin(curve_at(nodes)))])
+
+
 def _parabola(x, y, i):
     """Vertex of the parabola through (i-1, i, i+1) of a uniform grid, clamped to ±1 step."""
     if i <= 0 or i >= len(y) - 1:
@@ -355,11 +365,19 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
         pick = rng.choice(yy.size, min(refine_px, yy.size), replace=False)
         yr, xr = yy[pick], xx[pick]
         res = []
+        t_r, lab_r = tilt[yr, xr][:, None], lab[yr, xr]
+
+        def curve_at(d):
+            xyz_f = table.xyz_at(t_r, d[None, :]).astype(np.float32)
+            return _curve(xyz_f, lab_r, exposure, white, delta_e_method)
+
         for j in minima[:2]:
-            fine = np.arange(grid[j] - grid_step_nm, grid[j] + grid_step_nm + 1e-9, 0.05)
+            # ±1 grid step at 0.25 nm, then ±0.25 nm at 0.05 nm about the best: the mean ΔE
+            # over thousands of pixels is smooth at that scale (20 evaluations, not 41)
+            mid = _fine_minimum(curve_at, float(grid[j]), grid_step_nm, d_lo, d_hi, 0.25)
+            fine = np.arange(mid - 0.25, mid + 0.25 + 1e-9, 0.05)
             fine = fine[(fine >= d_lo) & (fine <= d_hi)]
-            xyz_f = table.xyz_at(tilt[yr, xr][:, None], fine[None, :]).astype(np.float32)
-            c_f = _curve(xyz_f, lab[yr, xr], exposure, white, delta_e_method)
+            c_f = curve_at(fine)
             k = int(np.argmin(c_f))
             d_best = _parabola(fine, c_f, k)
             de_best = float(_curve(table.xyz_at(tilt[yr, xr], d_best)[:, None, :].astype(

@@ -10,6 +10,11 @@ number of independent samples the mixtures' model choice counts (:mod:`.mixtures
 A spatial-autocorrelation estimate (integral area of the map's autocorrelation) was tried
 first and dropped: on the generalization sweep it gave 0.6–3× the true regions' count,
 erratically, where the region count gives 1–2× (docs/accuracy.md).
+
+The samples the mixtures are fitted to are prepared here too: :func:`prepare` (finite
+values, weights, errors; a reproducible subsample; the Kish size of the weights) and
+:func:`collapse` (identical samples as one, carrying their summed weight: per-pixel values
+repeat their region's or facet's, and the fits' cost grows with the samples).
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ from ..core.lazy import load
 
 stats = load("scipy.stats")
 
-__all__ = ["Regions", "thickness_regions"]
+__all__ = ["Regions", "collapse", "positive_int", "prepare", "thickness_regions"]
 
 
 @dataclass
@@ -131,3 +136,105 @@ def thickness_regions(labels, value, sigma, *, alpha=0.01) -> Regions:
     mh = m[has]
     return Regions(patch_region, mh[:, 1] / mh[:, 0], 1.0 / np.sqrt(mh[:, 0]), mh[:, 2],
                    math.sqrt(tau2))
+
+
+# ------------------------------------------------------------- the fits' samples
+
+
+def positive_int(x, name):
+    if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < 1:
+        raise ValueError(f"{name}: expected an integer >= 1, got {x!r}")
+    return int(x)
+
+
+def _array(values, name, size=None, shape=None):
+    try:
+        a = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected an array of numbers") from None
+    if size is not None and a.size != size:
+        raise ValueError(f"{name}: shape {a.shape} does not match {shape}")
+    return a.ravel()
+
+
+def prepare(values, name, weights, group, max_samples, random_state, *, sigma=None,
+            sigma_name="sigma", n_effective=None):
+    """Flatten, drop NaN / zero weight, subsample reproducibly.
+
+    Returns
+    -------
+    x, w, s : ndarray
+        Values, weights (ones without ``weights``) and per-sample noise (zeros without
+        ``sigma``) of the fitted samples.
+    n : int
+        Finite samples given.
+    n_eff : float
+        Independent observations for the BIC (see the notes of :mod:`.mixtures`).
+    """
+    x = _array(values, name)
+    shape = np.shape(values)
+    if np.isinf(x).any():
+        raise ValueError(f"{name}: contains infinite values")
+    keep = ~np.isnan(x)
+    w = np.ones(x.size)
+    if weights is not None:
+        w = _array(weights, "weights", x.size, shape)
+        if not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise ValueError("weights: must be finite and >= 0")
+        keep &= w > 0
+    s = np.zeros(x.size)
+    if sigma is not None:
+        s = np.broadcast_to(_array(sigma, sigma_name), x.shape) if np.size(sigma) == 1 else \
+            _array(sigma, sigma_name, x.size, shape)
+        if np.any(np.asarray(s)[keep] < 0) or np.isinf(np.asarray(s)[keep]).any():
+            raise ValueError(f"{sigma_name}: must be finite and >= 0")
+        keep &= np.isfinite(s)
+    g = None
+    if group is not None:
+        g = np.asarray(group)
+        if g.size != x.size:
+            raise ValueError(f"group: shape {g.shape} does not match {name} {shape}")
+        g = g.ravel()
+    n = int(keep.sum())
+    if n == 0:
+        raise ValueError(f"{name}: no finite values" + (" with weight > 0" if weights is not None
+                                                        else ""))
+    x, w, s = x[keep], w[keep], np.asarray(s, dtype=np.float64)[keep]
+    p = w / w.sum()
+    kish = 1.0 / float(np.sum(p * p))
+    if n > max_samples:
+        idx = np.sort(np.random.default_rng(random_state).choice(n, size=max_samples,
+                                                                 replace=False))
+        x, w, s = x[idx], w[idx], s[idx]
+        kish = min(kish, float(max_samples))
+    if n_effective is not None:
+        n_eff = float(n_effective)
+        if not (math.isfinite(n_eff) and n_eff > 0):
+            raise ValueError(f"n_effective: must be finite and > 0, got {n_effective!r}")
+    elif g is not None:
+        n_eff = float(min(np.unique(g[keep]).size, kish))
+    else:
+        n_eff = kish
+    return x, w, s, n, n_eff
+
+
+def collapse(a, *cols):
+    """Identical samples (equal in every column of ``cols``) as one sample carrying their
+    summed weight, in a canonical (sorted) order: the weighted likelihood and the EM
+    updates are those of the samples given (to rounding), on fewer samples when values
+    repeat (per-pixel values share their region's or facet's value); integer weights and
+    as many repeats of a sample give the same samples.
+
+    Returns ``(a, *cols)``.
+
+    >>> a, x = collapse(np.ones(4), np.array([2.0, 1.0, 2.0, 3.0]))
+    >>> a.tolist(), x.tolist()
+    ([1.0, 2.0, 1.0], [1.0, 2.0, 3.0])
+    """
+    order = np.lexsort(cols[::-1])
+    srt = [c[order] for c in cols]
+    new = np.zeros(a.size, bool)
+    new[:1] = True
+    for c in srt:
+        new[1:] |= c[1:] != c[:-1]
+    return (np.bincount(np.cumsum(new) - 1, weights=a[order]), *(c[new] for c in srt))

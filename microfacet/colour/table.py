@@ -142,6 +142,10 @@ def choose_spectral_step(*, thickness_range_nm=(0.0, 400.0), theta_range_deg=(0.
     return 1.0, 0.0, errors
 
 
+#: Points per chunk of :meth:`ColourTable.xyz_at` (its temporaries: ~200 bytes per point).
+_XYZ_CHUNK = 1 << 16
+
+
 @dataclass
 class ColourTable:
     """Tabulated colour of the film over incidence angle and thickness.
@@ -181,6 +185,7 @@ class ColourTable:
     observer: str
     n_ambient: float = 1.0
     info: dict = field(default_factory=dict)
+    _coef: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def theta_step_deg(self) -> float:
@@ -218,23 +223,52 @@ class ColourTable:
         """
         th, d = np.broadcast_arrays(np.asarray(theta_deg, np.float64),
                                     np.asarray(thickness_nm, np.float64))
+        if th.size > _XYZ_CHUNK:
+            # in chunks: the temporaries (~200 bytes per point) stay bounded
+            out = np.empty(th.shape + (3,))
+            th_f, d_f, o_f = th.reshape(-1), d.reshape(-1), out.reshape(-1, 3)
+            for a in range(0, th.size, _XYZ_CHUNK):
+                o_f[a:a + _XYZ_CHUNK] = self._xyz_at(th_f[a:a + _XYZ_CHUNK],
+                                                     d_f[a:a + _XYZ_CHUNK])
+            return out
+        return self._xyz_at(th, d)
+
+    def _xyz_at(self, th, d):
         with np.errstate(invalid="ignore"):
             i, fi, ok_i = self._coords(th, self.theta_deg)
             j, fj, ok_j = self._coords(d, self.thickness_nm)
         t = self.xyz
-        if self.theta_deg.size == 1:
-            row0 = t[0]
-            out = (row0[j] * (1 - fj)[..., None] + row0[np.minimum(j + 1, row0.shape[0] - 1)]
-                   * fj[..., None]) if self.thickness_nm.size > 1 else row0[j]
+        if self.theta_deg.size == 1 or self.thickness_nm.size == 1:
+            if self.theta_deg.size == 1:
+                row0 = t[0]
+                out = (row0[j] * (1 - fj)[..., None] + row0[np.minimum(j + 1, row0.shape[0] - 1)]
+                       * fj[..., None]) if self.thickness_nm.size > 1 else row0[j]
+            else:
+                col = t[:, 0]
+                out = col[i] * (1 - fi)[..., None] + col[i + 1] * fi[..., None]
         else:
-            j1 = np.minimum(j + 1, t.shape[1] - 1)
+            # one gather of the cell's bilinear coefficients (a + b·fj + c·fi + e·fi·fj)
+            # instead of four corner gathers: ~3× faster on the large scans of the analysis
+            coef = self._bilinear_coefficients()
+            cell = coef[i * (t.shape[1] - 1) + j]                   # (..., 4, 3)
             fi_, fj_ = fi[..., None], fj[..., None]
-            out = ((t[i, j] * (1 - fj_) + t[i, j1] * fj_) * (1 - fi_)
-                   + (t[i + 1, j] * (1 - fj_) + t[i + 1, j1] * fj_) * fi_)
+            out = (cell[..., 0, :] + cell[..., 1, :] * fj_
+                   + (cell[..., 2, :] + cell[..., 3, :] * fj_) * fi_)
         bad = ~(ok_i & ok_j)
         if np.any(bad):
             out = np.where(bad[..., None], np.nan, out)
         return out
+
+    def _bilinear_coefficients(self):
+        """Per cell (T−1)·(D−1) × 4 × 3: corner a, ∂/∂fj, ∂/∂fi and the cross term."""
+        coef = self._coef
+        if coef is None or coef.shape[0] != (self.xyz.shape[0] - 1) * (self.xyz.shape[1] - 1):
+            t = self.xyz
+            a, b = t[:-1, :-1], t[:-1, 1:]
+            c, e = t[1:, :-1], t[1:, 1:]
+            coef = np.stack([a, b - a, c - a, e - c - b + a], axis=2).reshape(-1, 4, 3)
+            self._coef = coef
+        return coef
 
     def lab_at(self, theta_deg, thickness_nm):
         """Interpolated CIELAB (float32), NaN outside the table; see :meth:`xyz_at`."""

@@ -5,6 +5,7 @@ module              format / concern
 ==================  ==========================================================
 ``stack``           focus stacks (``microfacet-stack/1``): :class:`Stack`
 ``stack_checks``    validation of ``stack.json`` before any work; images of a plain folder
+``stack_write``     writing ``stack.json`` (validated first) and stacks of images
 ``images``          image headers, decoding, writing (PNG with pHYs, JPEG, TIFF, ``.npy``)
 ``tiff_meta``       physical size in TIFF metadata (OME, ImageJ, resolution tags)
 ``instruments``     instrument height maps (``.x3p``, float TIFF, ``.npy``; through
@@ -23,7 +24,7 @@ from ..core.lazy import attach
 
 __getattr__, __dir__, __all__ = attach(__name__, submodules=(
     "angular_map", "images", "instruments", "jsonfile", "limits", "lock", "outdir", "results",
-    "spectrum", "stack", "stack_checks", "tiff_meta", "x3p"), submod_attrs={
+    "spectrum", "stack", "stack_checks", "stack_write", "tiff_meta", "x3p"), submod_attrs={
     "stack": ["Stack", "find_images", "read_stack", "stack_from_images", "write_stack",
               "write_stack_json"],
     "instruments": ["HeightMap", "read_height_map"],

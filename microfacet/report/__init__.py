@@ -6,8 +6,9 @@ results folder; :func:`parameter_tables` returns the tables of page 4 as strings
 
 Modules: :mod:`~microfacet.report.writer` (the entry point, header and footer),
 :mod:`~microfacet.report.context` (the folder opened for the report),
-:mod:`~microfacet.report.layout` (page geometry and drawing helpers), one module per page
-(``page_overview``, ``page_maps``, ``page_distributions``, ``page_parameters``,
+:mod:`~microfacet.report.layout` (page geometry and drawing helpers),
+:mod:`~microfacet.report.arrays` (maps reduced for display, colour limits, histograms), one
+module per page (``page_overview``, ``page_maps``, ``page_distributions``, ``page_parameters``,
 ``page_angular``, each with ``draw(page, ctx)``) and :mod:`~microfacet.report.figures`.
 
 Names load on first use: ``import microfacet.report`` imports neither matplotlib nor the
@@ -18,7 +19,7 @@ from ..core.lazy import attach
 
 __getattr__, __dir__, __all__ = attach(
     __name__,
-    submodules=("context", "figures", "layout", "page_angular", "page_distributions",
+    submodules=("arrays", "context", "figures", "layout", "page_angular", "page_distributions",
                 "page_maps", "page_overview", "page_parameters", "writer"),
     submod_attrs={"writer": ["PAGES", "write_report"],
                   "page_parameters": ["parameter_tables"],

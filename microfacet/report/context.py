@@ -1,8 +1,10 @@
 """What every page of the report reads: the results folder and what is derived from it once.
 
-The folder is read only through :class:`microfacet.io.results.Results`; a :class:`Context`
-adds the fitted mixtures, the map geometry, the colour mask, the largest measurable tilt
-and the checks the report needs before it draws anything.
+The folder is read only through :class:`microfacet.io.results.Results` (which reads each
+file once); a :class:`Context` adds the fitted mixtures, the map geometry, the colour mask,
+the largest measurable tilt, the checks the report needs before it draws anything, and the
+numbers of the maps that more than one panel or page uses (shares without a value,
+percentiles, colour limits), computed once.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import numpy as np
 
 from ..core.errors import InputError, one_line
 from ..io.results import IMAGES, MAPS, TABLES, Results
+from .arrays import limits_of, value_stats
 from .layout import Geometry, positive
 
 __all__ = ["Context", "DRAWN_FILES"]
@@ -66,6 +69,38 @@ class Context:
                       or self.inputs.get("path"))
         self.geom = Geometry(self.inputs.get("pixel_size_um"))
         self.mask = res.map("mask")
+        self._numbers: dict = {}
+
+    def _cached(self, key, compute):
+        if key not in self._numbers:
+            self._numbers[key] = compute()
+        return self._numbers[key]
+
+    def no_value(self, name):
+        """The share of the pixels of map ``name`` without a finite value (None: no map)."""
+        def compute():
+            a = self.res.map(name)
+            if a is None:
+                return None
+            return 1.0 - np.count_nonzero(np.isfinite(a)) / max(a.size, 1)
+        return self._cached(("no_value", name), compute)
+
+    def percentiles(self, names, q=(1.0, 99.0)):
+        """``((percentiles q), min, max)`` of the finite values of the maps ``names`` (one
+        name or several, taken together), or None if there are none (see
+        :func:`~microfacet.report.arrays.value_stats`)."""
+        names = (names,) if isinstance(names, str) else tuple(names)
+        q = tuple(float(v) for v in q)
+
+        def compute():
+            maps = [a for a in (self.res.map(n) for n in names) if a is not None]
+            return value_stats(maps, list(q))
+        return self._cached(("percentiles", names, q), compute)
+
+    def limits(self, names, lo=1.0, hi=99.0, *, floor=None):
+        """Colour limits ``(vmin, vmax, extend)`` of the maps ``names`` taken together, as
+        :func:`~microfacet.report.arrays.colour_limits`."""
+        return limits_of(self.percentiles(names, (lo, hi)), lo, floor=floor)
 
     def identification(self, key) -> tuple[bool, str]:
         """``(identified, reason)`` of the ``"thickness"`` or ``"ndf"`` distribution as

@@ -4,8 +4,9 @@ A page is one A4-landscape matplotlib ``Figure`` laid out in inches (:class:`Pag
 engine, so every report has pages of identical structure and draws quickly. On it the pages
 place map panels (:func:`map_panel`, :func:`category_panel`, :func:`blank_panel`) and tables
 (:func:`draw_table`). The small helpers format numbers for tables (:func:`fmt`, :func:`pct`,
-:func:`shorten`) and prepare arrays for display (:func:`downsample`,
-:func:`colour_limits`, :func:`histogram`, :func:`quantile_range`).
+:func:`shorten`); the arrays are prepared for display in :mod:`~microfacet.report.arrays`
+(:func:`downsample`, :func:`colour_limits`, :func:`histogram`, :func:`quantile_range`, here
+too). A map is drawn at the pixels its panel shows (:func:`shown`).
 
 Colour maps are perceptually uniform and sequential (no quantity drawn is signed); a pixel
 without a value (masked, or NaN) is drawn in :data:`NO_VALUE` grey on every map, and each map
@@ -25,13 +26,20 @@ from __future__ import annotations
 
 import math
 import textwrap
-import warnings
 
 import numpy as np
 
-from ..core.densities import histogram_density
 from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
+from .arrays import (
+    MAX_MAP_PX,
+    colour_limits,
+    display_block,
+    downsample,
+    finite,
+    histogram,
+    quantile_range,
+)
 
 mpl = load("matplotlib")
 mcolors = load("matplotlib.colors")
@@ -42,12 +50,9 @@ __all__ = ["CMAPS", "COMPONENT_COLOURS", "DE", "Geometry", "HEIGHT_TILT", "HIST_
            "HIST_FILL", "MAX_MAP_PX", "NO_VALUE", "PAGE_IN", "PDF_DPI", "PNG_DPI", "Page", "RC",
            "blank_panel", "category_panel", "colormap", "colour_limits", "colourbar",
            "component_colour", "downsample", "draw_table", "finite", "fmt", "histogram",
-           "image_axes", "map_panel", "number", "pct", "positive", "quantile_range",
-           "shorten", "wrap"]
+           "image_axes", "image_box", "map_panel", "number", "pct", "positive",
+           "quantile_range", "shorten", "shown", "wrap"]
 
-#: Maps are block-averaged so that neither side exceeds this many pixels (map panels are
-#: 2.2–3.3 inches wide: 512 pixels is over 150 per inch; larger maps only fatten the PDF).
-MAX_MAP_PX = 512
 #: Colour of a pixel without a value (masked or NaN) on every map.
 NO_VALUE = "#a3a3a3"
 
@@ -73,6 +78,9 @@ RC = {
     "axes.titley": 1.0,   # fixed title position: no automatic placement (slow)
     "image.interpolation": "none",   # vector output embeds the pixels unresampled
     "image.interpolation_stage": "rgba",
+    # unhinted glyphs: as legible at PNG_DPI and a fifth faster to render (the PDF's text
+    # is never hinted)
+    "text.hinting": "no_hinting",
 }
 #: Mixture components, sorted by mean thickness / lobe width (blue, green, red as the
 #: seed's Fig. 18c for thin, middle and thick).
@@ -129,103 +137,6 @@ def shorten(s, n):
 def wrap(text, width):
     """Greedy wrap on ", " and spaces (a table cell holds one line per row)."""
     return textwrap.wrap(text, width=width, break_long_words=True) or [""]
-
-
-# --------------------------------------------------------------------------- arrays
-def finite(a, mask=None):
-    """The finite values of ``a`` (None: none) outside ``mask`` (True = masked), 1-D float."""
-    if a is None:
-        return np.empty(0)
-    v = a if mask is None or mask.shape != a.shape else np.where(mask, np.nan, a)
-    v = np.asarray(v, dtype=np.float64).ravel()
-    return v[np.isfinite(v)]
-
-
-def downsample(a, max_px=MAX_MAP_PX):
-    """Block-average ``a`` (H×W or H×W×C; NaN-aware) so neither side exceeds ``max_px``.
-
-    Returns the reduced array and the block size (1 if unchanged). A boolean array gives a
-    boolean array (a block is True if at least half of it is).
-
-    >>> small, block = downsample(np.ones((1030, 20), bool))
-    >>> small.shape, small.dtype.name, block
-    ((344, 7), 'bool', 3)
-    """
-    h, w = a.shape[:2]
-    f = math.ceil(max(h, w) / max_px)
-    if f <= 1:
-        return a, 1
-    is_bool = a.dtype == bool
-    x = a.astype(np.float32)
-    H, W = math.ceil(h / f) * f, math.ceil(w / f) * f
-    pad = [(0, H - h), (0, W - w)] + [(0, 0)] * (x.ndim - 2)
-    x = np.pad(x, pad, constant_values=np.nan)
-    x = x.reshape((H // f, f, W // f, f) + x.shape[2:])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN blocks stay NaN
-        x = np.nanmean(x, axis=(1, 3))
-    return (x >= 0.5 if is_bool else x), f
-
-
-def colour_limits(values, lo=1.0, hi=99.0, *, floor=None):
-    """Robust colour limits (percentiles of the finite values) and the colour-bar extend.
-
-    >>> colour_limits(np.arange(101.0), 0.0, 99.0)
-    (0.0, 99.0, 'max')
-    """
-    v = np.asarray(values, dtype=np.float64)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return 0.0, 1.0, "neither"
-    vmin, vmax = np.percentile(v, [lo, hi])
-    if floor is not None:
-        vmin = max(floor, vmin) if lo > 0 else floor
-    if not vmax > vmin:  # a constant map: a range of ±5 % (at least ±1) about it
-        d = max(abs(vmin) * 0.05, 1.0)
-        vmin, vmax = vmin - d, vmax + d
-        if floor is not None and vmin < floor:
-            vmin, vmax = floor, max(vmax, floor + d)
-    below, above = v.min() < vmin, v.max() > vmax
-    extend = {(True, True): "both", (True, False): "min", (False, True): "max"}.get(
-        (bool(below), bool(above)), "neither")
-    return float(vmin), float(vmax), extend
-
-
-def histogram(values, lo=None, hi=None, *, bins=80):
-    """(centres, density) of the finite ``values`` on ``bins`` equal bins over [lo, hi]
-    (default their range), or None if there are fewer than two values or none inside.
-
-    The density is :func:`microfacet.core.densities.histogram_density`'s (normalised over
-    the range); this adds only the display defaults.
-
-    >>> histogram(np.array([0.5, 1.5, 1.6, 2.5]), 0.0, 3.0, bins=3)[1].tolist()
-    [0.25, 0.5, 0.25]
-    """
-    values = finite(values)
-    if values.size < 2:
-        return None
-    lo = float(np.min(values)) if lo is None else lo
-    hi = float(np.max(values)) if hi is None else hi
-    if not hi > lo:
-        hi = lo + 1.0
-    try:
-        return histogram_density(values, bins=bins, range=(lo, hi))
-    except ValueError:  # no value inside [lo, hi]
-        return None
-
-
-def quantile_range(x, dens, q=(0.002, 0.998)):
-    """The (low, high) quantiles of a density tabulated at bin centres ``x``, or None.
-
-    >>> quantile_range(np.arange(5.0), np.array([0, 1, 1, 1, 0]), q=(0.1, 0.9))
-    (1.0, 3.0)
-    """
-    d = np.nan_to_num(np.asarray(dens, dtype=np.float64)).clip(0)
-    if x is None or d.sum() <= 0:
-        return None
-    c = np.cumsum(d) / d.sum()
-    return float(x[min(np.searchsorted(c, q[0]), x.size - 1)]), \
-        float(x[min(np.searchsorted(c, q[1]), x.size - 1)])
 
 
 # --------------------------------------------------------------------------- page
@@ -342,26 +253,40 @@ _MAP_MARGINS = dict(left=0.55, right=0.86, top=0.30, bottom=0.50)
 
 
 def colormap(name):
-    """The matplotlib colour map ``name`` with NaN drawn in :data:`NO_VALUE`."""
-    return mpl.colormaps[name].with_extremes(bad=NO_VALUE)
+    """The matplotlib colour map ``name`` in 255 levels, with NaN drawn in :data:`NO_VALUE`:
+    a map then has at most 256 colours, which the PDF stores as an indexed image (a third
+    of the bytes, several times faster to compress than RGB)."""
+    return mpl.colormaps[name].resampled(255).with_extremes(bad=NO_VALUE)
 
 
-def image_axes(pg, cell, shape, geom=None):
-    """Axes in ``cell`` whose box has exactly the image's aspect on the sample (``geom``, a
-    :class:`Geometry`; pixels when None), so a colour bar beside it is as tall as the image,
-    as large as the margins allow, centred; and that box."""
+def image_box(cell, shape, geom=None):
+    """The box ``(x0, y0, w, h)`` inches in ``cell`` of an image of ``shape``: exactly the
+    image's aspect on the sample (``geom``, a :class:`Geometry`; pixels when None), as large
+    as the margins (and a colour bar) allow, centred."""
     x, y, w, h = cell
     m = _MAP_MARGINS
     aw, ah = w - m["left"] - m["right"], h - m["top"] - m["bottom"]
     r = geom.height_ratio(shape) if geom is not None else shape[0] / shape[1]
     iw, ih = (aw, aw * r) if aw * r <= ah else (ah / r, ah)
-    x0 = x + m["left"] + 0.5 * (aw - iw)
-    y0 = y + m["bottom"] + 0.5 * (ah - ih)
-    ax = pg.axes(x0, y0, iw, ih)
+    return x + m["left"] + 0.5 * (aw - iw), y + m["bottom"] + 0.5 * (ah - ih), iw, ih
+
+
+def image_axes(pg, cell, shape, geom=None):
+    """Axes on the :func:`image_box` of ``shape`` in ``cell`` (so a colour bar beside it is
+    as tall as the image), and that box."""
+    box = image_box(cell, shape, geom)
+    ax = pg.axes(*box)
     for sp in ax.spines.values():
         sp.set_visible(True)
         sp.set_linewidth(0.6)
-    return ax, (x0, y0, iw, ih)
+    return ax, box
+
+
+def shown(a, box):
+    """``a`` (H×W or H×W×C) block-averaged to the pixels the image ``box`` ``(x0, y0, w,
+    h)`` inches shows at :data:`PDF_DPI`, at most :data:`MAX_MAP_PX` a side
+    (:func:`~microfacet.report.arrays.display_block`); and the block size."""
+    return downsample(a, block=display_block(a.shape, box[2:], dpi=PDF_DPI))
 
 
 def blank_panel(pg, cell, text, title=None, shape=(1, 1)):
@@ -396,32 +321,48 @@ def colourbar(pg, im, box, label, *, extend="neither", ticks=None, ticklabels=No
 
 
 def map_panel(pg, cell, a, geom, *, title, label, cmap, limits=None, lo=1.0, hi=99.0,
-              floor=None):
-    """One H×W float map with a colour bar labelled ``label`` and a no-value swatch;
-    colour ``limits`` (vmin, vmax, extend) default to the ``lo``–``hi`` percentiles."""
-    small, block = downsample(a)
+              floor=None, no_value=None):
+    """One H×W float map with a colour bar labelled ``label`` and a no-value swatch.
+
+    The axes are those of the full map; its pixels are block-averaged to those the panel
+    shows (:func:`shown`). Colour ``limits`` (vmin, vmax, extend) default to the
+    ``lo``–``hi`` percentiles of ``a`` and ``no_value`` (the share of pixels without a
+    value) to that of ``a``: a caller that already has them passes them
+    (:class:`~microfacet.report.context.Context` computes them once).
+    """
+    ax, box = image_axes(pg, cell, a.shape, geom)
+    small, _ = shown(a, box)
     if limits is None:
         limits = colour_limits(a, lo, hi, floor=floor)
+    if no_value is None:
+        no_value = 1.0 - np.count_nonzero(np.isfinite(a)) / max(a.size, 1)
     vmin, vmax, extend = limits
-    ax, box = image_axes(pg, cell, small.shape, geom)
     im = ax.imshow(small, cmap=colormap(cmap), vmin=vmin, vmax=vmax, aspect="auto",
-                   extent=geom.extent(small.shape, block))
-    colourbar(pg, im, box, label, extend=extend, no_value=float(np.mean(~np.isfinite(a))))
+                   extent=geom.extent(a.shape))
+    colourbar(pg, im, box, label, extend=extend, no_value=float(no_value))
     ax.set_title(title)
     geom.label(ax)
     return ax
 
 
-def category_panel(pg, cell, codes, geom, *, colours, names, title, label, no_value):
-    """A map of small integer categories ``codes`` (−1 = no value) with a colour bar."""
-    block = max(1, math.ceil(max(codes.shape) / MAX_MAP_PX))
-    small = codes[::block, ::block]  # nearest: averaging would mix categories
+def category_panel(pg, cell, codes, geom, *, colours, names, title, label, no_value,
+                   to_codes=None):
+    """A map of small integer categories ``codes`` (−1 = no value) with a colour bar.
+
+    One pixel per block of :func:`shown` is drawn (nearest: averaging would mix
+    categories). With ``to_codes``, ``codes`` is any H×W map and ``to_codes`` turns the
+    pixels drawn into categories, so that they are computed for those pixels only.
+    """
+    ax, box = image_axes(pg, cell, codes.shape, geom)
+    block = display_block(codes.shape, box[2:], dpi=PDF_DPI)
+    small = codes[::block, ::block]
+    if to_codes is not None:
+        small = to_codes(small)
     k = len(colours)
     cm = mcolors.ListedColormap(list(colours)).with_extremes(bad=NO_VALUE)
-    ax, box = image_axes(pg, cell, small.shape, geom)
     data = np.ma.masked_less(small.astype(np.float32), -0.5)
     im = ax.imshow(data, cmap=cm, vmin=-0.5, vmax=k - 0.5, aspect="auto",
-                   extent=geom.extent(small.shape, block))
+                   extent=geom.extent(codes.shape))
     colourbar(pg, im, box, label, ticks=list(range(k)), ticklabels=list(names),
               no_value=no_value)
     ax.set_title(title)

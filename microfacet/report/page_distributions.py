@@ -10,12 +10,16 @@ and without those the fitted mixture alone.
 
 from __future__ import annotations
 
+import functools
 import math
+import re
 
 import numpy as np
 
 from ..core.densities import cell_edges, ndf_D_from_tilt_histogram
 from ..core.distributions import NDFMixture, ThicknessMixture
+from ..core.lazy import load
+from .arrays import value_stats
 from .layout import (
     DE,
     HEIGHT_TILT,
@@ -29,7 +33,9 @@ from .layout import (
     wrap,
 )
 
-__all__ = ["NAME", "TITLE", "draw"]
+mticker = load("matplotlib.ticker")
+
+__all__ = ["NAME", "TITLE", "draw", "plain_math"]
 
 NAME = "distributions"
 TITLE = "thickness and facet-normal distributions"
@@ -136,8 +142,8 @@ def _tilt_panel(ax, ctx):
     h = histogram(finite(ctx.res.map("tilt_height_deg"), ctx.mask), max(0.0, lo), top,
                   bins=60)
     if h is not None:
-        ax.stairs(h[1], cell_edges(h[0])[1], color=HEIGHT_TILT, lw=1.0,
-                  label="tilt from the height map (histogram)")
+        _stairs(ax, h[1], cell_edges(h[0])[1], color=HEIGHT_TILT, lw=1.0,
+                label="tilt from the height map (histogram)")
         n += 1
     if mt:
         ax.axvline(mt, color="0.3", lw=0.8, ls=":",
@@ -162,8 +168,8 @@ def _density_panel(ax, x, dens, mixd, mix, *, src, unit, what, comp_pdf, comp_la
         if e[0] < 0 <= x[0]:
             e[0] = 0.0
         d = np.nan_to_num(np.asarray(dens, dtype=np.float64))
-        ax.stairs(d, e, fill=True, color=HIST_FILL, label=f"histogram ({src})")
-        ax.stairs(d, e, color=HIST_EDGE, lw=0.6)
+        _stairs(ax, d, e, fill=True, color=HIST_FILL, label=f"histogram ({src})")
+        _stairs(ax, d, e, color=HIST_EDGE, lw=0.6)
         n += 1
     grid = np.linspace(lo, hi, 600)
     if mix is not None:
@@ -230,6 +236,7 @@ def _ndf_panel(ax, x, dens, mix, *, hi):
         lows = [v for v in bottoms if np.isfinite(v) and v > 0]
         b = max(min(lows) / 3.0 if lows else t * 1e-4, t * 1e-10)
         ax.set_yscale("log")
+        _plain_log_labels(ax.yaxis)
         ax.set_ylim(b, t * 10 ** (0.12 * n + 0.3) if n else t * 3)
         _legend(ax)
     else:
@@ -243,7 +250,7 @@ def _delta_e_panel(ax, ctx):
     v = finite(res.map("delta_e"), ctx.mask)
     ax.set_xlabel(f"{DE} (CIEDE2000) between pixel and model colour")
     ax.set_ylabel(f"fraction of pixels per unit {DE}")
-    hi = max(float(np.percentile(v, 99.0)), 1.0) if v.size else 1.0
+    hi = max(value_stats(v, [99.0])[0][0], 1.0) if v.size else 1.0
     h = histogram(v, 0.0, hi, bins=80)
     if h is None:
         ax.text(0.5, 0.5, "no ΔE₀₀ values (delta_e.npy absent or all masked)",
@@ -251,11 +258,11 @@ def _delta_e_panel(ax, ctx):
         return
     c, d = h
     e = cell_edges(c)[1]
-    ax.stairs(d, e, fill=True, color=HIST_FILL, label="histogram (delta_e.npy, 0–99 %)")
-    ax.stairs(d, e, color=HIST_EDGE, lw=0.6)
+    _stairs(ax, d, e, fill=True, color=HIST_FILL, label="histogram (delta_e.npy, 0–99 %)")
+    _stairs(ax, d, e, color=HIST_EDGE, lw=0.6)
     mean = number(res.get("delta_e", "mean"))
     med = number(res.get("delta_e", "median"))
-    mean = float(v.mean()) if mean is None else mean
+    mean = float(v.mean(dtype=np.float64)) if mean is None else mean
     med = float(np.median(v)) if med is None else med
     ax.axvline(mean, color="#d62728", lw=1.2, label=f"mean {mean:.2f}")
     ax.axvline(med, color="#1f77b4", lw=1.2, ls="--", label=f"median {med:.2f}")
@@ -265,6 +272,55 @@ def _delta_e_panel(ax, ctx):
     ax.set_xlim(0.0, hi)
     _legend_room(ax, 4)
     _legend(ax, c, d)
+
+
+def _stairs(ax, values, edges, **kw):
+    """``ax.stairs(values, edges, baseline=0, **kw)``, its data limits set from a stand-in
+    of two bins spanning the same box: for the real path matplotlib evaluates every
+    segment in Python (slow for the hundreds of bins of a density table)."""
+    v = np.asarray(values, dtype=np.float64)
+    ok = v[np.isfinite(v)]
+    lo, hi = (float(ok.min()), float(ok.max())) if ok.size else (0.0, 0.0)
+    patch = ax.stairs([hi, lo], [edges[0], 0.5 * (edges[0] + edges[-1]), edges[-1]], **kw)
+    patch.set_data(v, edges)
+    return patch
+
+
+_SUPERSCRIPTS = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def plain_math(s):
+    r"""A tick label of matplotlib's log formatter in plain text: mathtext is parsed again
+    for every renderer (the PDF and each PNG), which costs more than the rest of the axis.
+
+    >>> plain_math(r"$\mathdefault{10^{-3}}$"), plain_math(r"$\mathdefault{2\times10^{1}}$")
+    ('10⁻³', '2×10¹')
+    >>> plain_math("")
+    ''
+    """
+    m = re.fullmatch(r"\$\\mathdefault\{(.*)\}\$", s)
+    if not m:
+        return s
+    body = re.sub(r"\^\{(-?\d+)\}", lambda e: e.group(1).translate(_SUPERSCRIPTS),
+                  m.group(1).replace(r"\times", "×"))
+    return s if any(c in body for c in "\\{}^$") else body.replace("-", "−")
+
+
+@functools.cache
+def _plain_log_formatter():
+    class PlainLogFormatter(mticker.LogFormatterSciNotation):
+        """matplotlib's log-axis labels (10⁻³, 2×10⁻³) as plain text (:func:`plain_math`)."""
+
+        def __call__(self, x, pos=None):
+            return plain_math(super().__call__(x, pos))
+    return PlainLogFormatter
+
+
+def _plain_log_labels(axis):
+    """The log scale's own major and minor formatters, in plain text."""
+    cls = _plain_log_formatter()
+    axis.set_major_formatter(cls(10.0))
+    axis.set_minor_formatter(cls(10.0, labelOnlyBase=True))
 
 
 # --------------------------------------------------------------------------- legends
@@ -308,9 +364,7 @@ def _clip_top(ax, x, dens, curves=()):
 def _legend_room(ax, n_entries, *, frac_per_entry=0.075, base=1.06, top=None):
     """Raise the y limit so a legend of ``n_entries`` in the upper right covers no data
     (``top``: the highest value to show, default the data's)."""
-    if top is None:
-        ax.relim()
-        ax.autoscale_view()
+    if top is None:  # every artist updated the data limits when added (collections too)
         top = ax.dataLim.y1
     top = top if np.isfinite(top) and top > 0 else 1.0
     ax.set_ylim(0.0, top * (base + frac_per_entry * n_entries))

@@ -11,9 +11,7 @@ from .layout import (
     DE,
     blank_panel,
     category_panel,
-    colour_limits,
     component_colour,
-    finite,
     map_panel,
 )
 
@@ -71,45 +69,52 @@ def draw(pg, ctx):
     cells = pg.grid(2, 3, vgap=0.15)
     shape = next((a.shape for a in (thick, de, tilt, sig, tilt_h) if a is not None), (1, 1))
     # one colour scale for both tilt maps, so they can be compared
-    tilt_lim = colour_limits(np.concatenate([finite(tilt), finite(tilt_h)]), 0.0, 99.0,
-                             floor=0.0)
+    tilt_lim = ctx.limits(("tilt_deg", "tilt_height_deg"), 0.0, 99.0, floor=0.0)
     if thick is not None:
         map_panel(pg, cells[0], thick, geom, title="oxide thickness",
-                  label="thickness (nm)", cmap=CMAPS["thickness"])
+                  label="thickness (nm)", cmap=CMAPS["thickness"],
+                  limits=ctx.limits("thickness_nm"), no_value=ctx.no_value("thickness_nm"))
     else:
         blank_panel(pg, cells[0], "thickness_nm.npy is not in the folder", "oxide thickness",
                     shape=shape)
     if thick is not None and ctx.thick is not None:
         k = len(ctx.thick.components)
-        codes = component_codes(thick, ctx.thick)
         names = [f"{i + 1}: {c[1]:.0f} nm" for i, c in enumerate(ctx.thick.components)]
-        category_panel(pg, cells[1], codes, geom, title="thickness component (seed Fig. 18c)",
+        # the component of the pixels drawn only; no value exactly where thickness has none
+        category_panel(pg, cells[1], thick, geom, title="thickness component (seed Fig. 18c)",
+                       to_codes=lambda t: component_codes(t, ctx.thick),
                        colours=[component_colour(i) for i in range(k)], names=names,
-                       label="", no_value=float(np.mean(codes < 0)))
+                       label="", no_value=ctx.no_value("thickness_nm"))
     else:
         blank_panel(pg, cells[1], "no fitted thickness mixture", "thickness component",
                     shape=shape)
     if de is not None:
         map_panel(pg, cells[2], de, geom, title="colour difference of the fit",
-                  label=f"{DE} (CIEDE2000)", cmap=CMAPS["delta_e"], lo=0.0, floor=0.0)
+                  label=f"{DE} (CIEDE2000)", cmap=CMAPS["delta_e"],
+                  limits=ctx.limits("delta_e", 0.0, 99.0, floor=0.0),
+                  no_value=ctx.no_value("delta_e"))
     else:
         blank_panel(pg, cells[2], "delta_e.npy is not in the folder", "colour difference",
                     shape=shape)
     if tilt is not None:
         map_panel(pg, cells[3], tilt, geom, title="facet tilt from colour",
-                  label="tilt from optical axis (°)", cmap=CMAPS["tilt"], limits=tilt_lim)
+                  label="tilt from optical axis (°)", cmap=CMAPS["tilt"], limits=tilt_lim,
+                  no_value=ctx.no_value("tilt_deg"))
     else:
         blank_panel(pg, cells[3], "tilt_deg.npy is not in the folder",
                     "facet tilt from colour", shape=shape)
     if tilt_h is not None:
         map_panel(pg, cells[4], tilt_h, geom, title="facet tilt from the height map",
-                  label="tilt from optical axis (°)", cmap=CMAPS["tilt"], limits=tilt_lim)
+                  label="tilt from optical axis (°)", cmap=CMAPS["tilt"], limits=tilt_lim,
+                  no_value=ctx.no_value("tilt_height_deg"))
     else:
         blank_panel(pg, cells[4], "tilt_height_deg.npy is not in the folder",
                     "facet tilt from the height map", shape=shape)
     if sig is not None:
         map_panel(pg, cells[5], sig, geom, title="tilt uncertainty (1σ)",
-                  label="tilt 1σ (°)", cmap=CMAPS["sigma"], lo=0.0, floor=0.0)
+                  label="tilt 1σ (°)", cmap=CMAPS["sigma"],
+                  limits=ctx.limits("tilt_sigma_deg", 0.0, 99.0, floor=0.0),
+                  no_value=ctx.no_value("tilt_sigma_deg"))
     else:
         blank_panel(pg, cells[5], "tilt_sigma_deg.npy is not in the folder",
                     "tilt uncertainty", shape=shape)

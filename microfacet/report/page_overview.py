@@ -11,15 +11,14 @@ from .layout import (
     NO_VALUE,
     blank_panel,
     category_panel,
-    downsample,
     draw_table,
-    finite,
     fmt,
     image_axes,
     map_panel,
     number,
     pct,
     shorten,
+    shown,
 )
 
 __all__ = ["NAME", "TITLE", "draw"]
@@ -39,11 +38,15 @@ def draw(pg, ctx):
     res, geom = ctx.res, ctx.geom
     aif = res.image("all_in_focus")
     height = res.map("height_um")
-    mask, mask_note = ctx.mask, ""
-    if mask is None:
-        th = res.map("thickness_nm")
-        if th is not None:
-            mask, mask_note = ~np.isfinite(th), " (no thickness)"
+    # the colour mask, else the pixels without a thickness; drawn pixels only as codes
+    mask, mask_note, frac, to_codes = ctx.mask, "", None, _as_codes
+    if mask is not None:
+        frac = np.count_nonzero(mask) / max(mask.size, 1)
+    else:
+        mask = res.map("thickness_nm")
+        if mask is not None:
+            mask_note, frac, to_codes = " (no thickness)", ctx.no_value("thickness_nm"), \
+                _no_value_codes
     # two large maps on top; the mask and two tables below
     bottom_h = 3.0
     top_cells = pg.grid(1, 2, bottom=pg.bottom + bottom_h)
@@ -51,11 +54,10 @@ def draw(pg, ctx):
     cells = [top_cells[0], top_cells[1], low[0]]
     # ---- maps
     if aif is not None:
-        small, block = downsample(aif)
-        ax, box = image_axes(pg, cells[0], small.shape, geom)
+        ax, box = image_axes(pg, cells[0], aif.shape, geom)
+        small, _ = shown(aif, box)
         ax.imshow(small, cmap="gray" if small.ndim == 2 else None, vmin=0, vmax=1,
-                  aspect="auto", extent=geom.extent(small.shape, block),
-                  interpolation="antialiased")
+                  aspect="auto", extent=geom.extent(aif.shape), interpolation="antialiased")
         ax.set_title("all-in-focus image")
         geom.label(ax)
     else:
@@ -65,12 +67,12 @@ def draw(pg, ctx):
               else "from focus")
     if height is not None:
         map_panel(pg, cells[1], height, geom, title=f"height ({source})",
-                  label="height (µm)", cmap=CMAPS["height"])
+                  label="height (µm)", cmap=CMAPS["height"], limits=ctx.limits("height_um"),
+                  no_value=ctx.no_value("height_um"))
     else:
         blank_panel(pg, cells[1], "height_um.npy is not in the folder", f"height ({source})")
     if mask is not None:
-        frac = float(np.mean(mask))
-        category_panel(pg, cells[2], mask.astype(np.int8), geom,
+        category_panel(pg, cells[2], mask, geom, to_codes=to_codes,
                        colours=("#f3f3f3", NO_VALUE), names=("used", "masked"), label="",
                        title=f"colour mask{mask_note}: {100 * frac:.1f} % masked",
                        no_value=None)
@@ -116,7 +118,7 @@ def _input_rows(ctx):
         mt = ctx.max_tilt()
         rows.append(["numerical aperture", f"{na:.3g}" + (
             f" (tilt ≤ asin(NA)/2 = {mt:.1f}°)" if mt else "")])
-    rows.append(["height, 1–99 %", _range_text(res.map("height_um"), "µm")])
+    rows.append(["height, 1–99 %", _range_text(ctx, "height_um", "µm")])
     return rows
 
 
@@ -140,9 +142,17 @@ def _mask_rows(ctx):
     return rows
 
 
-def _range_text(a, unit):
-    v = finite(a)
-    if v.size == 0:
+def _as_codes(mask):
+    return mask.astype(np.int8)
+
+
+def _no_value_codes(a):
+    return (~np.isfinite(a)).astype(np.int8)
+
+
+def _range_text(ctx, name, unit):
+    p = ctx.percentiles(name, (1.0, 99.0))
+    if p is None:
         return "—"
-    lo, hi = np.percentile(v, [1, 99])
+    lo, hi = p[0]
     return f"{lo:.4g} to {hi:.4g} {unit}"

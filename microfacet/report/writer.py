@@ -18,9 +18,13 @@ each with a header (stack name, analysis mode, optics, date, microfacet version)
 
 Only ``summary.json`` is required. A missing map or CSV skips its panel (the histograms fall
 back to the maps, then to the fitted mixture alone) and is listed on page 4; a mixture with
-an empty component list (no fit) is shown as "no fit". Maps larger than
-:data:`~microfacet.report.layout.MAX_MAP_PX` are block-averaged before drawing, so the PDF
-stays small. The drawing helpers the pages share are in :mod:`~microfacet.report.layout`.
+an empty component list (no fit) is shown as "no fit". Each map is block-averaged to the
+pixels its panel shows at :data:`~microfacet.report.layout.PDF_DPI` (at most
+:data:`~microfacet.report.layout.MAX_MAP_PX` a side) before drawing, so the report's time
+and the PDF's size hardly grow with the image; what more than one page uses is computed
+once (:class:`~microfacet.report.context.Context`). The drawing helpers the pages share are
+in :mod:`~microfacet.report.layout`, the array preparation in
+:mod:`~microfacet.report.arrays`.
 
 Importing this module does not import matplotlib; :func:`write_report` does.
 """
@@ -32,7 +36,10 @@ import os
 import re
 import time
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+
+import numpy as np
 
 from .. import __version__
 from ..core.lazy import load
@@ -42,8 +49,10 @@ from .layout import PAGE_IN, PDF_DPI, PNG_DPI, RC, Page, shorten
 
 mpl = load("matplotlib")
 figure = load("matplotlib.figure")
+backend_agg = load("matplotlib.backends.backend_agg")
 backend_pdf = load("matplotlib.backends.backend_pdf")
 mlines = load("matplotlib.lines")
+pil_image = load("PIL.Image")
 
 __all__ = ["PAGES", "write_report"]
 
@@ -86,9 +95,11 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
     Notes
     -----
     Map axes are in µm when ``summary["inputs"]["pixel_size_um"]`` is given, else in pixels.
-    Maps are block-averaged to at most :data:`~microfacet.report.layout.MAX_MAP_PX` pixels a
-    side and colour limits are the 1st–99th percentiles (arrows on the colour bar mark values
-    beyond them). When the PDF is inside the results folder, the report's wall time is
+    Maps are block-averaged (NaN-aware; categories: nearest) to the pixels their panel shows
+    at :data:`~microfacet.report.layout.PDF_DPI`, at most
+    :data:`~microfacet.report.layout.MAX_MAP_PX` a side; colour limits are the 1st–99th
+    percentiles of the full-resolution map (arrows on the colour bar mark values beyond
+    them). When the PDF is inside the results folder, the report's wall time is
     recorded in its ``summary.json`` as ``timings_s.report`` (s).
 
     Examples
@@ -113,9 +124,13 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
     metadata = {"Title": f"microfacet report — {shown.name}",
                 "Creator": f"microfacet {__version__}"}
     try:
+        # The PNGs are compressed by one worker thread (Pillow releases the GIL) while the
+        # next page is drawn.
         with mpl.rc_context(RC), warnings.catch_warnings(), \
+                ThreadPoolExecutor(max_workers=1) as png_writer, \
                 backend_pdf.PdfPages(tmp, metadata=metadata) as pdf:
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN slices and the like
+            pngs = []
             for i, module in enumerate(_MODULES, start=1):
                 pg = Page(figure.Figure(figsize=PAGE_IN))
                 _header(pg, ctx, shown, module.TITLE, i, written)
@@ -123,8 +138,11 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
                 module.draw(pg, ctx)
                 pdf.savefig(pg.fig, dpi=PDF_DPI)
                 if png_dir is not None:
-                    pg.fig.savefig(png_dir / f"report_{i}_{module.NAME}.png", dpi=PNG_DPI,
-                                   pil_kwargs={"compress_level": 3})
+                    pngs.append(png_writer.submit(
+                        _write_png, _page_rgb(pg.fig),
+                        png_dir / f"report_{i}_{module.NAME}.png"))
+            for done in pngs:
+                done.result()  # raises what writing raised
         os.replace(tmp, out_pdf)
     except BaseException:
         tmp.unlink(missing_ok=True)
@@ -132,6 +150,22 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
     if out_pdf.resolve().is_relative_to(results_dir.resolve()):
         ctx.res.record("timings_s", "report", round(time.perf_counter() - t0, 4))
     return out_pdf
+
+
+def _page_rgb(fig):
+    """The page drawn by Agg at :data:`~microfacet.report.layout.PNG_DPI`, as an H×W×3
+    uint8 array (the page is opaque: without the alpha channel its PNG is compressed a
+    third faster and is smaller)."""
+    canvas = backend_agg.FigureCanvasAgg(fig)
+    fig.set_dpi(PNG_DPI)
+    canvas.draw()
+    return np.ascontiguousarray(np.asarray(canvas.buffer_rgba())[..., :3])
+
+
+def _write_png(rgb, path):
+    """Write the page pixels ``rgb`` as an 8-bit RGB PNG."""
+    pil_image.fromarray(rgb).save(path, format="png", compress_level=3,
+                                  dpi=(PNG_DPI, PNG_DPI))
 
 
 def _header(pg, ctx, shown, title, i, written):

@@ -361,3 +361,73 @@ def test_thickness_smaller_n_effective_never_more_components():
     assert ks[1] == 3
     assert all(a >= b for a, b in zip(ks, ks[1:])), ks
     assert ks[-1] == 1    # p = 3K - 1 <= n_eff = 2 allows K = 1 only
+
+
+# ------------------------------------------------------------------ the EM itself: the
+# (component, sample) sums against the textbook updates, identical samples
+
+from microfacet.analysis.mixtures import _xd_em  # noqa: E402
+from microfacet.analysis.sampling import collapse  # noqa: E402
+
+
+def _xd_em_textbook(x, v, a, w, mu, s2, s2_floor, bg, n_iter):
+    """Bovy et al.'s EM written out per (sample, component), with the uniform background:
+    the parameters after ``n_iter`` updates and the log-likelihood there."""
+    W = a.sum()
+    w = w / w.sum()
+    w_bg = 0.05 if bg > 0 else 0.0
+    w = w * (1.0 - w_bg)
+    for it in range(n_iter + 1):
+        V = s2 + v[:, None]
+        dens = w * np.exp(-(x[:, None] - mu) ** 2 / (2.0 * V)) / np.sqrt(2.0 * np.pi * V)
+        tot = dens.sum(axis=1) + w_bg * bg
+        ll = float(np.sum(a * np.log(tot)))
+        if it == n_iter:
+            return w, mu, s2, ll, w_bg
+        r = a[:, None] * dens / tot[:, None]
+        nk = r.sum(axis=0)
+        b = mu + s2 / V * (x[:, None] - mu)
+        mu = (r * b).sum(axis=0) / nk
+        s2 = np.maximum((r * ((b - mu) ** 2 + s2 * v[:, None] / V)).sum(axis=0) / nk, s2_floor)
+        w_bg = float(np.sum(a * w_bg * bg / tot) / W)
+        w = nk / W
+
+
+@pytest.mark.parametrize("bg", [0.0, 1.0 / 60.0])
+def test_xd_em_updates_are_the_textbook_updates(bg):
+    rng = np.random.default_rng(40)
+    x = np.concatenate([rng.normal(120.0, 3.0, 300), rng.normal(131.0, 2.0, 200),
+                        rng.uniform(100.0, 150.0, 20)])
+    v = rng.uniform(0.5, 4.0, x.size)
+    a = rng.uniform(0.5, 3.0, x.size)
+    start = (np.array([1.0, 2.0, 1.0]), np.array([115.0, 125.0, 135.0]), np.full(3, 16.0))
+    for n_iter in (1, 7, 40):
+        ours = _xd_em(x, v, a, *start, 0.01, bg=bg, max_iter=n_iter, tol=-np.inf)
+        ref = _xd_em_textbook(x, v, a, *start, 0.01, bg, n_iter)
+        for got, want in zip(ours, ref):
+            np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-13)
+
+
+def test_collapse_merges_identical_samples_and_keeps_the_em():
+    rng = np.random.default_rng(41)
+    # per-pixel values: 40 regions, each one (thickness, error) repeated over its pixels
+    vals = np.concatenate([rng.normal(120.0, 3.0, 20), rng.normal(135.0, 3.0, 20)])
+    errs = rng.uniform(0.5, 2.0, 40)
+    reps = rng.integers(1, 60, 40)
+    order = rng.permutation(reps.sum())
+    x, v = np.repeat(vals, reps)[order], np.repeat(errs, reps)[order] ** 2
+    a = np.ones(x.size)
+    ac, xc, vc = collapse(a, x, v)
+    assert xc.size == 40 and np.all(np.diff(xc) > 0)
+    np.testing.assert_array_equal(ac, reps[np.argsort(vals)])
+    assert ac.sum() == x.size
+    # the same (value, error) with another error stays a sample of its own
+    a2, x2, v2 = collapse(np.ones(3), np.array([1.0, 1.0, 1.0]), np.array([0.5, 0.5, 0.7]))
+    assert a2.tolist() == [2.0, 1.0] and v2.tolist() == [0.5, 0.7]
+    # the EM on the collapsed samples is the EM on the pixels, update for update
+    start = (np.ones(2), np.array([118.0, 138.0]), np.full(2, 9.0))
+    for n_iter in (5, 60):
+        full = _xd_em(x, v, a, *start, 0.01, bg=1 / 50, max_iter=n_iter, tol=-np.inf)
+        short = _xd_em(xc, vc, ac, *start, 0.01, bg=1 / 50, max_iter=n_iter, tol=-np.inf)
+        for got, want in zip(short, full):
+            np.testing.assert_allclose(got, want, rtol=1e-10)

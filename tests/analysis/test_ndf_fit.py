@@ -231,3 +231,73 @@ def test_width_relative_error_closed_forms():
 def test_ndf_option_errors(kw, match):
     with pytest.raises(ValueError, match=match):
         fit_ndf_mixture([1.0, 2.0, 3.0], **kw)
+
+
+# ------------------------------------------------------------------ the EM itself: the
+# (lobe, sample) sums against the textbook updates, identical samples
+
+from microfacet.analysis.ndf_fit import _rayleigh_em  # noqa: E402
+from microfacet.analysis.sampling import collapse  # noqa: E402
+
+
+def _rayleigh_em_textbook(m2, v, a, C, L2, w, s2, s2_floor, n_iter):
+    """The deconvolved, censored Rayleigh-mixture EM of the module notes written out per
+    (sample, lobe): the parameters after ``n_iter`` updates and ℓ′ there."""
+    W = a.sum() + C
+    w = w / w.sum()
+    for it in range(n_iter + 1):
+        V = s2 + v[:, None]
+        dens = w / V * np.exp(-m2[:, None] / (2.0 * V))
+        tail = w * np.exp(-L2 / (2.0 * s2))
+        ll = float(np.sum(a * np.log(dens.sum(axis=1)))) + (C * math.log(tail.sum()) if C else 0)
+        if it == n_iter:
+            return w, s2, ll
+        r = a[:, None] * dens / dens.sum(axis=1, keepdims=True)
+        rc = C * tail / tail.sum()
+        E = (s2 / V) ** 2 * m2[:, None] + 2.0 * s2 * v[:, None] / V
+        nk = r.sum(axis=0) + rc
+        s2 = np.maximum((0.5 * (r * E).sum(axis=0) + 0.5 * rc * (L2 + 2.0 * s2)) / nk, s2_floor)
+        w = nk / W
+
+
+@pytest.mark.parametrize("censored", [0.0, 150.0])
+def test_rayleigh_em_updates_are_the_textbook_updates(censored):
+    rng = np.random.default_rng(43)
+    noise = rng.uniform(0.005, 0.03, 700)
+    tilt = _measured_tilts(rng, 6.0, 700, noise)
+    m2, v = np.tan(np.radians(tilt)) ** 2, noise ** 2
+    a = rng.uniform(0.5, 2.0, 700)
+    L2 = math.tan(math.radians(NA_LIMIT_DEG)) ** 2
+    start = (np.array([1.0, 1.0, 2.0]), np.array([0.001, 0.01, 0.05]))
+    for n_iter in (1, 9, 50):
+        ours = _rayleigh_em(m2, v, a, censored, L2, *start, 1e-6, max_iter=n_iter,
+                            tol=-np.inf)
+        ref = _rayleigh_em_textbook(m2, v, a, censored, L2, *start, 1e-6, n_iter)
+        for got, want in zip(ours, ref):
+            np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+def test_rayleigh_em_on_collapsed_samples_is_the_em_on_the_pixels():
+    rng = np.random.default_rng(44)
+    # per-pixel tilts: 30 facets, each one (tilt, slope noise) over its pixels
+    noise = rng.uniform(0.005, 0.03, 30)
+    tilt = _measured_tilts(rng, 8.0, 30, noise)
+    reps = rng.integers(1, 80, 30)
+    order = rng.permutation(reps.sum())
+    m2 = np.repeat(np.tan(np.radians(tilt)) ** 2, reps)[order]
+    v = np.repeat(noise ** 2, reps)[order]
+    a = np.ones(m2.size)
+    ac, m2c, vc = collapse(a, m2, v)
+    assert m2c.size == 30 and ac.sum() == m2.size
+    start = (np.ones(2), np.array([0.002, 0.03]))
+    # update for update, and to convergence
+    for n_iter in (3, 40):
+        full = _rayleigh_em(m2, v, a, 40.0, 0.25, *start, 1e-6, max_iter=n_iter, tol=-np.inf)
+        short = _rayleigh_em(m2c, vc, ac, 40.0, 0.25, *start, 1e-6, max_iter=n_iter,
+                             tol=-np.inf)
+        for got, want in zip(short, full):
+            np.testing.assert_allclose(got, want, rtol=1e-10)
+    full = _rayleigh_em(m2, v, a, 40.0, 0.25, *start, 1e-6)
+    short = _rayleigh_em(m2c, vc, ac, 40.0, 0.25, *start, 1e-6)
+    for got, want in zip(short, full):
+        np.testing.assert_allclose(got, want, rtol=1e-9)

@@ -50,6 +50,43 @@ def test_prior_dominates_when_colour_is_uninformative(table):
 
 
 
+@pytest.mark.parametrize("prior", [False, True])
+def test_the_coarse_to_fine_search_finds_the_full_search_minimum(table, prior):
+    """Noisy colours at random tilts and thicknesses of several rows, with and without a
+    prior: the coarse-to-fine search (every 4th node, then ±4 nodes) returns the full
+    search's tilt, error and sensitivity for every pixel."""
+    rng = np.random.default_rng(5)
+    n = 3000
+    d_rows = np.array([105.0, 130.0, 155.0])
+    ri = rng.integers(0, 3, n)
+    true = rng.uniform(0, 26.5, n)
+    lab = color.xyz_to_lab(table.xyz_at(true, d_rows[ri]), white=table.white_xyz)
+    lab = (lab + rng.normal(0, 1.5, lab.shape)).astype(np.float32)
+    grid = np.linspace(0, 26.5, 54)
+    rows = model_lab_rows(table, d_rows, grid, exposure=1.0)
+    kw = dict(table=table, thickness_px=d_rows[ri], exposure=1.0, noise_de=1.5)
+    if prior:
+        kw.update(prior_deg=np.clip(true + rng.normal(0, 3, n), 0, 26.5),
+                  prior_sigma_deg=np.full(n, 3.0))
+    full = invert_tilt(lab, rows, ri, grid, coarse_stride=1, **kw)
+    fast = invert_tilt(lab, rows, ri, grid, coarse_stride=4, **kw)
+    np.testing.assert_array_equal(fast.tilt_deg, full.tilt_deg)
+    np.testing.assert_array_equal(fast.tilt_sigma_deg, full.tilt_sigma_deg)
+    np.testing.assert_array_equal(fast.delta_e, full.delta_e)
+    # the same values given per row (by_row) instead of per pixel
+    per_row = dict(table=table, thickness_px=d_rows, exposure=1.0,
+                   noise_de=np.array([1.5, 1.4, 1.6]), by_row=True)
+    per_px = dict(kw, noise_de=per_row["noise_de"][ri])
+    if prior:
+        p_rows, s_rows = np.array([5.0, 12.0, 20.0]), np.array([2.0, 3.0, 4.0])
+        per_row.update(prior_deg=p_rows, prior_sigma_deg=s_rows)
+        per_px.update(prior_deg=p_rows[ri], prior_sigma_deg=s_rows[ri])
+    a = invert_tilt(lab, rows, ri, grid, **per_row)
+    b = invert_tilt(lab, rows, ri, grid, **per_px)
+    for f in ("tilt_deg", "tilt_sigma_deg", "delta_e", "colour_weight"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+
+
 @pytest.mark.parametrize("method, formula", [("CIE76", color.delta_e_76),
                                              ("CIE94", color.delta_e_94),
                                              ("CIEDE2000", color.delta_e_2000)])
