@@ -7,6 +7,7 @@ module              stage
 ``surface``         height map (from focus or an export), normals, tilt
 ``colour_image``    CIELAB, the colour mask (``mask``), the colour noise
 ``roi``             thickness per region of interest, interference order, exposure
+``search``          coarse-to-fine least value on a grid, row by row (tilt, thickness)
 ``tilt``            per-pixel tilt by colour inversion (both modes)
 ``segmentation``    facets from colour and height edges (joint mode)
 ``facets``          plane fits, per-facet thickness (joint mode)
@@ -25,7 +26,7 @@ Nothing here imports the forward models or the report.
 from ..core.lazy import attach
 
 __getattr__, __dir__, __all__ = attach(__name__, submodules=(
-    "options", "surface", "colour_image", "mask", "roi", "tilt", "segmentation", "facets",
+    "options", "surface", "colour_image", "mask", "roi", "search", "tilt", "segmentation", "facets",
     "joint", "sampling", "mixtures", "ndf_fit", "identification", "pipeline", "output"),
     submod_attrs={
     "options": ["AnalysisOptions"],

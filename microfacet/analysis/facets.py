@@ -32,6 +32,7 @@ from ..colour.colorimetry import xyz_to_lab
 from ..colour.difference import delta_e
 from ..core.lazy import load
 from ..optics.constants import optical_constants
+from .search import coarse_to_fine
 from .segmentation import plane_from_moments, plane_moments
 
 ndimage = load("scipy.ndimage")
@@ -234,8 +235,8 @@ def _scan(table, centre, tilt, mean_lab, offsets, exposure, white, method):
 
 
 def _fine_scan(table, centre, tilt, mean_lab, fine, exposure, white, method, stride=5):
-    """The fine scan ``centre + fine`` (uniform offsets) coarse-to-fine: every ``stride``-th
-    offset, then each offset within ±``stride`` of the best (ΔE is unimodal over ±1 nm).
+    """The fine scan ``centre + fine`` (uniform offsets) coarse-to-fine
+    (:func:`~microfacet.analysis.search.coarse_to_fine`; ΔE is unimodal over ±1 nm).
 
     Returns the scanned thicknesses and ΔE (S, m), and two column indices into them: the
     least ΔE, and the node about which a full scan fits its parabola (its
@@ -248,15 +249,11 @@ def _fine_scan(table, centre, tilt, mean_lab, fine, exposure, white, method, str
         grid, de = _scan(table, centre, tilt, mean_lab, fine, exposure, white, method)
         k = np.argmin(de, axis=1)
         return grid, de, k, np.clip(k, 1, n - 2)
-    idx_a = np.unique(np.r_[np.arange(0, n, stride), n - 1])
-    _, de_a = _scan(table, centre, tilt, mean_lab, fine[idx_a], exposure, white, method)
-    best_a = idx_a[np.argmin(de_a, axis=1)]
-    # offsets within ±stride of the best (clamped to the scan), plus one more each side
-    idx = np.clip(best_a[:, None] + np.arange(-stride - 1, stride + 2)[None, :], 0, n - 1)
-    grid, de = _scan(table, centre, tilt, mean_lab, fine[idx], exposure, white, method)
-    inner = np.full(idx.shape[1], np.inf)
-    inner[1:-1] = 0.0
-    kw = np.argmin(de + inner[None, :], axis=1)
+    idx, de, kw = coarse_to_fine(
+        lambda nodes: _scan(table, centre, tilt, mean_lab, fine[nodes], exposure, white,
+                            method)[1], n, centre.size, stride=stride)
+    lo, hi = float(table.thickness_nm[0]), float(table.thickness_nm[-1])
+    grid = np.clip(centre[:, None] + fine[idx], lo, hi)
     # the node a full scan would fit its parabola about, clip(k, 1, n − 2), found in this
     # scan (it is kw itself unless the minimum is at an end of ``fine``)
     target = np.clip(idx[r, kw], 1, n - 2)

@@ -62,8 +62,6 @@ __all__ = [
     "fit_thickness_mixture",
     "k_max_for",
     "k_note",
-    "positive_int",
-    "prepare",
     "run_em",
     "single_thread",
 ]

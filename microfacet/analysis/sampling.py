@@ -124,7 +124,7 @@ def thickness_regions(labels, value, sigma, *, alpha=0.01) -> Regions:
         d2 = np.where(good, d2, np.inf)
         return good & (d2 < threshold), d2
 
-    merged, m = merge_adjacent(labels, moments, cost, max_rounds=500)
+    merged, m = merge_adjacent(labels, moments, cost, max_rounds=500, pairs=pairs)
     # the region of each patch (a patch lies in one region: take any of its pixels)
     first = np.full(S, -1, np.int64)
     flat_l, flat_m = labels.ravel(), merged.ravel()

@@ -171,12 +171,13 @@ def _precise_slopes(height_um, height_sigma_um, pixel_size_um):
     return np.stack([np.where(ok, gx, 0.0), np.where(ok, gy, 0.0)], axis=-1) / s_slope
 
 
-#: Side of the tiles Felzenszwalb runs on (pixels): its graph costs ~300 bytes per pixel
-#: (measured: +330 MB on a 1-megapixel image), so a tile bounds that memory (~80 MB) whatever
-#: the image size. The tile edges are blob edges too; the statistical merging that follows
-#: joins blobs across them like any other pair. On the 1-megapixel nd stack of
-#: pipelines/bench_analyze.py, tiles of 512 px against one whole-image tile: 0.2 % more facets,
-#: thickness MAE 0.652 vs 0.661 nm, tilt W1 1.637° vs 1.639° against the truth.
+#: Side of the tiles Felzenszwalb runs on (pixels): its graph costs a few hundred bytes per
+#: pixel, so a tile bounds that memory whatever the image size. The tile edges are blob edges
+#: too; the statistical merging that follows joins blobs across them like any other pair.
+#: On the 1-megapixel nd stack of pipelines/bench_analyze.py, 512-px tiles against one
+#: whole-image tile (``python pipelines/analysis_memory.py STACK --tiles 1024,512``): peak
+#: memory of the analysis 518 vs 739 MB, 0.2 % more facets, thickness MAE 0.652 vs 0.661 nm,
+#: tilt W1 1.637° vs 1.639° against the truth.
 FELZENSZWALB_TILE_PX = 512
 
 
@@ -320,7 +321,7 @@ def segment_facets(lab, *, facet_px, noise_de=None, height_um=None, height_sigma
     return labels
 
 
-def merge_adjacent(labels, moments, cost, *, max_rounds=30):
+def merge_adjacent(labels, moments, cost, *, max_rounds=30, pairs=None):
     """Merge neighbouring segments, mutual best pairs first, while ``cost`` allows.
 
     Parameters
@@ -334,18 +335,22 @@ def merge_adjacent(labels, moments, cost, *, max_rounds=30):
         the pair may merge and how well it fits (lower is better).
     max_rounds : int
         Each round merges every pair that is the other's best candidate.
+    pairs : ndarray of int, shape (P, 2), optional
+        :func:`neighbour_pairs` of ``labels``, when the caller has them already.
 
     Returns
     -------
     labels : ndarray of int32, shape (H, W)
     moments : ndarray, shape (S', m)
     """
-    labels = _relabel(labels)
     S = int(labels.max()) + 1
+    if not np.all(np.bincount(labels.ravel(), minlength=S)):  # labels 0..S-1 with gaps
+        labels = _relabel(labels)
+        S, pairs = int(labels.max()) + 1, None
     moments = np.asarray(moments, dtype=np.float64)
     # the segment graph: merged segments neighbour the union of their parts' neighbours, so
     # the pixels are read once and each round works on the (small) list of edges
-    pairs = neighbour_pairs(labels)
+    pairs = neighbour_pairs(labels) if pairs is None else np.asarray(pairs, np.int64)
     mapping = np.arange(S)
     for _ in range(max_rounds):
         if pairs.size == 0:

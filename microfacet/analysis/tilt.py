@@ -29,6 +29,7 @@ import numpy as np
 
 from ..colour.colorimetry import xyz_to_lab
 from ..colour.difference import delta_e
+from .search import coarse_to_fine
 
 __all__ = ["PixelEstimates", "TiltInversion", "invert_tilt", "model_lab_rows", "seed_tilts",
            "tilt_grid"]
@@ -241,15 +242,7 @@ def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness
 
         rr = np.arange(b - a)
         if stride > 1:
-            kc = np.unique(np.r_[np.arange(0, K, stride), K - 1])
-            k0 = kc[np.argmin(objective(np.broadcast_to(kc, (b - a, kc.size))), axis=1)]
-            # every node within ±stride of the coarse minimum, plus one more on each side for
-            # the parabola (indices clamped at the grid's ends)
-            nodes = np.clip(k0[:, None] + np.arange(-stride - 1, stride + 2)[None, :], 0, K - 1)
-            qw = objective(nodes)
-            inner = np.full(nodes.shape[1], np.inf)
-            inner[1:-1] = 0.0
-            kw = np.argmin(qw + inner[None, :], axis=1)
+            nodes, qw, kw = coarse_to_fine(objective, K, b - a, stride=stride)
             k = nodes[rr, kw]
             y0, y1, y2 = qw[rr, kw - 1], qw[rr, kw], qw[rr, kw + 1]
             km = np.where((k > 0) & (k < K - 1), k, -1)  # a parabola only inside the grid

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..core.distributions import NDFMixture, ThicknessMixture
 from ..core.errors import InputError, one_line
+from ..core.pixels import pixel_size_yx
 from .images import read_png, write_float_tiff, write_image
 from .jsonfile import read_json
 from .x3p import write_x3p
@@ -117,10 +118,9 @@ def pixel_size_of(summary: dict) -> tuple[float, float] | None:
     inputs = summary.get("inputs") if isinstance(summary, dict) else None
     value = inputs.get("pixel_size_um") if isinstance(inputs, dict) else None
     try:
-        p = np.broadcast_to(np.asarray(value, dtype=np.float64), (2,))
-    except (TypeError, ValueError):
+        return None if value is None else pixel_size_yx(value)
+    except ValueError:
         return None
-    return (float(p[0]), float(p[1])) if np.all(np.isfinite(p)) and np.all(p > 0) else None
 
 
 def write_results_files(folder, *, summary: dict, maps: dict, images: dict | None = None,

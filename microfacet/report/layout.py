@@ -218,10 +218,10 @@ class Geometry:
             self.yx = None
         self.unit = "µm" if self.yx else "pixel"
 
-    def extent(self, shape, block=1):
-        """``imshow`` extent of a map of ``shape`` whose pixels are ``block`` pixels."""
+    def extent(self, shape):
+        """``imshow`` extent of a map of ``shape`` (H, W, ...) pixels."""
         py, px = self.yx or (1.0, 1.0)
-        return (0.0, shape[1] * px * block, shape[0] * py * block, 0.0)
+        return (0.0, shape[1] * px, shape[0] * py, 0.0)
 
     def height_ratio(self, shape):
         """Height / width of a map of ``shape`` on the sample (pixels when unknown)."""
