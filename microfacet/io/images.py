@@ -34,7 +34,6 @@ ImageInfo(shape=(4, 5), dtype=dtype('uint8'), channels=3)
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 import struct
 import threading
@@ -429,10 +428,9 @@ def _png_chunks(data: bytes):
 
 def _with_phys(png: bytes, pixel_size_um) -> bytes:
     try:
-        py, px = pixel_size_yx(pixel_size_um)
+        ppm = [round(1e6 / v) for v in pixel_size_yx(pixel_size_um)[::-1]]  # x, y
     except ValueError:
-        py = px = math.nan
-    ppm = [round(1e6 / v) if math.isfinite(v) else 0 for v in (px, py)]
+        ppm = [0, 0]
     if not all(0 < v < 2**32 for v in ppm):
         raise ValueError(f"pixel_size_um: {pixel_size_um!r} does not fit a PNG pHYs chunk")
     body = b"pHYs" + struct.pack(">IIB", ppm[0], ppm[1], 1)
