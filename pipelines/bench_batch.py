@@ -16,7 +16,7 @@ from pathlib import Path
 from _shared import best_of, md_header, md_row, parser
 
 from microfacet.analysis import AnalysisOptions
-from microfacet.batch.runner import run_batch
+from microfacet.workflow.batch import run_batch
 from microfacet.forward.synth import generate_stack, preset
 
 

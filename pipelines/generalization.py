@@ -8,7 +8,7 @@ drift between slices, tilt-dependent brightness, elongated / size-spread / round
 other optical constants, terraces. Always drawn: 1-3 thickness populations (means 20-260 nm,
 across the first two interference orders, ≥ 12 nm and ≥ 4 SD apart), 1-2 NDF lobes of
 2-14°, facet size, waviness, per-facet thickness offsets, exposure and sensor noise. The
-stacks are analysed with ``microfacet.batch.run_batch`` (``--mode joint``, ``seed`` or
+stacks are analysed with ``microfacet.workflow.run_batch`` (``--mode joint``, ``seed`` or
 ``both``) and scored with ``_scoring.py`` (its docstring says what and why): thickness per
 true region, number of thickness populations and NDF lobes, NDF W1 where the analysis says
 the NDF is identified, the identified fraction on textured scenes, ΔE00 against the scene's
@@ -46,7 +46,7 @@ from _scoring import (
 from _shared import DOCS, ROOT, fmt, md_table, parser, pyplot, save_figure, write_csv
 
 from microfacet.analysis.options import AnalysisOptions
-from microfacet.batch.runner import run_batch
+from microfacet.workflow.batch import run_batch
 from microfacet.forward.synth import (
     SynthParams,
     ThicknessComponent,

@@ -4,7 +4,7 @@ Generates N synthetic stacks (``microfacet.forward.synth``) cycling over the pre
 own seed, a sensor noise drawn log-uniformly (full well 150 … 20,000 e⁻, i.e. relative noise
 1.5 % … 15 % at a linear signal of 0.3) and its tilt lobes scaled by a factor drawn
 uniformly in 0.5 … 2 (each lobe capped at 20°). Analyses them all with
-:func:`microfacet.batch.runner.run_batch` (local processes, or ``--scheduler`` a Dask cluster) and
+:func:`microfacet.workflow.run_batch` (local processes, or ``--scheduler`` a Dask cluster) and
 scores every results folder against its truth:
 
 * ``thickness_mae_nm``: mean |estimated − true| per-pixel thickness (unmasked, finite);
@@ -49,7 +49,7 @@ from _shared import (
 
 from microfacet.analysis.options import AnalysisOptions
 from microfacet.analysis.roi import nearest_roi_index, roi_grid
-from microfacet.batch.runner import run_batch
+from microfacet.workflow.batch import run_batch
 from microfacet.core.distributions import NDFMixture
 from microfacet.forward.synth import TiltLobe, generate_stack, preset
 

@@ -7,7 +7,7 @@ import logging
 import time
 from pathlib import Path
 
-from .. import batch, io
+from .. import io, workflow
 from .options import (
     HelpFormatter,
     add_analysis_options,
@@ -97,7 +97,7 @@ def run(args) -> int:
     t0 = time.perf_counter()
     skip = ("report",) if args.no_report else ()
     with StageProgress("analyze", ANALYZE_STAGE_WEIGHTS, skip=skip, quiet=args.quiet) as bar:
-        result = batch.analyse_to_folder(args.stack, out, options=opts,
+        result = workflow.analyse_to_folder(args.stack, out, options=opts,
                                          overwrite=args.overwrite, report=not args.no_report,
                                          limits=limits_from_args(args), progress=bar.stage,
                                          pixel_size_um=pixel_size_um, z_step_um=z_step_um)

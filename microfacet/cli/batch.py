@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .. import batch
+from .. import workflow
 from ..core.errors import InputError
 from .options import HelpFormatter, add_analysis_options, analysis_options, example_epilog
 from .progress import Progress
@@ -85,11 +85,11 @@ def run(args) -> int:
 
     with Progress("batch", total=len(stacks), unit="stacks", quiet=args.quiet) as bar:
         try:
-            result = batch.run_batch(stacks, args.out, options=opts, jobs=args.jobs,
+            result = workflow.run_batch(stacks, args.out, options=opts, jobs=args.jobs,
                                scheduler=args.scheduler, overwrite=args.overwrite,
                                report=not args.no_report,
                                progress=lambda done, total, row: bar.update(done, total))
-        except batch.runner.BatchInterrupted as exc:
+        except workflow.BatchInterrupted as exc:
             interrupted = exc
         else:
             interrupted = None

@@ -9,7 +9,7 @@ import time
 __all__ = ["ANALYZE_STAGE_WEIGHTS", "Progress", "StageProgress"]
 
 #: Relative cost of each stage of ``microfacet analyze``, in the order the pipeline announces
-#: them (``progress(stage)`` of :func:`microfacet.batch.analyse_to_folder`). Measured as the
+#: them (``progress(stage)`` of :func:`microfacet.workflow.analyse_to_folder`). Measured as the
 #: ``timings_s`` of ``summary.json`` after ``microfacet analyze fixtures/stacks/nd-fixture``
 #: (joint mode, 2 cores), seconds: height_from_focus + normals; colour_and_mask;
 #: colour_table; thickness_roi; segmentation + facet_fits + tilt_per_pixel; mixtures; write;

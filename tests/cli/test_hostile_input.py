@@ -277,7 +277,7 @@ def test_a_results_folder_caught_between_its_two_renames_is_put_back(tmp_path):
 
 def test_batch_resume_sweeps_what_killed_workers_left(tmp_path):
     from microfacet.analysis.pipeline import AnalysisOptions
-    from microfacet.batch.runner import run_batch
+    from microfacet.workflow.batch import run_batch
 
     s = _stack(tmp_path / "a")
     out = tmp_path / "res"
@@ -540,7 +540,7 @@ def test_pathological_json(tmp_path, capfd, text, pattern):
 
 
 def test_memory_error_is_one_line(tmp_path, capfd, monkeypatch):
-    import microfacet.batch.runner as runner
+    import microfacet.workflow.batch as runner
 
     def boom(*a, **k):
         raise MemoryError()
@@ -553,7 +553,7 @@ def test_memory_error_is_one_line(tmp_path, capfd, monkeypatch):
 
 
 def test_an_internal_error_is_one_line_with_exit_1_and_a_hint(tmp_path, capfd, monkeypatch):
-    import microfacet.batch.runner as runner
+    import microfacet.workflow.batch as runner
 
     def bug(*a, **k):
         raise TypeError("unsupported operand")

@@ -44,7 +44,7 @@ def test_the_stage_names_are_those_the_pipeline_announces():
     import inspect
 
     from microfacet.analysis import pipeline
-    from microfacet.batch import runner
+    from microfacet.workflow import batch as runner
 
     source = inspect.getsource(pipeline.analyze_stack) + inspect.getsource(
         runner.analyse_to_folder)

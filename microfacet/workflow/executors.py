@@ -20,7 +20,7 @@ joblib = load("joblib")
 
 __all__ = ["check_scheduler", "close_dask", "dask_client", "dask_results", "local_results"]
 
-log = logging.getLogger("microfacet.batch")
+log = logging.getLogger("microfacet.workflow")
 
 
 def local_results(fn, tasks, jobs):

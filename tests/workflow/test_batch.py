@@ -1,4 +1,4 @@
-"""Batches (microfacet.batch.runner, through ``microfacet batch`` and :func:`run_batch`):
+"""Batches (microfacet.workflow.batch, through ``microfacet batch`` and :func:`run_batch`):
 parallel local runs, a real Dask LocalCluster, failures and resume. The stacks are the
 ``batch_drawer`` fixture (tests/conftest.py). Argument errors of the command:
 tests/cli/test_batch.py; result names: test_summary.py."""
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from microfacet.batch.runner import run_batch
+from microfacet.workflow.batch import run_batch
 from microfacet.cli import main
 from microfacet.io.results import Results
 
@@ -147,10 +147,10 @@ def test_scheduler_local_starts_and_closes_a_local_cluster(batch_drawer, tmp_pat
 
 def test_every_stack_is_validated_before_any_analysis(batch_drawer, tmp_path, monkeypatch,
                                                       caplog):
-    from microfacet.batch import runner
+    from microfacet.workflow import batch as runner
 
     events = []
-    caplog.set_level("WARNING", logger="microfacet.batch")
+    caplog.set_level("WARNING", logger="microfacet.workflow")
     monkeypatch.setattr(caplog.handler, "emit",
                         lambda rec: events.append(("logged", rec.getMessage())))
 
@@ -176,7 +176,7 @@ def test_mistyped_scheduler_fails_fast_without_a_client(batch_drawer, tmp_path, 
                                                         monkeypatch):
     import time
 
-    from microfacet.batch import executors
+    from microfacet.workflow import executors
 
     def no_client(*a, **k):
         raise AssertionError("a Client was made for a malformed address")
@@ -200,7 +200,7 @@ def test_mistyped_scheduler_fails_fast_without_a_client(batch_drawer, tmp_path, 
 
 def test_ctrl_c_during_a_dask_run_says_how_far_it_got_and_exits_130(batch_drawer, tmp_path,
                                                                     capfd, monkeypatch):
-    from microfacet.batch import runner
+    from microfacet.workflow import batch as runner
 
     closed = []
 

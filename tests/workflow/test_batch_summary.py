@@ -1,8 +1,8 @@
-"""The batch summary (microfacet.batch.summary): short, unique result folder names."""
+"""The batch summary (microfacet.workflow.batch_summary): short, unique result folder names."""
 
 import pytest
 
-from microfacet.batch.summary import result_names
+from microfacet.workflow.batch_summary import result_names
 
 
 def test_result_names_are_unique_and_short():

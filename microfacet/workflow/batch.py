@@ -31,7 +31,7 @@ stack folder. It is made for drawers full of stacks:
 
 Examples
 --------
->>> from microfacet.batch.runner import run_batch
+>>> from microfacet.workflow import run_batch
 >>> result = run_batch(["drawer/a", "drawer/b"], "results", jobs=2)  # doctest: +SKIP
 >>> [row["status"] for row in result.rows]  # doctest: +SKIP
 ['done', 'done']
@@ -49,19 +49,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..analysis.options import AnalysisOptions
-from ..analysis.output import results_size_bytes, save_results
-from ..analysis.pipeline import analyze_stack, check_analysis_memory
 from ..core.errors import InputError
 from ..io.outdir import OutputFolder, check_output, sweep_stale
 from ..io.results import Results, json_safe
 from ..io.stack import read_stack
-from ..report.writer import write_report
+from .analyse import analyse_to_folder
+from .batch_summary import ERRORS_FILE, SUMMARY_FILE, result_names, row_from_results, write_summary
 from .executors import check_scheduler, close_dask, dask_client, dask_results, local_results
-from .summary import ERRORS_FILE, SUMMARY_FILE, result_names, row_from_results, write_summary
 
-__all__ = ["BatchInterrupted", "BatchResult", "analyse_to_folder", "run_batch"]
+__all__ = ["BatchInterrupted", "BatchResult", "run_batch"]
 
-log = logging.getLogger("microfacet.batch")
+log = logging.getLogger("microfacet.workflow")
 
 
 @dataclass
@@ -105,70 +103,6 @@ class BatchInterrupted(KeyboardInterrupt):
     def __init__(self, done: int, total: int, summary_csv: Path):
         super().__init__(f"interrupted; {done} of {total} stacks done")
         self.done, self.total, self.summary_csv = done, total, summary_csv
-
-
-def open_stack(stack, *, limits=None, pixel_size_um=None, z_step_um=None):
-    """The validated :class:`~microfacet.io.stack.Stack` of a stack folder, or of a plain
-    folder of images with ``pixel_size_um`` and ``z_step_um`` (natural file order, nothing
-    written).
-
-    Examples
-    --------
-    >>> import numpy as np, tempfile, pathlib
-    >>> from microfacet.io.images import write_image
-    >>> d = pathlib.Path(tempfile.mkdtemp())
-    >>> for i in (1, 2, 10):
-    ...     write_image(d / f"img_{i}.png", np.full((4, 5), 20 * i, np.uint8))
-    >>> st = open_stack(d, pixel_size_um=0.5, z_step_um=2.0)
-    >>> st.n_slices, [float(z) for z in st.z_um]
-    (3, [0.0, 2.0, 4.0])
-    """
-    return read_stack(stack, limits=limits, pixel_size_um=pixel_size_um, z_step_um=z_step_um)
-
-
-def analyse_to_folder(stack, out, *, options=None, overwrite=False, report=True, limits=None,
-                      progress=None, pixel_size_um=None, z_step_um=None):
-    """One stack end to end: claim ``out``, analyse, write the results and the report into it
-    in one atomic step (``microfacet analyze`` and each batch worker).
-
-    Parameters
-    ----------
-    stack : path-like or Stack
-    out : path-like
-        The results folder (the rules of :mod:`microfacet.io.outdir`).
-    options : AnalysisOptions, optional
-    overwrite : bool
-    report : bool
-        Also write ``report.pdf`` and its page PNGs.
-    limits : Limits, optional
-        Image-size limits for reading the stack.
-    progress : callable, optional
-        ``progress(stage_name)`` per analysis stage, then ``"write"`` and ``"report"``.
-    pixel_size_um, z_step_um : float, optional
-        For a plain folder of images without stack.json (see :func:`open_stack`).
-
-    Returns
-    -------
-    AnalysisResult
-    """
-    options = options or AnalysisOptions()
-    options.validate()
-    check_output(out, kind="results", inputs=[getattr(stack, "path", stack)],
-                 overwrite=overwrite)
-    st = (open_stack(stack, limits=limits, pixel_size_um=pixel_size_um, z_step_um=z_step_um)
-          if not hasattr(stack, "path") else stack)
-    check_analysis_memory(st)
-    step = progress or (lambda name: None)
-    with OutputFolder(out, kind="results", inputs=[st.path], overwrite=overwrite,
-                      expected_bytes=results_size_bytes(st.shape, report=report)) as claim:
-        result = analyze_stack(st, options, progress=progress)
-        step("write")
-        with claim.writing() as tmp:
-            save_results(result, tmp)
-            if report:
-                step("report")
-                write_report(tmp, png_dir=tmp)
-    return result
 
 
 def _analyse_one(stack: str, out: str, options, overwrite: bool, report: bool,
