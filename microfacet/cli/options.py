@@ -10,6 +10,7 @@ from pathlib import Path
 
 from .. import analysis, optics
 from ..core.errors import InputError
+from ..core.options import option_fields
 from ..core.pixels import pixel_size_value
 from ..io import limits
 from ..io.limits import DEFAULT_MAX_MEGAPIXELS, DEFAULT_MAX_STACK_MEGAPIXELS
@@ -130,6 +131,80 @@ def pair_type(sep: str, cast, example: str):
         return a, b
 
     return parse
+
+
+def add_option_fields(p, cls, *, title: str | None = None, skip=()) -> None:
+    """Add a flag for every command-line option of the options class ``cls``
+    (:func:`microfacet.core.options.option_fields` with ``cli=True``): type, choices, help and
+    default from the fields' metadata. Unset flags stay None and take the field's default in
+    :func:`options_from_args`.
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+    cls : type
+        An :class:`~microfacet.core.options.Options` class (a tree: sub-sections are walked).
+    title : str, optional
+        An argument group to put them in.
+    skip : collection of str
+        Dotted paths not to add (a command that fixes them).
+    """
+    g = p.add_argument_group(title) if title else p
+    for f in option_fields(cls):
+        if f.flag is None or f.path in skip:
+            continue
+        meta = f.field.metadata
+        kw = dict(dest=_dest(f.path), default=None, metavar=meta.get("metavar"))
+        kind = f.kind
+        if kind is bool and not meta.get("cli_kwargs"):
+            kw.update(action="store_true")
+            kw.pop("metavar")
+        elif kind is tuple:
+            kw["type"] = pair_type(":", float, "LOW:HIGH")
+            kw["metavar"] = kw["metavar"] or "LOW:HIGH"
+        elif kind in (int, float, str):
+            kw["type"] = kind
+            kw["metavar"] = kw["metavar"] or {int: "N", float: "X", str: "NAME"}[kind]
+        if meta.get("choices") is not None and kind is not tuple:
+            kw["choices"] = [c for c in meta["choices"] if c is not None]
+            kw.pop("metavar", None)
+        kw.update(meta.get("cli_kwargs") or {})
+        unit = f" {f.unit}" if f.unit and f.unit not in ("-", "") else ""
+        default = f.default
+        shown = ("none" if default is None else ":".join(f"{v:g}" for v in default)
+                 if isinstance(default, tuple) else f"{default:g}" if isinstance(default, float)
+                 else str(default))
+        kw["help"] = f"{f.help} (default {shown}{unit if default is not None else ''})"
+        g.add_argument(f.flag, **kw)
+
+
+def _dest(path: str) -> str:
+    return "opt__" + path.replace(".", "__")
+
+
+def options_from_args(args, cls, **fixed):
+    """The options tree ``cls`` from the flags :func:`add_option_fields` added (those given),
+    with ``fixed`` dotted-path values on top; validated on construction (an
+    :class:`~microfacet.core.errors.InputError` names the option's path, which
+    :func:`cli_flags` turns into its flag)."""
+    tree: dict = {}
+    values = {f.path: getattr(args, _dest(f.path), None) for f in option_fields(cls)
+              if f.flag is not None}
+    values.update(fixed)
+    for path, value in values.items():
+        if value is None:
+            continue
+        node = tree
+        *parents, leaf = path.split(".")
+        for k in parents:
+            node = node.setdefault(k, {})
+        node[leaf] = tuple(value) if isinstance(value, list) else value
+    return cls.from_dict(tree)
+
+
+def cli_flags(*classes) -> dict:
+    """``{dotted option path: flag}`` of the options classes (for error messages)."""
+    return {f.path: f.flag for cls in classes for f in option_fields(cls) if f.flag}
 
 
 def example_epilog(*lines: str) -> str:

@@ -38,7 +38,7 @@ __all__ = ["OptionField", "Options", "option", "option_fields"]
 
 def option(default, *, help: str, unit: str = "", low=None, high=None,
            low_exclusive: bool = False, choices=None, kind=None, check=None, cli: bool = False,
-           flag: str | None = None, metavar: str | None = None):
+           flag: str | None = None, metavar: str | None = None, cli_kwargs: dict | None = None):
     """A dataclass field of an :class:`Options` section.
 
     Parameters
@@ -64,10 +64,14 @@ def option(default, *, help: str, unit: str = "", low=None, high=None,
     flag : str, optional
         The command-line flag when it differs from that rule.
     metavar : str, optional
+    cli_kwargs : dict, optional
+        More keyword arguments of ``argparse.add_argument`` (``nargs``, ``const``) for an option
+        the usual rule (``type`` from the default) does not fit.
     """
     meta = dict(help=help, unit=unit, low=low, high=high, low_exclusive=low_exclusive,
                 choices=None if choices is None else tuple(choices), kind=kind, check=check,
-                cli=cli or flag is not None, flag=flag, metavar=metavar)
+                cli=cli or flag is not None, flag=flag, metavar=metavar,
+                cli_kwargs=dict(cli_kwargs or {}))
     if isinstance(default, Options):
         return field(default_factory=lambda: default, metadata=meta)
     return field(default=default, metadata=meta)
