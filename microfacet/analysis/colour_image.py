@@ -11,6 +11,7 @@ import numpy as np
 from ..colour.difference import delta_e
 from ..colour.srgb import srgb_encode, srgb_to_lab
 from .mask import ColourMask, colour_mask
+from .options import MaskOptions
 
 __all__ = ["ColourImage", "estimate_colour_noise", "measure_colour", "no_colour_message",
            "quantization_noise_de"]
@@ -43,31 +44,32 @@ class ColourImage:
     bit_depth: int
 
 
-def measure_colour(all_in_focus, *, color_space="sRGB", bit_depth=8, illuminant="D65",
-                   saturation_min=15.0, value_min=20.0, delta_e_method="CIEDE2000",
-                   steep_ratio=0.3) -> ColourImage:
+def measure_colour(all_in_focus, options: MaskOptions, *, color_space, bit_depth, illuminant,
+                   delta_e_method) -> ColourImage:
     """CIELAB, the colour mask and the colour noise of a composite image.
 
     Parameters
     ----------
     all_in_focus : ndarray (H, W) or (H, W, 3)
         In [0, 1], encoded per ``color_space`` (``"sRGB"`` or ``"linear-sRGB"``).
+    options : MaskOptions
+        The mask's thresholds (:func:`~microfacet.analysis.mask.colour_mask`): saturation and
+        value (0-255 HSV scale, seed: saturation 15), shadows, and pixels far darker than the
+        film (facets tilted past the acceptance,
+        :func:`~microfacet.analysis.mask.steep_facet_mask`).
+    color_space : {"sRGB", "linear-sRGB"}
     bit_depth : {8, 16}
         Of the source images (sets the quantization floor of the noise).
     illuminant : str
-    saturation_min, value_min : float
-        Mask thresholds, 0-255 HSV scale (seed: saturation 15).
-    steep_ratio : float or None
-        Pixels darker than this fraction of the film (linear) are masked too: facets
-        tilted past the acceptance (:func:`~microfacet.analysis.mask.steep_facet_mask`).
+    delta_e_method : str
+        The colour difference of the noise estimate.
     """
     aif = np.asarray(all_in_focus)
     if aif.ndim == 2:
         aif = np.repeat(aif[..., None], 3, axis=-1)
     enc = (srgb_encode(aif, dtype=np.float32) if color_space == "linear-sRGB"
            else aif.astype(np.float32))
-    cm = colour_mask(enc, saturation_min=saturation_min, value_min=value_min,
-                     bit_depth=bit_depth, steep_ratio=steep_ratio)
+    cm = colour_mask(enc, options, bit_depth=bit_depth)
     lab = srgb_to_lab(enc, illuminant=illuminant).astype(np.float32)
     noise = estimate_colour_noise(lab, cm.mask, delta_e_method=delta_e_method)
     floor = quantization_noise_de(enc, cm.mask, bit_depth=bit_depth, illuminant=illuminant,
@@ -78,18 +80,18 @@ def measure_colour(all_in_focus, *, color_space="sRGB", bit_depth=8, illuminant=
     return ColourImage(enc, lab, cm, noise, bit_depth)
 
 
-def no_colour_message(stack, mask: ColourMask, what: str, *, saturation_min, value_min) -> str:
+def no_colour_message(stack, mask: ColourMask, what: str, options: MaskOptions) -> str:
     """One-line InputError text for a stack without usable colour, with the mask reasons."""
     key = "tiff" if stack.tiff_path is not None else "slices" if stack.has_slices else "image"
     f = mask.fractions()
     reasons = ", ".join(f"{name.replace('_', ' ')} {100 * f[name]:.0f}%" for name in
                         ("low_saturation", "dark", "clipped", "invalid", "shadow", "steep"))
     return (f"{stack.path / 'stack.json'}: key {key!r}: no colour information to analyse, "
-            f"{what} ({reasons}; saturation_min {saturation_min:g}, value_min "
-            f"{value_min:g} on the 0-255 scale)")
+            f"{what} ({reasons}; `mask.saturation_min` {options.saturation_min:g}, "
+            f"`mask.value_min` {options.value_min:g} on the 0-255 scale)")
 
 
-def estimate_colour_noise(lab, mask, *, delta_e_method="CIEDE2000"):
+def estimate_colour_noise(lab, mask, *, delta_e_method):
     """Per-component colour noise σ_n in ΔE00 units from neighbouring pixels.
 
     The ΔE00 between horizontally adjacent unmasked pixels is, for noise alone, the norm of
@@ -105,8 +107,8 @@ def estimate_colour_noise(lab, mask, *, delta_e_method="CIEDE2000"):
     return float(np.median(de) / 2.18)
 
 
-def quantization_noise_de(encoded_srgb, mask, *, bit_depth, illuminant="D65", n_sample=4096,
-                          seed=0, delta_e_method="CIEDE2000"):
+def quantization_noise_de(encoded_srgb, mask, *, bit_depth, illuminant, delta_e_method,
+                          n_sample=4096, seed=0):
     """Colour noise (ΔE00 per component, as :func:`estimate_colour_noise`) that the image's
     quantization alone implies: the floor of the colour noise.
 

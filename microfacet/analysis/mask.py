@@ -14,6 +14,7 @@ import numpy as np
 
 from ..colour.srgb import srgb_decode
 from ..core.lazy import load
+from .options import MaskOptions
 
 cv2 = load("cv2")
 
@@ -61,29 +62,26 @@ class ColourMask:
                     "any": self.fraction}
 
 
-def colour_mask(image, *, saturation_min=15.0, value_min=20.0, clip_level=None,
-                bit_depth=8, shadow_ratio=0.75, steep_ratio=None) -> ColourMask:
-    """Mask low-saturation, dark, clipped and NaN pixels of an encoded RGB image.
+def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
+                clip_level=None) -> ColourMask:
+    """Mask low-saturation, dark, clipped, shadowed, steep and NaN pixels of an encoded RGB
+    image.
 
     Parameters
     ----------
     image : ndarray, shape (H, W, 3)
         Encoded (sRGB) image scaled to [0, 1] (float) — e.g. the all-in-focus composite.
-    saturation_min : float
-        HSV saturation threshold on the 0-255 scale (the seed's 15).
-    value_min : float
-        HSV value (max channel) threshold on the 0-255 scale.
+    options : MaskOptions, optional
+        ``saturation_min`` (HSV saturation threshold on the 0-255 scale, the seed's 15),
+        ``value_min`` (HSV value threshold, 0-255), ``shadow_ratio`` (mask pixels darker
+        than this fraction of their 9×9 neighbourhood's median value; 0 disables),
+        ``steep_ratio`` (mask pixels whose linear value is below this fraction of the median
+        of the other unmasked pixels, :func:`steep_facet_mask`; 0 disables).
+    bit_depth : int
+        Bit depth of the source images, for the default clip level.
     clip_level : float, optional
         A channel at or above this (0-1 scale) is clipped. Default: the top code value of
         ``bit_depth`` minus half a step (255 of 255 for 8-bit, 65535 for 16-bit).
-    bit_depth : int
-        Bit depth of the source images, for the default clip level.
-    shadow_ratio : float
-        Mask pixels darker than this fraction of their 9×9 neighbourhood's median value
-        (0 disables).
-    steep_ratio : float, optional
-        Also mask pixels whose linear value is below this fraction of the median of the
-        other unmasked pixels (:func:`steep_facet_mask`; None: not).
 
     Returns
     -------
@@ -96,13 +94,10 @@ def colour_mask(image, *, saturation_min=15.0, value_min=20.0, clip_level=None,
     >>> colour_mask(img).mask.tolist()
     [[False, True, True]]
     """
+    o = MaskOptions() if options is None else options
     img = np.asarray(image, dtype=np.float32)
     if img.ndim != 3 or img.shape[-1] != 3:
         raise ValueError(f"image: expected an RGB image (H, W, 3), got shape {img.shape}")
-    if not 0 <= saturation_min <= 255:
-        raise ValueError("saturation_min: must be in [0, 255]")
-    if not 0 <= value_min <= 255:
-        raise ValueError("value_min: must be in [0, 255]")
     if clip_level is None:
         top = 2 ** int(bit_depth) - 1
         clip_level = (top - 0.5) / top
@@ -112,20 +107,20 @@ def colour_mask(image, *, saturation_min=15.0, value_min=20.0, clip_level=None,
     vmin = safe.min(axis=-1)
     with np.errstate(invalid="ignore", divide="ignore"):
         sat = np.where(vmax > 0, (vmax - vmin) / vmax, 0.0) * 255.0
-    low_sat = sat < saturation_min
-    dark = vmax * 255.0 < value_min
+    low_sat = sat < o.saturation_min
+    dark = vmax * 255.0 < o.value_min
     clipped = vmax >= clip_level
-    if shadow_ratio > 0:
+    if o.shadow_ratio > 0:
         v8 = np.clip(np.round(vmax * 255.0), 0, 255).astype(np.uint8)
         local = cv2.medianBlur(v8, 9).astype(np.float32) / 255.0
-        shadow = (vmax < shadow_ratio * local) & ~invalid
+        shadow = (vmax < o.shadow_ratio * local) & ~invalid
     else:
         shadow = np.zeros(vmax.shape, bool)
     mask = low_sat | dark | clipped | invalid | shadow
     steep = np.zeros(vmax.shape, bool)
-    if steep_ratio is not None and (~mask).any():
+    if o.steep_ratio > 0 and (~mask).any():
         ref = float(np.median(srgb_decode(safe[~mask]).max(axis=-1)))
-        steep = steep_facet_mask(safe, ref, dark_ratio=steep_ratio) & ~invalid
+        steep = steep_facet_mask(safe, ref, dark_ratio=o.steep_ratio) & ~invalid
         mask = mask | steep
     return ColourMask(mask, low_sat & ~invalid, dark & ~invalid, clipped & ~invalid, invalid,
                       shadow, steep)
@@ -133,7 +128,7 @@ def colour_mask(image, *, saturation_min=15.0, value_min=20.0, clip_level=None,
 
 
 
-def steep_facet_mask(encoded, reference, *, dark_ratio=0.3):
+def steep_facet_mask(encoded, reference, *, dark_ratio):
     """Pixels far darker than the film: facets tilted past the objective's acceptance.
 
     Under coaxial light a facet tilted past asin(NA)/2 reflects outside the objective and
@@ -154,7 +149,8 @@ def steep_facet_mask(encoded, reference, *, dark_ratio=0.3):
     reference : float
         Median linear value (max channel) of the film's pixels.
     dark_ratio : float
-        Dark: a linear value below this fraction of ``reference``.
+        Dark: a linear value below this fraction of ``reference``
+        (:attr:`~.options.MaskOptions.steep_ratio`).
 
     Returns
     -------
@@ -164,7 +160,7 @@ def steep_facet_mask(encoded, reference, *, dark_ratio=0.3):
     --------
     >>> img = np.full((4, 4, 3), [0.8, 0.4, 0.2], np.float32)
     >>> img[0, 0] = 0.1                              # linear 0.010: dark
-    >>> int(steep_facet_mask(img, 0.6).sum())
+    >>> int(steep_facet_mask(img, 0.6, dark_ratio=0.3).sum())
     1
     """
     lin = srgb_decode(np.nan_to_num(np.asarray(encoded, dtype=np.float32), nan=1.0))

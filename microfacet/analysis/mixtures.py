@@ -51,7 +51,9 @@ import numpy as np
 
 from ..core.distributions import ThicknessMixture
 from ..core.lazy import load
-from .sampling import collapse, positive_int, prepare
+from ..io.jsonfile import json_safe
+from .options import FitOptions
+from .sampling import Samples, collapse, prepare
 
 threadpoolctl = load("threadpoolctl")
 
@@ -96,10 +98,6 @@ class MixtureFit:
         density per degree), before the ``n_eff / W`` scaling.
     bic_margin : float or None
         BIC of the best other admissible K minus the chosen one's (None: only one K).
-    identified : bool
-        The data determine the distribution (set by the analysis; see ``reason``).
-    reason : str
-        Why not, in one sentence a user can act on ("" when identified).
     info : dict
         Fit-specific numbers (e.g. censored fraction, facets used).
     """
@@ -113,8 +111,6 @@ class MixtureFit:
     n_fit: int = 0
     log_likelihood_by_k: dict = field(default_factory=dict, repr=False)
     bic_margin: float | None = None
-    identified: bool = True
-    reason: str = ""
     info: dict = field(default_factory=dict)
 
     @property
@@ -122,27 +118,17 @@ class MixtureFit:
         return len(self.mixture.components)
 
     def to_json(self) -> dict:
-        """``{"components": [...], "bic", "bic_by_k", "bic_margin", "n_effective",
-        "identified", "reason", ...}`` (plus ``form`` for the NDF); ``bic_by_k`` keys are
-        strings."""
+        """``{"components": [...], "bic", "bic_by_k", "bic_margin", "n_effective", ...}``
+        (plus ``form`` for the NDF; whether it is identified is the analysis' judgement,
+        :mod:`.identification`); ``bic_by_k`` keys are strings; JSON-safe."""
         out = dict(self.mixture.to_json())
-        out["bic"] = _json_float(self.bic)
-        out["bic_by_k"] = {str(k): _json_float(v) for k, v in sorted(self.bic_by_k.items())}
-        out["bic_margin"] = None if self.bic_margin is None else _json_float(self.bic_margin)
-        out["n_effective"] = _json_float(self.n_effective)
-        out["n_samples"] = int(self.n_samples)
-        out["degenerate"] = self.degenerate if isinstance(self.degenerate, str) else bool(
-            self.degenerate)
-        out["identified"] = bool(self.identified)
-        out["reason"] = str(self.reason)
-        out.update({k: (_json_float(v) if isinstance(v, float) else v)
-                    for k, v in self.info.items()})
-        return out
-
-
-def _json_float(x):
-    x = float(x)
-    return x if math.isfinite(x) else None
+        out.update(bic=self.bic, bic_by_k={str(k): v for k, v in sorted(self.bic_by_k.items())},
+                   bic_margin=self.bic_margin, n_effective=self.n_effective,
+                   n_samples=int(self.n_samples),
+                   degenerate=self.degenerate if isinstance(self.degenerate, str)
+                   else bool(self.degenerate))
+        out.update(self.info)
+        return json_safe(out)
 
 
 def single_thread():
@@ -212,8 +198,9 @@ def run_em(step, params, *, max_iter, tol):
     return params, ll0
 
 
-def _xd_em(x, v, a, w, mu, s2, s2_floor, *, bg=0.0, max_iter=300, tol=1e-8):
-    """Weighted 1-D extreme-deconvolution EM; returns (w, mu, s2, ℓ, w_bg).
+def _xd_em(data, start, s2_floor, *, bg=0.0, max_iter=300, tol=1e-8):
+    """Weighted 1-D extreme-deconvolution EM from ``start = (w, mu, s2)`` on
+    ``data = (x, v, a)`` (values, error variances, weights); returns (w, mu, s2, ℓ, w_bg).
 
     ``bg`` > 0: a uniform background of that density (1/span) joins the Gaussians with its
     own weight ``w_bg`` (the samples no population explains); ``w`` and ``w_bg`` sum to 1.
@@ -225,6 +212,8 @@ def _xd_em(x, v, a, w, mu, s2, s2_floor, *, bg=0.0, max_iter=300, tol=1e-8):
     ``Σ a r b = n μ + s² Σ q d`` and ``Σ a r ((b − μ′)² + B) = s⁴ Σ q d²/V + s² Σ q σ²
     − n (μ′ − μ)²``: the textbook updates without their (K, n) temporaries.
     """
+    x, v, a = data
+    w, mu, s2 = start
     W = float(a.sum())
     w = np.asarray(w, dtype=np.float64) / np.sum(w)
     w_bg = 0.0
@@ -299,10 +288,69 @@ def _weighted_quantiles(x, a, q):
     return np.interp(np.asarray(q) * c[-1], c - 0.5 * a[o], x[o])
 
 
+def _thickness_starts(k, d, sols, bg):
+    """Starting points of the EM for K = ``k``: quantiles; with ``k`` > 1 the K − 1 solution
+    with its widest-heaviest component split, or with a component added at the worst-fitted
+    sample or at the heaviest cluster of badly fitted samples."""
+    x, a, v = d.x, d.a, d.v
+    q = _weighted_quantiles(x, a, (np.arange(k) + 0.5) / k)
+    starts = [(np.ones(k), q, np.full(k, (d.spread / k) ** 2))]
+    if k == 1:
+        return starts
+    wp, mp, sp = sols[k - 1]
+    j = int(np.argmax(wp * np.sqrt(sp)))           # split the widest-heaviest
+    dj = math.sqrt(sp[j])
+    starts.append((np.append(np.delete(wp, j), [wp[j] / 2] * 2),
+                   np.append(np.delete(mp, j), [mp[j] - dj, mp[j] + dj]),
+                   np.append(np.delete(sp, j), [sp[j] / 2] * 2)))
+    dens = np.zeros(x.size)
+    for wk, mk, sk in zip(wp, mp, sp):
+        V = sk + v
+        dens += wk * np.exp(-(x - mk) ** 2 / (2 * V)) / np.sqrt(V)
+    i = int(np.argmin(dens))
+    starts.append((np.append(wp * 0.9, 0.1), np.append(mp, x[i]),
+                   np.append(sp, (d.spread / k) ** 2)))
+    c = _unexplained_cluster(x, a, dens, max(bg, 1e-3 / max(d.spread, 1e-9)))
+    starts.append((np.append(wp * 0.9, 0.1), np.append(mp, c),
+                   np.append(sp, max(float(np.median(v)), d.s2_floor))))
+    return starts
+
+
+@dataclass
+class _Data:
+    """The prepared samples of one fit and what every K shares."""
+
+    x: np.ndarray
+    a: np.ndarray
+    v: np.ndarray
+    collapsed: tuple
+    s2_floor: float
+    spread: float
+    n_eff: float
+    min_samples: float
+    bounded: bool
+
+
+def _fit_k(k, d, sols, bg):
+    """The most likely admissible of the starts for K = ``k`` after 25 EM updates, converged;
+    returns (w, mu, s2, ℓ, w_bg, admissible)."""
+    def admissible(r):
+        return k == 1 or (np.min(r[0]) * d.n_eff >= d.min_samples and not (
+            np.any(r[2] <= d.s2_floor * 1.0001) and not d.bounded))
+
+    runs = [_xd_em(d.collapsed, st, d.s2_floor, bg=bg, max_iter=25)
+            for st in _thickness_starts(k, d, sols, bg)]
+    # the most likely admissible start, converged (a spike on a few samples may be more
+    # likely, and is not a population); then checked again
+    pre = [r for r in runs if admissible(r)] or runs
+    w, mu, s2, ll, w_bg = _xd_em(d.collapsed, max(pre, key=lambda r: r[3])[:3], d.s2_floor,
+                                 bg=bg)
+    return w, mu, s2, ll, w_bg, admissible((w, mu, s2))
+
+
 def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=None,
-                          n_effective=None, max_components=5, random_state=0,
-                          max_samples=20000, sd_floor_nm=0.1, min_component_samples=1.0,
-                          background=False) -> MixtureFit:
+                          n_effective=None, options: FitOptions | None = None,
+                          background=False, seed=0) -> MixtureFit:
     """Gaussian mixture of the true oxide thickness, number of components by BIC.
 
     Parameters
@@ -318,27 +366,21 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
         is the number of independent observations.
     n_effective : float, optional
         The number of independent observations (see the module notes).
-    max_components : int, optional
-        Largest K tried; also limited to the number of distinct values and to
-        ``3K − 1 ≤ n_effective``.
-    random_state : int, optional
-        Seed of the subsample taken when there are more than ``max_samples`` values.
-    max_samples : int, optional
-    sd_floor_nm : float, optional
-        Smallest component SD. A single distinct value is one component at the floor
-        (``degenerate`` says so); for K ≥ 2 a component at the floor is not admissible
-        unless the samples' errors (mean ``sigma_nm²`` ≥ 4 floor²) bound its likelihood.
-    min_component_samples : float, optional
-        Fewest independent samples (``w_k n_eff``) a component of a K ≥ 2 solution needs:
-        one, a population seen in a single independent region (measured on the
-        generalization sweep: with two, populations on one region of a scene were lost).
-
+    options : FitOptions, optional
+        ``max_components`` (largest K tried; also limited to the number of distinct values
+        and to ``3K − 1 ≤ n_effective``); ``thickness_sd_floor_nm`` (smallest component SD:
+        a single distinct value is one component at the floor, ``degenerate`` says so; for
+        K ≥ 2 a component at the floor is not admissible unless the samples' errors, mean
+        σ² ≥ 4 floor², bound its likelihood); ``thickness_min_component_samples`` (fewest
+        independent samples ``w_k n_eff`` a component of a K ≥ 2 solution needs);
+        ``thickness_max_samples`` (larger inputs are subsampled with ``seed``).
     background : bool, optional
         Fit, beside the K Gaussians, a uniform background over the samples' span with its
         own weight (one more parameter for every K): samples no population explains (dust,
         pit floors, mis-fitted facets) then neither ask for components of their own nor
         widen the populations. The components returned are the populations' mixture
         (weights renormalised without it); ``info["background_weight"]`` is its weight.
+    seed : int, optional
 
     Returns
     -------
@@ -348,7 +390,7 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
     Raises
     ------
     ValueError
-        No finite values, infinite values, or bad options (the message names the argument).
+        No finite values, infinite values, or bad samples (the message names the argument).
 
     Examples
     --------
@@ -360,19 +402,15 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
     >>> [round(float(s), 1) for s in fit.mixture.sds_nm]     # the noise of 2 nm deconvolved
     [3.0, 3.0]
     """
-    max_components = positive_int(max_components, "max_components")
-    max_samples = positive_int(max_samples, "max_samples")
-    sd_floor_nm = float(sd_floor_nm)
-    if not (math.isfinite(sd_floor_nm) and sd_floor_nm > 0):
-        raise ValueError(f"sd_floor_nm: must be finite and > 0, got {sd_floor_nm!r}")
-    x, a, s, n, n_eff = prepare(thickness_nm, "thickness_nm", weights, group, max_samples,
-                                random_state, sigma=sigma_nm, sigma_name="sigma_nm",
-                                n_effective=n_effective)
+    opts = FitOptions() if options is None else options
+    sd_floor_nm = opts.thickness_sd_floor_nm
+    x, a, s, n, n_eff = prepare(Samples(thickness_nm, sigma_nm, weights, group, n_effective,
+                                        "thickness_nm", "sigma_nm"),
+                                max_samples=opts.thickness_max_samples, seed=seed)
     v = s * s
     W = float(a.sum())
     uniq = np.unique(x)
     s2_floor = sd_floor_nm ** 2
-
     if uniq.size == 1 and not np.any(v > 0):
         val = float(uniq[0])
         ll = W * (-math.log(sd_floor_nm) - 0.5 * _LOG_2PI)
@@ -380,69 +418,35 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
         return MixtureFit(ThicknessMixture([(1.0, val, sd_floor_nm)]), bic, {1: bic}, n, n_eff,
                           f"single value {val:g} nm: one component with floor sd "
                           f"{sd_floor_nm:g} nm", x.size, {1: ll})
-
-    k_max = k_max_for(max_components, uniq.size, n_eff, 3, -1)
-    # the EM on distinct (value, error) pairs (the starts below on the samples as given)
-    ac, xc, vc = collapse(a, x, v)
-    # With measurement errors well above the floor, a component at the floor has a bounded
-    # likelihood (its spread is below the resolution, e.g. a population seen in one region):
-    # admissible. Without, it is a spike on repeated values: not admissible.
-    bounded = float(np.average(v, weights=a)) >= 4.0 * s2_floor
+    k_max = k_max_for(opts.max_components, uniq.size, n_eff, 3, -1)
+    ac, xc, vc = collapse(a, x, v)   # the EM on distinct (value, error) pairs
     # the background: uniform over the samples' span (padded by the SD floor and errors)
     span = float(x.max() - x.min()) + 4.0 * float(np.sqrt(np.max(v)) if v.size else 0.0) \
         + 2.0 * sd_floor_nm
     bg = 1.0 / span if background and uniq.size > 2 else 0.0
-    sols, lls, fits, bgw = {}, {}, {}, {}
     spread = float(np.sqrt(max(np.average((x - np.average(x, weights=a)) ** 2, weights=a)
                                - np.average(v, weights=a), s2_floor)))
+    # With measurement errors well above the floor, a component at the floor has a bounded
+    # likelihood (its spread is below the resolution, e.g. a population seen in one region):
+    # admissible. Without, it is a spike on repeated values: not admissible.
+    d = _Data(x, a, v, (xc, vc, ac), s2_floor, spread, n_eff,
+              opts.thickness_min_component_samples,
+              float(np.average(v, weights=a)) >= 4.0 * s2_floor)
+    sols, lls, fits, bgw = {}, {}, {}, {}
     with single_thread():
         for k in range(1, k_max + 1):
-            q = _weighted_quantiles(x, a, (np.arange(k) + 0.5) / k)
-            starts = [(np.ones(k), q, np.full(k, (spread / k) ** 2))]
-            if k > 1:
-                wp, mp, sp = sols[k - 1]
-                j = int(np.argmax(wp * np.sqrt(sp)))           # split the widest-heaviest
-                d = math.sqrt(sp[j])
-                starts.append((np.append(np.delete(wp, j), [wp[j] / 2] * 2),
-                               np.append(np.delete(mp, j), [mp[j] - d, mp[j] + d]),
-                               np.append(np.delete(sp, j), [sp[j] / 2] * 2)))
-                # a new component at the worst-fitted sample
-                dens = np.zeros(x.size)
-                for wk, mk, sk in zip(wp, mp, sp):
-                    V = sk + v
-                    dens += wk * np.exp(-(x - mk) ** 2 / (2 * V)) / np.sqrt(V)
-                i = int(np.argmin(dens))
-                starts.append((np.append(wp * 0.9, 0.1), np.append(mp, x[i]),
-                               np.append(sp, (spread / k) ** 2)))
-                # ... and at the heaviest cluster of badly fitted samples
-                c = _unexplained_cluster(x, a, dens, max(bg, 1e-3 / max(spread, 1e-9)))
-                starts.append((np.append(wp * 0.9, 0.1), np.append(mp, c),
-                               np.append(sp, max(float(np.median(v)), s2_floor))))
-            runs = [_xd_em(xc, vc, ac, *st, s2_floor, bg=bg, max_iter=25) for st in starts]
-
-            def admissible(r):
-                return k == 1 or (np.min(r[0]) * n_eff >= min_component_samples and not (
-                    np.any(r[2] <= s2_floor * 1.0001) and not bounded))
-
-            # the most likely admissible start, converged (a spike on a few samples may be
-            # more likely, and is not a population); then checked again
-            pre = [r for r in runs if admissible(r)] or runs
-            w, mu, s2, ll, w_bg = _xd_em(xc, vc, ac, *max(pre, key=lambda r: r[3])[:3],
-                                         s2_floor, bg=bg)
-            good = admissible((w, mu, s2))
-            bgw[k] = w_bg
+            w, mu, s2, ll, bgw[k], good = _fit_k(k, d, sols, bg)
             sols[k] = (w, mu, s2)
             lls[k] = max(ll, lls.get(k - 1, -np.inf))      # never below the nested optimum
-            bad = not good
-            fits[k] = (bic_score(lls[k], W, n_eff, 3 * k - 1 + (bg > 0)), w, bad)
-    k_best, margin, ok = choose_k(fits, n_eff, min_component_samples)
+            fits[k] = (bic_score(lls[k], W, n_eff, 3 * k - 1 + (bg > 0)), w, not good)
+    k_best, margin, ok = choose_k(fits, n_eff, d.min_samples)
     bics = {k: f[0] for k, f in fits.items()}
-    info_k = sorted(set(bics) - set(ok))
     w, mu, s2 = sols[k_best]
     w = w / w.sum()             # the populations' distribution, without the background
     comps = [(float(a_), float(m_), float(math.sqrt(c_))) for a_, m_, c_ in zip(w, mu, s2)
              if a_ > 1e-12]
     return MixtureFit(ThicknessMixture(comps), bics[k_best], bics, n, n_eff,
-                      k_note(k_max, max_components, uniq.size, n_eff, "values"), x.size, lls,
-                      bic_margin=margin, info={"inadmissible_k": info_k,
-                                               "background_weight": bgw[k_best]})
+                      k_note(k_max, opts.max_components, uniq.size, n_eff, "values"), x.size,
+                      lls, bic_margin=margin,
+                      info={"inadmissible_k": sorted(set(bics) - set(ok)),
+                            "background_weight": bgw[k_best]})

@@ -26,6 +26,7 @@ Weights and the model choice
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -40,7 +41,8 @@ from .mixtures import (
     run_em,
     single_thread,
 )
-from .sampling import collapse, positive_int, prepare
+from .options import FitOptions
+from .sampling import Samples, collapse, prepare
 
 optimize = load("scipy.optimize")
 
@@ -51,17 +53,19 @@ _M_LOG_FLOOR = 1e-6  # slope magnitude at which log m is evaluated for tilts of 
 _S2_CEIL = math.tan(88.9 * _DEG) ** 2  # NDFMixture needs sd_deg < 89
 
 
-def _rayleigh_em(m2, v, a, C, L2, w, s2, s2_floor, max_iter=1000, tol=1e-7):
-    """Weighted, deconvolved, censored Rayleigh-mixture EM; returns (w, s2, ℓ′).
+def _rayleigh_em(data, censor, start, s2_floor, *, max_iter=1000, tol=1e-7):
+    """Weighted, deconvolved, censored Rayleigh-mixture EM from ``start = (w, s2)``;
+    returns (w, s2, ℓ′).
 
-    ``m2`` squared measured slopes, ``v`` their noise variance per axis, ``a`` weights,
-    ``C`` the censored weight (slopes above ``√L2``). ℓ′ omits the model-independent
+    ``data = (m2, v, a)``: squared measured slopes, their noise variance per axis, weights;
+    ``censor = (C, L2)``: the censored weight (slopes above ``√L2``). ℓ′ omits the model-independent
     Σ a log m̂ term. Stops when an iteration raises ℓ′ by less than ``tol`` × total weight
     (:func:`~.mixtures.run_em`).
 
     The arrays are laid out (lobe, sample), reused, and the M-step uses the sums
     ``Σ q m̂²/V`` and ``Σ q σ²`` (``q = a r / V``): ``Σ a r E[|m|²] = s⁴ Σ q m̂²/V + 2 s² Σ q σ²``.
     """
+    (m2, v, a), (C, L2), (w, s2) = data, censor, start
     W = float(a.sum() + C)
     half_m2 = 0.5 * m2
     work = [np.empty((len(s2), m2.size)) for _ in range(3)]     # reused (K, n) arrays
@@ -144,10 +148,59 @@ def width_relative_error(tilt_deg, slope_sigma, weights, n_effective) -> float:
     return 1.0 / (2.0 * s2 * math.sqrt(info)) if info > 0 else float("inf")
 
 
-def fit_ndf_mixture(tilt_deg, *, slope_sigma=None, weights=None, censored_weight=0.0,
-                    censor_tilt_deg=None, max_components=5, group=None, n_effective=None,
-                    random_state=0, max_samples=50000, sd_floor_deg=0.05,
-                    min_component_samples=2.0) -> MixtureFit:
+def _ndf_starts(k, d, sols):
+    """Starting points of the EM for K = ``k``: quantile blocks of m², a geometric spread
+    about the mean square slope; with ``k`` > 1 the K − 1 solution plus one wide or one
+    narrow lobe, or with its heaviest lobe split in two."""
+    starts = [(np.ones(k), np.array([max(b.mean() / 2.0, d.s2_floor)
+                                     for b in np.array_split(d.order, k)])),
+              (np.ones(k), d.base * np.geomspace(1 / 9.0, 9.0, k))]
+    if k > 1:
+        wp, sp = sols[k - 1]
+        starts.append((np.append(wp * 0.9, 0.1), np.append(sp, sp.max() * 4.0)))
+        starts.append((np.append(wp * 0.9, 0.1), np.append(sp, max(sp.min() / 4.0,
+                                                                    d.s2_floor))))
+        j = int(np.argmax(wp))
+        ws, ss = wp.copy(), sp.copy()
+        ws[j] /= 2.0
+        ss[j] /= 1.5
+        starts.append((np.append(ws, wp[j] / 2.0), np.append(ss, sp[j] * 1.5)))
+    return starts
+
+
+@dataclass
+class _Data:
+    """The prepared samples of one NDF fit and what every K shares."""
+
+    collapsed: tuple
+    censor: tuple
+    order: np.ndarray
+    base: float
+    s2_floor: float
+    bounded: bool
+
+
+def _censoring(censored, tilt_deg, weights, a_sum):
+    """``(C, L2)``: the censored weight in the units of the fitted samples' weights and the
+    squared slope of the limit (0, 0 without censoring)."""
+    if censored is None:
+        return 0.0, 0.0
+    C, limit = float(censored[0]), censored[1]
+    if not (math.isfinite(C) and C >= 0):
+        raise ValueError(f"censored: weight must be finite and >= 0, got {censored[0]!r}")
+    if C == 0:
+        return 0.0, 0.0
+    if limit is None or not (0 < float(limit) < 90):
+        raise ValueError("censored: a limit in (0, 90) degrees is needed with a weight > 0")
+    t_all = np.asarray(tilt_deg, dtype=np.float64)
+    w_all = (np.ones(t_all.shape) if weights is None
+             else np.broadcast_to(np.asarray(weights, dtype=np.float64), t_all.shape))
+    C = C * a_sum / float(np.sum(w_all[np.isfinite(t_all)]))
+    return C, math.tan(float(limit) * _DEG) ** 2
+
+
+def fit_ndf_mixture(tilt_deg, *, slope_sigma=None, weights=None, censored=None, group=None,
+                    n_effective=None, options: FitOptions | None = None, seed=0) -> MixtureFit:
     """Mixture of zero-mean Gaussian-slope lobes fitted to measured tilts, K by BIC.
 
     Parameters
@@ -157,30 +210,25 @@ def fit_ndf_mixture(tilt_deg, *, slope_sigma=None, weights=None, censored_weight
         [0, 90). NaN is ignored.
     slope_sigma : array_like or float, optional
         Isotropic noise of each measured slope vector, per axis, as a slope (e.g.
-        :attr:`~microfacet.analysis.facets.FacetFit.slope_sigma`): deconvolved.
+        :attr:`~microfacet.analysis.planes.FacetFit.slope_sigma`): deconvolved.
     weights : array_like, same shape, optional
         Sample weights (facet areas; one pixel = one unit of projected area by default).
-    censored_weight : float, optional
-        Total weight (area) of samples whose tilt is only known to exceed
-        ``censor_tilt_deg`` (dark facets past the acceptance).
-    censor_tilt_deg : float, optional
-        The censoring limit (asin(NA)/2); needed with ``censored_weight``.
-    max_components : int, optional
-        Largest K tried; also limited to ``2K − 1 ≤ n_effective`` and distinct values.
+    censored : (float, float), optional
+        ``(weight, limit_deg)``: the total weight (area) of samples whose tilt is only known
+        to exceed ``limit_deg`` (dark facets past the acceptance asin(NA)/2).
     group : array_like, optional
         Facet id per sample (per-pixel input): distinct ids are the independent samples.
     n_effective : float, optional
         Independent samples (default: groups, else the Kish size of the weights) — the
         censored weight is counted in proportion.
-    random_state : int, optional
-    max_samples : int, optional
-        Larger inputs are subsampled reproducibly.
-    sd_floor_deg : float, optional
-        Smallest lobe SD (degrees); lobe SDs are also capped at 88.9°. All-zero tilts give
-        one lobe at the floor (``degenerate`` says so); for K ≥ 2 a lobe at the floor is not
-        admissible.
-    min_component_samples : float, optional
-        Fewest independent samples a lobe of a K ≥ 2 solution needs.
+    options : FitOptions, optional
+        ``max_components`` (also limited to ``2K − 1 ≤ n_effective`` and distinct values),
+        ``ndf_sd_floor_deg`` (smallest lobe SD; lobe SDs are also capped at 88.9°; all-zero
+        tilts give one lobe at the floor, ``degenerate`` says so; for K ≥ 2 a lobe at the
+        floor is not admissible), ``ndf_min_component_samples`` (fewest independent samples
+        a lobe of a K ≥ 2 solution needs), ``ndf_max_samples`` (larger inputs are
+        subsampled with ``seed``).
+    seed : int, optional
 
     Returns
     -------
@@ -192,7 +240,7 @@ def fit_ndf_mixture(tilt_deg, *, slope_sigma=None, weights=None, censored_weight
     Raises
     ------
     ValueError
-        No finite tilts, tilts outside [0, 90), or bad options.
+        No finite tilts, tilts outside [0, 90), or a bad censoring.
 
     Examples
     --------
@@ -204,43 +252,26 @@ def fit_ndf_mixture(tilt_deg, *, slope_sigma=None, weights=None, censored_weight
     >>> fit.n_components, round(float(fit.mixture.sds_deg[0]), 1)
     (1, 5.0)
     """
-    max_components = positive_int(max_components, "max_components")
-    max_samples = positive_int(max_samples, "max_samples")
-    sd_floor_deg = float(sd_floor_deg)
-    if not (math.isfinite(sd_floor_deg) and 0 < sd_floor_deg < 89):
-        raise ValueError(f"sd_floor_deg: must be in (0, 89), got {sd_floor_deg!r}")
-    C = float(censored_weight)
-    if not (math.isfinite(C) and C >= 0):
-        raise ValueError(f"censored_weight: must be finite and >= 0, got {censored_weight!r}")
-    L2 = 0.0
-    if C > 0:
-        if censor_tilt_deg is None or not (0 < float(censor_tilt_deg) < 90):
-            raise ValueError("censor_tilt_deg: needed in (0, 90) with censored_weight > 0")
-        L2 = math.tan(float(censor_tilt_deg) * _DEG) ** 2
-    th, a, sg, n, n_eff = prepare(tilt_deg, "tilt_deg", weights, group, max_samples,
-                                  random_state, sigma=slope_sigma, sigma_name="slope_sigma",
-                                  n_effective=n_effective)
+    opts = FitOptions() if options is None else options
+    sd_floor_deg = opts.ndf_sd_floor_deg
+    th, a, sg, n, n_eff = prepare(Samples(tilt_deg, slope_sigma, weights, group, n_effective,
+                                          "tilt_deg", "slope_sigma"),
+                                  max_samples=opts.ndf_max_samples, seed=seed)
     if np.any(th < 0) or np.any(th >= 90):
         raise ValueError("tilt_deg: tilts must be in [0, 90) degrees")
     a_sum = float(a.sum())
-    if C > 0:   # in the units of the fitted (possibly subsampled) samples' weights
-        t_all = np.asarray(tilt_deg, dtype=np.float64)
-        w_all = (np.ones(t_all.shape) if weights is None
-                 else np.broadcast_to(np.asarray(weights, dtype=np.float64), t_all.shape))
-        C = C * a_sum / float(np.sum(w_all[np.isfinite(t_all)]))
-        if n_effective is None:
-            n_eff *= (a_sum + C) / a_sum
+    C, L2 = _censoring(censored, tilt_deg, weights, a_sum)
+    if C > 0 and n_effective is None:
+        n_eff *= (a_sum + C) / a_sum
     W = a_sum + C
     rad = th * _DEG
-    m = np.tan(rad)
-    m2 = m * m
+    m2 = np.tan(rad) ** 2
     v = sg * sg
     s2_floor = math.tan(sd_floor_deg * _DEG) ** 2
     # model-independent part of the log density per degree: log m + 2 log sec θ + log(π/180)
-    const = float(np.sum(a * (np.log(np.maximum(m, _M_LOG_FLOOR)) - 2.0 * np.log(np.cos(rad))
-                              + math.log(_DEG))))
+    const = float(np.sum(a * (np.log(np.maximum(np.tan(rad), _M_LOG_FLOOR))
+                              - 2.0 * np.log(np.cos(rad)) + math.log(_DEG))))
     info = {"censored_fraction": C / W if W > 0 else 0.0}
-
     uniq = np.unique(th)
     if np.all(m2 == 0) and not np.any(v > 0) and C == 0:
         ll = a_sum * -math.log(s2_floor) + const
@@ -248,52 +279,32 @@ def fit_ndf_mixture(tilt_deg, *, slope_sigma=None, weights=None, censored_weight
         return MixtureFit(NDFMixture([(1.0, sd_floor_deg)]), bic, {1: bic}, n, n_eff,
                           f"all tilts are 0: one lobe with floor sd {sd_floor_deg:g} deg",
                           th.size, {1: ll}, info=info)
-
-    k_max = k_max_for(max_components, uniq.size + (C > 0), n_eff, 2, -1)
-    # the EM on distinct (tilt, noise) pairs (the starts below on the samples as given)
-    ac, m2c, vc = collapse(a, m2, v)
-    order = np.sort(m2)
+    k_max = k_max_for(opts.max_components, uniq.size + (C > 0), n_eff, 2, -1)
+    ac, m2c, vc = collapse(a, m2, v)   # the EM on distinct (tilt, noise) pairs
     base = max(float(np.average(np.maximum(m2 - 2 * v, 0.0), weights=a)) / 2.0, s2_floor)
     if C > 0:
         base = max(base, L2 / 4.0 * C / W)
     # A lobe at the floor is a spike unless the slope noise bounds its likelihood
     # (as in fit_thickness_mixture).
-    bounded = float(np.average(v, weights=a)) >= 4.0 * s2_floor
+    d = _Data((m2c, vc, ac), (C, L2), np.sort(m2), base, s2_floor,
+              float(np.average(v, weights=a)) >= 4.0 * s2_floor)
     sols, lls, fits = {}, {}, {}
     with single_thread():
         for k in range(1, k_max + 1):
-            # 1. quantile blocks of m²; 2. a geometric spread about the mean square slope
-            starts = [(np.ones(k), np.array([max(b.mean() / 2.0, s2_floor)
-                                             for b in np.array_split(order, k)]))]
-            starts.append((np.ones(k), base * np.geomspace(1 / 9.0, 9.0, k)))
-            if k > 1:
-                # 3./4. the K − 1 solution plus one wide or one narrow lobe;
-                # 5. the K − 1 solution with its heaviest lobe split in two
-                wp, sp = sols[k - 1]
-                starts.append((np.append(wp * 0.9, 0.1), np.append(sp, sp.max() * 4.0)))
-                starts.append((np.append(wp * 0.9, 0.1),
-                               np.append(sp, max(sp.min() / 4.0, s2_floor))))
-                j = int(np.argmax(wp))
-                ws, ss = wp.copy(), sp.copy()
-                ws[j] /= 2.0
-                ss[j] /= 1.5
-                starts.append((np.append(ws, wp[j] / 2.0), np.append(ss, sp[j] * 1.5)))
-            runs = [_rayleigh_em(m2c, vc, ac, C, L2, w0, s0, s2_floor, max_iter=25)
-                    for w0, s0 in starts]
-            w0, s0, _ = max(runs, key=lambda r: r[2])
-            w, s2, ll = _rayleigh_em(m2c, vc, ac, C, L2, w0, s0, s2_floor)
+            runs = [_rayleigh_em(d.collapsed, d.censor, st, s2_floor, max_iter=25)
+                    for st in _ndf_starts(k, d, sols)]
+            w, s2, ll = _rayleigh_em(d.collapsed, d.censor, max(runs, key=lambda r: r[2])[:2],
+                                     s2_floor)
             sols[k] = (w, s2)
             lls[k] = max(ll + const, lls.get(k - 1, -np.inf))
-            at_floor = (k > 1 and bool(np.any(s2 <= s2_floor * 1.0001))
-                        and not bounded)
+            at_floor = k > 1 and bool(np.any(s2 <= s2_floor * 1.0001)) and not d.bounded
             fits[k] = (bic_score(lls[k], W, n_eff, 2 * k - 1), w, at_floor)
-    k_best, margin, ok = choose_k(fits, n_eff, min_component_samples)
+    k_best, margin, ok = choose_k(fits, n_eff, opts.ndf_min_component_samples)
     bics = {k: f[0] for k, f in fits.items()}
-    info_k = sorted(set(bics) - set(ok))
     w, s2 = sols[k_best]
     sd = np.degrees(np.arctan(np.sqrt(s2)))
-    comps = [(float(x), float(y)) for x, y in zip(w, sd) if x > 1e-12]
-    info["inadmissible_k"] = info_k
-    return MixtureFit(NDFMixture(comps), bics[k_best], bics, n, n_eff,
-                      k_note(k_max, max_components, uniq.size, n_eff, "tilts"), th.size, lls,
-                      bic_margin=margin, info=info)
+    info["inadmissible_k"] = sorted(set(bics) - set(ok))
+    return MixtureFit(NDFMixture([(float(x), float(y)) for x, y in zip(w, sd) if x > 1e-12]),
+                      bics[k_best], bics, n, n_eff,
+                      k_note(k_max, opts.max_components, uniq.size, n_eff, "tilts"), th.size,
+                      lls, bic_margin=margin, info=info)

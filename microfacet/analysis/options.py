@@ -1,4 +1,37 @@
-"""Options of the analysis, and the optics of a scene they resolve to."""
+"""The options of an analysis: one typed tree, one source of defaults.
+
+:class:`AnalysisOptions` holds a section per stage, each a frozen dataclass whose fields carry
+their default, unit, valid range and a line of help (:mod:`microfacet.core.options`):
+
+==============  ======================================================================
+section         stage (module)
+==============  ======================================================================
+``focus``       height from focus (:class:`~microfacet.focus.options.FocusOptions`)
+``mask``        pixels without colour information (:mod:`.mask`, :mod:`.colour_image`)
+``roi``         thickness per region of interest, interference order, exposure (:mod:`.roi`)
+``joint``       facets, their planes and thickness (joint mode: :mod:`.segmentation`,
+                :mod:`.planes`, :mod:`.facet_thickness`, :mod:`.joint`)
+``tilt``        per-pixel tilt from colour (:mod:`.tilt`)
+``fits``        the mixtures and whether the data determine them (:mod:`.distributions`,
+                :mod:`.identification`)
+``optics``      film, substrate, illuminant, exposure, thickness range, colour difference
+==============  ======================================================================
+
+Constructing a section validates it (an :class:`~microfacet.core.errors.InputError` names the
+option's path, e.g. ``roi.size_px``); each stage takes only its section. The command line's
+flags and help are generated from the fields (``cli=True``), and ``summary.json`` records the
+whole tree (:meth:`~microfacet.core.options.Options.to_dict`).
+
+Examples
+--------
+>>> o = AnalysisOptions(mode="seed", roi=RoiOptions(size_px=128))
+>>> o.roi.size_px, o.mask.saturation_min
+(128, 15.0)
+>>> AnalysisOptions.from_dict({"roi": {"size_px": 4}})
+Traceback (most recent call last):
+...
+microfacet.core.errors.InputError: roi.size_px: must be >= 8, got 4
+"""
 
 from __future__ import annotations
 
@@ -7,135 +40,289 @@ from dataclasses import dataclass
 
 from ..colour.difference import METHODS
 from ..core.errors import InputError
-from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, load_set
+from ..core.options import Options, option
+from ..focus.options import FocusOptions
+from ..optics.constants import known_sets, load_set
+from ..optics.defaults import DEFAULT_FILM, DEFAULT_ILLUMINANT, DEFAULT_SUBSTRATE
 
-__all__ = ["MODES", "AnalysisOptions", "SceneOptics", "scene_optics"]
+__all__ = ["MODES", "AnalysisOptions", "FitOptions", "JointOptions", "MaskOptions",
+           "OpticsOptions", "RoiOptions", "Scene", "TiltOptions", "scene_of"]
 
 MODES = ("joint", "seed")
 
 
-@dataclass(frozen=True)
-class AnalysisOptions:
-    """Options of :func:`~microfacet.analysis.pipeline.analyze_stack` (defaults follow the seed).
+def _known_set(name):
+    if name is None:
+        return None
+    try:
+        load_set(name)
+    except ValueError as exc:
+        return str(exc)
+    return None
 
-    Attributes
-    ----------
-    mode : {"joint", "seed"}
-        ``joint`` (default): facet tilts from the height map, thickness from colour;
-        ``seed``: the paper's per-pixel inversion (seed §3.3.3).
-    roi_size_px, roi_stride_px : int
-        ROI side (seed: 255 px) and stride (default = size).
-    saturation_min, value_min : float
-        Mask thresholds on the 0-255 HSV scale (seed: saturation 15).
-    thickness_range_nm : (float, float)
-        Global thickness search range.
-    exposure : float or None
-        Overrides stack.json's ``exposure``; estimated when both are absent.
-    film, substrate, illuminant : str or None
-        Override the stack's (or the defaults).
-    facet_size_um : float
-        Expected facet diameter for the joint mode's segmentation (seed: 1-3 µm).
-    tilt_step_deg : float
-        Tilt grid step of the per-pixel search (refined below it). 1-2° steps measure as
-        accurate at half the time (docs/speed-vs-error.md §3c); whether tilt from colour
-        means anything for a film: docs/conditioning.md.
-    max_components : int
-        Largest number of mixture components tried by BIC.
-    operator, window_px, align : focus options (None = the focus module's defaults).
-    seed : int
-        Random sampling in the ROI fits.
-    delta_e_method : {"CIEDE2000", "CIE94", "CIE76"}
-        The colour difference every stage minimises or reports (seed: ΔE; CIEDE2000, whose
-        cost against the others is in docs/speed-vs-error.md).
 
-    Examples
-    --------
-    >>> AnalysisOptions(mode="seed").validate()
-    >>> try:
-    ...     AnalysisOptions(roi_size_px=4).validate()
-    ... except InputError as exc:
-    ...     print(exc.param)
-    roi_size_px
-    """
-
-    mode: str = "joint"
-    roi_size_px: int = 255
-    roi_stride_px: int | None = None
-    saturation_min: float = 15.0
-    value_min: float = 20.0
-    thickness_range_nm: tuple = (0.0, 400.0)
-    exposure: float | None = None
-    film: str | None = None
-    substrate: str | None = None
-    illuminant: str | None = None
-    facet_size_um: float = 2.0
-    tilt_step_deg: float = 0.5
-    max_components: int = 5
-    operator: str | None = None
-    window_px: int | None = None
-    align: bool | str = False
-    seed: int = 0
-    delta_e_method: str = "CIEDE2000"
-
-    def validate(self) -> None:
-        """Raise :class:`~microfacet.core.errors.InputError` naming the first bad option."""
-        def bad(param, reason):
-            raise InputError(reason, param=param)
-
-        if self.mode not in MODES:
-            bad("mode", f"must be one of {', '.join(MODES)}, got {self.mode!r}")
-        lo, hi = self.thickness_range_nm
-        if not (0 <= lo < hi <= 2000):
-            bad("thickness_range_nm", f"need 0 <= low < high <= 2000, got {lo:g}:{hi:g}")
-        if self.exposure is not None and not (self.exposure > 0 and math.isfinite(self.exposure)):
-            bad("exposure", f"must be > 0, got {self.exposure!r}")
-        if not self.facet_size_um > 0:
-            bad("facet_size_um", f"must be > 0, got {self.facet_size_um!r}")
-        if not 0.05 <= self.tilt_step_deg <= 5:
-            bad("tilt_step_deg", f"must be in [0.05, 5], got {self.tilt_step_deg!r}")
-        if not 1 <= self.max_components <= 10:
-            bad("max_components", f"must be in [1, 10], got {self.max_components!r}")
-        if not self.roi_size_px >= 8:
-            bad("roi_size_px", f"must be >= 8, got {self.roi_size_px!r}")
-        if self.roi_stride_px is not None and not 1 <= self.roi_stride_px <= self.roi_size_px:
-            bad("roi_stride_px", f"must be in [1, roi_size_px], got {self.roi_stride_px!r}")
-        if self.delta_e_method not in METHODS:
-            bad("delta_e_method", f"must be one of {', '.join(METHODS)}, got "
-                                  f"{self.delta_e_method!r}")
-        for param in ("film", "substrate"):
-            name = getattr(self, param)
-            if name is not None:
-                try:
-                    load_set(name)
-                except ValueError as exc:
-                    bad(param, str(exc))
+def _thickness_range(value):
+    try:
+        lo, hi = (float(v) for v in value)
+    except (TypeError, ValueError):
+        return f"expected (low, high) in nm, got {value!r}"
+    if not (0 <= lo < hi <= 2000):
+        return f"need 0 <= low < high <= 2000, got {lo:g}:{hi:g}"
+    return None
 
 
 @dataclass(frozen=True)
-class SceneOptics:
-    """The optics an analysis models: film and substrate sets, illuminant, numerical
-    aperture and the largest facet tilt the objective sees, asin(NA)/2 in degrees."""
+class MaskOptions(Options):
+    """Which pixels carry no colour information (seed §3.3.3 step 2; :mod:`.mask`)."""
+
+    saturation_min: float = option(
+        15.0, help="mask pixels of HSV saturation below this, 0-255 scale (seed: 15)",
+        low=0, high=255, cli=True, metavar="S")
+    value_min: float = option(
+        20.0, help="mask pixels of HSV value below this, 0-255 scale", low=0, high=255,
+        cli=True, metavar="V")
+    shadow_ratio: float = option(
+        0.75, help="mask pixels darker than this fraction of their 9x9 neighbourhood's median "
+                   "value (partly shadowed step walls; 0 disables)", low=0, high=1)
+    steep_ratio: float = option(
+        0.3, help="mask pixels whose linear value is below this fraction of the film's median "
+                  "(tilted past the acceptance; mask.steep_facet_mask explains the value)",
+        low=0, high=1)
+
+
+@dataclass(frozen=True)
+class RoiOptions(Options):
+    """Thickness per region of interest, the interference order and the exposure
+    (:mod:`.roi`)."""
+
+    CLI_PREFIX = "roi-"
+    size_px: int = option(255, help="ROI side (seed: 255 px = 55.1 µm)", unit="px", low=8,
+                          cli=True, metavar="PX")
+    stride_px: int | None = option(None, help="ROI stride (none: the side, no overlap)",
+                                   unit="px", kind=int, low=1, cli=True, metavar="PX")
+    grid_step_nm: float = option(
+        1.0, help="step of the global thickness scan (the minima are >= 20 nm apart; a "
+                  "coarser scan is slower, not faster: docs/speed-vs-error.md §3a)",
+        unit="nm", low=0.05, high=20)
+    sample_px: int = option(256, help="pixels per ROI in the global scan", low=8)
+    refine_px: int = option(8000, help="pixels per ROI in the refinement of the best minima",
+                            low=8)
+    consensus_px: int = option(
+        128, help="pixels per ROI in the interference-order consensus and the exposure scan "
+                  "(512 did not make the order choice robust and hurt mixed ROIs: "
+                  "docs/accuracy.md)", low=8)
+    min_pixels: int = option(20, help="ROIs with fewer unmasked pixels are not fitted", low=1)
+    consensus_half_width_nm: float = option(
+        35.0, help="half-width of the interference-order band chosen for all ROIs together "
+                   "(less than half the ~110 nm spacing of the orders; 0 disables)",
+        unit="nm", low=0)
+    order_margin_de: float = option(
+        2.0, help="a ROI leaves the consensus band only for a minimum better by this",
+        unit="ΔE", low=0)
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.stride_px is not None and self.stride_px > self.size_px:
+            raise InputError(f"must be in [1, `roi.size_px`], got {self.stride_px}",
+                             param="stride_px")
+
+
+@dataclass(frozen=True)
+class JointOptions(Options):
+    """The joint mode: facets from colour and height, a plane per facet from its reliable
+    heights, a thickness per facet from its colour at that tilt (:mod:`.joint`)."""
+
+    facet_size_um: float = option(
+        2.0, help="expected facet diameter for the segmentation (seed: 1-3 µm)", unit="µm",
+        low=0, low_exclusive=True, cli=True, metavar="UM")
+    merge_alpha: float = option(
+        0.01, help="significance of the segment-merge tests (a true edge is kept when its "
+                   "colour or plane difference would arise by chance with a smaller "
+                   "probability)", low=1e-9, high=0.5)
+    max_area_factor: float = option(2.0, help="largest segment, in facet areas", low=1)
+    merge_rounds: int = option(30, help="segment-merge rounds (mutual best pairs each)", low=1)
+    min_plane_pixels: int = option(
+        8, help="fewest reliable heights for a facet plane (3 determine it; 8 leave 5 degrees "
+                "of freedom for the residual that scales its covariance)", low=4)
+    plane_edge_px: float = option(
+        1.0, help="heights closer than this to a facet boundary are not used by its plane",
+        unit="px", low=0)
+    interior_px: float = option(
+        1.5, help="pixels at least this far from a facet boundary give its mean colour "
+                  "(boundaries are partly shadowed)", unit="px", low=0)
+    focus_error_correlation: float = option(
+        0.7, help="correlation area of the focus stage's height errors per window area "
+                  "(window_px²): measured 27-41 px² for the 7 px window on synthetic nd "
+                  "stacks", low=0)
+    export_sigma_um: float = option(
+        1e-4, help="height error assumed for a microscope export that gives none (tiny: the "
+                   "planes' covariance then comes from their residuals)", unit="µm",
+        low=0, low_exclusive=True)
+    order_window_fraction: float = option(
+        0.45, help="half-width of a facet's interference-order window, in colour periods "
+                   "λ/(2n) at 560 nm (the neighbouring orders' look-alikes stay out)",
+        low=0.05, high=0.5)
+    order_switch_de: float = option(
+        1.0, help="a facet leaves its ROI's interference order when another fits its colour "
+                  "better by more than this", unit="ΔE", low=0)
+    order_switch_ratio: float = option(
+        0.5, help="... and with at most this fraction of the ROI order's ΔE (a facet of two "
+                  "regions or of a groove fits neither; without it 1.8 % of the fixture's "
+                  "pixels switched to a wrong order)", low=0, high=1)
+    thickness_step_nm: float = option(
+        0.05, help="final resolution of a facet's thickness (1 nm scan, then ±1 nm at this "
+                   "step, then a parabola)", unit="nm", low=0.001, high=1)
+    exposure_facets: int = option(
+        2000, help="facets (at random) on which the exposure is refined", low=10)
+    exposure_thickness_step_nm: float = option(
+        0.1, help="resolution of the facets' thickness while the exposure is refined",
+        unit="nm", low=0.001, high=1)
+
+
+@dataclass(frozen=True)
+class TiltOptions(Options):
+    """The per-pixel tilt search (:mod:`.tilt`; both modes)."""
+
+    CLI_PREFIX = "tilt-"
+    step_deg: float = option(
+        0.5, help="tilt grid step of the per-pixel search, refined below it (1-2° measure as "
+                  "accurate at half the time: docs/speed-vs-error.md §3c)", unit="°",
+        low=0.05, high=5, cli=True, metavar="DEG")
+    coarse_stride: int = option(
+        4, help="coarse-to-fine search: every this-th grid node first, then those near the "
+                "best (1 = every node; the objective's basins are many degrees wide)", low=1)
+
+
+@dataclass(frozen=True)
+class FitOptions(Options):
+    """The mixtures (:mod:`.mixtures`, :mod:`.ndf_fit`) and whether the data determine them
+    (:mod:`.identification`)."""
+
+    max_components: int = option(
+        5, help="largest number of mixture components tried by BIC", low=1, high=10,
+        cli=True, metavar="K")
+    thickness_sd_floor_nm: float = option(0.1, help="smallest thickness component SD",
+                                          unit="nm", low=0, low_exclusive=True)
+    thickness_min_component_samples: float = option(
+        1.0, help="fewest independent regions a thickness component needs (with two, "
+                  "populations on one region were lost on the generalization sweep)", low=0)
+    thickness_max_samples: int = option(
+        20000, help="thickness samples fitted at most (a reproducible subsample above)", low=10)
+    ndf_sd_floor_deg: float = option(0.05, help="smallest NDF lobe SD", unit="°", low=0,
+                                     low_exclusive=True, high=89)
+    ndf_max_samples: int = option(
+        50000, help="tilt samples fitted at most (a reproducible subsample above)", low=10)
+    ndf_min_component_samples: float = option(2.0, help="fewest facets an NDF lobe needs",
+                                              low=0)
+    min_ndf_facets: int = option(20, help="fewest facets with a height plane for an "
+                                          "identified NDF", low=2)
+    max_width_error: float = option(
+        0.25, help="largest relative 1-σ error of the lobe width for an identified NDF",
+        low=0, low_exclusive=True)
+    max_censored_fraction: float = option(
+        0.5, help="largest share of the surface past the acceptance for an identified NDF",
+        low=0, high=1)
+    ambiguous_order_de: float = option(
+        1.0, help="a ROI or facet whose runner-up interference order fits within this is "
+                  "ambiguous", unit="ΔE", low=0)
+    unexplained_mads: float = option(
+        5.0, help="facets whose ΔE is above median + this × 1.4826 MAD are not explained by "
+                  "the film model (left out of the thickness mixture)", low=0)
+    colour_contrast_factor: float = option(
+        3.0, help="colour carries tilt when a 10° tilt changes it by more than this × the "
+                  "colour error", low=0)
+    excess_delta_e: float = option(
+        1.0, help="warn when the median ΔE is this far above the image's noise floor",
+        unit="ΔE", low=0)
+    sample_tilt_warn_fraction: float = option(
+        0.5, help="warn when the sample's mean plane is tilted by more than this fraction of "
+                  "the NDF's rms lobe width (a tilt m widens a lobe σ to √(σ² + m²))", low=0)
+
+
+@dataclass(frozen=True)
+class OpticsOptions(Options):
+    """What the film model assumes; None takes the stack's value, then the default."""
+
+    film: str | None = option(None, help=f"optical-constant set of the oxide film (stack.json's, "
+                                         f"else {DEFAULT_FILM})", kind=str, check=_known_set,
+                              cli=True)
+    substrate: str | None = option(
+        None, help=f"optical-constant set of the metal (stack.json's, else {DEFAULT_SUBSTRATE})",
+        kind=str, check=_known_set, cli=True)
+    illuminant: str | None = option(
+        None, help=f"light the images are white-balanced to (stack.json's, else "
+                   f"{DEFAULT_ILLUMINANT})", kind=str, cli=True)
+    exposure: float | None = option(
+        None, help="scale from the model's linear sRGB to the image's (stack.json's, else "
+                   "estimated)", kind=float, low=0, low_exclusive=True, cli=True, metavar="E")
+    thickness_range_nm: tuple = option(
+        (0.0, 400.0), help="global thickness search range", unit="nm", kind=tuple,
+        check=_thickness_range, cli=True)
+    delta_e_method: str = option(
+        "CIEDE2000", help="colour difference every stage minimises and reports (seed: ΔE; the "
+                          "cost of the others: docs/speed-vs-error.md)", choices=METHODS,
+        cli=True)
+
+
+@dataclass(frozen=True)
+class AnalysisOptions(Options):
+    """Options of :func:`~microfacet.analysis.pipeline.analyse_stack` (defaults follow the
+    seed; the sections are listed in the module notes)."""
+
+    mode: str = option("joint", help="joint: facet planes + colour; seed: the paper's "
+                                     "per-pixel inversion", choices=MODES, cli=True)
+    seed: int = option(0, help="random sampling in the ROI and exposure fits", low=0)
+    focus: FocusOptions = option(FocusOptions(), help="height from focus")
+    mask: MaskOptions = option(MaskOptions(), help="colour mask")
+    roi: RoiOptions = option(RoiOptions(), help="thickness per ROI")
+    joint: JointOptions = option(JointOptions(), help="joint mode")
+    tilt: TiltOptions = option(TiltOptions(), help="per-pixel tilt")
+    fits: FitOptions = option(FitOptions(), help="mixtures and identification")
+    optics: OpticsOptions = option(OpticsOptions(), help="film model")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """What an analysis knows of the scene before it looks at the colours: the optics it
+    models (film and substrate sets, illuminant, numerical aperture and the largest facet tilt
+    the objective sees, asin(NA)/2 in degrees), the pixel size ``(y, x)`` in µm, whether the
+    height comes from focus (not a microscope's export), the exposure (given, or None: to be
+    estimated) and where it came from, and the seed of the random samples."""
 
     film: str
     substrate: str
     illuminant: str
     numerical_aperture: float
     max_tilt_deg: float
+    pixel_size_um: tuple
+    from_focus: bool
+    exposure: float | None
+    exposure_source: str
+    seed: int = 0
 
-    def to_json(self) -> dict:
+    @property
+    def estimate_exposure(self) -> bool:
+        return self.exposure is None
+
+    def optics_json(self) -> dict:
+        """The optics as ``summary.json`` ``inputs`` records them."""
         return {"film": self.film, "substrate": self.substrate, "illuminant": self.illuminant,
                 "numerical_aperture": self.numerical_aperture}
 
 
-def scene_optics(stack, options: AnalysisOptions) -> SceneOptics:
-    """The options' film, substrate and illuminant, else the stack's, else the defaults."""
-    film = options.film or stack.film or DEFAULT_FILM
-    substrate = options.substrate or stack.substrate or DEFAULT_SUBSTRATE
-    for key, name in (("film", film), ("substrate", substrate)):
-        try:
-            load_set(name)
-        except ValueError as exc:
-            raise InputError(str(exc), param=key) from None
+def scene_of(stack, options: AnalysisOptions) -> Scene:
+    """The scene of ``stack`` under ``options``: the options' film, substrate, illuminant and
+    exposure, else the stack's, else the defaults (the exposure: estimated)."""
+    o = options.optics
+    film = o.film or stack.film or DEFAULT_FILM
+    substrate = o.substrate or stack.substrate or DEFAULT_SUBSTRATE
+    for key, name in (("optics.film", film), ("optics.substrate", substrate)):
+        if name not in known_sets():
+            raise InputError(_known_set(name), param=key)
     na = float(stack.numerical_aperture)
-    return SceneOptics(film, substrate, options.illuminant or stack.illuminant or "D65", na,
-                       math.degrees(math.asin(na)) / 2.0)
+    exposure = o.exposure if o.exposure is not None else stack.exposure
+    source = ("option" if o.exposure is not None else
+              "stack.json" if stack.exposure is not None else "estimated")
+    return Scene(film, substrate, o.illuminant or stack.illuminant or DEFAULT_ILLUMINANT, na,
+                 math.degrees(math.asin(na)) / 2.0, tuple(stack.pixel_size_yx_um),
+                 bool(stack.has_slices), exposure, source, options.seed)

@@ -7,7 +7,6 @@ line and ``batch`` run on the written folder.
 
 from __future__ import annotations
 
-import dataclasses
 import datetime
 import importlib.metadata
 import math
@@ -19,12 +18,19 @@ import numpy as np
 from .. import __version__
 from ..core.densities import cell_edges, pdf_table
 from ..io.outdir import atomic_output_dir
-from ..io.results import json_safe, write_results_files
+from ..io.results import write_results_files
+from ..io.summary import (
+    DeltaE,
+    FacetCounts,
+    Inputs,
+    NdfSection,
+    RoiCounts,
+    Summary,
+    ThicknessSection,
+)
 from .identification import (
-    AMBIGUOUS_ORDER_DE,
     MEDIAN_NOISE_FLOOR_FACTOR,
     NOISE_FLOOR_FACTOR,
-    identification,
     mean_plane_tilt_deg,
 )
 
@@ -63,7 +69,7 @@ def _versions():
 
 
 def _thickness_pdf(r):
-    th = r.thickness_nm[np.isfinite(r.thickness_nm)]
+    th = r.pixels.thickness_nm[np.isfinite(r.pixels.thickness_nm)]
     if not th.size or r.thickness_fit is None:
         return np.empty((0, 3))
     lo, hi = math.floor(th.min()) - 10, math.ceil(th.max()) + 10
@@ -72,24 +78,19 @@ def _thickness_pdf(r):
 
 
 def _ndf_pdf(r):
-    tl = r.tilt_deg[np.isfinite(r.tilt_deg)]
+    tl = r.pixels.tilt_deg[np.isfinite(r.pixels.tilt_deg)]
     if not tl.size or r.ndf_fit is None:
         return np.empty((0, 3))
     # Equal cells of <= 0.5° exactly covering [0, max_tilt] (tilts lie there), at least two
     # (pdf_table's minimum) even for a tiny numerical aperture.
-    n_cells = max(2, math.ceil(r.max_tilt_deg / 0.5 - 1e-9))
-    grid = (np.arange(n_cells) + 0.5) * (r.max_tilt_deg / n_cells)
+    max_tilt = r.scene.max_tilt_deg
+    n_cells = max(2, math.ceil(max_tilt / 0.5 - 1e-9))
+    grid = (np.arange(n_cells) + 0.5) * (max_tilt / n_cells)
     # Tilts at 0 or max_tilt may fall a rounding error outside the outer cell edges (float32
     # map, edges from the grid): clip them onto those edges.
     _, edges = cell_edges(grid)
     tl = np.clip(tl.astype(np.float64), edges[0], edges[-1])
     return pdf_table(tl, r.ndf_fit.mixture, grid=grid)
-
-
-def _ambiguous(roi):
-    fit = np.isfinite(roi.thickness_nm)
-    return (fit & (np.nan_to_num(roi.ambiguity_delta_e, nan=np.inf) < AMBIGUOUS_ORDER_DE)
-            ).astype(int)
 
 
 def _facet_rows(joint):
@@ -101,39 +102,47 @@ def _facet_rows(joint):
                             th.delta_e, th.delta_e_other_order, cens])
 
 
+def _tables(r) -> dict:
+    roi = r.roi
+    pix_mean, pix_sd = roi.pixel_stats(r.pixels.thickness_nm)
+    roi_rows = np.column_stack([roi.row0, roi.col0, np.full(roi.row0.size, roi.height_px),
+                                roi.thickness_nm, roi.mean_delta_e, roi.n_pixels,
+                                np.full(roi.row0.size, roi.width_px),
+                                roi.runner_up_thickness_nm, roi.runner_up_delta_e,
+                                roi.ambiguity_delta_e, r.distributions.roi_ambiguous.astype(int),
+                                pix_mean, pix_sd])
+    tables = {"thickness_roi": (roi_rows, _ROI_COLUMNS, _ROI_FMT)}
+    if r.joint is not None:
+        tables["facets"] = (_facet_rows(r.joint), _FACET_COLUMNS, _FACET_FMT)
+    tables["thickness_pdf"] = (_thickness_pdf(r), ["thickness_nm", "density",
+                                                   "mixture_density"], "%.6g")
+    tables["ndf_pdf"] = (_ndf_pdf(r), ["tilt_deg", "density", "mixture_density"], "%.6g")
+    return tables
+
+
 def save_results(result, folder) -> None:
     """Write the results of ``result`` into the existing folder ``folder`` (normally the
     temporary folder of an :class:`~microfacet.io.outdir.OutputFolder`)."""
     r = result
     t0 = time.perf_counter()
     rel = np.isfinite(r.focus.height_um)
-    roi = r.roi
-    pix_mean, pix_sd = roi.pixel_stats(r.thickness_nm)
-    roi_rows = np.column_stack([roi.row0, roi.col0, np.full(roi.row0.size, roi.height_px),
-                                roi.thickness_nm, roi.mean_delta_e, roi.n_pixels,
-                                np.full(roi.row0.size, roi.width_px),
-                                roi.runner_up_thickness_nm, roi.runner_up_delta_e,
-                                roi.ambiguity_delta_e, _ambiguous(roi), pix_mean, pix_sd])
-    tables = {"thickness_roi": (roi_rows, _ROI_COLUMNS, _ROI_FMT)}
-    if r.joint is not None:
-        tables["facets"] = (_facet_rows(r.joint), _FACET_COLUMNS, _FACET_FMT)
+    px = r.pixels
     maps = {
-        "height_um": r.focus.height_um, "normals": np.where(rel[..., None], r.normals, np.nan),
-        "reliability_db": r.focus.reliability_db, "tilt_height_deg": r.tilt_height_deg,
-        "thickness_nm": r.thickness_nm, "tilt_deg": r.tilt_deg,
-        "tilt_sigma_deg": r.tilt_sigma_deg, "delta_e": r.delta_e,
-        "colour_weight": r.colour_weight, "mask": r.mask.mask, "facets": r.facets,
+        "height_um": r.focus.height_um,
+        "normals": np.where(rel[..., None], r.surface.normals, np.nan),
+        "reliability_db": r.focus.reliability_db, "tilt_height_deg": r.surface.tilt_deg,
+        "thickness_nm": px.thickness_nm, "tilt_deg": px.tilt_deg,
+        "tilt_sigma_deg": px.tilt_sigma_deg, "delta_e": px.delta_e,
+        "colour_weight": px.colour_weight, "mask": r.colour.mask.mask,
+        "facets": None if r.joint is None else r.joint.facets,
     }
     summary = build_summary(r)
-    summary["timings_s"]["write"] = round(time.perf_counter() - t0, 4)
+    summary.timings_s["write"] = round(time.perf_counter() - t0, 4)
     write_results_files(
-        folder, summary=summary, maps=maps,
+        folder, summary=summary.to_json(), maps=maps,
         images={"all_in_focus": (r.focus.all_in_focus,
                                  16 if r.stack.dtype == np.uint16 else 8)},
-        tables={**tables,
-                "thickness_pdf": (_thickness_pdf(r), ["thickness_nm", "density",
-                                                      "mixture_density"], "%.6g"),
-                "ndf_pdf": (_ndf_pdf(r), ["tilt_deg", "density", "mixture_density"], "%.6g")})
+        tables=_tables(r))
 
 
 def write_results(result, out, *, overwrite=False) -> Path:
@@ -170,79 +179,76 @@ def write_results(result, out, *, overwrite=False) -> Path:
     return Path(out)
 
 
-def build_summary(r) -> dict:
-    """``summary.json`` of an :class:`~microfacet.analysis.pipeline.AnalysisResult` (the
-    keys of docs/results-format.md)."""
+def _inputs(r) -> Inputs:
     st = r.stack
-    roi = r.roi
-    cwt = r.colour_weight[np.isfinite(r.colour_weight)]
-    opts = dataclasses.asdict(r.options)
-    empty_mix = {"components": [], "bic": None}
-    thick_mix = r.thickness_fit.to_json() if r.thickness_fit is not None else empty_mix
-    ndf_mix = r.ndf_fit.to_json() if r.ndf_fit is not None else empty_mix
-    ok_roi = np.isfinite(roi.thickness_nm)
-    floor = NOISE_FLOOR_FACTOR * r.noise_de
-    ndf_id = dict(zip(("identified", "reason"), identification(r.ndf_fit, "ndf")))
-    thick_mix.update(zip(("identified", "reason"), identification(r.thickness_fit,
-                                                                  "thickness")))
-    ndf_mix.update(ndf_id)
-    s = {
-        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "mode": r.options.mode,
-        "inputs": {"stack": str(st.path), "shape": list(st.shape), "n_slices": st.n_slices,
-                   "pixel_size_um": st.pixel_size_um,
-                   "z_um_range": ([float(np.min(st.z_um)), float(np.max(st.z_um))]
-                                  if st.n_slices else None),
-                   "height_source": "focus stack" if st.n_slices else "microscope export",
-                   **r.optics},
-        "parameters": opts,
-        "versions": _versions(),
-        "film": r.optics["film"], "substrate": r.optics["substrate"],
-        "illuminant": r.optics["illuminant"],
-        "thickness": {
-            "mixture": thick_mix,
-            "roi": {"count": int(roi.thickness_nm.size), "fitted": int(ok_roi.sum()),
-                    "thickness_nm_mean": float(np.mean(roi.thickness_nm[ok_roi]))
-                    if ok_roi.any() else None,
-                    "ambiguous_count": int(_ambiguous(roi).sum()),
-                    "ambiguous_delta_e": AMBIGUOUS_ORDER_DE},
-        },
-        "ndf": {**ndf_id, "mixture": ndf_mix, "max_tilt_deg": r.max_tilt_deg,
-                "mean_plane_tilt_deg": mean_plane_tilt_deg(r.joint),
-                "histogram": "per-pixel tilt of unmasked pixels (projected-area density)"},
-        "facets": _facet_summary(r.joint),
-        "exposure": r.exposure,
-        "exposure_source": r.exposure_source,
-        "delta_e": {**r.delta_e_stats, "noise_floor_mean": floor,
-                    "noise_floor_median": MEDIAN_NOISE_FLOOR_FACTOR * r.noise_de},
-        "masked_fraction": r.mask.fraction,
-        "mask": r.mask.fractions(),
-        "colour_noise_de": r.noise_de,
-        "tilt_information": {
-            "colour_weight_mean": float(cwt.mean()) if cwt.size else None,
+    return Inputs(stack=str(st.path), shape=list(st.shape), n_slices=st.n_slices,
+                  pixel_size_um=st.pixel_size_um,
+                  z_um_range=([float(np.min(st.z_um)), float(np.max(st.z_um))]
+                              if st.n_slices else None),
+                  height_source="focus stack" if st.n_slices else "microscope export",
+                  **r.scene.optics_json())
+
+
+def _thickness_section(r) -> ThicknessSection:
+    roi, dist = r.roi, r.distributions
+    ok = np.isfinite(roi.thickness_nm)
+    mix = dist.thickness.to_json() if dist.thickness is not None else {"components": [],
+                                                                       "bic": None}
+    mix.update(dist.thickness_judgement.to_json())
+    return ThicknessSection(mix, RoiCounts(
+        count=int(roi.thickness_nm.size), fitted=int(ok.sum()),
+        thickness_nm_mean=float(np.mean(roi.thickness_nm[ok])) if ok.any() else None,
+        ambiguous_count=int(dist.roi_ambiguous.sum()),
+        ambiguous_delta_e=r.options.fits.ambiguous_order_de))
+
+
+def _ndf_section(r) -> NdfSection:
+    dist = r.distributions
+    mix = dist.ndf.to_json() if dist.ndf is not None else {"components": [], "bic": None}
+    return NdfSection(**dist.ndf_judgement.to_json(), mixture=mix,
+                      max_tilt_deg=r.scene.max_tilt_deg,
+                      mean_plane_tilt_deg=mean_plane_tilt_deg(r.joint),
+                      histogram="per-pixel tilt of unmasked pixels (projected-area density)")
+
+
+def _tilt_information(px) -> dict:
+    cwt = px.colour_weight[np.isfinite(px.colour_weight)]
+    return {"colour_weight_mean": float(cwt.mean()) if cwt.size else None,
             "colour_dominated_fraction": float(np.mean(cwt > 0.5)) if cwt.size else None,
-            "tilt_sigma_deg_median": float(np.nanmedian(r.tilt_sigma_deg))
-            if np.isfinite(r.tilt_sigma_deg).any() else None,
-        },
-        "height": {"unreliable_fraction": float(np.mean(~np.isfinite(r.focus.height_um)))},
-        "colour_table": {"spectral_step_nm": r.table.spectral_step_nm,
-                         "spectral_error_de00": r.table.spectral_error_de00,
-                         "interp_error_de00": r.table.interp_error_de00,
-                         "theta_step_deg": r.table.theta_step_deg,
-                         "thickness_step_nm": r.table.thickness_step_nm},
-        "warnings": r.warnings,
-        "timings_s": dict(r.timings_s),
-    }
-    return json_safe(s)
+            "tilt_sigma_deg_median": float(np.nanmedian(px.tilt_sigma_deg))
+            if np.isfinite(px.tilt_sigma_deg).any() else None}
 
 
-def _facet_summary(joint):
+def build_summary(r) -> Summary:
+    """The :class:`~microfacet.io.summary.Summary` of an
+    :class:`~microfacet.analysis.pipeline.AnalysisResult` (docs/results-format.md)."""
+    table, noise = r.model.table, r.colour.noise_de
+    return Summary(
+        created=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        mode=r.options.mode, inputs=_inputs(r), parameters=r.options.to_dict(),
+        versions=_versions(), thickness=_thickness_section(r), ndf=_ndf_section(r),
+        facets=_facet_summary(r.joint), exposure=r.exposure,
+        exposure_source=r.scene.exposure_source,
+        delta_e=DeltaE(**r.delta_e_stats, noise_floor_mean=NOISE_FLOOR_FACTOR * noise,
+                       noise_floor_median=MEDIAN_NOISE_FLOOR_FACTOR * noise),
+        masked_fraction=r.colour.mask.fraction, mask=r.colour.mask.fractions(),
+        colour_noise_de=noise, tilt_information=_tilt_information(r.pixels),
+        height={"unreliable_fraction": float(np.mean(~np.isfinite(r.focus.height_um)))},
+        colour_table={"spectral_step_nm": table.spectral_step_nm,
+                      "spectral_error_de00": table.spectral_error_de00,
+                      "interp_error_de00": table.interp_error_de00,
+                      "theta_step_deg": table.theta_step_deg,
+                      "thickness_step_nm": table.thickness_step_nm},
+        warnings=[w.plain() for w in r.warnings], timings_s=dict(r.timings_s))
+
+
+def _facet_summary(joint) -> FacetCounts | None:
     """``summary.json`` ``facets`` (joint mode; None in seed mode)."""
     if joint is None:
         return None
     pl, area = joint.planes, joint.area_px.astype(np.float64)
     tot = max(float(area.sum()), 1.0)
-    return {"count": int(area.size), "median_area_px": float(np.median(area)),
-            "with_height_plane": int(pl.fitted.sum()),
-            "height_plane_area_fraction": float(area[pl.fitted].sum() / tot),
-            "censored_area_fraction": float(joint.censored.sum() / tot)}
+    return FacetCounts(count=int(area.size), median_area_px=float(np.median(area)),
+                       with_height_plane=int(pl.fitted.sum()),
+                       height_plane_area_fraction=float(area[pl.fitted].sum() / tot),
+                       censored_area_fraction=float(joint.censored.sum() / tot))

@@ -38,9 +38,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..colour.colorimetry import xyz_to_lab
-from ..colour.difference import delta_e
 from ..core.lazy import load
+from .options import RoiOptions
+from .search import local_minima, parabola
 
 ndimage = load("scipy.ndimage")
 optimize = load("scipy.optimize")
@@ -48,6 +48,11 @@ optimize = load("scipy.optimize")
 __all__ = ["RoiFit", "fit_roi_thickness", "nearest_roi_index", "roi_grid", "thickness_per_roi"]
 
 log = logging.getLogger(__name__)
+
+#: The exposure scan: log-spaced over this range, then a bounded refinement to this
+#: tolerance in log exposure.
+EXPOSURE_SCAN = (0.25, 4.0, 25)
+EXPOSURE_XATOL = 0.003
 
 
 def _starts(n, size, stride):
@@ -63,7 +68,7 @@ def _starts(n, size, stride):
     return starts, size
 
 
-def roi_grid(shape, *, size_px=255, stride_px=None):
+def roi_grid(shape, *, size_px, stride_px=None):
     """Square regions of interest tiling an image.
 
     Parameters
@@ -71,7 +76,7 @@ def roi_grid(shape, *, size_px=255, stride_px=None):
     shape : (int, int)
         Image height and width.
     size_px : int
-        ROI side (the seed's 255 px). An image smaller than that gives one ROI of the
+        ROI side (the seed's 255 px: :class:`~.options.RoiOptions`). An image smaller than that gives one ROI of the
         image's size along that axis.
     stride_px : int, optional
         Step between ROI origins. By default (``size_px``) the axis is cut into
@@ -133,11 +138,9 @@ class RoiFit:
     thickness_nm : ndarray
         Best thickness (NaN where the ROI has too few unmasked pixels).
     mean_delta_e : ndarray
-        Mean ΔE00 of the ROI's unmasked pixels at the best thickness.
+        Mean ΔE of the ROI's unmasked pixels at the best thickness.
     runner_up_thickness_nm, runner_up_delta_e : ndarray
         The best other local minimum of the mean-ΔE curve.
-    ambiguity_delta_e : ndarray
-        ``runner_up_delta_e − mean_delta_e`` (small: the interference order is uncertain).
     n_pixels : ndarray of int
         Unmasked pixels used.
     exposure : float
@@ -145,7 +148,7 @@ class RoiFit:
     grid_nm : ndarray
         The global thickness grid of the scan.
     curves : ndarray, shape (n_roi, n_grid)
-        Mean ΔE00 of the pixel sample of each ROI along the grid.
+        Mean ΔE of the pixel sample of each ROI along the grid.
     rows, cols : list of int
         ROI origins along each axis (the ROIs are their product, row-major).
     """
@@ -158,14 +161,18 @@ class RoiFit:
     mean_delta_e: np.ndarray
     runner_up_thickness_nm: np.ndarray
     runner_up_delta_e: np.ndarray
-    ambiguity_delta_e: np.ndarray
     n_pixels: np.ndarray
-    exposure: float
-    exposure_estimated: bool
-    grid_nm: np.ndarray
-    curves: np.ndarray
+    exposure: float = 1.0
+    exposure_estimated: bool = False
+    grid_nm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    curves: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     rows: list = field(default_factory=list)
     cols: list = field(default_factory=list)
+
+    @property
+    def ambiguity_delta_e(self) -> np.ndarray:
+        """``runner_up_delta_e − mean_delta_e`` (small: the interference order is uncertain)."""
+        return self.runner_up_delta_e - self.mean_delta_e
 
     def pixel_stats(self, thickness_nm) -> tuple[np.ndarray, np.ndarray]:
         """Mean and SD (nm) of the finite per-pixel thicknesses inside each ROI's window.
@@ -173,8 +180,8 @@ class RoiFit:
         The single least-ΔE fit (:attr:`thickness_nm`) of a ROI mixing populations is no
         summary of it; these are (NaN for a ROI without pixels).
 
-        >>> r = RoiFit(np.array([0]), np.array([0]), 2, 2, *[np.zeros(1)] * 5,
-        ...            np.zeros(1, int), 1.0, False, np.zeros(1), np.zeros((1, 1)))
+        >>> z = np.zeros(1)
+        >>> r = RoiFit(np.array([0]), np.array([0]), 2, 2, z, z, z, z, np.zeros(1, int))
         >>> [round(float(v[0]), 3) for v in r.pixel_stats([[100.0, 110.0], [np.nan, 120.0]])]
         [110.0, 8.165]
         """
@@ -195,69 +202,154 @@ class RoiFit:
         return ri[:, None] * len(self.cols) + ci[None, :]
 
 
-def _model_lab(xyz, exposure, white):
-    return xyz_to_lab((xyz * exposure).astype(np.float32),
-                            white=white.astype(np.float32))
+@dataclass
+class _Sample:
+    """One ROI's pixels: the model XYZ of a random sample along the grid (exposure 1), its
+    Lab, and every usable pixel's coordinates."""
+
+    xyz: np.ndarray
+    lab: np.ndarray
+    yy: np.ndarray
+    xx: np.ndarray
 
 
-def _curve(xyz_s, lab_s, exposure, white, method):
-    """Mean ΔE00 over the sample for every grid thickness: xyz_s (n, D, 3), lab_s (n, 3) → (D,)."""
-    de = delta_e(_model_lab(xyz_s, exposure, white), lab_s[:, None, :], method=method)
-    return de.mean(axis=0)
+def _curve(model, xyz, lab):
+    """Mean ΔE over a sample for every grid thickness: xyz (n, D, 3), lab (n, 3) → (D,)."""
+    return model.difference(model.lab_from_xyz(xyz), lab[:, None, :]).mean(axis=0)
 
 
-def _band_curve(xyz_s, lab_s, white, grid, half_width_nm, exposure=None, method="CIEDE2000"):
-    """Band score: mean over pixels of each pixel's best ΔE00 within ±half_width of d.
+def _band_curve(model, xyz, lab, grid, half_width_nm, *, invariant):
+    """Band score: mean over pixels of each pixel's best ΔE within ±half_width of d.
 
     Each pixel may take its own thickness inside the band (ROIs span several thickness
-    regions). With ``exposure=None`` the model's Lab is rescaled to each pixel's L*: in
-    CIELAB's cube-root regime an exposure e scales L*, a*, b* together by e^(1/3), so this
+    regions). ``invariant``: the model's Lab is rescaled to each pixel's L* (at exposure 1):
+    in CIELAB's cube-root regime an exposure e scales L*, a*, b* together by e^(1/3), so this
     compares hue and chroma only, whatever the exposure.
     """
-    if exposure is None:
-        model = _model_lab(xyz_s, 1.0, white)
-        model = model * (lab_s[:, None, 0:1] / np.maximum(model[..., 0:1], 1e-3))
+    if invariant:
+        m = model.with_exposure(1.0).lab_from_xyz(xyz)
+        m = m * (lab[:, None, 0:1] / np.maximum(m[..., 0:1], 1e-3))
     else:
-        model = _model_lab(xyz_s, exposure, white)
-    de = delta_e(model, lab_s[:, None, :], method=method)
+        m = model.lab_from_xyz(xyz)
+    de = model.difference(m, lab[:, None, :])
     step = grid[1] - grid[0] if grid.size > 1 else 1.0
     k = max(1, int(round(half_width_nm / step)))
     return ndimage.minimum_filter1d(de, size=2 * k + 1, axis=1, mode="nearest").mean(axis=0)
 
 
-def _local_minima(curve):
-    c = np.where(np.isfinite(curve), curve, np.inf)
-    padded = np.concatenate([[np.inf], c, [np.inf]])
-    is_min = (padded[1:-1] <= padded[:-2]) & (padded[1:-1] < padded[2:])
-    idx = np.flatnonzero(is_min & np.isfinite(c))
-    return idx[np.argsort(c[idx])]
+def _samples(lab, tilt, usable, rois, model, grid, options, rng):
+    """Per ROI (row-major) a :class:`_Sample`, or None with fewer than ``min_pixels``."""
+    rows, cols, (rh, rw) = rois
+    out = []
+    for r0 in rows:
+        for c0 in cols:
+            yy, xx = np.nonzero(usable[r0:r0 + rh, c0:c0 + rw])
+            yy, xx = yy + r0, xx + c0
+            if yy.size < options.min_pixels:
+                out.append(None)
+                continue
+            pick = rng.choice(yy.size, min(options.sample_px, yy.size), replace=False)
+            ys, xs = yy[pick], xx[pick]
+            xyz = model.xyz(tilt[ys, xs][:, None], grid[None, :]).astype(np.float32)
+            out.append(_Sample(xyz, lab[ys, xs], yy, xx))
+    return out
 
 
-def _fine_minimum(curve_at, centre, half_width, lo, hi, step):
-    """The node of least ``curve_at`` on a ``step`` grid within ±``half_width`` of
-    ``centre`` (clipped to [lo, hi])."""
-    nodes = np.arange(centre - half_width, centre + half_width + 1e-9, step)
+def _order_band(valid, model, grid, options):
+    """The interference order, from hue and chroma alone (before the exposure is known): the
+    band of ±``consensus_half_width_nm`` whose ROIs' mean best in-band ΔE is least."""
+    hw = options.consensus_half_width_nm
+    if hw <= 0 or not valid or grid.size <= 2:
+        return None
+    n = options.consensus_px
+    score = np.mean([_band_curve(model, s.xyz[:n], s.lab[:n], grid, hw, invariant=True)
+                     for s in valid], axis=0)
+    centre = float(grid[int(np.argmin(score))])
+    log.info("interference-order consensus (exposure-invariant): %.1f-%.1f nm",
+             centre - hw, centre + hw)
+    return centre - hw, centre + hw
+
+
+def _estimate_exposure(valid, model, grid, band, options):
+    """Exposure minimising the ROIs' mean best median ΔE (within the order band, if any)."""
+    n = options.consensus_px
+    sub = [(s.xyz[:n], s.lab[:n]) for s in valid]
+    inside = (np.ones(grid.size, bool) if band is None
+              else (grid >= band[0]) & (grid <= band[1]))
+
+    def objective(log_e):
+        # Each pixel at its best thickness in the band; the median over pixels (robust to
+        # partly shadowed pixels), averaged over ROIs.
+        m = model.with_exposure(math.exp(log_e))
+        return float(np.mean([np.median(model.difference(
+            m.lab_from_xyz(x[:, inside]), lab_s[:, None, :]).min(axis=1)) for x, lab_s in sub]))
+
+    lo, hi, count = EXPOSURE_SCAN
+    log_grid = np.linspace(math.log(lo), math.log(hi), count)
+    vals = np.array([objective(g) for g in log_grid])
+    i = int(np.argmin(vals))
+    a, b = log_grid[max(i - 1, 0)], log_grid[min(i + 1, log_grid.size - 1)]
+    opt = optimize.minimize_scalar(objective, bounds=(a, b), method="bounded",
+                                   options={"xatol": EXPOSURE_XATOL})
+    return float(math.exp(opt.x if opt.fun <= vals[i] else log_grid[i]))
+
+
+def _candidate_minima(curve, grid, band, margin_de):
+    """The curve's local minima, best first; inside the order band first unless one outside
+    is better by more than ``margin_de``. Returns the minima and whether the band chose."""
+    minima = local_minima(curve)
+    if band is None or not minima.size:
+        return minima, False
+    inside = minima[(grid[minima] >= band[0]) & (grid[minima] <= band[1])]
+    if inside.size and curve[minima[0]] >= curve[inside[0]] - margin_de:
+        return np.concatenate([inside[:1], minima[minima != inside[0]]]), True
+    return minima, False
+
+
+def _refine_minimum(curve_at, centre, step_nm, limits):
+    """A minimum of the mean-ΔE curve below the grid step: ±1 grid step at 0.25 nm, then
+    ±0.25 nm at 0.05 nm about the best (the mean ΔE over thousands of pixels is smooth at
+    that scale: 20 evaluations, not 41), then a parabola. Returns the thickness."""
+    lo, hi = limits
+    nodes = np.arange(centre - step_nm, centre + step_nm + 1e-9, 0.25)
     nodes = nodes[(nodes >= lo) & (nodes <= hi)]
-    if nodes.size == 0:
-        return float(np.clip(centre, lo, hi))
-    return float(nodes[int(np.argmin(curve_at(nodes)))])
+    mid = float(np.clip(centre, lo, hi)) if nodes.size == 0 else float(
+        nodes[int(np.argmin(curve_at(nodes)))])
+    fine = np.arange(mid - 0.25, mid + 0.25 + 1e-9, 0.05)
+    fine = fine[(fine >= lo) & (fine <= hi)]
+    c = curve_at(fine)
+    k = int(np.argmin(c))
+    if 0 < k < len(c) - 1:
+        off, _, _ = parabola(c[k - 1], c[k], c[k + 1])
+        return float(fine[k] + float(off) * (fine[1] - fine[0]))
+    return float(fine[k])
 
 
-def _parabola(x, y, i):
-    """Vertex of the parabola through (i-1, i, i+1) of a uniform grid, clamped to ±1 step."""
-    if i <= 0 or i >= len(y) - 1:
-        return float(x[i])
-    y0, y1, y2 = y[i - 1], y[i], y[i + 1]
-    den = y0 - 2 * y1 + y2
-    off = 0.5 * (y0 - y2) / den if den > 0 else 0.0
-    return float(x[i] + np.clip(off, -1, 1) * (x[1] - x[0]))
+def _fit_one(s, curve, fit, model, options, rng):
+    """The two best minima of one ROI refined on a larger sample: ((ΔE, d), (ΔE, d))."""
+    grid, band = fit["grid"], fit["band"]
+    minima, by_band = _candidate_minima(curve, grid, band, options.order_margin_de)
+    pick = rng.choice(s.yy.size, min(options.refine_px, s.yy.size), replace=False)
+    yr, xr = s.yy[pick], s.xx[pick]
+    t_r, lab_r = fit["tilt"][yr, xr], fit["lab"][yr, xr]
+
+    def curve_at(d):
+        return _curve(model, model.xyz(t_r[:, None], d[None, :]).astype(np.float32), lab_r)
+
+    res = []
+    for j in minima[:2]:
+        d = _refine_minimum(curve_at, float(grid[j]), options.grid_step_nm,
+                            model.thickness_range_nm)
+        de = float(_curve(model, model.xyz(t_r, d)[:, None, :].astype(np.float32), lab_r)[0])
+        res.append((de, d))
+    if not by_band:
+        res.sort()
+    return res + [(np.nan, np.nan)] * (2 - len(res))
 
 
-def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
-                      grid_step_nm=1.0, sample_px=256, refine_px=8000, min_pixels=20,
-                      consensus_half_width_nm=35.0, order_margin_de=2.0,
-                      seed=0, delta_e_method="CIEDE2000") -> RoiFit:
-    """Thickness of least mean ΔE00 per ROI, and the exposure if not given.
+def fit_roi_thickness(lab, tilt_deg, mask, model, options: RoiOptions, *, rois, exposure=None,
+                      seed=0) -> RoiFit:
+    """Thickness of least mean ΔE per ROI, and the exposure if not given.
 
     Parameters
     ----------
@@ -267,136 +359,62 @@ def fit_roi_thickness(lab, tilt_deg, mask, table, *, rois, exposure=None,
         Facet tilt per pixel from the height map (NaN = unknown: pixel not used).
     mask : ndarray of bool, shape (H, W)
         True where the pixel carries no colour information.
-    table : microfacet.colour.table.ColourTable
-        Must cover the tilts and the thickness range to search.
+    model : FilmColourModel
+        The film colour (its table must cover the tilts and the thickness range to search);
+        its exposure is not used.
+    options : RoiOptions
+        The grid step, pixel samples and the interference-order consensus (see the module
+        notes and the fields' help).
     rois : tuple
         ``(rows, cols, (h, w))`` from :func:`roi_grid`.
     exposure : float, optional
         Known exposure; estimated when None.
-    grid_step_nm : float
-        Step of the global thickness scan (the minima are ≥ 20 nm apart). The time is set
-        by ``refine_px``; a coarser scan is slower, not faster (docs/speed-vs-error.md §3a).
-    sample_px, refine_px : int
-        Pixels per ROI used for the global scan / for the refinement. The order consensus
-        uses 128 of them. More does not make the order choice robust: at 12-15 % image
-        noise a different 1 of 42 synthetic stacks gets the wrong order with 128 and with
-        512, always flagged (``ambiguity_delta_e`` < 1), and 512 made mixed-population ROIs
-        worse (docs/accuracy.md).
-    min_pixels : int
-        ROIs with fewer unmasked pixels get NaN.
-    consensus_half_width_nm, order_margin_de : float
-        Interference-order consensus: the band of ±``consensus_half_width_nm`` (less than
-        half the ~110 nm spacing of the orders) that minimises the ROIs' summed best mean ΔE
-        within it is the sample's order; each ROI takes its best minimum inside the band,
-        unless a minimum outside is better by more than ``order_margin_de`` (a sample that
-        really spans two orders). 0 disables the consensus.
-    delta_e_method : {"CIEDE2000", "CIE94", "CIE76"}
-        Colour-difference formula (:func:`microfacet.colour.difference.delta_e`); the seed
-        and the defaults use CIEDE2000 (docs/speed-vs-error.md compares the others).
+    seed : int
+        Random pixel samples.
 
     Returns
     -------
     RoiFit
     """
-    rows, cols, (rh, rw) = rois
     lab = np.asarray(lab, dtype=np.float32)
     tilt = np.asarray(tilt_deg, dtype=np.float64)
-    t_lo, t_hi = float(table.theta_deg[0]), float(table.theta_deg[-1])
+    t_lo, t_hi = model.theta_range_deg
     usable = ~np.asarray(mask, bool) & np.isfinite(tilt) & np.all(np.isfinite(lab), axis=-1)
     tilt = np.clip(np.where(np.isfinite(tilt), tilt, t_lo), t_lo, t_hi)
-    d_lo, d_hi = float(table.thickness_nm[0]), float(table.thickness_nm[-1])
-    grid = np.arange(d_lo, d_hi + 1e-9, grid_step_nm)
-    white = table.white_xyz
+    d_lo, d_hi = model.thickness_range_nm
+    grid = np.arange(d_lo, d_hi + 1e-9, options.grid_step_nm)
     rng = np.random.default_rng(seed)
-
-    samples = []  # per ROI: (xyz (n, D, 3), lab (n, 3), idx of all usable pixels)
-    for r0 in rows:
-        for c0 in cols:
-            sub = usable[r0:r0 + rh, c0:c0 + rw]
-            yy, xx = np.nonzero(sub)
-            yy, xx = yy + r0, xx + c0
-            if yy.size < min_pixels:
-                samples.append(None)
-                continue
-            pick = rng.choice(yy.size, min(sample_px, yy.size), replace=False)
-            ys, xs = yy[pick], xx[pick]
-            xyz = table.xyz_at(tilt[ys, xs][:, None], grid[None, :]).astype(np.float32)
-            samples.append((xyz, lab[ys, xs], yy, xx))
-
+    samples = _samples(lab, tilt, usable, rois, model, grid, options, rng)
     valid = [s for s in samples if s is not None]
-    band = None
-    if consensus_half_width_nm > 0 and valid and grid.size > 2:
-        # The interference order, from hue and chroma alone (before the exposure is known).
-        score = np.mean([_band_curve(x[:128], lab_s[:128], white, grid, consensus_half_width_nm,
-                                     method=delta_e_method)
-                         for x, lab_s, _, _ in valid], axis=0)
-        centre = float(grid[int(np.argmin(score))])
-        band = (centre - consensus_half_width_nm, centre + consensus_half_width_nm)
-        log.info("interference-order consensus (exposure-invariant): %.1f-%.1f nm", *band)
+    band = _order_band(valid, model, grid, options)
     estimated = exposure is None
     if estimated:
-        exposure = (_estimate_exposure(valid, white, grid, band, delta_e_method) if valid
-                    else 1.0)
+        exposure = _estimate_exposure(valid, model, grid, band, options) if valid else 1.0
         log.info("estimated exposure %.4f", exposure)
-    elif not (np.isfinite(exposure) and exposure > 0):
-        raise ValueError(f"exposure: must be > 0, got {exposure!r}")
-
+    model = model.with_exposure(exposure)
     n = len(samples)
-    out = {k: np.full(n, np.nan) for k in ("d", "de", "d2", "de2")}
-    npx = np.zeros(n, dtype=np.int64)
     curves = np.full((n, grid.size), np.nan, dtype=np.float32)
     for i, s in enumerate(samples):
         if s is not None:
-            curves[i] = _curve(s[0], s[1], exposure, white, delta_e_method)
+            curves[i] = _curve(model, s.xyz, s.lab)
+    best = np.full((n, 2, 2), np.nan)
+    npx = np.zeros(n, dtype=np.int64)
+    fit = {"grid": grid, "band": band, "tilt": tilt, "lab": lab}
     for i, s in enumerate(samples):
-        if s is None:
-            continue
-        xyz, lab_s, yy, xx = s
-        npx[i] = yy.size
-        curve = curves[i]
-        minima = _local_minima(curve)
-        chosen_by_consensus = False
-        if band is not None and minima.size:
-            inside = minima[(grid[minima] >= band[0]) & (grid[minima] <= band[1])]
-            if inside.size and curve[minima[0]] >= curve[inside[0]] - order_margin_de:
-                minima = np.concatenate([inside[:1], minima[minima != inside[0]]])
-                chosen_by_consensus = True
-        # Refine the two best minima on a larger sample at 0.05 nm.
-        pick = rng.choice(yy.size, min(refine_px, yy.size), replace=False)
-        yr, xr = yy[pick], xx[pick]
-        res = []
-        t_r, lab_r = tilt[yr, xr][:, None], lab[yr, xr]
-
-        def curve_at(d):
-            xyz_f = table.xyz_at(t_r, d[None, :]).astype(np.float32)
-            return _curve(xyz_f, lab_r, exposure, white, delta_e_method)
-
-        for j in minima[:2]:
-            # ±1 grid step at 0.25 nm, then ±0.25 nm at 0.05 nm about the best: the mean ΔE
-            # over thousands of pixels is smooth at that scale (20 evaluations, not 41)
-            mid = _fine_minimum(curve_at, float(grid[j]), grid_step_nm, d_lo, d_hi, 0.25)
-            fine = np.arange(mid - 0.25, mid + 0.25 + 1e-9, 0.05)
-            fine = fine[(fine >= d_lo) & (fine <= d_hi)]
-            c_f = curve_at(fine)
-            k = int(np.argmin(c_f))
-            d_best = _parabola(fine, c_f, k)
-            de_best = float(_curve(table.xyz_at(tilt[yr, xr], d_best)[:, None, :].astype(
-                np.float32), lab[yr, xr], exposure, white, delta_e_method)[0])
-            res.append((de_best, d_best))
-        if not chosen_by_consensus:
-            res.sort()
-        out["de"][i], out["d"][i] = res[0]
-        if len(res) > 1:
-            out["de2"][i], out["d2"][i] = res[1]
-    r0s = np.repeat(np.asarray(rows), len(cols))
-    c0s = np.tile(np.asarray(cols), len(rows))
-    return RoiFit(r0s, c0s, rh, rw, out["d"], out["de"], out["d2"], out["de2"],
-                  out["de2"] - out["de"], npx, float(exposure), estimated, grid, curves,
-                  list(rows), list(cols))
+        if s is not None:
+            npx[i] = s.yy.size
+            best[i] = _fit_one(s, curves[i], fit, model, options, rng)
+    rows, cols, (rh, rw) = rois
+    return RoiFit(row0=np.repeat(np.asarray(rows), len(cols)),
+                  col0=np.tile(np.asarray(cols), len(rows)), height_px=rh, width_px=rw,
+                  thickness_nm=best[:, 0, 1], mean_delta_e=best[:, 0, 0],
+                  runner_up_thickness_nm=best[:, 1, 1], runner_up_delta_e=best[:, 1, 0],
+                  n_pixels=npx, exposure=float(exposure), exposure_estimated=estimated,
+                  grid_nm=grid, curves=curves, rows=list(rows), cols=list(cols))
 
 
-def thickness_per_roi(colour, tilt_deg, table, *, size_px=255, stride_px=None, exposure=None,
-                      seed=0, delta_e_method="CIEDE2000") -> RoiFit:
+def thickness_per_roi(colour, tilt_deg, model, options: RoiOptions, *, exposure=None,
+                      seed=0) -> RoiFit:
     """The ROI stage: a grid of ROIs over the image and :func:`fit_roi_thickness` on it.
 
     Parameters
@@ -405,36 +423,11 @@ def thickness_per_roi(colour, tilt_deg, table, *, size_px=255, stride_px=None, e
         Lab and mask of the image (:func:`~microfacet.analysis.colour_image.measure_colour`).
     tilt_deg : ndarray (H, W)
         Tilt per pixel from the height map.
-    table : ColourTable
-    size_px, stride_px, exposure, seed
-        See :func:`roi_grid` and :func:`fit_roi_thickness`.
+    model : FilmColourModel
+    options : RoiOptions
+    exposure, seed
+        See :func:`fit_roi_thickness`.
     """
-    rois = roi_grid(colour.lab.shape[:2], size_px=size_px, stride_px=stride_px)
-    return fit_roi_thickness(colour.lab, tilt_deg, colour.mask.mask, table, rois=rois,
-                             exposure=exposure, seed=seed, delta_e_method=delta_e_method)
-
-
-def _estimate_exposure(samples, white, grid, band, method):
-    """Exposure minimising the ROIs' mean best median ΔE (within the order band, if any)."""
-    sub = [(xyz[:128], lab_s[:128]) for xyz, lab_s, _, _ in samples]
-    inside = (np.ones(grid.size, bool) if band is None
-              else (grid >= band[0]) & (grid <= band[1]))
-
-    def objective(log_e):
-        # Each pixel at its best thickness in the band; the median over pixels (robust to
-        # partly shadowed pixels), averaged over ROIs.
-        e = math.exp(log_e)
-        vals = []
-        for x, lab_s in sub:
-            de = delta_e(_model_lab(x[:, inside], e, white), lab_s[:, None, :], method=method)
-            vals.append(np.median(de.min(axis=1)))
-        return float(np.mean(vals))
-
-    log_grid = np.linspace(math.log(0.25), math.log(4.0), 25)
-    vals = np.array([objective(g) for g in log_grid])
-    i = int(np.argmin(vals))
-    lo, hi = log_grid[max(i - 1, 0)], log_grid[min(i + 1, log_grid.size - 1)]
-    opt = optimize.minimize_scalar(objective, bounds=(lo, hi), method="bounded",
-                          options={"xatol": 0.003})
-    best = opt.x if opt.fun <= vals[i] else log_grid[i]
-    return float(math.exp(best))
+    rois = roi_grid(colour.lab.shape[:2], size_px=options.size_px, stride_px=options.stride_px)
+    return fit_roi_thickness(colour.lab, tilt_deg, colour.mask.mask, model, options, rois=rois,
+                             exposure=exposure, seed=seed)

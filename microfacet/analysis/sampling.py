@@ -28,7 +28,7 @@ from ..core.lazy import load
 
 stats = load("scipy.stats")
 
-__all__ = ["Regions", "collapse", "positive_int", "prepare", "thickness_regions"]
+__all__ = ["Regions", "Samples", "collapse", "positive_int", "prepare", "thickness_regions"]
 
 
 @dataclass
@@ -157,9 +157,39 @@ def _array(values, name, size=None, shape=None):
     return a.ravel()
 
 
-def prepare(values, name, weights, group, max_samples, random_state, *, sigma=None,
-            sigma_name="sigma", n_effective=None):
-    """Flatten, drop NaN / zero weight, subsample reproducibly.
+@dataclass
+class Samples:
+    """Samples a mixture is fitted to, as given.
+
+    Attributes
+    ----------
+    values : array_like, any shape
+        The samples (NaN ignored).
+    sigma : array_like or float, optional
+        1-σ measurement error of each sample: the components are deconvolved from it.
+    weights : array_like, same shape, optional
+        Non-negative sample weights (e.g. facet areas).
+    group : array_like, same shape, optional
+        Region / facet id per sample: without ``n_effective``, the number of distinct
+        groups is the number of independent observations.
+    n_effective : float, optional
+        The number of independent observations (see the notes of :mod:`.mixtures`).
+    name, sigma_name : str
+        How messages name the values and their errors.
+    """
+
+    values: object
+    sigma: object = None
+    weights: object = None
+    group: object = None
+    n_effective: float | None = None
+    name: str = "values"
+    sigma_name: str = "sigma"
+
+
+def prepare(samples: Samples, *, max_samples, seed=0):
+    """Flatten, drop NaN / zero weight, subsample reproducibly (``max_samples`` at most, drawn
+    with ``seed``).
 
     Returns
     -------
@@ -171,51 +201,58 @@ def prepare(values, name, weights, group, max_samples, random_state, *, sigma=No
     n_eff : float
         Independent observations for the BIC (see the notes of :mod:`.mixtures`).
     """
+    x, w, s, keep, g = _checked(samples)
+    n = int(keep.sum())
+    if n == 0:
+        raise ValueError(f"{samples.name}: no finite values" + (
+            " with weight > 0" if samples.weights is not None else ""))
+    x, w, s = x[keep], w[keep], np.asarray(s, dtype=np.float64)[keep]
+    p = w / w.sum()
+    kish = 1.0 / float(np.sum(p * p))
+    if n > max_samples:
+        idx = np.sort(np.random.default_rng(seed).choice(n, size=max_samples, replace=False))
+        x, w, s = x[idx], w[idx], s[idx]
+        kish = min(kish, float(max_samples))
+    if samples.n_effective is not None:
+        n_eff = float(samples.n_effective)
+        if not (math.isfinite(n_eff) and n_eff > 0):
+            raise ValueError(f"n_effective: must be finite and > 0, got {samples.n_effective!r}")
+    elif g is not None:
+        n_eff = float(min(np.unique(g[keep]).size, kish))
+    else:
+        n_eff = kish
+    return x, w, s, n, n_eff
+
+
+def _checked(samples: Samples):
+    """Values, weights, errors, the finite mask and groups of ``samples`` (flat), checked."""
+    name, values = samples.name, samples.values
     x = _array(values, name)
     shape = np.shape(values)
     if np.isinf(x).any():
         raise ValueError(f"{name}: contains infinite values")
     keep = ~np.isnan(x)
     w = np.ones(x.size)
-    if weights is not None:
-        w = _array(weights, "weights", x.size, shape)
+    if samples.weights is not None:
+        w = _array(samples.weights, "weights", x.size, shape)
         if not np.all(np.isfinite(w)) or np.any(w < 0):
             raise ValueError("weights: must be finite and >= 0")
         keep &= w > 0
     s = np.zeros(x.size)
+    sigma = samples.sigma
     if sigma is not None:
-        s = np.broadcast_to(_array(sigma, sigma_name), x.shape) if np.size(sigma) == 1 else \
-            _array(sigma, sigma_name, x.size, shape)
+        s = np.broadcast_to(_array(sigma, samples.sigma_name), x.shape) if np.size(sigma) == 1 \
+            else _array(sigma, samples.sigma_name, x.size, shape)
         if np.any(np.asarray(s)[keep] < 0) or np.isinf(np.asarray(s)[keep]).any():
-            raise ValueError(f"{sigma_name}: must be finite and >= 0")
+            raise ValueError(f"{samples.sigma_name}: must be finite and >= 0")
         keep &= np.isfinite(s)
     g = None
-    if group is not None:
-        g = np.asarray(group)
+    if samples.group is not None:
+        g = np.asarray(samples.group)
         if g.size != x.size:
             raise ValueError(f"group: shape {g.shape} does not match {name} {shape}")
         g = g.ravel()
-    n = int(keep.sum())
-    if n == 0:
-        raise ValueError(f"{name}: no finite values" + (" with weight > 0" if weights is not None
-                                                        else ""))
-    x, w, s = x[keep], w[keep], np.asarray(s, dtype=np.float64)[keep]
-    p = w / w.sum()
-    kish = 1.0 / float(np.sum(p * p))
-    if n > max_samples:
-        idx = np.sort(np.random.default_rng(random_state).choice(n, size=max_samples,
-                                                                 replace=False))
-        x, w, s = x[idx], w[idx], s[idx]
-        kish = min(kish, float(max_samples))
-    if n_effective is not None:
-        n_eff = float(n_effective)
-        if not (math.isfinite(n_eff) and n_eff > 0):
-            raise ValueError(f"n_effective: must be finite and > 0, got {n_effective!r}")
-    elif g is not None:
-        n_eff = float(min(np.unique(g[keep]).size, kish))
-    else:
-        n_eff = kish
-    return x, w, s, n, n_eff
+    return x, w, s, keep, g
 
 
 def collapse(a, *cols):

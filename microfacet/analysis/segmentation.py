@@ -32,6 +32,7 @@ import numpy as np
 
 from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
+from .options import JointOptions
 
 measure = load("skimage.measure")
 segmentation = load("skimage.segmentation")
@@ -212,7 +213,7 @@ def _relabel(labels):
 
 
 def segment_facets(lab, *, facet_px, noise_de=None, height_um=None, height_sigma_um=None,
-                   pixel_size_um=1.0, alpha=0.01, max_area_factor=2.0, max_rounds=30):
+                   pixel_size_um=1.0, options=None):
     """Segment a Lab image into facets that follow colour and height edges.
 
     Parameters
@@ -231,13 +232,11 @@ def segment_facets(lab, *, facet_px, noise_de=None, height_um=None, height_sigma
     pixel_size_um : float or (float, float)
         Lateral pixel size, ``(y, x)`` for non-square pixels (only the ratio to the height
         units matters).
-    alpha : float
-        Significance of the merge tests: a true edge is kept when its colour or plane
-        difference would arise by chance with probability below ``alpha``.
-    max_area_factor : float
-        Largest segment, in facet areas (π/4 · facet_px²).
-    max_rounds : int
-        Merge rounds (each merges mutual best pairs).
+    options : JointOptions, optional
+        ``merge_alpha`` (significance of the merge tests: a true edge is kept when its colour
+        or plane difference would arise by chance with a smaller probability),
+        ``max_area_factor`` (largest segment, in facet areas π/4 · facet_px²) and
+        ``merge_rounds`` (each merges mutual best pairs).
 
     Returns
     -------
@@ -258,8 +257,7 @@ def segment_facets(lab, *, facet_px, noise_de=None, height_um=None, height_sigma
     facet_px = float(facet_px)
     if not (math.isfinite(facet_px) and facet_px > 0):
         raise ValueError(f"facet_px: must be finite and > 0, got {facet_px!r}")
-    if not 0 < alpha < 1:
-        raise ValueError(f"alpha: must be in (0, 1), got {alpha!r}")
+    options = JointOptions() if options is None else options
     # float32 (the analysis' Lab is float32 already): half the memory of float64
     img = np.where(np.isfinite(lab), lab, np.array(_NAN_LAB, np.float32)).astype(np.float32)
     h, w = img.shape[:2]
@@ -294,8 +292,8 @@ def segment_facets(lab, *, facet_px, noise_de=None, height_um=None, height_sigma
                                n_labels=S)
     else:
         planes = np.zeros((S, 10))
-    thr = float(stats.chi2.isf(alpha, 3))
-    max_area = max_area_factor * area
+    thr = float(stats.chi2.isf(options.merge_alpha, 3))
+    max_area = options.max_area_factor * area
 
     def colour_stat(ci, cj):
         ni, nj = ci[:, 0], cj[:, 0]
@@ -316,12 +314,12 @@ def segment_facets(lab, *, facet_px, noise_de=None, height_um=None, height_sigma
         return ok, dc + dp
 
     moments = np.concatenate([colour, planes], axis=1)
-    labels, moments = merge_adjacent(labels, moments, absorb, max_rounds=max_rounds)
-    labels, _ = merge_adjacent(labels, moments, cost, max_rounds=max_rounds)
+    labels, moments = merge_adjacent(labels, moments, absorb, max_rounds=options.merge_rounds)
+    labels, _ = merge_adjacent(labels, moments, cost, max_rounds=options.merge_rounds)
     return labels
 
 
-def merge_adjacent(labels, moments, cost, *, max_rounds=30, pairs=None):
+def merge_adjacent(labels, moments, cost, *, max_rounds, pairs=None):
     """Merge neighbouring segments, mutual best pairs first, while ``cost`` allows.
 
     Parameters

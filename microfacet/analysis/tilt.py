@@ -27,12 +27,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..colour.colorimetry import xyz_to_lab
-from ..colour.difference import delta_e
-from .search import coarse_to_fine
+from .options import TiltOptions
+from .search import coarse_to_fine, refine
 
-__all__ = ["PixelEstimates", "TiltInversion", "invert_tilt", "model_lab_rows", "seed_tilts",
-           "tilt_grid"]
+__all__ = ["PixelEstimates", "TiltInversion", "TiltRows", "invert_tilt", "model_lab_rows",
+           "seed_tilts", "tilt_grid"]
+
+#: Pixels per chunk of the search (bounded temporaries).
+CHUNK_PX = 65536
 
 
 @dataclass
@@ -106,19 +108,142 @@ def tilt_grid(max_tilt_deg, step_deg) -> np.ndarray:
     return np.linspace(0.0, max_tilt_deg, n_steps + 1)
 
 
-def seed_tilts(colour, roi, table, *, theta_grid_deg, exposure, delta_e_method="CIEDE2000"
-               ) -> PixelEstimates:
+@dataclass
+class TiltRows:
+    """What the pixels of one row (a ROI in the seed mode, a facet in the joint mode) share.
+
+    Attributes
+    ----------
+    lab : ndarray of float32, shape (R, K, 3)
+        Model Lab of each row's thickness on the tilt grid (:func:`model_lab_rows`).
+    thickness_nm : ndarray, shape (R,)
+    noise_de : ndarray, shape (R,), or float
+        Colour error per Lab component (ΔE units): the image noise, or per row the
+        calibrated error of the colour term (noise, thickness uncertainty, misfit).
+    prior_deg, prior_sigma_deg : ndarray, shape (R,), optional
+        A Gaussian prior on the tilt (the joint mode's facet plane).
+    """
+
+    lab: np.ndarray
+    thickness_nm: np.ndarray
+    noise_de: object
+    prior_deg: np.ndarray | None = None
+    prior_sigma_deg: np.ndarray | None = None
+
+    @property
+    def noise(self) -> np.ndarray:
+        """Per row, finite and at least 1e-3 (1 where not finite)."""
+        n = np.broadcast_to(np.asarray(self.noise_de, dtype=np.float64), (self.lab.shape[0],))
+        return np.where(np.isfinite(n), np.maximum(n, 1e-3), 1.0)
+
+
+def model_lab_rows(model, thickness_nm, theta_grid_deg):
+    """Model Lab for each thickness (rows) over a θ grid: shape (R, K, 3), float32."""
+    d = np.asarray(thickness_nm, dtype=np.float64)
+    th = np.asarray(theta_grid_deg)[None, :]
+    out = np.empty((d.size, th.size, 3), np.float32)
+    step = max(1, (1 << 16) // max(1, th.size))   # rows per chunk: bounded temporaries
+    for a in range(0, d.size, step):
+        out[a:a + step] = model.lab(th, d[a:a + step, None])
+    return out
+
+
+def _sensitivity(model, rows_lab, step):
+    """ΔE per degree of each row at each grid node (central differences; one-sided at the
+    ends)."""
+    rl = rows_lab.astype(np.float32)
+    sens = np.empty(rl.shape[:2], np.float32)
+    sens[:, 1:-1] = model.difference(rl[:, 2:], rl[:, :-2]) / (2 * step)
+    sens[:, 0] = model.difference(rl[:, 1], rl[:, 0]) / step
+    sens[:, -1] = model.difference(rl[:, -1], rl[:, -2]) / step
+    return sens
+
+
+def _invert_chunk(lab_px, ri, rows, sens, th, model, stride):
+    """The search for one chunk of pixels: tilt, σ, colour weight, J and ΔE at the grid."""
+    noise = rows.noise[ri]
+    prior = rows.prior_deg is not None
+    if prior:
+        p_deg, p_sd = rows.prior_deg[ri], rows.prior_sigma_deg[ri]
+
+    def objective(nodes):  # q on grid nodes (m, w) of each pixel
+        de = model.difference(rows.lab[ri[:, None], nodes], lab_px[:, None, :])
+        q = (de.astype(np.float64) / noise[:, None]) ** 2
+        if prior:
+            q += ((th[nodes] - p_deg[:, None]) / p_sd[:, None]) ** 2
+        return q
+
+    m = refine(coarse_to_fine(objective, th.size, ri.size, stride=stride), th.size)
+    t = th[m.node] + m.offset * (th[1] - th[0])
+    j = sens[ri, m.node]
+    info_c = (j / noise) ** 2
+    if prior:
+        info_p = 1.0 / p_sd ** 2
+        sig, w = 1.0 / np.sqrt(info_c + info_p), info_c / (info_c + info_p)
+    else:
+        with np.errstate(divide="ignore"):
+            sig = np.where(j > 0, noise / j, np.inf)
+        w = np.ones_like(sig)
+    return t, np.minimum(sig, th[-1] - th[0]), w, j
+
+
+def invert_tilt(lab_px, row_index, rows: TiltRows, theta_grid_deg, model,
+                options: TiltOptions) -> TiltInversion:
+    """Tilt of least ΔE (or MAP with a prior) for each pixel.
+
+    Parameters
+    ----------
+    lab_px : ndarray, shape (n, 3)
+        The pixels' Lab.
+    row_index : ndarray of int, shape (n,)
+        The row of each pixel.
+    rows : TiltRows
+        Per row: model Lab on the grid, thickness, colour error, prior.
+    theta_grid_deg : ndarray, shape (K,)
+        Uniform tilt grid from 0 to θ_max (:func:`tilt_grid`).
+    model : FilmColourModel
+        For the exact ΔE at the solution (table interpolation at the off-grid tilt) and the
+        colour difference of the search.
+    options : TiltOptions
+        ``coarse_stride``: the objective on every ``coarse_stride``-th grid node, then on
+        every node within ±``coarse_stride`` of the coarse minimum (≈ 2.2× fewer ΔE at 4;
+        1 = every node). The colour changes by 0.03-0.3 ΔE00 per degree, so the objective's
+        basins are many degrees wide and the coarse grid finds the basin of the minimum.
+
+    Returns
+    -------
+    TiltInversion
+    """
+    lab_px = np.asarray(lab_px, dtype=np.float32)
+    th = np.asarray(theta_grid_deg, dtype=np.float64)
+    n = lab_px.shape[0]
+    out = {k: np.empty(n, np.float32) for k in ("t", "s", "w", "j", "e")}
+    sens = _sensitivity(model, rows.lab, th[1] - th[0])
+    stride = max(1, min(int(options.coarse_stride), (th.size - 1) // 2))
+    d_rows = np.asarray(rows.thickness_nm, dtype=np.float64)
+    for a in range(0, n, CHUNK_PX):
+        b = min(n, a + CHUNK_PX)
+        ri = row_index[a:b]
+        out["t"][a:b], out["s"][a:b], out["w"][a:b], out["j"][a:b] = _invert_chunk(
+            lab_px[a:b], ri, rows, sens, th, model, stride)
+        # the exact ΔE at the solution (table interpolation at the off-grid tilt), per chunk
+        out["e"][a:b] = model.delta_e(lab_px[a:b], out["t"][a:b], d_rows[ri])
+    return TiltInversion(out["t"], out["s"], out["e"], out["w"], out["j"])
+
+
+def seed_tilts(colour, roi, model, theta_grid_deg, options: TiltOptions) -> PixelEstimates:
     """The seed's step 3 (§3.3.3): each ROI's thickness for its pixels, and per pixel the
-    tilt of least ΔE00 at that thickness (:func:`invert_tilt`, no prior).
+    tilt of least ΔE at that thickness (:func:`invert_tilt`, no prior).
 
     Parameters
     ----------
     colour : ColourImage
     roi : RoiFit
-    table : ColourTable
+    model : FilmColourModel
+        At the scene's exposure.
     theta_grid_deg : ndarray
         From :func:`tilt_grid`.
-    exposure : float
+    options : TiltOptions
     """
     shape = colour.lab.shape[:2]
     roi_index = roi.index_map(shape)
@@ -126,152 +251,11 @@ def seed_tilts(colour, roi, table, *, theta_grid_deg, exposure, delta_e_method="
     out.thickness_group = roi_index
     usable = ~colour.mask.mask & np.isfinite(roi.thickness_nm[roi_index])
     yy, xx = np.nonzero(usable)
-    rows_d = np.where(np.isfinite(roi.thickness_nm), roi.thickness_nm, table.thickness_nm[0])
-    rows_lab = model_lab_rows(table, rows_d, theta_grid_deg, exposure=exposure)
+    rows_d = np.where(np.isfinite(roi.thickness_nm), roi.thickness_nm,
+                      model.thickness_range_nm[0])
+    rows = TiltRows(model_lab_rows(model, rows_d, theta_grid_deg), rows_d, colour.noise_de)
     rix = roi_index[yy, xx]
-    inv = invert_tilt(colour.lab[yy, xx], rows_lab, rix, theta_grid_deg, table=table,
-                      thickness_px=rows_d[rix], exposure=exposure, noise_de=colour.noise_de,
-                      delta_e_method=delta_e_method)
+    inv = invert_tilt(colour.lab[yy, xx], rix, rows, theta_grid_deg, model, options)
     out.thickness_nm[yy, xx] = rows_d[rix]
     out.fill(yy, xx, inv)
     return out
-
-
-def model_lab_rows(table, thickness_nm, theta_grid_deg, *, exposure):
-    """Model Lab for each thickness (rows) over a θ grid: shape (R, K, 3), float32."""
-    d = np.asarray(thickness_nm, dtype=np.float64)
-    th = np.asarray(theta_grid_deg)[None, :]
-    white = table.white_xyz.astype(np.float32)
-    out = np.empty((d.size, th.size, 3), np.float32)
-    step = max(1, (1 << 16) // max(1, th.size))   # rows per chunk: bounded temporaries
-    for a in range(0, d.size, step):
-        xyz = table.xyz_at(th, d[a:a + step, None]) * exposure
-        out[a:a + step] = xyz_to_lab(xyz.astype(np.float32), white=white)
-    return out
-
-
-def invert_tilt(lab_px, rows_lab, row_index, theta_grid_deg, *, table, thickness_px,
-                exposure, noise_de, prior_deg=None, prior_sigma_deg=None,
-                chunk=65536, delta_e_method="CIEDE2000", coarse_stride=4,
-                by_row=False) -> TiltInversion:
-    """Tilt of least ΔE00 (or MAP with a prior) for each pixel.
-
-    Parameters
-    ----------
-    lab_px : ndarray, shape (n, 3)
-        The pixels' Lab.
-    rows_lab : ndarray, shape (R, K, 3)
-        Model Lab of each row (ROI or facet thickness) on ``theta_grid_deg``
-        (:func:`model_lab_rows`).
-    row_index : ndarray of int, shape (n,)
-        The row of each pixel.
-    theta_grid_deg : ndarray, shape (K,)
-        Uniform tilt grid from 0 to θ_max.
-    table : ColourTable
-        For the exact ΔE at the solution.
-    thickness_px : ndarray, shape (n,)
-        Thickness used for each pixel (its row's).
-    exposure : float
-    noise_de : float or ndarray, shape (n,)
-        Colour error per Lab component, ΔE00 units: the image noise, or per pixel the
-        calibrated error of the colour term (noise, thickness uncertainty, misfit).
-    prior_deg, prior_sigma_deg : ndarray, shape (n,), optional
-        Gaussian prior on the tilt (joint mode).
-    delta_e_method : str
-        Colour-difference formula of the search, the sensitivity and the reported ΔE
-        (:func:`microfacet.colour.difference.delta_e`; default CIEDE2000).
-    by_row : bool
-        ``thickness_px``, ``noise_de``, ``prior_deg`` and ``prior_sigma_deg`` are given per
-        row (shape (R,)) and gathered through ``row_index`` chunk by chunk: no per-pixel
-        copies of values that pixels of one row share.
-    coarse_stride : int
-        Coarse-to-fine search: the objective on every ``coarse_stride``-th grid node, then on
-        every node within ±``coarse_stride`` of the coarse minimum (≈ 2.2× fewer ΔE00 at 4;
-        1 = every node). The colour changes by 0.03-0.3 ΔE00 per degree, so the objective's
-        basins are many degrees wide and the coarse grid (2° at the default step) finds the
-        basin of the minimum.
-
-    Returns
-    -------
-    TiltInversion
-    """
-    def de_fn(a, b):
-        return delta_e(a, b, method=delta_e_method)
-
-    lab_px = np.asarray(lab_px, dtype=np.float32)
-    th = np.asarray(theta_grid_deg, dtype=np.float64)
-    step = th[1] - th[0]
-    n, K = lab_px.shape[0], th.size
-    out_t = np.empty(n, np.float32)
-    out_s = np.empty(n, np.float32)
-    out_w = np.empty(n, np.float32)
-    out_j = np.empty(n, np.float32)
-    out_e = np.empty(n, np.float32)
-    white32 = table.white_xyz.astype(np.float32)
-    size = rows_lab.shape[0] if by_row else n
-
-    def per(v):  # per pixel of the chunk a:b, from per-pixel or per-row values
-        return (lambda a, b: v[row_index[a:b]]) if by_row else (lambda a, b: v[a:b])
-
-    noise_all = np.broadcast_to(np.asarray(noise_de, dtype=np.float64), (size,))
-    noise_all = np.where(np.isfinite(noise_all), np.maximum(noise_all, 1e-3), 1.0)
-    noise_of = per(noise_all)
-    thickness_of = per(np.broadcast_to(np.asarray(thickness_px, dtype=np.float64), (size,)))
-    if prior_deg is not None:
-        prior_of, prior_sd_of = per(np.asarray(prior_deg)), per(np.asarray(prior_sigma_deg))
-    stride = max(1, min(int(coarse_stride), (K - 1) // 2))
-    # Sensitivity per row and grid node (central differences; one-sided at the ends).
-    rl = rows_lab.astype(np.float32)
-    sens_rows = np.empty(rl.shape[:2], np.float32)  # ΔE00 per degree
-    sens_rows[:, 1:-1] = de_fn(rl[:, 2:], rl[:, :-2]) / (2 * step)
-    sens_rows[:, 0] = de_fn(rl[:, 1], rl[:, 0]) / step
-    sens_rows[:, -1] = de_fn(rl[:, -1], rl[:, -2]) / step
-    for a in range(0, n, chunk):
-        b = min(n, a + chunk)
-        ri = row_index[a:b]
-        noise = noise_of(a, b)
-        if prior_deg is not None:
-            p_deg, p_sd = prior_of(a, b), prior_sd_of(a, b)
-
-        def objective(nodes):  # q on grid nodes (m, w) of each pixel
-            de = de_fn(rows_lab[ri[:, None], nodes], lab_px[a:b, None, :])
-            q = (de.astype(np.float64) / noise[:, None]) ** 2
-            if prior_deg is not None:
-                q += ((th[nodes] - p_deg[:, None]) / p_sd[:, None]) ** 2
-            return q
-
-        rr = np.arange(b - a)
-        if stride > 1:
-            nodes, qw, kw = coarse_to_fine(objective, K, b - a, stride=stride)
-            k = nodes[rr, kw]
-            y0, y1, y2 = qw[rr, kw - 1], qw[rr, kw], qw[rr, kw + 1]
-            km = np.where((k > 0) & (k < K - 1), k, -1)  # a parabola only inside the grid
-        else:
-            q = objective(np.broadcast_to(np.arange(K), (b - a, K)))
-            k = np.argmin(q, axis=1)
-            km = np.clip(k, 1, K - 2)
-            y0, y1, y2 = q[rr, km - 1], q[rr, km], q[rr, km + 1]
-        den = y0 - 2 * y1 + y2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            off = np.where(den > 0, 0.5 * (y0 - y2) / den, 0.0)
-        off = np.where(k == km, np.clip(off, -1, 1), 0.0)  # no extrapolation at the ends
-        t = th[k] + off * step
-        j = sens_rows[ri, k]
-        info_c = (j / noise) ** 2
-        if prior_deg is not None:
-            info_p = 1.0 / p_sd ** 2
-            sig = 1.0 / np.sqrt(info_c + info_p)
-            w = info_c / (info_c + info_p)
-        else:
-            with np.errstate(divide="ignore"):
-                sig = np.where(j > 0, noise / j, np.inf)
-            w = np.ones_like(sig)
-        out_t[a:b] = t
-        out_s[a:b] = np.minimum(sig, th[-1] - th[0])
-        out_w[a:b] = w
-        out_j[a:b] = j
-        # the exact ΔE at the solution (table interpolation at the off-grid tilt), per chunk
-        out_e[a:b] = de_fn(xyz_to_lab((table.xyz_at(out_t[a:b], thickness_of(a, b))
-                                       * exposure).astype(np.float32), white=white32),
-                           lab_px[a:b])
-    return TiltInversion(out_t, out_s, out_e, out_w, out_j)

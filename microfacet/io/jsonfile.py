@@ -26,12 +26,15 @@ key 'a' is given twice (the second would silently win)
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
+
+import numpy as np
 
 from ..core.errors import InputError, one_line
 from .limits import MAX_JSON_BYTES
 
-__all__ = ["read_json"]
+__all__ = ["json_safe", "read_json"]
 
 
 def _pairs(pairs):
@@ -83,3 +86,26 @@ def read_json(path, *, max_bytes: int = MAX_JSON_BYTES):
     except json.JSONDecodeError as exc:
         raise InputError(f"{shown}: invalid JSON ({exc.msg} at line {exc.lineno} column "
                          f"{exc.colno})") from None
+
+
+def json_safe(x):
+    """``x`` made JSON-safe: NaN and ±inf → None, numpy scalars and arrays → Python (the one
+    sanitiser of everything the package writes as JSON).
+
+    >>> import numpy as np
+    >>> json_safe({"a": np.float32(1.5), "b": [np.nan, np.int64(2)], "c": np.bool_(True)})
+    {'a': 1.5, 'b': [None, 2], 'c': True}
+    """
+    if isinstance(x, dict):
+        return {str(k): json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_safe(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return json_safe(x.tolist())
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(float(x)) else None
+    return x

@@ -34,11 +34,11 @@ from ..core.distributions import NDFMixture, ThicknessMixture
 from ..core.errors import InputError, one_line
 from ..core.pixels import pixel_size_yx
 from .images import read_png, write_float_tiff, write_image
-from .jsonfile import read_json
+from .jsonfile import json_safe, read_json
 from .x3p import write_x3p
 
 __all__ = ["FORMAT", "IMAGES", "MAPS", "Results", "TABLES", "TIFF_COPIES", "X3P_COPIES",
-           "json_safe", "pixel_size_of", "write_results_files"]
+           "pixel_size_of", "write_results_files"]
 
 FORMAT = "microfacet-results/1"
 #: Maps of a results folder: name -> (file, what it holds). Shapes are H×W (H×W×3 for the
@@ -78,27 +78,6 @@ TABLES = {
     "facets": ("facets.csv", ("facet", "n_pixels", "tilt_deg", "tilt_sigma_deg",
                               "height_plane", "thickness_nm", "thickness_sigma_nm")),
 }
-
-
-def json_safe(x):
-    """``x`` made JSON-safe: NaN and ±inf → None, numpy scalars and arrays → Python.
-
-    >>> json_safe({"a": np.float32(1.5), "b": [np.nan, np.int64(2)], "c": np.bool_(True)})
-    {'a': 1.5, 'b': [None, 2], 'c': True}
-    """
-    if isinstance(x, dict):
-        return {str(k): json_safe(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [json_safe(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return json_safe(x.tolist())
-    if isinstance(x, (bool, np.bool_)):
-        return bool(x)
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(float(x)) else None
-    return x
 
 
 def _dump(path: Path, summary: dict) -> None:

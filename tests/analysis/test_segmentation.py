@@ -208,9 +208,9 @@ def test_merge_adjacent_merges_mutual_best_pairs_while_allowed():
         d = np.abs(mi[:, 1] / mi[:, 0] - mj[:, 1] / mj[:, 0])
         return d < 1.0, d
 
-    merged, m = merge_adjacent(labels, moments, cost)
+    merged, m = merge_adjacent(labels, moments, cost, max_rounds=30)
     assert np.unique(merged).size == 3
     np.testing.assert_allclose(np.sort(m[:, 1] / m[:, 0]), [0.05, 5.1, 20.05])
-    same, _ = merge_adjacent(labels, moments, lambda a, b: (np.zeros(len(a), bool),
+    same, _ = merge_adjacent(labels, moments, max_rounds=30, cost=lambda a, b: (np.zeros(len(a), bool),
                                                             np.zeros(len(a))))
     assert np.unique(same).size == 6

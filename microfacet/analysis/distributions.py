@@ -1,0 +1,202 @@
+"""The distributions stage: the thickness mixture and the NDF, and whether the data
+determine them (:mod:`.identification`).
+
+Joint mode (:func:`fit_joint_distributions`)
+    * **Thickness**: one sample per facet (its thickness, its 1-σ error, its area), the
+      mixture deconvolved from the errors (:func:`~.mixtures.fit_thickness_mixture`) with
+      the number of independent thickness regions as ``n_eff`` (the area-weighted count
+      of :func:`~.sampling.thickness_regions`). Dark (censored) facets and facets whose
+      colour the model does not explain (:func:`~.identification.unexplained_facets`) are
+      left out.
+    * **NDF**: one sample per facet with a height tilt (its plane's slope, the slope noise of
+      the fit, its area), deconvolved; dark facet-sized areas (tilted past the acceptance)
+      and planes steeper than it enter as censored samples (:func:`~.ndf_fit.fit_ndf_mixture`);
+      ``n_eff`` = facets. Without any facet plane, the per-pixel tilts are fitted for
+      inspection only (never identified).
+
+Seed mode (:func:`fit_seed_distributions`)
+    The seed's per-pixel histograms: thickness per ROI, tilt per pixel from colour alone.
+
+References
+----------
+.. [1] N. Nagata et al., the seed, §3.3.3 and Figs. 18-19 (three Gaussians of thickness, two
+   zero-mean lobes of the normals).
+.. [2] J. Bovy, D. W. Hogg, S. T. Roweis, "Extreme deconvolution", Ann. Appl. Stat. 5 (2011)
+   1657-1677, doi:10.1214/10-AOAS439.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .identification import (
+    NO_SAMPLES,
+    Judgement,
+    NdfEvidence,
+    ambiguous_order,
+    colour_tilt_contrast,
+    ndf_judgement,
+    seed_ndf_judgement,
+    thickness_judgement,
+    unexplained_facets,
+)
+from .mixtures import MixtureFit, fit_thickness_mixture
+from .ndf_fit import fit_ndf_mixture, width_relative_error
+from .options import FitOptions
+from .sampling import thickness_regions
+
+__all__ = ["Distributions", "fit_joint_distributions", "fit_seed_distributions"]
+
+#: A facet more than this fraction of whose pixels are dark is censored (tilted past the
+#: acceptance): it carries neither a thickness nor a measured tilt.
+CENSORED_FACET_FRACTION = 0.5
+
+
+@dataclass
+class Distributions:
+    """The two fitted distributions and whether the data determine them.
+
+    Attributes
+    ----------
+    thickness, ndf : MixtureFit or None
+        None without samples.
+    thickness_judgement, ndf_judgement : Judgement
+    roi_ambiguous : ndarray of bool
+        ROIs whose runner-up interference order fits within ``fits.ambiguous_order_de``.
+    roi_fitted : ndarray of bool
+        ROIs with a thickness.
+    """
+
+    thickness: MixtureFit | None
+    ndf: MixtureFit | None
+    thickness_judgement: Judgement
+    ndf_judgement: Judgement
+    roi_ambiguous: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    roi_fitted: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+
+def _roi_flags(roi, options):
+    fitted = np.isfinite(roi.thickness_nm)
+    return fitted & ambiguous_order(roi.ambiguity_delta_e, options.ambiguous_order_de), fitted
+
+
+def _joint_thickness(joint, roi, cens_frac, options, seed):
+    """The thickness mixture of the facets, and its judgement."""
+    th = joint.thickness
+    area = joint.area_px.astype(np.float64)
+    # Facets whose colour the film model does not explain (dust, pit floors, mixed or dark
+    # facets: ΔE a robust outlier among the facets') and censored (dark) facets carry no
+    # thickness: they are left out of the mixture, and counted.
+    unexplained = unexplained_facets(th.delta_e, options.unexplained_mads)
+    ok = (np.isfinite(th.thickness_nm) & (area > 0) & (cens_frac < CENSORED_FACET_FRACTION)
+          & ~unexplained)
+    if ok.sum() < 2:
+        return None, NO_SAMPLES["thickness"]
+    regions = thickness_regions(joint.facets, np.where(ok, th.thickness_nm, np.nan),
+                                th.sigma_nm)
+    fit = fit_thickness_mixture(th.thickness_nm[ok], sigma_nm=th.sigma_nm[ok], weights=area[ok],
+                                n_effective=max(1.0, regions.effective_count), options=options,
+                                background=True, seed=seed)
+    a_t = area[ok].sum()
+    edge = float(area[ok & th.at_window_edge].sum() / a_t)
+    amb = ok & ambiguous_order(th.delta_e_other_order - th.delta_e, options.ambiguous_order_de)
+    other = float(area[amb].sum() / a_t)
+    fit.info.update({"facets": int(ok.sum()),
+                     "unexplained_area_fraction": float(area[unexplained].sum()
+                                                        / max(area.sum(), 1.0)),
+                     "thickness_regions": regions.count, "order_edge_fraction": edge,
+                     "order_ambiguous_fraction": other})
+    return fit, thickness_judgement(roi, options, edge_fraction=edge,
+                                    other_order_fraction=other)
+
+
+def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed):
+    """The NDF of the facet planes (censored), and its judgement."""
+    th, pl = joint.thickness, joint.planes
+    area = joint.area_px.astype(np.float64)
+    fit_ok = pl.fitted & np.isfinite(pl.tilt_deg) & (cens_frac < CENSORED_FACET_FRACTION)
+    # A plane steeper than the acceptance (a wall seen through the blur) is not an exact
+    # sample of a censored distribution: it counts as censored, with the dark facets.
+    beyond = fit_ok & (pl.tilt_deg > max_tilt_deg)
+    use = fit_ok & ~beyond
+    C = float(joint.censored.sum()) + float(area[beyond].sum())
+    mean_area = float(area[use].mean()) if use.any() else float(area.mean())
+    n_eff = float(use.sum()) + C / max(mean_area, 1.0)
+    d_med = float(np.nanmedian(th.thickness_nm)) if np.isfinite(th.thickness_nm).any() else 0.0
+    contrast = colour_tilt_contrast(model, d_med) if d_med > 0 else 0.0
+    c_err = float(np.nanmedian(joint.colour_sigma_de / np.sqrt(np.maximum(area, 1))))
+    fit, rel = None, math.inf
+    if use.sum() >= 2:
+        fit = fit_ndf_mixture(pl.tilt_deg[use], slope_sigma=pl.slope_sigma[use],
+                              weights=area[use], censored=(C, max_tilt_deg) if C > 0 else None,
+                              n_effective=max(n_eff, 1.0), options=options, seed=seed)
+        fit.info["samples"] = "facet plane tilts (height from focus)"
+        rel = width_relative_error(pl.tilt_deg[use], pl.slope_sigma[use], area[use],
+                                   float(use.sum()))
+    elif np.isfinite(joint.pixels.tilt_deg).sum() >= 2:
+        # No facet planes: for inspection only (never identified), the per-pixel tilts, one
+        # independent sample per facet.
+        okp = np.isfinite(joint.pixels.tilt_deg)
+        fit = fit_ndf_mixture(joint.pixels.tilt_deg[okp], group=joint.facets[okp],
+                              options=options, seed=seed)
+        fit.info["samples"] = "per-pixel tilt (no facet has a height plane)"
+    if fit is None:
+        return None, NO_SAMPLES["ndf"]
+    seen = float(area[use].sum()) + C if use.any() else float(area.sum())
+    fit.info.update({"facets": int(use.sum()), "facets_total": int(area.size),
+                     "width_relative_error": float(rel) if math.isfinite(rel) else None,
+                     "colour_tilt_contrast_de": contrast})
+    evidence = NdfEvidence(int(use.sum()), int(area.size),
+                           float(area[pl.fitted].sum() / max(area.sum(), 1)), rel,
+                           C / max(seen, 1.0), contrast, c_err, d_med)
+    return fit, ndf_judgement(evidence, options)
+
+
+def fit_joint_distributions(joint, roi, model, scene, options: FitOptions) -> Distributions:
+    """Thickness mixture and NDF of a :class:`~.joint.JointResult`, with identification.
+
+    Parameters
+    ----------
+    joint : JointResult
+        With its per-pixel estimates.
+    roi : RoiFit
+    model : FilmColourModel
+        At the joint stage's exposure (for the colour's tilt contrast).
+    scene : Scene
+        The acceptance limit (censoring) and the seed.
+    options : FitOptions
+    """
+    cens_frac = (np.bincount(joint.facets.ravel(), weights=joint.censored.ravel(),
+                             minlength=joint.area_px.size) / np.maximum(joint.area_px, 1))
+    tfit, tj = _joint_thickness(joint, roi, cens_frac, options, scene.seed)
+    nfit, nj = _joint_ndf(joint, model, cens_frac, scene.max_tilt_deg, options, scene.seed)
+    return Distributions(tfit, nfit, tj, nj, *_roi_flags(roi, options))
+
+
+def fit_seed_distributions(pixels, roi, model, noise_de, options: FitOptions, *,
+                           seed=0) -> Distributions:
+    """The seed's fits on per-pixel estimates (thickness per ROI, tilt from colour alone).
+
+    The NDF is identified only if colour carries tilt at the median thickness
+    (:func:`~.identification.colour_tilt_contrast` above ``options.colour_contrast_factor`` ×
+    the pixel noise ``noise_de``).
+    """
+    ok = np.isfinite(pixels.thickness_nm)
+    tfit, tj = None, NO_SAMPLES["thickness"]
+    if ok.sum() >= 2:
+        tfit = fit_thickness_mixture(pixels.thickness_nm[ok], group=pixels.thickness_group[ok],
+                                     options=options, seed=seed)
+        tj = thickness_judgement(roi, options)
+    okt = np.isfinite(pixels.tilt_deg)
+    nfit, nj = None, NO_SAMPLES["ndf"]
+    if okt.sum() >= 2:
+        nfit = fit_ndf_mixture(pixels.tilt_deg[okt], group=pixels.thickness_group[okt],
+                               options=options, seed=seed)
+        d_med = float(np.nanmedian(pixels.thickness_nm))
+        contrast = colour_tilt_contrast(model, d_med)
+        nj = seed_ndf_judgement(contrast, d_med, noise_de, options)
+        nfit.info["colour_tilt_contrast_de"] = contrast
+    return Distributions(tfit, nfit, tj, nj, *_roi_flags(roi, options))

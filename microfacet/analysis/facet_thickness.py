@@ -1,0 +1,310 @@
+"""Thickness per facet from its colour at its tilt, within its interference order.
+
+Colour moves about 2 ΔE00 per nm of thickness but only 0.03-0.3 per degree of tilt: to first
+order a tilt θ acts like a thickness change d·(1 − cos θ₁), so a 1 nm thickness change inside
+a region masquerades as a 10-20° tilt in the seed's per-pixel inversion. The joint mode
+(:mod:`.joint`) therefore takes each facet's tilt from its plane (:mod:`.planes`) and its
+thickness from colour at that tilt: the d of least ΔE between the facet's mean interior Lab
+and the model (:class:`~microfacet.colour.model.FilmColourModel`), searched over the facet's
+interference order (±``order_window_fraction`` of the colour period λ/(2n) around its ROI's
+thickness: the colours of the neighbouring orders, a period away, stay out), with a 1-σ error
+from the curvature of ΔE² and the tilt's own error. Every search is
+:func:`~.search.coarse_to_fine` on a uniform grid.
+
+References
+----------
+.. [1] N. Nagata et al., the seed, §3.3.3 (2) (thickness of least mean ΔE).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.lazy import load
+from .options import JointOptions
+from .search import coarse_to_fine, refine
+
+optimize = load("scipy.optimize")
+
+__all__ = ["FacetColours", "FacetImage", "FacetThickness", "facet_thickness",
+           "refine_exposure_on_facets"]
+
+#: Facets per chunk of the vectorised searches (bounded temporaries).
+_CHUNK = 2048
+#: Strides of the coarse-to-fine searches: the 1 nm order window (every other nm, then the
+#: nodes next to the best), the fine scan below 1 nm, the whole-range order scan.
+_WINDOW_STRIDE, _FINE_STRIDE, _ORDER_STRIDE = 2, 5, 2
+
+
+@dataclass
+class FacetColours:
+    """The colour evidence of each facet (arrays of length S).
+
+    Attributes
+    ----------
+    mean_lab : ndarray, shape (S, 3)
+        Mean Lab of the facet's usable interior pixels (all its usable ones where it has no
+        interior pixel).
+    n_pixels : ndarray
+        Pixels averaged.
+    roi_thickness_nm : ndarray
+        Mean ROI thickness over those pixels: the centre of the facet's order window.
+    """
+
+    mean_lab: np.ndarray
+    n_pixels: np.ndarray
+    roi_thickness_nm: np.ndarray
+
+
+@dataclass
+class FacetImage:
+    """The image as facets: labels, Lab, the usable pixels, the interior ones (away from a
+    facet's partly shadowed boundary) and the ROI stage's thickness per pixel."""
+
+    labels: np.ndarray
+    lab: np.ndarray
+    usable: np.ndarray
+    interior: np.ndarray
+    roi_thickness_px: np.ndarray
+
+    @property
+    def n_facets(self) -> int:
+        return int(self.labels.max()) + 1
+
+    def colours(self, usable=None) -> FacetColours:
+        """Mean Lab, pixel count and mean ROI thickness of every facet's ``usable`` (default:
+        all usable) pixels, its interior ones where it has any."""
+        S = self.n_facets
+        lab_flat = np.asarray(self.lab, dtype=np.float64).reshape(-1, 3)
+        u = np.asarray(self.usable if usable is None else usable, bool).ravel()
+        lb = self.labels.ravel()
+        ui = u & np.asarray(self.interior, bool).ravel()
+        has_interior = np.bincount(lb[ui], minlength=S) > 0
+        u = np.where(has_interior[lb], ui, u)
+        cnt = np.bincount(lb[u], minlength=S).astype(np.float64)
+        mean_lab = np.stack([np.bincount(lb[u], weights=lab_flat[u, c], minlength=S)
+                             for c in range(3)], axis=-1) / np.maximum(cnt, 1)[:, None]
+        v = np.asarray(self.roi_thickness_px, dtype=np.float64).ravel()[u]
+        ok = np.isfinite(v)
+        mv = (np.bincount(lb[u][ok], weights=v[ok], minlength=S)
+              / np.maximum(np.bincount(lb[u][ok], minlength=S), 1))
+        return FacetColours(mean_lab, cnt, mv)
+
+
+@dataclass
+class FacetThickness:
+    """Thickness per facet (arrays of length S; NaN where a facet has no usable pixel).
+
+    Attributes
+    ----------
+    thickness_nm, sigma_nm : ndarray
+        Thickness and its 1-σ error (colour noise and misfit through the curvature of ΔE²,
+        plus the thickness equivalent of the tilt's error).
+    delta_e : ndarray
+        ΔE between the facet's mean colour and the model at the solution.
+    at_window_edge : ndarray of bool
+        The minimum lies at the edge of the interference-order window (the colour fits a
+        thickness outside the order better: ambiguous).
+    n_pixels : ndarray of int
+        Pixels whose mean colour was used.
+    delta_e_other_order : ndarray
+        The least ΔE in the neighbouring orders' windows (one colour period above and
+        below; NaN where both lie outside the table): close to ``delta_e``, the order is
+        uncertain.
+    """
+
+    thickness_nm: np.ndarray
+    sigma_nm: np.ndarray
+    delta_e: np.ndarray
+    at_window_edge: np.ndarray
+    n_pixels: np.ndarray
+    delta_e_other_order: np.ndarray
+
+
+class _Rows:
+    """ΔE of a chunk of facets' mean colours against the model at thicknesses of a uniform
+    grid per facet, ``clip(centre + offsets[node])``: the objective of the searches."""
+
+    def __init__(self, model, tilt, mean_lab, centre, offsets):
+        self.model, self.tilt, self.offsets = model, tilt[:, None], offsets
+        self.lab = mean_lab[:, None, :].astype(np.float32)
+        self.centre = centre[:, None]
+        self.lo, self.hi = model.thickness_range_nm
+
+    def thickness(self, nodes):
+        return np.clip(self.centre + self.offsets[nodes], self.lo, self.hi)
+
+    def __call__(self, nodes):
+        return self.model.delta_e(self.lab, self.tilt, self.thickness(nodes)).astype(np.float64)
+
+
+def _window_minimum(rows):
+    """The node of least ΔE in each facet's window (every other node, then the nodes next
+    to the best). Returns the thickness, the node and its ΔE."""
+    n = rows.offsets.size
+    scan = coarse_to_fine(rows, n, rows.centre.shape[0], stride=_WINDOW_STRIDE, reach=1)
+    k = scan.node
+    return rows.thickness(k[:, None])[:, 0], k, scan.value
+
+
+def _order_scan(model, tilt, mean_lab, centre, hw):
+    """Least ΔE inside the order window ±``hw`` about ``centre`` and the best thickness and
+    ΔE outside it, over the table's whole range at 1 nm (coarse-to-fine, shared coarse
+    pass). Returns ``best_in, d_out, de_out`` (inf where a side has no node)."""
+    lo, hi = model.thickness_range_nm
+    g = np.arange(lo, hi + 1e-9, 1.0)
+    rows = _Rows(model, tilt, mean_lab, np.zeros(centre.size), g)
+    inside = np.abs(g[None, :] - centre[:, None]) <= hw
+    s_in, s_out = coarse_to_fine(rows, g.size, centre.size, stride=_ORDER_STRIDE, reach=1,
+                                 allowed=[inside, ~inside])
+    return s_in.value, g[s_out.node], s_out.value
+
+
+def _fine(model, tilt, mean_lab, d_k, step):
+    """±1 nm at ``step`` about ``d_k``, coarse-to-fine, and the parabola through the least
+    ΔE² (:func:`~.search.refine`): thickness, ΔE and d²(ΔE²)/dd² (NaN where not convex)."""
+    fine = np.arange(-1.0, 1.0 + 1e-9, step)
+    rows = _Rows(model, tilt, mean_lab, d_k, fine)
+    sq = lambda nodes: rows(nodes) ** 2   # noqa: E731 - the objective is ΔE²
+    stride = _FINE_STRIDE if fine.size >= 4 * _FINE_STRIDE else 1
+    m = refine(coarse_to_fine(sq, fine.size, d_k.size, stride=stride), fine.size)
+    d = rows.thickness(m.node[:, None])[:, 0] + m.offset * step
+    return d, np.sqrt(np.maximum(m.vertex, 0.0)), m.curvature / step ** 2
+
+
+def _sigma(model, d, de, curv, n_px, tilt, tilt_sigma_deg, noise_de, hw):
+    """1-σ thickness error: the colour error of the facet's mean per Lab component (noise
+    over its pixels, or the misfit when larger) through the curvature of ΔE², plus the
+    thickness equivalent of the tilt's error; at most the SD of a uniform spread over the
+    window (a flat ΔE curve)."""
+    sc = np.maximum(noise_de / np.sqrt(n_px), de / math.sqrt(3.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s2 = (sc * np.sqrt(2.0 / curv)) ** 2
+    if tilt_sigma_deg is not None:
+        dd_dth = model.thickness_per_tilt(tilt, d)
+        s2 = s2 + (dd_dth * np.radians(np.nan_to_num(tilt_sigma_deg, nan=0.0))) ** 2
+    s = np.minimum(np.sqrt(s2), hw / math.sqrt(3.0))
+    return np.where(np.isfinite(s), s, hw / math.sqrt(3.0))
+
+
+def _other_orders(model, tilt, mean_lab, d, window):
+    """The least ΔE in the windows (``window = (hw, offsets)``) one colour period above and
+    below ``d``."""
+    lo, hi = model.thickness_range_nm
+    hw, offsets = window
+    alt = np.full(d.size, np.inf)
+    for shift in (-model.period_nm, model.period_nm):
+        c2 = d + shift
+        inside = (c2 + hw >= lo) & (c2 - hw <= hi)
+        if inside.any():
+            rows = _Rows(model, tilt[inside], mean_lab[inside], c2[inside], offsets)
+            alt[inside] = np.minimum(alt[inside], _window_minimum(rows)[2])
+    return np.where(np.isfinite(alt), alt, np.nan)
+
+
+def _chunk(model, colours, ii, tilt, options, extra):
+    """:func:`facet_thickness` on the facets ``ii``: (d, σ, ΔE, edge, other-order ΔE)."""
+    hw = options.order_window_fraction * model.period_nm
+    t_lo, t_hi = model.theta_range_deg
+    th = np.clip(tilt[ii], t_lo, t_hi)
+    lab, cen = colours.mean_lab[ii], colours.roi_thickness_nm[ii]
+    if extra["thorough"]:
+        best_in, d_out, de_out = _order_scan(model, th, lab, cen, hw)
+        switch = ((de_out < best_in - options.order_switch_de)
+                  & (de_out < options.order_switch_ratio * best_in))
+        cen = np.where(switch, d_out, cen)
+    offsets = np.arange(-hw, hw + 1e-9, 1.0)
+    d_k, k, _ = _window_minimum(_Rows(model, th, lab, cen, offsets))
+    edge = (k == 0) | (k == offsets.size - 1)
+    d, de, curv = _fine(model, th, lab, d_k, extra["step"])
+    ts = None if extra["tilt_sigma"] is None else extra["tilt_sigma"][ii]
+    s = _sigma(model, d, de, curv, colours.n_pixels[ii], th, ts, extra["noise_de"], hw)
+    alt = (_other_orders(model, th, lab, d, (hw, offsets)) if extra["thorough"]
+           else np.full(ii.size, np.nan))
+    return d, s, de, edge, alt
+
+
+def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOptions, *,
+                    tilt_sigma_deg=None, noise_de=1.0, thorough=True) -> FacetThickness:
+    """Thickness per facet from its mean Lab at its tilt, within its interference order.
+
+    The order is the ROI's (the window ±``order_window_fraction`` colour periods about the
+    ROI thickness) unless a scan of the table's whole thickness range finds, outside that
+    window, a thickness whose colour fits the facet better by more than
+    ``options.order_switch_de`` and with at most ``options.order_switch_ratio`` of the ROI
+    order's ΔE: a facet of another population than its ROI's majority, in another order,
+    takes its own. Within ``order_switch_de`` the orders are not told apart by colour and the
+    ROI's is kept.
+
+    Parameters
+    ----------
+    colours : FacetColours
+        From :meth:`FacetImage.colours`.
+    tilt_deg : ndarray, shape (S,)
+        Tilt per facet (its plane's, or a stand-in where it has none).
+    model : FilmColourModel
+        The film colour at the scene's exposure.
+    options : JointOptions
+    tilt_sigma_deg : ndarray, shape (S,), optional
+        Error of ``tilt_deg`` (adds ∂d/∂θ · σ_θ to the error).
+    noise_de : float
+        Colour noise per Lab component of one pixel.
+    thorough : bool
+        Scan the whole range for another order and the neighbouring orders for
+        ``delta_e_other_order``, at ``options.thickness_step_nm``; False (the exposure
+        refinement): stay in the ROI's order, at ``options.exposure_thickness_step_nm``.
+
+    Returns
+    -------
+    FacetThickness
+    """
+    S = colours.mean_lab.shape[0]
+    tilt = np.asarray(tilt_deg, dtype=np.float64)
+    has = (colours.n_pixels > 0) & np.isfinite(colours.roi_thickness_nm) & np.isfinite(tilt)
+    out = np.full((5, S), np.nan)
+    extra = {"thorough": thorough, "noise_de": noise_de,
+             "tilt_sigma": None if tilt_sigma_deg is None else np.asarray(tilt_sigma_deg,
+                                                                          np.float64),
+             "step": options.thickness_step_nm if thorough else
+             options.exposure_thickness_step_nm}
+    idx = np.flatnonzero(has)
+    for a in range(0, idx.size, _CHUNK):
+        ii = idx[a:a + _CHUNK]
+        out[:, ii] = _chunk(model, colours, ii, tilt, options, extra)
+    return FacetThickness(out[0], out[1], out[2], out[3] == 1.0,
+                          colours.n_pixels.astype(np.int64), out[4])
+
+
+def refine_exposure_on_facets(image: FacetImage, tilt_deg, model, options: JointOptions, *,
+                              seed=0) -> float:
+    """Exposure of least median facet ΔE, each facet's thickness re-solved per candidate
+    (within ×/÷ 1.5 of the model's).
+
+    Facets are homogeneous (one tilt, one thickness), unlike ROIs that span several
+    thickness regions, so they pin the exposure down better than the ROI fit did. Facets
+    without a tilt (NaN in ``tilt_deg``) are not used; ``options.exposure_facets`` of them at
+    random, with at least 4 usable interior pixels.
+    """
+    S = image.n_facets
+    rng = np.random.default_rng(seed)
+    cnt = np.bincount(image.labels[image.usable & image.interior], minlength=S)
+    cand = np.flatnonzero((cnt >= 4) & np.isfinite(tilt_deg))
+    if cand.size < 10:
+        return model.exposure
+    pick = np.zeros(S, bool)
+    pick[rng.choice(cand, min(options.exposure_facets, cand.size), replace=False)] = True
+    colours = image.colours(image.usable & pick[image.labels])
+    tilt = np.where(pick, tilt_deg, np.nan)
+
+    def objective(log_e):
+        ft = facet_thickness(colours, tilt, model.with_exposure(math.exp(log_e)), options,
+                             thorough=False)
+        return float(np.nanmedian(ft.delta_e))
+
+    e0 = model.exposure
+    opt = optimize.minimize_scalar(objective, bounds=(math.log(e0 / 1.5), math.log(e0 * 1.5)),
+                                   method="bounded", options={"xatol": 0.005})
+    return float(math.exp(opt.x)) if opt.fun <= objective(math.log(e0)) else e0

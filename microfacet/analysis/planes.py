@@ -1,0 +1,148 @@
+"""Facet planes: a least-squares plane per facet through its reliable heights only.
+
+Colour moves about 2 ΔE00 per nm of thickness but only 0.03-0.3 per degree of tilt
+(docs/conditioning.md), so the joint mode (:mod:`.joint`) takes each facet's tilt from the
+height map: a plane through the facet's *reliable* heights, each weighted by 1/σ_h² (its
+error from the focus stage). Its covariance, inflated by the reduced χ² of the fit when the
+plane fits worse than the height errors allow and by the correlation of the height errors,
+is the slope noise the NDF fit deconvolves. A facet with too few reliable heights, or whose
+reliable pixels do not span a plane, gets no tilt (``fitted`` False, tilt NaN): it is not
+guessed.
+
+References
+----------
+.. [1] N. Nagata et al., the seed, §3.3.2 (facets as planes of the height map, Fig. 17).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.lazy import load
+from .segmentation import plane_from_moments, plane_moments
+
+ndimage = load("scipy.ndimage")
+
+__all__ = ["FacetFit", "facet_edge_distance", "fit_facet_planes"]
+
+
+@dataclass
+class FacetFit:
+    """Plane fits per facet (arrays of length S; NaN where not ``fitted``).
+
+    Attributes
+    ----------
+    slope_x, slope_y : ndarray
+        dh/dx and dh/dy (x = image columns, y = image rows, both in µm).
+    slope_cov : ndarray, shape (S, 2, 2)
+        Covariance of (slope_x, slope_y), inflated by ``max(1, chi2_dof)`` and by the
+        correlation of the height errors.
+    slope_sigma : ndarray
+        Isotropic slope noise per axis, √(trace(cov) / 2): a measured slope vector is the
+        true one plus N(0, slope_sigma² I) (the NDF fit's noise model).
+    tilt_deg, tilt_sigma_deg : ndarray
+        Tilt of the plane and its 1-σ uncertainty (along the gradient).
+    n_pixels : ndarray of int
+        Reliable pixels the plane was fitted to.
+    chi2_dof : ndarray
+        Weighted residual per degree of freedom (≈ 1 when the heights' σ is right and the
+        facet is one plane).
+    fitted : ndarray of bool
+        The facet has a height tilt.
+    """
+
+    slope_x: np.ndarray
+    slope_y: np.ndarray
+    slope_cov: np.ndarray
+    slope_sigma: np.ndarray
+    tilt_deg: np.ndarray
+    tilt_sigma_deg: np.ndarray
+    n_pixels: np.ndarray
+    chi2_dof: np.ndarray
+    fitted: np.ndarray
+
+
+def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size_um,
+                     min_pixels, correlation_px=1.0) -> FacetFit:
+    """Weighted least-squares plane per facet through its reliable heights only.
+
+    Parameters
+    ----------
+    labels : ndarray of int, shape (H, W)
+        Facets 0..S-1.
+    height_um : ndarray, shape (H, W)
+        Height map (NaN ignored).
+    height_sigma_um : ndarray or float
+        1-σ height error per pixel (µm): weights 1/σ².
+    reliable : ndarray of bool, shape (H, W)
+        Pixels whose height may be used (the others, however plausible, are not).
+    pixel_size_um : float or (float, float)
+        Lateral pixel size in µm, ``(y, x)`` for non-square pixels.
+    min_pixels : int
+        Fewest reliable pixels for a plane (:attr:`~.options.JointOptions.min_plane_pixels`).
+    correlation_px : float
+        Correlation area A of the height errors in pixels. Heights from focus share their
+        errors over the focus window (measured: 27-41 px² for a 7 px window), which the
+        residual about the plane cannot show: the slope covariance of independent errors is
+        multiplied by ``n A / (n + 5 A)`` — A for facets much larger than the correlation
+        area, less for smaller ones (a smooth error tilts a small facet less than it would
+        n independent errors), fitted within ±30 % to simulations of smoothed white noise
+        for facets of 0.3-36 correlation areas (tests/analysis/test_facets.py).
+
+    Returns
+    -------
+    FacetFit
+
+    Examples
+    --------
+    >>> yy, xx = np.mgrid[0:10, 0:20]
+    >>> labels = (xx >= 10).astype(np.int32)
+    >>> h = np.where(labels == 0, 0.1, -0.2) * xx * 0.5     # slopes 0.1 and -0.2
+    >>> rel = np.ones(h.shape, bool); rel[:, 10:] = False   # facet 1: no reliable height
+    >>> ff = fit_facet_planes(labels, h, height_sigma_um=0.01, reliable=rel, pixel_size_um=0.5,
+    ...                       min_pixels=8)
+    >>> ff.fitted.tolist(), round(float(ff.slope_x[0]), 6), bool(np.isnan(ff.tilt_deg[1]))
+    ([True, False], 0.1, True)
+    """
+    S = int(labels.max()) + 1
+    sig = np.broadcast_to(np.asarray(height_sigma_um, dtype=np.float64), labels.shape)
+    z = np.asarray(height_um, dtype=np.float64)
+    use = np.asarray(reliable, bool) & np.isfinite(z) & np.isfinite(sig) & (sig > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        wt = np.where(use, 1.0 / sig ** 2, 0.0)
+    m = plane_moments(labels, np.where(use, z, np.nan), wt, pixel_size_um=pixel_size_um,
+                      n_labels=S)
+    n = np.bincount(labels.ravel(), weights=use.ravel(), minlength=S).astype(np.int64)
+    a, b, rss, cov = plane_from_moments(m)
+    fitted = (n >= max(int(min_pixels), 4)) & np.isfinite(a) & np.isfinite(b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        chi2 = np.where(fitted, rss / np.maximum(n - 3, 1), np.nan)
+    A = max(float(correlation_px), 1.0)
+    corr = n * A / (n + 5.0 * A) if A > 1.0 else np.ones(n.shape)
+    infl = np.where(fitted, np.maximum(chi2, 1.0) * np.maximum(corr, 1.0), np.nan)
+    cov = np.where(fitted[:, None, None], cov * infl[:, None, None], np.nan)
+    g = np.hypot(a, b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ux = np.where(g > 0, a / g, 1 / np.sqrt(2))
+        uy = np.where(g > 0, b / g, 1 / np.sqrt(2))
+        var_g = (cov[:, 0, 0] * ux * ux + 2 * cov[:, 0, 1] * ux * uy + cov[:, 1, 1] * uy * uy)
+    tilt = np.where(fitted, np.degrees(np.arctan(g)), np.nan)
+    tsig = np.where(fitted, np.degrees(np.sqrt(np.maximum(var_g, 0.0)) / (1.0 + g * g)),
+                    np.nan)
+    ssig = np.where(fitted, np.sqrt(np.maximum(cov[:, 0, 0] + cov[:, 1, 1], 0.0) / 2.0),
+                    np.nan)
+    nan = np.where(fitted, 0.0, np.nan)
+    return FacetFit(a + nan, b + nan, cov, ssig, tilt, tsig, n, chi2, fitted)
+
+
+def facet_edge_distance(labels) -> np.ndarray:
+    """Distance in pixels of every pixel from the nearest facet boundary (0 on it; +inf
+    everywhere for a single facet, which has no boundary)."""
+    edge = np.zeros(labels.shape, bool)
+    edge[:, 1:] |= labels[:, 1:] != labels[:, :-1]
+    edge[1:, :] |= labels[1:, :] != labels[:-1, :]
+    if not edge.any():
+        return np.full(labels.shape, np.inf)
+    return ndimage.distance_transform_edt(~edge)
