@@ -76,8 +76,8 @@ def roi_grid(shape, *, size_px, stride_px=None):
     shape : (int, int)
         Image height and width.
     size_px : int
-        ROI side (the seed's 255 px: :class:`~.options.RoiOptions`). An image smaller than that gives one ROI of the
-        image's size along that axis.
+        ROI side (the seed's 255 px: :class:`~.options.RoiOptions`). An image smaller
+        than that gives one ROI of the image's size along that axis.
     stride_px : int, optional
         Step between ROI origins. By default (``size_px``) the axis is cut into
         ``round(n / size_px)`` equal tiles (the last absorbs the remainder's rounding), so

@@ -8,7 +8,9 @@ import time
 from pathlib import Path
 
 from .. import io, workflow
+from ..analysis.stages import JOINT_ONLY, Stage
 from .options import (
+    FLAGS,
     HelpFormatter,
     add_analysis_options,
     add_limit_options,
@@ -18,7 +20,7 @@ from .options import (
     limits_from_args,
     plain_folder_values,
 )
-from .progress import ANALYZE_STAGE_WEIGHTS, StageProgress
+from .progress import StageProgress
 
 
 def register(sub):
@@ -70,22 +72,28 @@ def json_summary(out: Path) -> dict:
 
 
 def _text_summary(result, out: Path, elapsed_s: float) -> str:
-    fit = result.thickness_fit
+    dist = result.distributions
+    fit = dist.thickness
     comps = ", ".join(f"{m:.1f} nm ({100 * w:.0f}%)" for w, m, _ in fit.mixture.components) \
         if fit else "none"
-    lobes = ", ".join(f"{s:.1f}° ({100 * w:.0f}%)"
-                      for w, s in result.ndf_fit.mixture.components) \
-        if result.ndf_fit else "none"
-    if fit is not None and not fit.identified:
+    lobes = ", ".join(f"{s:.1f}° ({100 * w:.0f}%)" for w, s in dist.ndf.mixture.components) \
+        if dist.ndf else "none"
+    if fit is not None and not dist.thickness_judgement.identified:
         comps += " -- NOT IDENTIFIED"
-    if result.ndf_fit is None or not result.ndf_fit.identified:
+    if not dist.ndf_judgement.identified:
         lobes += " -- NOT IDENTIFIED, not a measurement"
     de = result.delta_e_stats
     return (f"wrote {out} in {elapsed_s:.1f} s\n"
             f"  thickness: {comps}\n  NDF lobes (slope SD): {lobes}\n"
-            f"  exposure {result.exposure:.3f} ({result.exposure_source}), "
+            f"  exposure {result.exposure:.3f} ({result.scene.exposure_source}), "
             f"mean dE00 {de['mean'] if de['mean'] is None else round(de['mean'], 2)}, "
-            f"masked {100 * result.mask.fraction:.1f}%")
+            f"masked {100 * result.colour.mask.fraction:.1f}%")
+
+
+def _skipped(args, options) -> tuple:
+    """The stages that will not run (their share of the progress bar)."""
+    skip = (Stage.REPORT,) if args.no_report else ()
+    return skip + (JOINT_ONLY if options.mode == "seed" else ())
 
 
 def run(args) -> int:
@@ -94,16 +102,16 @@ def run(args) -> int:
     out = Path(args.out)
     opts = analysis_options(args)
     pixel_size_um, z_step_um = plain_folder_values(args)
+    source = workflow.StackSource(args.stack, pixel_size_um, z_step_um, limits_from_args(args))
     t0 = time.perf_counter()
-    skip = ("report",) if args.no_report else ()
-    with StageProgress("analyze", ANALYZE_STAGE_WEIGHTS, skip=skip, quiet=args.quiet) as bar:
-        result = workflow.analyse_to_folder(args.stack, out, options=opts,
-                                         overwrite=args.overwrite, report=not args.no_report,
-                                         limits=limits_from_args(args), progress=bar.stage,
-                                         pixel_size_um=pixel_size_um, z_step_um=z_step_um)
+    with StageProgress("analyze", list(Stage), skip=_skipped(args, opts),
+                       quiet=args.quiet) as bar:
+        result = workflow.analyse_to_folder(source, out, options=opts,
+                                            overwrite=args.overwrite, report=not args.no_report,
+                                            progress=bar.stage)
         bar.finish()
     for w in result.warnings:
-        logging.getLogger(__name__).warning("%s: %s", out, w)
+        logging.getLogger(__name__).warning("%s: %s", out, w.render(FLAGS))
     if args.json:
         print(json.dumps(json_summary(out), indent=1))
     elif not args.quiet:

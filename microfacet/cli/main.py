@@ -22,6 +22,7 @@ import sys
 
 from .. import __version__
 from ..core.errors import InputError, one_line
+from .options import FLAGS
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = (
@@ -108,7 +109,7 @@ def _on_sigterm(signum, frame):
 def _user_message(exc: BaseException) -> str | None:
     """One line for an error caused by the input or the environment, None for a bug."""
     if isinstance(exc, InputError):
-        return exc.cli_message()
+        return exc.cli_message(FLAGS)
     if isinstance(exc, OSError):
         name = exc.filename if exc.filename is not None else ""
         what = exc.strerror or str(exc) or type(exc).__name__

@@ -169,13 +169,25 @@ def add_option_fields(p, cls, *, title: str | None = None, skip=()) -> None:
             kw["choices"] = [c for c in meta["choices"] if c is not None]
             kw.pop("metavar", None)
         kw.update(meta.get("cli_kwargs") or {})
-        unit = f" {f.unit}" if f.unit and f.unit not in ("-", "") else ""
-        default = f.default
-        shown = ("none" if default is None else ":".join(f"{v:g}" for v in default)
-                 if isinstance(default, tuple) else f"{default:g}" if isinstance(default, float)
-                 else str(default))
-        kw["help"] = f"{f.help} (default {shown}{unit if default is not None else ''})"
+        kw["help"] = f.help + _default_text(f)
         g.add_argument(f.flag, **kw)
+        FLAGS[f.path] = f.flag
+
+
+#: ``{dotted option path: flag}`` of every option a command registered
+#: (:func:`add_option_fields`): how an error or a reason naming an option shows it.
+FLAGS: dict = {}
+
+
+def _default_text(f) -> str:
+    """`` (default 255 px)``; nothing for a default of None (the help says what happens)."""
+    d = f.default
+    if d is None or d is False:
+        return ""
+    shown = (":".join(f"{v:g}" for v in d) if isinstance(d, tuple)
+             else f"{d:g}" if isinstance(d, float) and not isinstance(d, bool) else str(d))
+    unit = "" if not f.unit else f.unit if f.unit in ("°", "%") else f" {f.unit}"
+    return f" (default {shown}{unit})"
 
 
 def _dest(path: str) -> str:
@@ -212,44 +224,15 @@ def example_epilog(*lines: str) -> str:
 
 
 def add_analysis_options(p: argparse.ArgumentParser) -> None:
-    """The options of :class:`~microfacet.analysis.options.AnalysisOptions` (``analyze``,
-    ``batch``)."""
-    g = p.add_argument_group("analysis")
-    g.add_argument("--mode", choices=("joint", "seed"), default="joint",
-                   help="joint: facet planes + colour (default); seed: the paper's method")
-    g.add_argument("--roi-size-px", type=int, default=255, metavar="PX",
-                   help="ROI side (default 255)")
-    g.add_argument("--roi-stride-px", type=int, default=None, metavar="PX",
-                   help="ROI stride (default: size)")
-    g.add_argument("--saturation-min", type=float, default=15.0, metavar="S",
-                   help="mask HSV saturation below this, 0-255 scale (default 15)")
-    g.add_argument("--thickness-range-nm", type=pair_type(":", float, "LOW:HIGH in nm"),
-                   default=(0.0, 400.0), metavar="LOW:HIGH",
-                   help="global thickness search range (default 0:400)")
-    g.add_argument("--exposure", type=float, default=None, metavar="E",
-                   help="known exposure (default: stack.json's, else estimated)")
-    g.add_argument("--facet-size-um", type=float, default=2.0, metavar="UM",
-                   help="expected facet diameter for the joint mode (default 2)")
-    g.add_argument("--max-components", type=int, default=5, metavar="K",
-                   help="largest number of mixture components tried by BIC (default 5)")
-    g.add_argument("--align", nargs="?", const="ecc", choices=("ecc", "phase"), default=None,
-                   help="register slices before measuring focus")
-    g.add_argument("--film", default=None, metavar="NAME", help="override the stack's film set")
-    g.add_argument("--substrate", default=None, metavar="NAME",
-                   help="override the stack's substrate set")
+    """The command-line options of :class:`~microfacet.analysis.options.AnalysisOptions`
+    (``analyze``, ``batch``), generated from its fields."""
+    add_option_fields(p, analysis.AnalysisOptions, title="analysis")
 
 
 def analysis_options(args):
-    """:class:`~microfacet.analysis.options.AnalysisOptions` from the parsed options, validated
-    (an :class:`~microfacet.core.errors.InputError` names the option)."""
-    opts = analysis.AnalysisOptions(
-        mode=args.mode, roi_size_px=args.roi_size_px, roi_stride_px=args.roi_stride_px,
-        saturation_min=args.saturation_min, thickness_range_nm=tuple(args.thickness_range_nm),
-        exposure=args.exposure, facet_size_um=args.facet_size_um,
-        max_components=args.max_components, align=args.align or False, film=args.film,
-        substrate=args.substrate)
-    opts.validate()
-    return opts
+    """:class:`~microfacet.analysis.options.AnalysisOptions` from the parsed options,
+    validated (an :class:`~microfacet.core.errors.InputError` names the option)."""
+    return options_from_args(args, analysis.AnalysisOptions)
 
 
 class HelpFormatter(argparse.HelpFormatter):

@@ -6,25 +6,7 @@ from __future__ import annotations
 import sys
 import time
 
-__all__ = ["ANALYZE_STAGE_WEIGHTS", "Progress", "StageProgress"]
-
-#: Relative cost of each stage of ``microfacet analyze``, in the order the pipeline announces
-#: them (``progress(stage)`` of :func:`microfacet.workflow.analyse_to_folder`). Measured as the
-#: ``timings_s`` of ``summary.json`` after ``microfacet analyze fixtures/stacks/nd-fixture``
-#: (joint mode, 2 cores), seconds: height_from_focus + normals; colour_and_mask;
-#: colour_table; thickness_roi; segmentation + facet_fits + tilt_per_pixel; mixtures; write;
-#: report. The report takes as long as the whole analysis, so equal steps would put the
-#: bar at 6/8 when half the time is still ahead.
-ANALYZE_STAGE_WEIGHTS = (
-    ("height from focus", 2.2),
-    ("colour", 1.4),
-    ("colour table", 0.6),
-    ("thickness per ROI", 0.4),
-    ("tilt per pixel", 3.0),
-    ("distributions", 1.1),
-    ("write", 0.05),
-    ("report", 8.5),
-)
+__all__ = ["Progress", "StageProgress"]
 
 
 class Progress:
@@ -92,38 +74,40 @@ class StageProgress(Progress):
     Parameters
     ----------
     label : str
-    weights : sequence of (str, float)
-        The stages in order and their relative cost (see :data:`ANALYZE_STAGE_WEIGHTS`).
-    skip : collection of str, optional
-        Stages that will not run this time (``report`` with ``--no-report``); they count
-        for nothing.
+    stages : sequence
+        The stages in order, each with a ``label`` and a relative cost ``weight``
+        (:class:`microfacet.analysis.stages.Stage`).
+    skip : collection, optional
+        Stages that will not run this time (the report with ``--no-report``, the joint
+        mode's stages in the seed mode); they count for nothing.
     quiet : bool
     stream : file, optional
 
     Examples
     --------
-    >>> bar = StageProgress("analyze", [("a", 1.0), ("b", 3.0)], quiet=True)
-    >>> bar.stage("b"); bar.fraction
+    >>> from types import SimpleNamespace as S
+    >>> a, b = S(label="a", weight=1.0), S(label="b", weight=3.0)
+    >>> bar = StageProgress("analyze", [a, b], quiet=True)
+    >>> bar.stage(b); bar.fraction
     0.25
-    >>> bar.stage("unknown"); bar.fraction   # an unknown stage does not move the bar
+    >>> bar.stage(S(label="other", weight=1.0)); bar.fraction   # not a stage: no move
     0.25
     >>> bar.finish(); bar.fraction
     1.0
     """
 
-    def __init__(self, label: str, weights, *, skip=(), quiet: bool = False, stream=None):
-        self._stages = [(name, float(w)) for name, w in weights if name not in set(skip)]
+    def __init__(self, label: str, stages, *, skip=(), quiet: bool = False, stream=None):
+        self._stages = [s for s in stages if s not in list(skip)]
         super().__init__(label, total=len(self._stages), quiet=quiet, stream=stream)
-        self._sum = sum(w for _, w in self._stages) or 1.0
+        self._sum = sum(s.weight for s in self._stages) or 1.0
 
-    def stage(self, name: str) -> None:
-        """Stage ``name`` starts: every stage before it in the order is done."""
-        names = [n for n, _ in self._stages]
-        if name not in names:
+    def stage(self, stage) -> None:
+        """``stage`` starts: every stage before it in the order is done."""
+        if stage not in self._stages:
             return
-        k = names.index(name)
-        self._draw(sum(w for _, w in self._stages[:k]) / self._sum,
-                   f"{name} ({k + 1}/{len(names)})")
+        k = self._stages.index(stage)
+        self._draw(sum(s.weight for s in self._stages[:k]) / self._sum,
+                   f"{stage.label} ({k + 1}/{len(self._stages)})")
 
     def finish(self) -> None:
         """Every stage is done."""

@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.defaults import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
 from ..core.lazy import load
 from .arrays import channels, float_array
 from .datasets import (  # re-exported: their import path here is public
@@ -143,8 +144,8 @@ def _weights_cached(wl: tuple[float, ...], illuminant: str, observer: str) -> np
     return weights
 
 
-def spectral_weights(wavelength_nm: Any, *, illuminant: str = "D65",
-                     observer: str = "2") -> np.ndarray:
+def spectral_weights(wavelength_nm: Any, *, illuminant: str = DEFAULT_ILLUMINANT,
+                     observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """Weights ``W`` such that ``XYZ = R @ W`` for reflectance spectra ``R``.
 
     ``W[i] = cmf(λ_i) S(λ_i) Δλ / Σ_k ȳ(λ_k) S(λ_k) Δλ``, CIE 15 summation: on a uniform
@@ -192,8 +193,8 @@ def spectral_weights(wavelength_nm: Any, *, illuminant: str = "D65",
                            observer_name(observer))
 
 
-def spectrum_to_xyz(reflectance: Any, wavelength_nm: Any, *, illuminant: str = "D65",
-                    observer: str = "2") -> np.ndarray:
+def spectrum_to_xyz(reflectance: Any, wavelength_nm: Any, *, illuminant: str = DEFAULT_ILLUMINANT,
+                    observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """CIE XYZ of reflectance spectra (perfect reflector ``Y = 1``): ``R @ W``.
 
     The weights ``W`` are colour-science's integration (:func:`spectral_weights`); applying
@@ -237,7 +238,8 @@ def spectrum_to_xyz(reflectance: Any, wavelength_nm: Any, *, illuminant: str = "
     return r @ weights.astype(r.dtype, copy=False)
 
 
-def white_xyz(*, illuminant: str = "D65", observer: str = "2") -> np.ndarray:
+def white_xyz(*, illuminant: str = DEFAULT_ILLUMINANT,
+              observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """XYZ of the perfect reflecting diffuser (``Y = 1``), CIE 1 nm, 360-830 nm.
 
     colour-science's ``sd_to_XYZ(sd_ones, cmfs, illuminant, method="Integration") / 100``
@@ -279,8 +281,8 @@ def _white_arg(white: Any, illuminant: str, observer: str, dtype: np.dtype) -> n
     return wt.astype(dtype, copy=False)
 
 
-def xyz_to_lab(xyz: Any, *, white: Any = None, illuminant: str = "D65",
-               observer: str = "2") -> np.ndarray:
+def xyz_to_lab(xyz: Any, *, white: Any = None, illuminant: str = DEFAULT_ILLUMINANT,
+               observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """CIE 1976 L*a*b* from XYZ (exact CIE piecewise function).
 
     Kept ours (colour-science has ``colour.XYZ_to_Lab``): it computes in float32 when
@@ -324,8 +326,8 @@ def xyz_to_lab(xyz: Any, *, white: Any = None, illuminant: str = "D65",
     return out
 
 
-def lab_to_xyz(lab: Any, *, white: Any = None, illuminant: str = "D65",
-               observer: str = "2") -> np.ndarray:
+def lab_to_xyz(lab: Any, *, white: Any = None, illuminant: str = DEFAULT_ILLUMINANT,
+               observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """XYZ from CIE 1976 L*a*b* (inverse of :func:`xyz_to_lab`).
 
     Kept ours (colour-science has ``colour.Lab_to_XYZ``) for the float32 image path of
@@ -364,8 +366,8 @@ def lab_to_xyz(lab: Any, *, white: Any = None, illuminant: str = "D65",
     return t * wt
 
 
-def spectrum_to_lab(reflectance: Any, wavelength_nm: Any, *, illuminant: str = "D65",
-                    observer: str = "2") -> np.ndarray:
+def spectrum_to_lab(reflectance: Any, wavelength_nm: Any, *, illuminant: str = DEFAULT_ILLUMINANT,
+                    observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """CIELAB of reflectance spectra relative to the white of the same grid.
 
     The white is ``spectral_weights(wavelength_nm, ...).sum(axis=0)`` so the perfect

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.defaults import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
 from ..core.lazy import load
 
 colour = load("colour")
@@ -125,7 +126,8 @@ def illuminant_key(illuminant: Any) -> str:
         folded = {n.casefold(): n for n in names}
         if illuminant.casefold() in folded:
             return folded[illuminant.casefold()]
-    examples = ", ".join(n for n in ("D65", "D50", "A", "E", "FL2", "F11") if n in names)
+    examples = ", ".join(n for n in (DEFAULT_ILLUMINANT, "D50", "A", "E", "FL2", "F11")
+                         if n in names)
     raise ValueError(
         f"illuminant {illuminant!r} is unknown; use a name of colour.SDS_ILLUMINANTS, "
         f"e.g. {examples} ({len(names)} known, see known_illuminants())"
@@ -164,7 +166,7 @@ def _illuminant_table(name: str) -> tuple[np.ndarray, np.ndarray]:
     return _frozen(aligned.wavelengths), _frozen(aligned.values)
 
 
-def cmfs(wavelength_nm: Any, *, observer: str = "2") -> np.ndarray:
+def cmfs(wavelength_nm: Any, *, observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """CIE colour matching functions at the given wavelengths.
 
     Parameters
@@ -200,7 +202,7 @@ def cmfs(wavelength_nm: Any, *, observer: str = "2") -> np.ndarray:
     return out
 
 
-def illuminant_sd(wavelength_nm: Any, *, illuminant: str = "D65") -> np.ndarray:
+def illuminant_sd(wavelength_nm: Any, *, illuminant: str = DEFAULT_ILLUMINANT) -> np.ndarray:
     """Relative spectral power of a named CIE / colour-science illuminant.
 
     The tabulated SPD (5 nm for the CIE illuminants) is first aligned to 1 nm exactly

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.defaults import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
 from .adaptation import BRADFORD, bradford_matrix
 from .arrays import channels
 from .colorimetry import (
@@ -65,6 +66,8 @@ __all__ = [
     "xyz_to_linear_srgb",
 ]
 
+#: The white point and observer the sRGB standard (IEC 61966-2-1:1999) is defined for.
+SRGB_ILLUMINANT, SRGB_OBSERVER = "D65", "2"
 #: sRGB (IEC 61966-2-1:1999) linear RGB -> XYZ (D65, Y = 1 for RGB white).
 SRGB_TO_XYZ = np.array(
     [
@@ -87,10 +90,12 @@ SRGB_WHITE_XYZ.flags.writeable = False
 
 
 def _is_srgb_native(illuminant: str, observer: str) -> bool:
-    return illuminant_key(illuminant) == "D65" and observer_name(observer) == observer_name("2")
+    return (illuminant_key(illuminant) == SRGB_ILLUMINANT
+            and observer_name(observer) == observer_name(SRGB_OBSERVER))
 
 
-def image_white_xyz(*, illuminant: str = "D65", observer: str = "2") -> np.ndarray:
+def image_white_xyz(*, illuminant: str = DEFAULT_ILLUMINANT,
+                    observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """Reference white of the image (sRGB) path, i.e. the XYZ of RGB ``(1, 1, 1)``.
 
     :data:`SRGB_WHITE_XYZ` (0.9505, 1, 1.089) for D65 and the 2 degree observer,
@@ -130,7 +135,8 @@ def _xyz_to_rgb_matrix(illuminant: str, observer: str) -> np.ndarray:
     return m
 
 
-def linear_srgb_to_xyz(rgb: Any, *, illuminant: str = "D65", observer: str = "2") -> np.ndarray:
+def linear_srgb_to_xyz(rgb: Any, *, illuminant: str = DEFAULT_ILLUMINANT,
+                       observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """Linear sRGB -> XYZ, white-balanced images (RGB 1 = illuminant white).
 
     Kept ours (colour-science: ``colour.RGB_to_XYZ``): one cached (3, 3) matrix (built
@@ -162,7 +168,8 @@ def linear_srgb_to_xyz(rgb: Any, *, illuminant: str = "D65", observer: str = "2"
     return (a @ m.T.astype(a.dtype, copy=False)).astype(np.float32, copy=False)
 
 
-def xyz_to_linear_srgb(xyz: Any, *, illuminant: str = "D65", observer: str = "2") -> np.ndarray:
+def xyz_to_linear_srgb(xyz: Any, *, illuminant: str = DEFAULT_ILLUMINANT,
+                       observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """XYZ -> linear sRGB, the inverse of :func:`linear_srgb_to_xyz` (unclipped).
 
     Kept ours for the reasons of :func:`linear_srgb_to_xyz` (9.5× / 17× faster than
@@ -189,8 +196,8 @@ def xyz_to_linear_srgb(xyz: Any, *, illuminant: str = "D65", observer: str = "2"
     return (a @ m.T.astype(a.dtype, copy=False)).astype(np.float32, copy=False)
 
 
-def model_xyz_to_linear_srgb(xyz: Any, *, white: Any, illuminant: str = "D65",
-                             observer: str = "2") -> np.ndarray:
+def model_xyz_to_linear_srgb(xyz: Any, *, white: Any, illuminant: str = DEFAULT_ILLUMINANT,
+                             observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """Linear sRGB of model XYZ whose perfect reflector is ``white``, which maps to RGB 1.
 
     Spectra integrated on a wavelength grid have their own white (the perfect reflector on
@@ -227,7 +234,8 @@ def model_xyz_to_linear_srgb(xyz: Any, *, white: Any, illuminant: str = "D65",
         np.float32)
 
 
-def srgb_to_lab(image: Any, *, illuminant: str = "D65", observer: str = "2") -> np.ndarray:
+def srgb_to_lab(image: Any, *, illuminant: str = DEFAULT_ILLUMINANT,
+                observer: str = DEFAULT_OBSERVER) -> np.ndarray:
     """Encoded sRGB image -> CIELAB relative to the illuminant white.
 
     Kept ours, float32 throughout: on a 12 MP uint8 image 6.4× faster than the
@@ -262,7 +270,8 @@ def srgb_to_lab(image: Any, *, illuminant: str = "D65", observer: str = "2") -> 
 
 
 def lab_to_srgb(
-    lab: Any, *, illuminant: str = "D65", observer: str = "2", dtype: Any = np.uint8
+    lab: Any, *, illuminant: str = DEFAULT_ILLUMINANT, observer: str = DEFAULT_OBSERVER,
+    dtype: Any = np.uint8
 ) -> np.ndarray:
     """CIELAB -> encoded sRGB (inverse of :func:`srgb_to_lab`; out-of-gamut clipped).
 
@@ -291,8 +300,8 @@ def lab_to_srgb(
     return srgb_encode(rgb, dtype=dtype)
 
 
-def colours_from_spectra(spectra, wavelength_nm, *, exposure=1.0, illuminant="D65",
-                         observer="2"):
+def colours_from_spectra(spectra, wavelength_nm, *, exposure=1.0, illuminant=DEFAULT_ILLUMINANT,
+                         observer=DEFAULT_OBSERVER):
     """XYZ, CIELAB and sRGB of reflectance spectra.
 
     Parameters

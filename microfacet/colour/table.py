@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.defaults import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, resolve_index
 from ..optics.thinfilm import reflectance
 from .colorimetry import spectral_weights, xyz_to_lab
@@ -59,7 +60,8 @@ def _wavelengths(step_nm):
 
 
 def direct_xyz(theta_deg, thickness_nm, *, spectral_step_nm=1.0, film=DEFAULT_FILM,
-               substrate=DEFAULT_SUBSTRATE, illuminant="D65", observer="2", n_ambient=1.0):
+               substrate=DEFAULT_SUBSTRATE, illuminant=DEFAULT_ILLUMINANT,
+               observer=DEFAULT_OBSERVER, n_ambient=1.0):
     """XYZ (perfect reflector Y = 1) by direct spectral integration, no table.
 
     Parameters
@@ -98,10 +100,10 @@ def _random_points(rng, theta_range, thickness_range, count):
     return th, d
 
 
-def choose_spectral_step(*, thickness_range_nm=(0.0, 400.0), theta_range_deg=(0.0, 45.0),
-                         film=DEFAULT_FILM, substrate=DEFAULT_SUBSTRATE, illuminant="D65",
-                         observer="2", n_ambient=1.0, max_error_de00=0.05, samples=400,
-                         seed=0):
+def choose_spectral_step(*, thickness_range_nm, theta_range_deg, film=DEFAULT_FILM,
+                         substrate=DEFAULT_SUBSTRATE, illuminant=DEFAULT_ILLUMINANT,
+                         observer=DEFAULT_OBSERVER, n_ambient=1.0, max_error_de00=0.05,
+                         samples=400, seed=0):
     """Coarsest spectral step whose colours stay within ``max_error_de00`` of 1 nm.
 
     It picks 10 / 5 / 2 nm for films of 0-200 / 0-400 / 0-800 nm, each the cheapest step on
@@ -282,9 +284,9 @@ class ColourTable:
             illuminant=self.illuminant, observer=self.observer)
 
 
-def build_colour_table(*, thickness_range_nm=(0.0, 400.0), theta_range_deg=(0.0, 45.0),
-                       film=DEFAULT_FILM, substrate=DEFAULT_SUBSTRATE, illuminant="D65",
-                       observer="2", n_ambient=1.0, spectral_step_nm=None,
+def build_colour_table(*, thickness_range_nm, theta_range_deg, film=DEFAULT_FILM,
+                       substrate=DEFAULT_SUBSTRATE, illuminant=DEFAULT_ILLUMINANT,
+                       observer=DEFAULT_OBSERVER, n_ambient=1.0, spectral_step_nm=None,
                        thickness_step_nm=None, theta_step_deg=None,
                        max_spectral_error_de00=0.05, max_interp_error_de00=0.05,
                        check_samples=2000, seed=0) -> ColourTable:

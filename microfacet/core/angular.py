@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .defaults import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
+
 __all__ = ["AngularMap"]
 
 
@@ -43,8 +45,8 @@ class AngularMap:
     srgb: np.ndarray | None = None
     spectra: np.ndarray | None = None
     wavelength_nm: np.ndarray | None = None
-    illuminant: str = "D65"
-    observer: str = "2"
+    illuminant: str = DEFAULT_ILLUMINANT
+    observer: str = DEFAULT_OBSERVER
     meta: dict = field(default_factory=dict)
 
     @property

@@ -127,7 +127,7 @@ def option_fields(cls, prefix: str = "") -> Iterator[OptionField]:
 def _check_value(name: str, value, meta: dict, default) -> str | None:
     """The reason ``value`` is invalid for the field (None when it is valid)."""
     if value is None:
-        return None if default is None else f"must be given, got None"
+        return None if default is None else "must be given, got None"
     choices = meta.get("choices")
     if choices is not None and value not in choices:
         return f"must be one of {', '.join(map(str, choices))}, got {value!r}"

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..colour.srgb import colours_from_spectra
 from ..core.angular import AngularMap
+from ..core.defaults import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
 from ..io.angular_map import check_angles
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from . import brdf, eq6
@@ -73,7 +74,8 @@ def simulate_memory_bytes(*, model: str, n_light: int, n_view: int, n_wavelength
 
 def simulate_map(*, model="microfacet", thickness, ndf=None, n=None, theta_light_deg=None,
                  theta_view_deg=None, exposure=1.0, wavelength_nm=None, film=DEFAULT_FILM,
-                 substrate=DEFAULT_SUBSTRATE, illuminant="D65", observer="2", n_ambient=1.0,
+                 substrate=DEFAULT_SUBSTRATE, illuminant=DEFAULT_ILLUMINANT,
+                 observer=DEFAULT_OBSERVER, n_ambient=1.0,
                  theta_m_step_deg=0.5) -> AngularMap:
     """Angular map of a forward model over an in-plane (θ_light, θ_view) grid.
 

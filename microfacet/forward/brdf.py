@@ -85,6 +85,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..colour.colorimetry import spectral_weights
+from ..core.defaults import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
 from ..core.distributions import NDFMixture, ThicknessMixture
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from ..optics.thinfilm import reflectance
@@ -306,7 +307,7 @@ class FilmAverage:
         f = np.clip((t - g[i]) / (g[i + 1] - g[i]), 0.0, 1.0)
         return i, f, ok
 
-    def xyz(self, *, illuminant="D65", observer="2"):
+    def xyz(self, *, illuminant=DEFAULT_ILLUMINANT, observer=DEFAULT_OBSERVER):
         """XYZ of every row (perfect reflector Y = 1), shape (T, 3)."""
         return self.spectra @ spectral_weights(self.wavelength_nm, illuminant=illuminant,
                                                      observer=observer)

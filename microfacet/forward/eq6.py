@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.defaults import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
 from ..core.distributions import NDFMixture
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from .brdf import FilmAverage, trapezoid_weights, unit_directions
@@ -165,7 +166,7 @@ class Eq6Kernel:
         out[self.nan] = np.nan
         return out.reshape(self.shape + (out.shape[-1],))
 
-    def xyz(self, n, *, illuminant="D65", observer="2", table_xyz=None):
+    def xyz(self, n, *, illuminant=DEFAULT_ILLUMINANT, observer=DEFAULT_OBSERVER, table_xyz=None):
         """Eq. 6 XYZ (perfect reflector Y = 1), shape ``shape + (3,)``.
 
         ``table_xyz`` (T, 3): the film table's XYZ, if already computed (fitting loops).

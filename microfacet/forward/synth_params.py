@@ -22,6 +22,7 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+from ..core.defaults import DEFAULT_ILLUMINANT
 from ..core.lazy import load
 from ..optics.defaults import DEFAULT_FILM, DEFAULT_SUBSTRATE
 
@@ -212,7 +213,7 @@ class SynthParams:
     write_exposure: bool = False
     film: str = DEFAULT_FILM
     substrate: str = DEFAULT_SUBSTRATE
-    illuminant: str = "D65"
+    illuminant: str = DEFAULT_ILLUMINANT
     seed: int = 0
     preset: str = "custom"
     # -- imaging variations: every default is "off" ------------------------------------

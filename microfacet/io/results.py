@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import os
 from pathlib import Path
 
@@ -35,12 +34,12 @@ from ..core.errors import InputError, one_line
 from ..core.pixels import pixel_size_yx
 from .images import read_png, write_float_tiff, write_image
 from .jsonfile import json_safe, read_json
+from .summary import FORMAT, Summary
 from .x3p import write_x3p
 
 __all__ = ["FORMAT", "IMAGES", "MAPS", "Results", "TABLES", "TIFF_COPIES", "X3P_COPIES",
            "pixel_size_of", "write_results_files"]
 
-FORMAT = "microfacet-results/1"
 #: Maps of a results folder: name -> (file, what it holds). Shapes are H×W (H×W×3 for the
 #: normals); floats are float32 with NaN where there is no value.
 MAPS = {
@@ -182,13 +181,10 @@ class Results:
             raise InputError(f"{one_line(self.path)}: results folder not found")
         if not f.is_file():
             raise InputError(f"{one_line(f)}: missing (not a results folder)")
-        summary = read_json(f)
-        if not isinstance(summary, dict):
-            raise InputError(f"{one_line(f)}: must hold a JSON object")
-        fmt = summary.get("format")
-        if fmt is not None and not str(fmt).startswith("microfacet-results/"):
-            raise InputError(f"{one_line(f)}: key 'format': {fmt!r} is not {FORMAT!r}")
-        self.summary = summary
+        #: The validated, typed summary (:class:`~microfacet.io.summary.Summary`).
+        self.typed = Summary.from_json(read_json(f), where=one_line(f))
+        #: ``summary.json`` as a dict (the typed summary's JSON, version-2 layout).
+        self.summary = self.typed.to_json()
         self.summary_mtime = f.stat().st_mtime
         self._cache: dict = {}
 
@@ -215,10 +211,29 @@ class Results:
         p = self.summary.get("parameters")
         return p if isinstance(p, dict) else {}
 
+    def parameter(self, path: str):
+        """The analysis option at the dotted ``path`` of the options tree
+        (``"roi.size_px"``), or None.
+
+        >>> import tempfile, pathlib
+        >>> d = pathlib.Path(tempfile.mkdtemp())
+        >>> _ = (d / "summary.json").write_text('{"parameters": {"roi_size_px": 128}}')
+        >>> Results(d).parameter("roi.size_px")     # a version-1 summary's flat name
+        128
+        """
+        return self.get("parameters", *path.split("."))
+
     def differing_parameters(self, parameters: dict) -> list[str]:
-        """Names of the ``parameters`` (JSON-safe values) that this folder was not made with."""
-        have = self.parameters
-        want = json_safe(parameters)
+        """Dotted names of the ``parameters`` (a nested dict of options) that this folder was
+        not made with.
+
+        >>> import tempfile, pathlib
+        >>> d = pathlib.Path(tempfile.mkdtemp())
+        >>> _ = (d / "summary.json").write_text('{"parameters": {"roi": {"size_px": 255}}}')
+        >>> Results(d).differing_parameters({"roi": {"size_px": 128}, "mode": "joint"})
+        ['mode', 'roi.size_px']
+        """
+        have, want = _flat(self.parameters), _flat(json_safe(parameters))
         return sorted(k for k in want if have.get(k) != want[k])
 
     def _mixture(self, key, cls):
@@ -340,6 +355,16 @@ class Results:
                                f"parameters ({', '.join(diff)}); re-analysed only with "
                                f"overwrite")
         return True, ""
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
 
 
 def _read_table(f: Path, required) -> dict:

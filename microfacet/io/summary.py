@@ -184,11 +184,35 @@ def _plain(v):
     return v
 
 
+#: Version 1's flat ``parameters`` → their dotted paths in the options tree of version 2.
+V1_PARAMETERS = {
+    "roi_size_px": "roi.size_px", "roi_stride_px": "roi.stride_px",
+    "saturation_min": "mask.saturation_min", "value_min": "mask.value_min",
+    "thickness_range_nm": "optics.thickness_range_nm", "exposure": "optics.exposure",
+    "film": "optics.film", "substrate": "optics.substrate", "illuminant": "optics.illuminant",
+    "delta_e_method": "optics.delta_e_method", "facet_size_um": "joint.facet_size_um",
+    "tilt_step_deg": "tilt.step_deg", "max_components": "fits.max_components",
+    "operator": "focus.operator", "window_px": "focus.window_px", "align": "focus.align"}
+
+
+def _nested_parameters(flat: dict) -> dict:
+    out: dict = {}
+    for key, value in flat.items():
+        node = out
+        *parents, leaf = V1_PARAMETERS.get(key, key).split(".")
+        for k in parents:
+            node = node.setdefault(k, {})
+        node[leaf] = value
+    return out
+
+
 def _upgrade(data: dict) -> dict:
     """A version-1 summary in the version-2 layout (nothing is lost: the repeated keys
-    equal their originals)."""
+    equal their originals; the flat parameters are nested as the options tree)."""
     if data.get("summary_version") is not None:
         return data
+    if isinstance(data.get("parameters"), dict):
+        data["parameters"] = _nested_parameters(data["parameters"])
     inputs = data.get("inputs")
     if isinstance(inputs, dict):
         inputs = dict(inputs)

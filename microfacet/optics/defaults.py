@@ -15,17 +15,16 @@ Defaults
     sample 2 falls at ~51 nm, matching the seed's Table 1 estimate (50.8 nm); Palm (2018) is an
     annealed evaporated film with markedly lower n and k, the Rakic sets are model fits.
 
-``DEFAULT_ILLUMINANT = "D65"``, ``DEFAULT_OBSERVER = "2"``
-    The light a stack's images are white-balanced to when ``stack.json`` does not say (the
-    seed renders and compares under D65), and the CIE 1931 2° observer.
+The illuminant and observer (:data:`DEFAULT_ILLUMINANT`, :data:`DEFAULT_OBSERVER`) are
+:mod:`microfacet.core.defaults`' (core code needs them too), named here for convenience.
 """
+
+from ..core.defaults import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
 
 __all__ = ["DEFAULT_FILM", "DEFAULT_ILLUMINANT", "DEFAULT_OBSERVER", "DEFAULT_SUBSTRATE",
            "DEFAULT_NUMERICAL_APERTURE"]
 
 DEFAULT_FILM = "TiO2_Jolivet2023_amorphous"
 DEFAULT_SUBSTRATE = "Ti_JohnsonChristy1974"
-DEFAULT_ILLUMINANT = "D65"
-DEFAULT_OBSERVER = "2"
 #: Numerical aperture of the objective when ``stack.json`` does not give one.
 DEFAULT_NUMERICAL_APERTURE = 0.8

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..colour.colorimetry import illuminant_key
+from ..core.defaults import DEFAULT_ILLUMINANT
 from ..forward.angular import DISPLAY_CORE_DEG, display_exposure, simulate_map, with_exposure
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, known_sets
 from .layout import blank_panel, shorten
@@ -42,13 +43,14 @@ def optics(ctx) -> dict:
     """
     out = dict(film=ctx.optics("film") or DEFAULT_FILM,
                substrate=ctx.optics("substrate") or DEFAULT_SUBSTRATE,
-               illuminant=ctx.optics("illuminant") or "D65")
+               illuminant=ctx.optics("illuminant") or DEFAULT_ILLUMINANT)
     try:
         illuminant_key(out["illuminant"])
         ok = out["film"] in known_sets() and out["substrate"] in known_sets()
     except (ValueError, TypeError):
         ok = False
-    return out if ok else dict(film=DEFAULT_FILM, substrate=DEFAULT_SUBSTRATE, illuminant="D65")
+    return out if ok else dict(film=DEFAULT_FILM, substrate=DEFAULT_SUBSTRATE,
+                               illuminant=DEFAULT_ILLUMINANT)
 
 
 def predicted_maps(ctx) -> list:

@@ -132,10 +132,9 @@ def _mask_rows(ctx):
                         ("invalid", "invalid (NaN)")):
             if k in m:
                 rows.append([f"   {name}", fmt(pct(m[k]), ".1f", "%")])
-    p = res.parameters
-    if "saturation_min" in p or "value_min" in p:
-        rows.append(["thresholds (0–255 HSV)", f"S ≥ {fmt(p.get('saturation_min'), '.4g')}, "
-                                               f"V ≥ {fmt(p.get('value_min'), '.4g')}"])
+    s_min, v_min = res.parameter("mask.saturation_min"), res.parameter("mask.value_min")
+    if s_min is not None or v_min is not None:
+        rows.append(["thresholds (0–255 HSV)", f"S ≥ {fmt(s_min, '.4g')}, V ≥ {fmt(v_min, '.4g')}"])
     uf = res.get("height", "unreliable_fraction")
     if uf is not None:
         rows.append(["height unreliable (no focus)", fmt(pct(uf), ".1f", "%")])

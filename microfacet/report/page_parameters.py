@@ -56,7 +56,7 @@ def parameter_tables(results_dir) -> dict:
         for i, (w, m, s) in enumerate(ctx.thick.components):
             rows.append([f"{i + 1}", f"{w:.3f}", f"{m:.1f}", f"{s:.2f}"])
     out["thickness"] = {"header": ["component", "weight", "mean (nm)", "SD (nm)"],
-                        "rows": rows, "note": _fit_note(ctx.res, "thickness", ctx.thick)}
+                        "rows": rows, "note": _fit_note(ctx, "thickness", ctx.thick)}
     rows = []
     if ctx.ndf is not None:
         for i, (w, s) in enumerate(ctx.ndf.components):
@@ -64,7 +64,7 @@ def parameter_tables(results_dir) -> dict:
                          f"{math.tan(math.radians(s)):.4f}",
                          f"{math.sqrt(2.0) * math.tan(math.radians(s)):.4f}"])
     out["ndf"] = {"header": ["lobe", "weight", "slope SD σ (°)", "tan σ", "Beckmann α"],
-                  "rows": rows, "note": _fit_note(ctx.res, "ndf", ctx.ndf)}
+                  "rows": rows, "note": _fit_note(ctx, "ndf", ctx.ndf)}
     out["analysis"] = {"header": ["quantity", "value"], "rows": _analysis_rows(ctx)}
     out["run"] = {"header": ["quantity", "value"], "rows": _run_rows(ctx)}
     out["timings"] = {"header": ["step", "time"], "rows": _timing_rows(ctx)}
@@ -117,7 +117,8 @@ def draw(pg, ctx):
                title="analysis (summary.json)", fontsize=8.0)
 
 
-def _fit_note(res, key, mix):
+def _fit_note(ctx, key, mix):
+    res = ctx.res
     m = res.get(key, "mixture")
     if mix is None:
         return ("no fit (no usable pixels)" if isinstance(m, dict) else
@@ -144,10 +145,9 @@ def _fit_note(res, key, mix):
         parts.append("degenerate fit")
     elif isinstance(d, str) and d:
         parts.append(d)
-    ident = res.get(key, "mixture", "identified")
-    if ident is False:
-        parts.insert(0, "NOT IDENTIFIED, not a measurement: "
-                     + str(res.get(key, "mixture", "reason") or ""))
+    ident, reason = ctx.identification(key)
+    if not ident:
+        parts.insert(0, "NOT IDENTIFIED, not a measurement: " + reason)
     return "; ".join(parts)
 
 
@@ -189,19 +189,7 @@ def _analysis_rows(ctx):
                         if number(roi.get("thickness_nm_mean")) is not None else "")
                      + (f", {roi['ambiguous_count']} ambiguous"
                         if number(roi.get("ambiguous_count")) else "")])
-    if p:
-        if "roi_size_px" in p:
-            rows.append(["ROI size", f"{fmt(p.get('roi_size_px'), '.0f')} px"])
-        tr = p.get("thickness_range_nm")
-        if isinstance(tr, list) and len(tr) == 2:
-            rows.append(["thickness search range", f"{fmt(tr[0], 'g')}–{fmt(tr[1], 'g')} nm"])
-        if mode == "joint" and "facet_size_um" in p:
-            rows.append(["facet size (segmentation)", fmt(p.get("facet_size_um"), ".3g",
-                                                          "µm")])
-        if "tilt_step_deg" in p:
-            rows.append(["tilt search step", fmt(p.get("tilt_step_deg"), ".3g", "°")])
-        if "max_components" in p:
-            rows.append(["largest k tried (BIC)", fmt(p.get("max_components"), ".0f")])
+    rows += _parameter_rows(res, mode)
     ct = res.get("colour_table")
     if isinstance(ct, dict):
         rows.append(["colour table: steps",
@@ -211,6 +199,25 @@ def _analysis_rows(ctx):
         rows.append([f"colour table: error ({DE})",
                      f"{fmt(ct.get('interp_error_de00'), '.3f')} interpolation, "
                      f"{fmt(ct.get('spectral_error_de00'), '.3f')} spectral"])
+    return rows
+
+
+def _parameter_rows(res, mode):
+    """The analysis options the report shows (those recorded)."""
+    rows = []
+    size, tr = res.parameter("roi.size_px"), res.parameter("optics.thickness_range_nm")
+    facet, step = res.parameter("joint.facet_size_um"), res.parameter("tilt.step_deg")
+    k = res.parameter("fits.max_components")
+    if size is not None:
+        rows.append(["ROI size", f"{fmt(size, '.0f')} px"])
+    if isinstance(tr, list) and len(tr) == 2:
+        rows.append(["thickness search range", f"{fmt(tr[0], 'g')}–{fmt(tr[1], 'g')} nm"])
+    if mode == "joint" and facet is not None:
+        rows.append(["facet size (segmentation)", fmt(facet, ".3g", "µm")])
+    if step is not None:
+        rows.append(["tilt search step", fmt(step, ".3g", "°")])
+    if k is not None:
+        rows.append(["largest k tried (BIC)", fmt(k, ".0f")])
     return rows
 
 

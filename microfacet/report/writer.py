@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..core.defaults import DEFAULT_ILLUMINANT
 from ..core.lazy import load
 from . import page_angular, page_distributions, page_maps, page_overview, page_parameters
 from .context import Context
@@ -183,7 +184,7 @@ def _header(pg, ctx, shown, title, i, written):
         bits.append(f"{mode} mode")
     film, sub = ctx.optics("film"), ctx.optics("substrate")
     if film and sub:
-        bits.append(f"{film} on {sub}, {ctx.optics('illuminant') or 'D65'}")
+        bits.append(f"{film} on {sub}, {ctx.optics('illuminant') or DEFAULT_ILLUMINANT}")
     when = res.get("created") or res.get("date")
     analysed = str(when) if when else _dt.datetime.fromtimestamp(
         res.summary_mtime).strftime("%Y-%m-%d %H:%M")

@@ -16,6 +16,6 @@ from ..core.lazy import attach
 
 __getattr__, __dir__, __all__ = attach(__name__, submodules=(
     "analyse", "batch", "batch_summary", "executors"), submod_attrs={
-    "analyse": ["analyse_to_folder", "open_stack"],
+    "analyse": ["StackSource", "analyse_to_folder", "open_stack"],
     "batch": ["BatchInterrupted", "BatchResult", "run_batch"],
 })

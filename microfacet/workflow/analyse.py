@@ -3,14 +3,33 @@ into it in one atomic step (``microfacet analyze`` and each batch worker)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from ..analysis.options import AnalysisOptions
 from ..analysis.output import results_size_bytes, save_results
-from ..analysis.pipeline import analyze_stack, check_analysis_memory
+from ..analysis.pipeline import check_stack_for_analysis, run_stages
+from ..analysis.stages import Stage
 from ..io.outdir import OutputFolder, check_output
-from ..io.stack import read_stack
+from ..io.stack import Stack, read_stack
 from ..report.writer import write_report
 
-__all__ = ["analyse_to_folder", "open_stack"]
+__all__ = ["StackSource", "analyse_to_folder", "open_stack"]
+
+
+@dataclass(frozen=True)
+class StackSource:
+    """Where a stack is and how to read it: a stack folder, or a plain folder of images with
+    ``pixel_size_um`` and ``z_step_um``; image-size ``limits`` (:class:`~microfacet.io.limits.
+    Limits`) checked from the headers before any work."""
+
+    path: object
+    pixel_size_um: object = None
+    z_step_um: float | None = None
+    limits: object = None
+
+    def open(self) -> Stack:
+        return read_stack(self.path, limits=self.limits, pixel_size_um=self.pixel_size_um,
+                          z_step_um=self.z_step_um)
 
 
 def open_stack(stack, *, limits=None, pixel_size_um=None, z_step_um=None):
@@ -29,49 +48,52 @@ def open_stack(stack, *, limits=None, pixel_size_um=None, z_step_um=None):
     >>> st.n_slices, [float(z) for z in st.z_um]
     (3, [0.0, 2.0, 4.0])
     """
-    return read_stack(stack, limits=limits, pixel_size_um=pixel_size_um, z_step_um=z_step_um)
+    return StackSource(stack, pixel_size_um, z_step_um, limits).open()
 
 
-def analyse_to_folder(stack, out, *, options=None, overwrite=False, report=True, limits=None,
-                      progress=None, pixel_size_um=None, z_step_um=None):
+def _path_of(stack):
+    return stack.path if isinstance(stack, (Stack, StackSource)) else stack
+
+
+def analyse_to_folder(stack, out, *, options: AnalysisOptions | None = None, overwrite=False,
+                      report=True, progress=None):
     """One stack end to end: claim ``out``, analyse, write the results and the report into it
     in one atomic step (``microfacet analyze`` and each batch worker).
 
+    The output folder is checked before the stack is read, and the stack (its headers, the
+    memory its analysis needs) before any work.
+
     Parameters
     ----------
-    stack : path-like or Stack
+    stack : path-like, StackSource or Stack
     out : path-like
         The results folder (the rules of :mod:`microfacet.io.outdir`).
     options : AnalysisOptions, optional
     overwrite : bool
+        Replace an earlier results folder.
     report : bool
         Also write ``report.pdf`` and its page PNGs.
-    limits : Limits, optional
-        Image-size limits for reading the stack.
     progress : callable, optional
-        ``progress(stage_name)`` per analysis stage, then ``"write"`` and ``"report"``.
-    pixel_size_um, z_step_um : float, optional
-        For a plain folder of images without stack.json (see :func:`open_stack`).
+        ``progress(stage)`` (a :class:`~microfacet.analysis.stages.Stage`) per stage, the
+        analysis' and then ``Stage.WRITE`` and ``Stage.REPORT``.
 
     Returns
     -------
     AnalysisResult
     """
-    options = options or AnalysisOptions()
-    options.validate()
-    check_output(out, kind="results", inputs=[getattr(stack, "path", stack)],
-                 overwrite=overwrite)
-    st = (open_stack(stack, limits=limits, pixel_size_um=pixel_size_um, z_step_um=z_step_um)
-          if not hasattr(stack, "path") else stack)
-    check_analysis_memory(st)
-    step = progress or (lambda name: None)
+    options = AnalysisOptions() if options is None else options
+    check_output(out, kind="results", inputs=[_path_of(stack)], overwrite=overwrite)
+    st = stack if isinstance(stack, Stack) else (
+        stack if isinstance(stack, StackSource) else StackSource(stack)).open()
+    check_stack_for_analysis(st)
+    step = progress or (lambda stage: None)
     with OutputFolder(out, kind="results", inputs=[st.path], overwrite=overwrite,
                       expected_bytes=results_size_bytes(st.shape, report=report)) as claim:
-        result = analyze_stack(st, options, progress=progress)
-        step("write")
+        result = run_stages(st, options, progress=progress)
+        step(Stage.WRITE)
         with claim.writing() as tmp:
             save_results(result, tmp)
             if report:
-                step("report")
+                step(Stage.REPORT)
                 write_report(tmp, png_dir=tmp)
     return result

@@ -1,7 +1,7 @@
 """Many stacks at once: local worker processes or an existing Dask cluster.
 
 :func:`run_batch` analyses every stack with
-:func:`~microfacet.analysis.pipeline.analyze_stack` and writes
+:func:`~microfacet.workflow.analyse.analyse_to_folder` and writes
 each results folder (``docs/results-format.md``) under one output folder, named after the
 stack folder. It is made for drawers full of stacks:
 
@@ -39,7 +39,6 @@ Examples
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import os
 import socket
@@ -51,7 +50,7 @@ from pathlib import Path
 from ..analysis.options import AnalysisOptions
 from ..core.errors import InputError
 from ..io.outdir import OutputFolder, check_output, sweep_stale
-from ..io.results import Results, json_safe
+from ..io.results import Results
 from ..io.stack import read_stack
 from .analyse import analyse_to_folder
 from .batch_summary import ERRORS_FILE, SUMMARY_FILE, result_names, row_from_results, write_summary
@@ -143,7 +142,7 @@ def run_batch(stacks, out_dir, *, options=None, jobs=None, scheduler=None, overw
     out_dir : path-like
         Output folder (created); results go to ``out_dir/<name>`` with the names of
         :func:`result_names`.
-    options : microfacet.analysis.pipeline.AnalysisOptions, optional
+    options : microfacet.analysis.options.AnalysisOptions, optional
         The same for every stack.
     jobs : int, optional
         Local worker processes (default: the CPU count, at most the number of stacks);
@@ -176,7 +175,6 @@ def run_batch(stacks, out_dir, *, options=None, jobs=None, scheduler=None, overw
     """
     t0 = time.perf_counter()
     options = AnalysisOptions() if options is None else options
-    options.validate()
     stacks = [os.path.abspath(s) for s in stacks]
     if not stacks:
         raise InputError("no stacks given", param="stacks")
@@ -211,7 +209,7 @@ def _run_claimed(stacks, names, out_dir, options, dask, jobs, overwrite, report,
     tasks, index = [], {}
     for i, (stack, name) in enumerate(zip(stacks, names)):
         out = str(out_dir / name)
-        complete, why = Results.complete(out, json_safe(dataclasses.asdict(options)))
+        complete, why = Results.complete(out, options.to_dict())
         refused = ""
         try:  # an existing folder that is not a results folder is never replaced
             check_output(out, kind="results", inputs=[stack], overwrite=True)
