@@ -175,11 +175,12 @@ def _fine(model, tilt, mean_lab, d_k, step):
     return d, np.sqrt(np.maximum(m.vertex, 0.0)), m.curvature / step ** 2
 
 
-def _sigma(model, d, de, curv, n_px, tilt, tilt_sigma_deg, noise_de, hw):
+def _sigma(model, fine, n_px, tilt, tilt_sigma_deg, noise_de, hw):
     """1-σ thickness error: the colour error of the facet's mean per Lab component (noise
     over its pixels, or the misfit when larger) through the curvature of ΔE², plus the
     thickness equivalent of the tilt's error; at most the SD of a uniform spread over the
-    window (a flat ΔE curve)."""
+    window (a flat ΔE curve). ``fine`` is :func:`_fine`'s (thickness, ΔE, curvature)."""
+    d, de, curv = fine
     sc = np.maximum(noise_de / np.sqrt(n_px), de / math.sqrt(3.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         s2 = (sc * np.sqrt(2.0 / curv)) ** 2
@@ -221,7 +222,7 @@ def _chunk(model, colours, ii, tilt, options, extra):
     edge = (k == 0) | (k == offsets.size - 1)
     d, de, curv = _fine(model, th, lab, d_k, extra["step"])
     ts = None if extra["tilt_sigma"] is None else extra["tilt_sigma"][ii]
-    s = _sigma(model, d, de, curv, colours.n_pixels[ii], th, ts, extra["noise_de"], hw)
+    s = _sigma(model, (d, de, curv), colours.n_pixels[ii], th, ts, extra["noise_de"], hw)
     alt = (_other_orders(model, th, lab, d, (hw, offsets)) if extra["thorough"]
            else np.full(ii.size, np.nan))
     return d, s, de, edge, alt

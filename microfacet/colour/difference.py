@@ -230,10 +230,18 @@ def delta_e_2000(lab1: Any, lab2: Any) -> np.ndarray:
 
 
 def _de2000_block(inp: np.ndarray, work: np.ndarray, out: np.ndarray, dtype) -> None:
-    """ΔE00 of one block; ``inp`` (6, k) = L1 a1 b1 L2 a2 b2 (overwritten)."""
+    """ΔE00 of one block; ``inp`` (6, k) = L1 a1 b1 L2 a2 b2 (overwritten), ``work`` (16, k)
+    scratch rows: the primed chroma, the mean hue and ΔH', then the weighted sum."""
+    _primed_chroma(inp, work)
+    _mean_hue(inp, work)
+    _weighted_sum(inp, work, out, dtype)
+
+
+def _primed_chroma(inp: np.ndarray, work: np.ndarray) -> None:
+    """a1', a2' in place (× 1 + G from the mean CIE chroma) and C1', C2' (``work`` rows 0-1)."""
     L1, a1, b1, L2, a2, b2 = inp
     c1, c2, t0, t1, m1, m2, m3, m4, px, py, sg, r, u, v, w, cc = work
-    mul, add, sub, sqrt = np.multiply, np.add, np.subtract, np.sqrt
+    mul, add, sqrt = np.multiply, np.add, np.sqrt
     # 1 + G from the mean CIE chroma
     mul(a1, a1, out=t0)
     mul(b1, b1, out=t1)
@@ -259,6 +267,13 @@ def _de2000_block(inp: np.ndarray, work: np.ndarray, out: np.ndarray, dtype) -> 
     mul(b2, b2, out=t1)
     add(t0, t1, out=t0)
     sqrt(t0, out=c2)
+
+
+def _mean_hue(inp: np.ndarray, work: np.ndarray) -> None:
+    """cos h̄', sin h̄' of the mean hue (``px``, ``py``), ΔH' (``m1``), sqrt(C1'C2') (``cc``)."""
+    L1, a1, b1, L2, a2, b2 = inp
+    c1, c2, t0, t1, m1, m2, m3, m4, px, py, sg, r, u, v, w, cc = work
+    mul, add, sub, sqrt = np.multiply, np.add, np.subtract, np.sqrt
     # p = C2' v1 + C1' v2 (bisector, near-equal hues); d = C1' v2 - C2' v1 (near-opposite)
     mul(c2, a1, out=m1)
     mul(c1, a2, out=m2)
@@ -299,6 +314,13 @@ def _de2000_block(inp: np.ndarray, work: np.ndarray, out: np.ndarray, dtype) -> 
     deg = np.flatnonzero(sg == 0.0)  # exactly equal/opposite hues, zero chroma
     if deg.size:
         _fix_degenerate(deg, a1, b1, a2, b2, c1, c2, cc, m1, px, py)
+
+
+def _weighted_sum(inp: np.ndarray, work: np.ndarray, out: np.ndarray, dtype) -> None:
+    """T, RT, SH, SC, SL and ΔE00 = sqrt(dl² + dc (dc + RT dh) + dh²) into ``out``."""
+    L1, a1, b1, L2, a2, b2 = inp
+    c1, c2, t0, t1, m1, m2, m3, m4, px, py, sg, r, u, v, w, cc = work
+    mul, add, sub, sqrt = np.multiply, np.add, np.subtract, np.sqrt
     # T = P(cos h̄) + sin h̄ Q(cos h̄)
     _horner(px, _P[::-1], u)
     _horner(px, _Q[::-1], v)

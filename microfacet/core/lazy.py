@@ -9,10 +9,11 @@ subpackages; a module that needs one names it once, at its top::
     cv2 = load("cv2")                 # imported when cv2.<anything> is first used
     ndimage = load("scipy.ndimage")
 
-and a package exposes its public names without importing its modules (scikit-image's
-``lazy_loader.attach`` pattern)::
+and a package exposes its public names without importing its modules, declared in an
+``__init__.pyi`` beside its ``__init__.py`` (scikit-image's ``lazy_loader.attach_stub``
+pattern: type checkers and IDEs read the stub, the runtime reads the same stub)::
 
-    __getattr__, __dir__, __all__ = attach(__name__, submod_attrs={"thinfilm": ["reflectance"]})
+    __getattr__, __dir__, __all__ = attach_stub(__name__, __file__)
 
 numpy is imported normally: it is what every module computes with.
 
@@ -38,7 +39,7 @@ import types
 
 import lazy_loader
 
-__all__ = ["attach", "load"]
+__all__ = ["attach", "attach_stub", "load"]
 
 
 class _LazyModule(types.ModuleType):
@@ -90,3 +91,17 @@ def attach(package_name: str, submodules=(), submod_attrs=None):
     """
     return lazy_loader.attach(package_name, submodules=list(submodules),
                               submod_attrs=submod_attrs or {})
+
+
+def attach_stub(package_name: str, filename: str):
+    """``(__getattr__, __dir__, __all__)`` for a package whose public names are the imports of
+    the ``.pyi`` stub beside ``filename`` (``from .module import name``), loaded on first use.
+
+    Parameters
+    ----------
+    package_name : str
+        The package's ``__name__``.
+    filename : str
+        The package's ``__file__``; its ``.pyi`` holds the names.
+    """
+    return lazy_loader.attach_stub(package_name, filename)

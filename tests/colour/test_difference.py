@@ -157,9 +157,3 @@ def test_delta_e_bad_input(fn):
 def test_delta_e_2000_no_shape_mismatch_crash():
     with pytest.raises(ValueError, match="broadcast"):
         delta_e_2000(np.zeros((4, 3)), np.zeros((5, 3)))
-
-
-def test_compat_name_is_the_same_function():
-    from microfacet.color import delta_e_2000 as compat
-
-    assert compat is delta_e_2000
