@@ -24,7 +24,7 @@ Examples
 >>> float(model.delta_e(lab, 0.0, 51.0))
 0.0
 >>> round(model.period_nm, 1)     # λ/(2n) at 560 nm: the colours repeat about this often
-114.3
+114.6
 """
 
 from __future__ import annotations

@@ -100,7 +100,7 @@ def _random_points(rng, theta_range, thickness_range, count):
     return th, d
 
 
-def choose_spectral_step(*, thickness_range_nm, theta_range_deg, film=DEFAULT_FILM,
+def choose_spectral_step(*, thickness_range_nm, theta_range_deg=(0.0, 45.0), film=DEFAULT_FILM,
                          substrate=DEFAULT_SUBSTRATE, illuminant=DEFAULT_ILLUMINANT,
                          observer=DEFAULT_OBSERVER, n_ambient=1.0, max_error_de00=0.05,
                          samples=400, seed=0):
@@ -284,7 +284,7 @@ class ColourTable:
             illuminant=self.illuminant, observer=self.observer)
 
 
-def build_colour_table(*, thickness_range_nm, theta_range_deg, film=DEFAULT_FILM,
+def build_colour_table(*, thickness_range_nm, theta_range_deg=(0.0, 45.0), film=DEFAULT_FILM,
                        substrate=DEFAULT_SUBSTRATE, illuminant=DEFAULT_ILLUMINANT,
                        observer=DEFAULT_OBSERVER, n_ambient=1.0, spectral_step_nm=None,
                        thickness_step_nm=None, theta_step_deg=None,

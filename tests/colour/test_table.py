@@ -143,4 +143,4 @@ def test_grid_nodes_reproduce_the_tabulated_values(table):
 ])
 def test_bad_arguments(kw, name):
     with pytest.raises(ValueError, match=name):
-        build_colour_table(**kw)
+        build_colour_table(**{"thickness_range_nm": (0, 100), **kw})

@@ -67,7 +67,7 @@ def test_importing_every_subpackage_imports_no_heavy_library():
         import json, sys
         import microfacet
         for pkg in ("core", "optics", "colour", "io", "focus", "analysis", "forward",
-                    "report", "batch"):
+                    "report", "workflow"):
             __import__("microfacet." + pkg)
         print(json.dumps([m for m in {HEAVY!r} if m in sys.modules]))
     """)

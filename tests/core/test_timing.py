@@ -1,7 +1,9 @@
-"""Stage timings (microfacet.core.timing): each stage is the time since the previous lap on
-one clock, the total the time since the timer was made, progress announced on start."""
+"""Stage timings (microfacet.core.timing): each stage is the time between its start and its
+end on one clock, the total the time since the timer was made, progress announced on start."""
 
 from __future__ import annotations
+
+from types import SimpleNamespace as Stage
 
 import pytest
 
@@ -20,39 +22,35 @@ def clock(monkeypatch):
     return c
 
 
-def test_laps_are_the_times_between_consecutive_laps(clock):
+def test_a_stage_is_the_time_from_its_start_to_its_end(clock):
     seen = []
+    read, fit = Stage(key="read"), Stage(key="fit")
     t = StageTimer(progress=seen.append)
     clock.t = 100.5
-    t.start("read")                   # announces; the clock keeps running
-    clock.t = 101.25
-    t.lap("read")                     # 1.25 s since the timer was made
-    clock.t = 101.30004
-    t.lap("fit")
-    clock.t = 104.0
-    t.start("report")
-    assert seen == ["read", "report"]
+    with t.stage(read):               # announced when it starts
+        clock.t = 101.75
+    clock.t = 102.0                   # between stages: counted in the total only
+    with t.stage(fit):
+        clock.t = 102.05004
+    assert seen == [read, fit]
     assert t.timings == {"read": 1.25, "fit": 0.05}          # rounded to 0.1 ms
+    clock.t = 104.0
     assert t.total() == 4.0 and t.timings["total"] == 4.0
-    clock.t = 105.0
-    t.lap("report")                   # since the last lap, not since start("report")
-    assert t.timings["report"] == pytest.approx(3.7, abs=1e-9)
-    assert t.total() == 5.0
 
 
-def test_a_stage_timed_twice_keeps_its_last_lap(clock):
-    t = StageTimer()                  # no progress callback: start is a no-op
-    t.start("x")
-    clock.t = 102.0
-    t.lap("x")
-    clock.t = 102.5
-    t.lap("x")
-    assert t.timings == {"x": 0.5}
+def test_a_stage_that_raises_records_no_time(clock):
+    t = StageTimer()
+    with pytest.raises(RuntimeError):
+        with t.stage(Stage(key="x")):
+            raise RuntimeError("boom")
+    assert t.timings == {}
 
 
 def test_the_real_clock_is_monotonic():
     t = StageTimer()
-    t.lap("a")
-    t.lap("b")
+    with t.stage(Stage(key="a")):
+        pass
+    with t.stage(Stage(key="b")):
+        pass
     assert all(v >= 0 for v in t.timings.values())
     assert t.total() >= t.timings["a"] + t.timings["b"] - 1e-3
