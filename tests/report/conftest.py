@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import re
 import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -48,16 +47,12 @@ def results_copy(results, tmp_path):
 
 @pytest.fixture(scope="session")
 def pdf_text():
-    """``pdf_text(path, page)``: text of one PDF page by pdftotext (poppler), or skip if it
-    is not installed."""
-    exe = shutil.which("pdftotext")
+    """``pdf_text(path, page)``: text of one PDF page (1-based), as laid out on it, read by
+    pypdf (a test extra: these tests never skip)."""
+    from pypdf import PdfReader
 
     def read(path, page):
-        if exe is None:
-            pytest.skip("pdftotext not installed")
-        out = subprocess.run([exe, "-f", str(page), "-l", str(page), "-layout", str(path),
-                              "-"], capture_output=True, text=True, check=True)
-        return out.stdout
+        return PdfReader(path).pages[page - 1].extract_text(extraction_mode="layout")
     return read
 
 
