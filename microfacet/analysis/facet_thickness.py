@@ -206,13 +206,24 @@ def _other_orders(model, tilt, mean_lab, d, window):
     return np.where(np.isfinite(alt), alt, np.nan)
 
 
-def _chunk(model, colours, ii, tilt, options, extra):
+@dataclass(frozen=True)
+class _Search:
+    """How :func:`facet_thickness` searches: the whole range for another order and the
+    neighbouring orders (``thorough``), the final step, the colour noise, the tilts' error."""
+
+    thorough: bool
+    step_nm: float
+    noise_de: float
+    tilt_sigma_deg: np.ndarray | None
+
+
+def _chunk(model, colours, ii, tilt, options, search: _Search):
     """:func:`facet_thickness` on the facets ``ii``: (d, σ, ΔE, edge, other-order ΔE)."""
     hw = options.order_window_fraction * model.period_nm
     t_lo, t_hi = model.theta_range_deg
     th = np.clip(tilt[ii], t_lo, t_hi)
     lab, cen = colours.mean_lab[ii], colours.roi_thickness_nm[ii]
-    if extra["thorough"]:
+    if search.thorough:
         best_in, d_out, de_out = _order_scan(model, th, lab, cen, hw)
         switch = ((de_out < best_in - options.order_switch_de)
                   & (de_out < options.order_switch_ratio * best_in))
@@ -220,10 +231,10 @@ def _chunk(model, colours, ii, tilt, options, extra):
     offsets = np.arange(-hw, hw + 1e-9, 1.0)
     d_k, k, _ = _window_minimum(_Rows(model, th, lab, cen, offsets))
     edge = (k == 0) | (k == offsets.size - 1)
-    d, de, curv = _fine(model, th, lab, d_k, extra["step"])
-    ts = None if extra["tilt_sigma"] is None else extra["tilt_sigma"][ii]
-    s = _sigma(model, (d, de, curv), colours.n_pixels[ii], th, ts, extra["noise_de"], hw)
-    alt = (_other_orders(model, th, lab, d, (hw, offsets)) if extra["thorough"]
+    d, de, curv = _fine(model, th, lab, d_k, search.step_nm)
+    ts = None if search.tilt_sigma_deg is None else search.tilt_sigma_deg[ii]
+    s = _sigma(model, (d, de, curv), colours.n_pixels[ii], th, ts, search.noise_de, hw)
+    alt = (_other_orders(model, th, lab, d, (hw, offsets)) if search.thorough
            else np.full(ii.size, np.nan))
     return d, s, de, edge, alt
 
@@ -266,15 +277,13 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
     tilt = np.asarray(tilt_deg, dtype=np.float64)
     has = (colours.n_pixels > 0) & np.isfinite(colours.roi_thickness_nm) & np.isfinite(tilt)
     out = np.full((5, S), np.nan)
-    extra = {"thorough": thorough, "noise_de": noise_de,
-             "tilt_sigma": None if tilt_sigma_deg is None else np.asarray(tilt_sigma_deg,
-                                                                          np.float64),
-             "step": options.thickness_step_nm if thorough else
-             options.exposure_thickness_step_nm}
+    search = _Search(thorough, options.thickness_step_nm if thorough
+                     else options.exposure_thickness_step_nm, noise_de,
+                     None if tilt_sigma_deg is None else np.asarray(tilt_sigma_deg, np.float64))
     idx = np.flatnonzero(has)
     for a in range(0, idx.size, _CHUNK):
         ii = idx[a:a + _CHUNK]
-        out[:, ii] = _chunk(model, colours, ii, tilt, options, extra)
+        out[:, ii] = _chunk(model, colours, ii, tilt, options, search)
     return FacetThickness(out[0], out[1], out[2], out[3] == 1.0,
                           colours.n_pixels.astype(np.int64), out[4])
 

@@ -325,20 +325,30 @@ def _refine_minimum(curve_at, centre, step_nm, limits):
     return float(fine[k])
 
 
-def _fit_one(s, curve, fit, model, options, rng):
+@dataclass
+class _Image:
+    """What every ROI's refinement reads: the image's Lab and tilt, the global thickness
+    grid and the interference-order band (None: no consensus)."""
+
+    lab: np.ndarray
+    tilt: np.ndarray
+    grid: np.ndarray
+    band: tuple | None
+
+
+def _fit_one(s, curve, img: _Image, model, options, rng):
     """The two best minima of one ROI refined on a larger sample: ((ΔE, d), (ΔE, d))."""
-    grid, band = fit["grid"], fit["band"]
-    minima, by_band = _candidate_minima(curve, grid, band, options.order_margin_de)
+    minima, by_band = _candidate_minima(curve, img.grid, img.band, options.order_margin_de)
     pick = rng.choice(s.yy.size, min(options.refine_px, s.yy.size), replace=False)
     yr, xr = s.yy[pick], s.xx[pick]
-    t_r, lab_r = fit["tilt"][yr, xr], fit["lab"][yr, xr]
+    t_r, lab_r = img.tilt[yr, xr], img.lab[yr, xr]
 
     def curve_at(d):
         return _curve(model, model.xyz(t_r[:, None], d[None, :]).astype(np.float32), lab_r)
 
     res = []
     for j in minima[:2]:
-        d = _refine_minimum(curve_at, float(grid[j]), options.grid_step_nm,
+        d = _refine_minimum(curve_at, float(img.grid[j]), options.grid_step_nm,
                             model.thickness_range_nm)
         de = float(_curve(model, model.xyz(t_r, d)[:, None, :].astype(np.float32), lab_r)[0])
         res.append((de, d))
@@ -399,11 +409,11 @@ def fit_roi_thickness(lab, tilt_deg, mask, model, options: RoiOptions, *, rois, 
             curves[i] = _curve(model, s.xyz, s.lab)
     best = np.full((n, 2, 2), np.nan)
     npx = np.zeros(n, dtype=np.int64)
-    fit = {"grid": grid, "band": band, "tilt": tilt, "lab": lab}
+    img = _Image(lab, tilt, grid, band)
     for i, s in enumerate(samples):
         if s is not None:
             npx[i] = s.yy.size
-            best[i] = _fit_one(s, curves[i], fit, model, options, rng)
+            best[i] = _fit_one(s, curves[i], img, model, options, rng)
     rows, cols, (rh, rw) = rois
     return RoiFit(row0=np.repeat(np.asarray(rows), len(cols)),
                   col0=np.tile(np.asarray(cols), len(rows)), height_px=rh, width_px=rw,
