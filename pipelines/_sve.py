@@ -55,7 +55,7 @@ def defaults():
     from microfacet.analysis.facets import facet_thickness
     from microfacet.analysis.options import AnalysisOptions
     from microfacet.analysis.roi import fit_roi_thickness
-    from microfacet.focus import height as focus
+    from microfacet.focus.options import FocusOptions
     from microfacet.forward.angular import simulate_map
     from microfacet.forward.brdf import thickness_nodes
 
@@ -70,9 +70,14 @@ def defaults():
         tilt_step=float(AnalysisOptions().tilt_step_deg),
         eq6_step=float(dflt(simulate_map, "theta_m_step_deg")),
         dnode_max=float(dflt(thickness_nodes, "max_step_nm")),
-        focus=(focus.DEFAULT_OPERATOR, focus.DEFAULT_WINDOW, int(focus.DEFAULT_WINDOW_PX),
-               focus.DEFAULT_INTERPOLATION, int(focus.DEFAULT_FIT_RADIUS)),
+        focus=focus_defaults(FocusOptions()),
     )
+
+
+def focus_defaults(options) -> tuple:
+    """``(operator, window, window_px, interpolation, fit_radius)`` of focus options."""
+    return (options.operator, options.window, int(options.window_px), options.interpolation,
+            int(options.fit_radius))
 
 
 def formula_kw(fn, method):

@@ -64,13 +64,13 @@ def child_memory(folder: str, earlier: bool) -> None:
     import resource
     import tracemalloc
 
-    from microfacet.focus.defaults import EARLIER_DEFAULT
     from microfacet.focus.height import height_from_focus
+    from microfacet.focus.options import EARLIER_DEFAULT
     from microfacet.io.stack import read_stack
 
     st = read_stack(folder)
     tracemalloc.start()
-    height_from_focus(st, **(EARLIER_DEFAULT if earlier else {}))
+    height_from_focus(st, EARLIER_DEFAULT if earlier else None)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
@@ -88,8 +88,8 @@ def main(argv=None) -> int:
         child_memory(args.child, args.child_earlier)
         return 0
 
-    from microfacet.focus.defaults import EARLIER_DEFAULT
-    from microfacet.focus.height import OPERATORS, height_from_focus
+    from microfacet.focus.height import height_from_focus
+    from microfacet.focus.options import EARLIER_DEFAULT, OPERATORS, FocusOptions
     from microfacet.io.stack import read_stack
 
     out = {"size": args.size, "cpus": os.cpu_count(), "runs": {}}
@@ -110,8 +110,10 @@ def main(argv=None) -> int:
             for op in OPERATORS:
                 best = {}
                 for _ in range(max(1, args.repeat)):      # interleaved: same load for both
-                    for label, kw in (("earlier", EARLIER_DEFAULT), ("default", {})):
-                        dt, res = best_of(lambda: height_from_focus(st, operator=op, **kw), 1)
+                    for label, opts in (("earlier", EARLIER_DEFAULT),
+                                        ("default", FocusOptions())):
+                        opts = opts.replace(operator=op)
+                        dt, res = best_of(lambda: height_from_focus(st, opts), 1)
                         if label not in best or dt < best[label][0]:
                             best[label] = (dt, res)
                 for label in ("earlier", "default"):

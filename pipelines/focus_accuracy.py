@@ -16,10 +16,11 @@ from __future__ import annotations
 import numpy as np
 from _shared import cou_rmse, cou_stack, md_header, md_row
 
-from microfacet.focus.defaults import EARLIER_DEFAULT
 from microfacet.focus.height import height_from_focus
+from microfacet.focus.options import EARLIER_DEFAULT, FocusOptions
 
-# (operator, window, window_px, interpolation, fit_radius): one window each
+# (operator, window, window_px, interpolation, fit_radius): one window each (fit_radius None:
+# not used by the fit)
 METHODS = [
     ("sml", "box", 5, "none", None),
     ("sml", "box", 5, "gauss3", None),
@@ -45,18 +46,19 @@ def main():
     stacks = {s: cou_stack(s) for s in (1, 2, 3)}
     print(md_header(["operator", "window", "interpolation", "stack 1", "stack 2", "stack 3"]))
     for op, win, px, interp, r in METHODS:
-        vals = [cou_rmse(height_from_focus(st, operator=op, window=win, window_px=px,
-                                           interpolation=interp, fit_radius=r,
-                                           coarse_window_px=None,
-                                           min_reliability_db=-np.inf).height_um, ref)
+        opts = FocusOptions(operator=op, window=win, window_px=px, interpolation=interp,
+                            coarse_window_px=0, min_reliability_db=-np.inf,
+                            **({} if r is None else {"fit_radius": r}))
+        vals = [cou_rmse(height_from_focus(st, opts).height_um, ref)
                 for st, ref in stacks.values()]
         name = {"none": "arg-max", "gauss3": "Gauss 3-pt", "lsq": f"lsq {r}",
                 "lorentz": f"Lorentz {r}"}[interp]
         wname = f"{'Gauss' if win == 'gaussian' else 'box'} {px}"
         print(md_row([op, wname, name] + [f"{v:.3f}" for v in vals]), flush=True)
-    for label, kw in (("default: Lorentz 2, windows 7 + 15", {}),
-                      ("earlier default: lsq 2, window 7", EARLIER_DEFAULT)):
-        vals = [cou_rmse(height_from_focus(st, min_reliability_db=-np.inf, **kw).height_um, ref)
+    for label, opts in (("default: Lorentz 2, windows 7 + 15", FocusOptions()),
+                        ("earlier default: lsq 2, window 7", EARLIER_DEFAULT)):
+        opts = opts.replace(min_reliability_db=-np.inf)
+        vals = [cou_rmse(height_from_focus(st, opts).height_um, ref)
                 for st, ref in stacks.values()]
         print(md_row(["tenengrad", "Gauss 7", label] + [f"{v:.3f}" for v in vals]), flush=True)
 

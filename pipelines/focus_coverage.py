@@ -35,8 +35,8 @@ import cv2
 import numpy as np
 from _shared import cou_stack, md_header, md_row
 
-from microfacet.focus.defaults import EARLIER_DEFAULT, PERTUZ_MIN_RELIABILITY_DB
 from microfacet.focus.height import height_from_focus
+from microfacet.focus.options import EARLIER_DEFAULT, FocusOptions
 
 N_SLICES = 24
 NOISE = 0.01
@@ -45,11 +45,11 @@ SCENES = ("smooth", "steps", "craters", "ridges")
 #: name -> options of height_from_focus (the default last but one; colour last)
 METHODS = {
     "earlier default (Gauss fit, 7 px, Pertuz 12 dB)": EARLIER_DEFAULT,
-    "Lorentz fit, 7 px, Pertuz 12 dB": dict(coarse_window_px=None, reliability="pertuz"),
-    "Lorentz fit, 7 px, σ cut": dict(coarse_window_px=None),
-    "+ fine 3 px": dict(coarse_window_px=None, fine_window_px=3),
-    "+ coarse 15 px (new default)": dict(),
-    "3 + 7 + 15 px": dict(fine_window_px=3),
+    "Lorentz fit, 7 px, Pertuz 12 dB": FocusOptions(coarse_window_px=0, reliability="pertuz"),
+    "Lorentz fit, 7 px, σ cut": FocusOptions(coarse_window_px=0),
+    "+ fine 3 px": FocusOptions(coarse_window_px=0, fine_window_px=3),
+    "+ coarse 15 px (new default)": FocusOptions(),
+    "3 + 7 + 15 px": FocusOptions(fine_window_px=3),
 }
 
 
@@ -223,8 +223,8 @@ def run_synthetic(size, seeds, blur):
             for seed in range(seeds):
                 tex = texture((size, size), luma_sd=c, chroma_sd=c, seed=100 * seed + 1)
                 imgs = render(h, z, tex, blur_per_slice=blur, noise=NOISE, seed=seed)
-                for m, kw in METHODS.items():
-                    res = height_from_focus(imgs, z_um=z, **kw)
+                for m, opts in METHODS.items():
+                    res = height_from_focus(imgs, opts, z_um=z)
                     for zone, mask in (("all", inner), ("relief", inner & relief)):
                         if mask.any():
                             pools.setdefault((m, name, c, zone), Pool()).add(res, h, mask)
@@ -335,8 +335,8 @@ def cut_table(pools, default, earlier, cuts=(0.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 
                      "contrasts 0.003-0.006, all pixels"]))
     groups = ((SCENES, "all", CONTRASTS[2:]), (SCENES[1:], "relief", CONTRASTS[2:]),
               (SCENES[:1], "all", CONTRASTS[2:]), (SCENES, "all", CONTRASTS[:2]))
-    rows = [(f"earlier default, Pertuz ≥ {PERTUZ_MIN_RELIABILITY_DB['tenengrad']:g} dB",
-             earlier, PERTUZ_MIN_RELIABILITY_DB["tenengrad"])]
+    pertuz_cut = EARLIER_DEFAULT.reliability_cut_db
+    rows = [(f"earlier default, Pertuz ≥ {pertuz_cut:g} dB", earlier, pertuz_cut)]
     rows += [(f"σ ≤ {10 ** (-c / 20):.2f} step ({c:g} dB)", default, c) for c in cuts]
     for label, m, cut in rows:
         cells = []
@@ -361,7 +361,7 @@ def colour_table(size, blur):
             cells = []
             for col in ("luma", "rgb"):
                 p = Pool()
-                p.add(height_from_focus(imgs, z_um=z, colour=col), h, inner)
+                p.add(height_from_focus(imgs, FocusOptions(colour=col), z_um=z), h, inner)
                 s = p.stats()
                 cells.append(f"{pct(s['cov'])} / {f3(s['rmse'])}")
             print(md_row([ratio, c] + cells))
@@ -376,7 +376,7 @@ def cou_table(methods, short):
     for m in methods:
         cells = []
         for st, ref in stacks:
-            res = height_from_focus(st, **METHODS[m])
+            res = height_from_focus(st, METHODS[m])
             truth = np.full(res.height_um.shape, np.nan)
             truth[o:o + ref.shape[0], o:o + ref.shape[1]] = ref
             p = Pool()

@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 from _shared import cou_rmse, cou_stack, md_table, verdict
-from _sve import defaults, pareto_plot, section_main, timed
+from _sve import focus_defaults, pareto_plot, section_main, timed
 
-OPERATORS = ("tenengrad", "sml", "glv")
-WINDOWS = ("gaussian", "box")
+from microfacet.focus.options import OPERATORS, WINDOWS, FocusOptions
 
 
 def measure(cfg):
@@ -28,7 +27,7 @@ def measure(cfg):
         imgs = [st.read_slice(int(i), np.float32) for i in order]
         stacks[s] = (imgs, np.asarray(st.z_um, float)[order], ref)
     z_step = float(np.median(np.diff(stacks[cfg["focus_stacks"][0]][1])))
-    fop, fwin, fpx, finterp, fr = defaults()["focus"]
+    fop, fwin, fpx, finterp, fr = focus_defaults(FocusOptions())
     fit_r = fr if finterp == "lsq" else 2
     configs = [(op, win, px, "lsq", fit_r) for op in OPERATORS for win in WINDOWS
                for px in sorted(set(cfg["focus_px"]) | {fpx})]
@@ -40,26 +39,34 @@ def measure(cfg):
     for op, win, px, interp, r in configs:
         tot_t, errs = 0.0, []
         for imgs, z, ref in stacks.values():
-            t, fres = timed(lambda: height_from_focus(imgs, z_um=z, operator=op, window=win,
-                                                      window_px=px, interpolation=interp,
-                                                      fit_radius=r, min_reliability_db=-np.inf,
-                                                      prefetch=False), cfg["repeat"])
+            opts = _options(op, win, px, interp, r)
+            t, fres = timed(lambda: height_from_focus(imgs, opts, z_um=z, prefetch=False),
+                            cfg["repeat"])
             tot_t += t
             errs.append(cou_rmse(fres.height_um, ref) / z_step)
         res.append(dict(op=op, win=win, px=px, interp=interp, r=r, time=tot_t,
                         err=float(np.mean(errs)), worst=float(np.max(errs)), errs=errs))
         print(f"  focus {op} {win} {px} {interp} {r}: {np.mean(errs):.3f} slices, {tot_t:.2f} s",
               flush=True)
-    fkey = (fop, fwin, fpx, finterp, fr if finterp == "lsq" else None)
+    fkey = (fop, fwin, fpx, finterp, fr if finterp in ("lsq", "lorentz") else None)
     idef = next(i for i, c in enumerate(res) if (c["op"], c["win"], c["px"], c["interp"],
                                                   c["r"]) == fkey)
     first = stacks[cfg["focus_stacks"][0]][0]
     return res, idef, fit_r, (first[0].shape, len(first))
 
 
+def _options(op, win, px, interp, r):
+    """The focus options of one configuration, every pixel kept; the default radius where
+    ``r`` is None (the fit does not use it)."""
+    kw = dict(operator=op, window=win, window_px=px, interpolation=interp,
+              min_reliability_db=-np.inf)
+    return FocusOptions(**kw, **({} if r is None else {"fit_radius": r}))
+
+
 def run(cfg, doc, img):
-    fop, fwin, fpx, finterp, fr = defaults()["focus"]
-    dname = f"{fop}, {fwin} {fpx} px, {finterp}" + (f" r = {fr}" if finterp == "lsq" else "")
+    fop, fwin, fpx, finterp, fr = focus_defaults(FocusOptions())
+    dname = f"{fop}, {fwin} {fpx} px, {finterp}" + (
+        f" r = {fr}" if finterp in ("lsq", "lorentz") else "")
     res, idef, fit_r, (shape, n_slices) = measure(cfg)
     td = res[idef]["time"]
     doc("\n## 4. Focus operator and window\n")
@@ -90,7 +97,8 @@ def run(cfg, doc, img):
     doc(md_table(["operator", "window"] + [f"{px} px" for px in pxs], rows))
     doc(f"\nPeak interpolation ({fop}, {fwin} {fpx} px):\n")
     doc(md_table(["interpolation", "RMSE (slices)", "worst stack", "time × default"],
-                 [[{"none": "arg-max", "gauss3": "Gauss 3-point", "lsq": f"lsq r = {c['r']}"}[
+                 [[{"none": "arg-max", "gauss3": "Gauss 3-point", "lsq": f"lsq r = {c['r']}",
+                   "lorentz": f"Lorentz r = {c['r']}"}[
                      c["interp"]] + (" (default)" if c is res[idef] else ""),
                    f"{c['err']:.3f}", f"{c['worst']:.3f}", f"{c['time'] / td:.2f}"]
                   for c in res if (c["op"], c["win"], c["px"]) == (fop, fwin, fpx)]))
@@ -132,7 +140,7 @@ def run(cfg, doc, img):
 
 
 def plot(img, res, idef, fit_r):
-    fop, fwin, fpx = defaults()["focus"][:3]
+    fop, fwin, fpx = focus_defaults(FocusOptions())[:3]
     td = res[idef]["time"]
     panels = []
     for op in OPERATORS:
@@ -162,8 +170,8 @@ def summary_rows(result):
     """Rows of the summary table (speed_vs_error.py)."""
     res, i = result["res"], result["idef"]
     best = min(range(len(res)), key=lambda k: res[k]["err"])
-    return [["§4 focus (`focus.DEFAULT_OPERATOR`, `DEFAULT_WINDOW`, `DEFAULT_WINDOW_PX`, "
-             "`DEFAULT_INTERPOLATION`, `DEFAULT_FIT_RADIUS`)",
+    return [["§4 focus (`FocusOptions`: `operator`, `window`, `window_px`, "
+             "`interpolation`, `fit_radius`)",
              result["name"], f"{res[i]['err']:.3f} slices RMSE",
              f"best measured: {res[best]['op']} {res[best]['win']} {res[best]['px']} "
              f"{res[best]['interp']}{res[best]['r'] or ''} {res[best]['err']:.3f} at "

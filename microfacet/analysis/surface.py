@@ -13,6 +13,7 @@ from ..core.errors import InputError
 from ..focus.fill import fill_missing
 from ..focus.height import FocusResult, height_from_focus
 from ..focus.normals import normals_from_height, tilt_azimuth_deg
+from ..focus.options import FocusOptions
 
 __all__ = ["Surface", "export_as_focus", "measure_height", "surface_normals"]
 
@@ -35,8 +36,10 @@ def export_as_focus(stack) -> FocusResult:
         timings_s={"total": round(time.perf_counter() - t0, 4)})
 
 
-def measure_height(stack, *, operator=None, window_px=None, align=False) -> FocusResult:
-    """Height from focus of the stack's slices, or the export's own height map.
+def measure_height(stack, options: FocusOptions) -> FocusResult:
+    """Height from focus of the stack's slices (:func:`~microfacet.focus.height.
+    height_from_focus` with the ``focus`` section of the options), or the export's own
+    height map.
 
     Raises
     ------
@@ -48,8 +51,7 @@ def measure_height(stack, *, operator=None, window_px=None, align=False) -> Focu
     if stack.n_slices < 3:
         raise InputError(f"{stack.path / 'stack.json'}: key 'slices': height from focus needs "
                          f"at least 3 slices, the stack has {stack.n_slices}")
-    kw = {k: v for k, v in (("operator", operator), ("window_px", window_px)) if v}
-    return height_from_focus(stack, align=align, **kw)
+    return height_from_focus(stack, options)
 
 
 @dataclass

@@ -17,11 +17,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import signal
 import sys
 
 from .. import __version__
 from ..core.errors import InputError, one_line
+from ..core.threads import ENV_VAR as THREADS_ENV_VAR
+from ..core.threads import set_num_threads, threads_from_text
 from .options import FLAGS
 
 #: Subcommand modules, in the order ``--help`` lists them.
@@ -154,6 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:  # not the main thread (embedded use): leave signals alone
         pass
     try:
+        set_num_threads(threads_from_text(os.environ.get(THREADS_ENV_VAR)))
         return int(args.run(args) or 0)
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)

@@ -223,10 +223,16 @@ def example_epilog(*lines: str) -> str:
     return "example:\n" + "\n".join(f"  {line}" for line in lines)
 
 
+#: Options of the tree ``analyze`` does not offer: filling the height map's unreliable pixels
+#: would hand the facet planes heights that were not measured (``microfacet height`` offers
+#: it).
+ANALYSIS_SKIP = ("focus.fill",)
+
+
 def add_analysis_options(p: argparse.ArgumentParser) -> None:
     """The command-line options of :class:`~microfacet.analysis.options.AnalysisOptions`
     (``analyze``, ``batch``), generated from its fields."""
-    add_option_fields(p, analysis.AnalysisOptions, title="analysis")
+    add_option_fields(p, analysis.AnalysisOptions, title="analysis", skip=ANALYSIS_SKIP)
 
 
 def analysis_options(args):

@@ -5,9 +5,11 @@ The stack is read **once**, slice by slice in increasing ``z``; per pixel and wi
 fixed number of image-sized buffers is kept (:class:`~microfacet.focus.stream.PeakTracker`),
 so peak memory is ``O(H·W)`` whatever the number of slices.
 
-Method (defaults chosen from the measurements of ``docs/height-from-focus.md``: the RMSE on
-the Cou & Guennebaud (2023) ground-truth stacks and the coverage on rendered stacks of known
-relief and texture contrast, ``pipelines/focus_coverage.py``):
+The options are one :class:`~microfacet.focus.options.FocusOptions` (their defaults, valid
+values and the measurements behind them are declared there). Method (defaults chosen from the
+measurements of ``docs/height-from-focus.md``: the RMSE on the Cou & Guennebaud (2023)
+ground-truth stacks and the coverage on rendered stacks of known relief and texture contrast,
+``pipelines/focus_coverage.py``):
 
 1. Focus measure per slice (:mod:`microfacet.focus.measures`) in the main window
    (``window_px``, default 7) and a coarse one (``coarse_window_px``, default 15, on a grid
@@ -49,61 +51,29 @@ True
 from __future__ import annotations
 
 import logging
-import math
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
-from ..io.images import convert_samples
 from ..io.limits import check_memory
-from ..io.stack import Stack
 from .align import estimate_warps, warped_loader
-from .defaults import (
-    COLOURS,
-    DEFAULT_COARSE_WINDOW_PX,
-    DEFAULT_COLOUR,
-    DEFAULT_FIT_RADIUS,
-    DEFAULT_INTERPOLATION,
-    DEFAULT_MIN_RELIABILITY_DB,
-    DEFAULT_RELIABILITY,
-    DETECTION_ALPHA,
-    INTERPOLATIONS,
-    PERTUZ_MIN_RELIABILITY_DB,
-    RELIABILITIES,
-    SIGMA_MODEL,
-)
 from .fill import fill_missing
-from .measures import (
-    DEFAULT_OPERATOR,
-    DEFAULT_WINDOW,
-    DEFAULT_WINDOW_PX,
-    OPERATORS,
-    check_window,
-    focus_measures,
-    noise_shape,
-)
+from .measures import focus_measures, noise_shape
+from .options import FocusOptions
 from .peaks import peak_fit
+from .slices import SliceSource, slice_source
 from .stream import PeakTracker
-from .uncertainty import add_relief_terms, combine, fit_window
+from .uncertainty import SIGMA_MODEL, WindowFit, add_relief_terms, combine, fit_window
 
 cv2 = load("cv2")
 
-__all__ = [
-    "DEFAULT_COARSE_WINDOW_PX",
-    "DEFAULT_FIT_RADIUS",
-    "DEFAULT_INTERPOLATION",
-    "DEFAULT_MIN_RELIABILITY_DB",
-    "FocusResult",
-    "INTERPOLATIONS",
-    "check_focus_memory",
-    "height_from_focus",
-    "peak_fit",
-]
+__all__ = ["FocusResult", "check_focus_memory", "height_from_focus", "peak_fit"]
 
 log = logging.getLogger(__name__)
 
@@ -195,105 +165,10 @@ def check_focus_memory(stack) -> None:
 # streaming height from focus
 
 
-def _slice_source(source, z_um):
-    """Return (z_um file order, n, shape, channels, loader(file_index) -> image float32)."""
-    if isinstance(source, Stack):
-        if not source.has_slices:
-            raise InputError(f"{source.path / 'stack.json'}: the stack has no slices (export "
-                             f"only); "
-                             f"height from focus needs slices")
-        if z_um is not None:
-            raise ValueError("z_um must not be given with a Stack (it has its own)")
-        z = np.asarray(source.z_um, dtype=np.float64)
-
-        def load(i):
-            return source.read_slice(i, np.float32)
-
-        return z, source.n_slices, source.shape, source.channels, load
-    if z_um is None:
-        raise ValueError("z_um is required when source is a sequence of images")
-    z = np.asarray(z_um, dtype=np.float64).ravel()
-    if not np.all(np.isfinite(z)):
-        raise ValueError("z_um must be finite")
-    if np.unique(z).size != z.size:
-        raise ValueError("z_um must not hold duplicate heights")
-    if len(source) != z.size:
-        raise ValueError(f"z_um has {z.size} values but there are {len(source)} images")
-    first = np.asarray(source[0])
-    if first.ndim not in (2, 3) or (first.ndim == 3 and first.shape[2] != 3):
-        raise ValueError(f"images must be (H, W) or (H, W, 3), got {first.shape}")
-
-    def load(i):
-        img = np.asarray(source[i])
-        if img.shape != first.shape:
-            raise ValueError(f"image {i} has shape {img.shape}, expected {first.shape}")
-        if img.dtype in (np.uint8, np.uint16):
-            return convert_samples(img, np.float32)
-        return img.astype(np.float32, copy=False)
-
-    return z, z.size, first.shape[:2], (3 if first.ndim == 3 else 1), load
-
-
-def _windows(shape, window_px, window, fine_window_px, coarse_window_px):
-    """(window_px, window, downsample) of every window, sorted by size; index of the main."""
-    out = []
-    if fine_window_px:
-        check_window(fine_window_px, window)
-        if fine_window_px < window_px:
-            out.append((int(fine_window_px), window, 1))
-    out.append((int(window_px), window, 1))
-    main = len(out) - 1
-    if coarse_window_px:
-        check_window(coarse_window_px, window)
-        if coarse_window_px > window_px:
-            ds = 2 if coarse_window_px >= 11 and min(shape) >= 32 else 1
-            out.append((int(coarse_window_px), window, ds))
-    return out, main
-
-
-def _check_options(operator, window_px, window, interpolation, fit_radius, reliability,
-                   colour, min_reliability_db, fill):
-    if operator not in OPERATORS:
-        raise ValueError(f"operator must be one of {OPERATORS}, not {operator!r}")
-    check_window(window_px, window)
-    if interpolation not in INTERPOLATIONS:
-        raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, not {interpolation!r}")
-    if reliability not in RELIABILITIES:
-        raise ValueError(f"reliability must be one of {RELIABILITIES}, not {reliability!r}")
-    if colour not in COLOURS:
-        raise ValueError(f"colour must be one of {COLOURS}, not {colour!r}")
-    if interpolation in ("lsq", "lorentz"):
-        r = DEFAULT_FIT_RADIUS if fit_radius is None else fit_radius
-        if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or not 1 <= r <= 10:
-            raise ValueError(f"fit_radius must be an integer in 1..10, got {fit_radius!r}")
-    else:
-        r = 1
-    if min_reliability_db is None:
-        cuts = DEFAULT_MIN_RELIABILITY_DB if reliability == "sigma" else \
-            PERTUZ_MIN_RELIABILITY_DB
-        min_reliability_db = cuts[operator]
-    if isinstance(min_reliability_db, bool) or not isinstance(min_reliability_db, (int, float)) \
-            or math.isnan(min_reliability_db):
-        raise ValueError(f"min_reliability_db must be a number, got {min_reliability_db!r}")
-    if fill is True:
-        fill = "smooth"
-    if fill not in (None, False, "smooth", "nearest"):
-        raise ValueError(f"fill must be None, True, 'smooth' or 'nearest', not {fill!r}")
-    return int(r), float(min_reliability_db), fill
-
-
-def height_from_focus(source, *, z_um: Sequence[float] | None = None,
-                      operator: str = DEFAULT_OPERATOR, window_px: int = DEFAULT_WINDOW_PX,
-                      window: str = DEFAULT_WINDOW, interpolation: str = DEFAULT_INTERPOLATION,
-                      fit_radius: int | None = None,
-                      min_reliability_db: float | None = None,
-                      fill: str | bool | None = None, align: bool | str = False,
-                      reference: int | None = None, prefetch: bool = True,
+def height_from_focus(source, options: FocusOptions | None = None, *,
+                      z_um: Sequence[float] | None = None,
                       progress: Callable[[int, int], None] | None = None,
-                      colour: str = DEFAULT_COLOUR,
-                      coarse_window_px: int | None = DEFAULT_COARSE_WINDOW_PX,
-                      fine_window_px: int | None = None,
-                      reliability: str = DEFAULT_RELIABILITY) -> FocusResult:
+                      prefetch: bool = True) -> FocusResult:
     """Height map and its uncertainty from a focus stack in one streaming pass.
 
     Parameters
@@ -302,163 +177,257 @@ def height_from_focus(source, *, z_um: Sequence[float] | None = None,
         A :class:`microfacet.io.stack.Stack`, or images (each (H, W) or (H, W, 3); uint8/uint16
         are scaled to [0, 1]) indexed in the order of ``z_um``. Slices are read one at a time
         in increasing ``z``.
+    options : FocusOptions, optional
+        Focus measure, windows, peak fit, reliability, fill and alignment
+        (:class:`~microfacet.focus.options.FocusOptions`, validated when constructed);
+        default ``FocusOptions()``.
     z_um : sequence of float, shape (N,), optional
         Slice heights in µm (required for an image sequence, not allowed with a Stack). Any
         order and spacing, no duplicates.
-    operator : {"tenengrad", "sml", "glv"}
-        Focus measure, see :func:`~microfacet.focus.measures.focus_measure`.
-    window_px : int
-        Odd side of the main focus window in pixels.
-    window : {"gaussian", "box"}
-        Window shape.
-    interpolation : {"lorentz", "lsq", "gauss3", "none"}
-        Sub-slice peak estimate: weighted least squares over ``±fit_radius`` slices of a
-        parabola in ``F^(-1/2)`` or in ``log F``, the 3-point Gaussian, or the arg-max slice.
-    fit_radius : int, optional
-        Neighbours on each side used by ``"lorentz"`` and ``"lsq"`` (default 2);
-        ``"gauss3"`` uses 1.
-    min_reliability_db : float, optional
-        Pixels with a lower reliability are NaN in ``height_um`` (``-inf`` keeps all).
-        Default: 4 dB (σ ≤ 0.63 z step) for ``reliability="sigma"``,
-        ``PERTUZ_MIN_RELIABILITY_DB[operator]`` for ``"pertuz"``.
-    fill : {None, False, True, "smooth", "nearest"}
-        Fill unreliable pixels (True means ``"smooth"``), see :func:`fill_missing`.
-    align : bool or {"ecc", "phase"}
-        Register every slice to a reference slice before measuring focus (two passes over the
-        stack); see :mod:`microfacet.focus.align`. True means ``"ecc"``.
-    reference : int, optional
-        File-order index of the alignment reference (default: chosen automatically).
-    prefetch : bool
-        Decode the next slice in a background thread while the current one is measured.
     progress : callable(done, total), optional
         Called after each slice.
-    colour : {"luma", "rgb"}
-        Measure the luma of RGB slices, or sum the measures of the three channels (better
-        where colour texture is more than about twice the grey one).
-    coarse_window_px : int or None
-        A second, larger window (evaluated on a grid downsampled by 2 when ≥ 11 px) that
-        pixels take where it gives the smaller uncertainty (weak texture); None: main window
-        only. Ignored unless larger than ``window_px``.
-    fine_window_px : int or None
-        An optional smaller window for sharp relief (ignored unless smaller than
-        ``window_px``); off by default: on the Cou stacks it raises the RMSE.
-    reliability : {"sigma", "pertuz"}
-        What ``reliability_db`` means and what ``reliable`` requires (see FocusResult).
+    prefetch : bool
+        Decode the next slice in a background thread while the current one is measured.
 
     Returns
     -------
     FocusResult
+
+    Raises
+    ------
+    InputError
+        A stack without slices or with fewer than 3.
+    ValueError
+        Images and ``z_um`` that do not fit together.
     """
     t_start = time.perf_counter()
-    r, min_reliability_db, fill = _check_options(
-        operator, window_px, window, interpolation, fit_radius, reliability, colour,
-        min_reliability_db, fill)
-    z, n, shape, channels, load = _slice_source(source, z_um)
-    if n < 3:
-        raise InputError(f"a focus stack needs at least 3 slices, got {n}")
-    order = np.argsort(z, kind="stable")          # rank -> file index
-    zs = z[order]                                 # sorted heights
-    H, W = shape
-    wins, main = _windows(shape, window_px, window, fine_window_px, coarse_window_px)
+    plan = _plan(slice_source(source, z_um), _checked(options))
+    load, alignment = _aligned_loader(plan)
+    scan = _scan(plan, load, prefetch=prefetch, progress=progress)
+    t2 = time.perf_counter()
+    step = float(np.median(np.diff(plan.zs)))
+    fits = _fit_windows(plan, scan.trackers, step)
+    best_main = scan.trackers[plan.main].best
+    best_rank = scan.trackers[plan.main].best_rank
+    scan.trackers = None                      # free the streaming buffers before the choice
+    choice = _choose(plan, fits, step)
+    fits = None
+    t3 = time.perf_counter()
 
-    warps = None
-    if align:
-        method = "ecc" if align is True else align
-        warps, ref = estimate_warps(load, order, shape, method=method, reference=reference)
-        load = warped_loader(load, warps, shape)
+    height = choice.height.astype(np.float32)
+    h = np.where(choice.reliable, height, np.float32(np.nan)).astype(np.float32)
+    if plan.options.fill:
+        h = fill_missing(h, method=plan.options.fill)
+    t_end = time.perf_counter()
+    timings = {"read": scan.t_read, "focus": scan.t_focus, "fit": t3 - t2,
+               "total": t_end - t_start}
+    log.info("height from focus: %d slices %dx%d, %.1f%% unreliable (%.1f%% without a focus "
+             "peak), %.2f s", plan.slices.n, plan.slices.shape[1], plan.slices.shape[0],
+             100.0 * (1.0 - choice.reliable.mean()), 100.0 * (1.0 - choice.detected.mean()),
+             timings["total"])
+    return FocusResult(height_um=h, height_fit_um=height,
+                       reliability_db=choice.reliability_db.astype(np.float32),
+                       reliable=choice.reliable,
+                       best_index=plan.order[best_rank].astype(np.int32), focus_max=best_main,
+                       all_in_focus=scan.all_in_focus, z_um=plan.slices.z_um,
+                       params=_params(plan, alignment), timings_s=timings,
+                       height_sigma_um=choice.sigma_um.astype(np.float32),
+                       detected=choice.detected, window_px_map=choice.window_px_map)
 
-    trackers = [PeakTracker(((H + 1) // 2, (W + 1) // 2) if ds == 2 else (H, W), radius=r,
-                            n_slices=n) for _, _, ds in wins]
-    best_now = np.full((H, W), -np.inf, np.float32)  # undelayed max (for the composite)
-    aif = np.zeros((H, W, 3) if channels == 3 else (H, W), np.float32)
-    mask = np.empty((H, W), bool)
 
+def _checked(options) -> FocusOptions:
+    if options is None:
+        return FocusOptions()
+    if not isinstance(options, FocusOptions):
+        raise TypeError(f"options must be a FocusOptions, not {type(options).__name__} "
+                        f"(FocusOptions(**...) validates a dict of them)")
+    return options
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """What one run measures: the slices, their z order, the windows and the options."""
+
+    slices: SliceSource
+    order: np.ndarray           # z rank -> file index
+    windows: list               # (window_px, window, downsample), sorted by size
+    main: int                   # index of the main window in ``windows``
+    options: FocusOptions
+
+    @property
+    def zs(self) -> np.ndarray:
+        """Slice heights sorted by z."""
+        return self.slices.z_um[self.order]
+
+
+def _plan(slices: SliceSource, options: FocusOptions) -> _Plan:
+    if slices.n < 3:
+        raise InputError(f"a focus stack needs at least 3 slices, got {slices.n}")
+    order = np.argsort(slices.z_um, kind="stable")
+    windows, main = _windows(slices.shape, options)
+    return _Plan(slices, order, windows, main, options)
+
+
+def _windows(shape, o: FocusOptions):
+    """(window_px, window, downsample) of every window, sorted by size; index of the main."""
+    out = []
+    if o.fine_window_px and o.fine_window_px < o.window_px:
+        out.append((int(o.fine_window_px), o.window, 1))
+    out.append((int(o.window_px), o.window, 1))
+    main = len(out) - 1
+    if o.coarse_window_px and o.coarse_window_px > o.window_px:
+        ds = 2 if o.coarse_window_px >= 11 and min(shape) >= 32 else 1
+        out.append((int(o.coarse_window_px), o.window, ds))
+    return out, main
+
+
+def _aligned_loader(plan: _Plan):
+    """The slice loader, registered to a reference slice when ``options.align`` asks for it,
+    and the alignment's record (None without)."""
+    o, src = plan.options, plan.slices
+    if o.align is None:
+        return src.load, None
+    warps, ref = estimate_warps(src.load, plan.order, src.shape, method=o.align,
+                                reference=o.reference)
+    return warped_loader(src.load, warps, src.shape), {
+        "reference": int(ref), "warps": [np.asarray(w).tolist() for w in warps]}
+
+
+@dataclass
+class _Scan:
+    """The streaming pass: a tracker per window, the all-in-focus composite, wall times."""
+
+    trackers: list | None
+    all_in_focus: np.ndarray
+    t_read: float
+    t_focus: float
+
+
+def _scan(plan: _Plan, load, *, prefetch: bool, progress) -> _Scan:
+    """Read the slices once in increasing z: focus measures, running peaks, composite."""
+    o, (H, W), n = plan.options, plan.slices.shape, plan.slices.n
+    trackers = [PeakTracker(((H + 1) // 2, (W + 1) // 2) if ds == 2 else (H, W),
+                            radius=o.fit_radius_used, n_slices=n) for _, _, ds in plan.windows]
+    composite = _Composite((H, W), plan.slices.channels)
     t_read = t_focus = 0.0
-    pool = ThreadPoolExecutor(max_workers=1) if prefetch else None
-    try:
-        fut = pool.submit(load, int(order[0])) if pool else None
-        for k in range(n):
-            t0 = time.perf_counter()
-            img = fut.result() if pool else load(int(order[k]))
-            if pool and k + 1 < n:
-                fut = pool.submit(load, int(order[k + 1]))
+    with _slices_in_z_order(load, plan.order, prefetch) as slices:
+        for k, img, t_wait in slices:
             t1 = time.perf_counter()
-            fs = focus_measures(img, wins, operator=operator, colour=colour)
+            fs = focus_measures(img, plan.windows, operator=o.operator, colour=o.colour)
             for tr, f in zip(trackers, fs):
                 tr.push(f, k)
-            f = fs[main]
-            np.greater(f, best_now, out=mask)
-            cv2.max(f, best_now, dst=best_now)
-            cv2.copyTo(img, mask.view(np.uint8), aif)
-            t_read += t1 - t0
+            composite.add(fs[plan.main], img)
+            t_read += t_wait
             t_focus += time.perf_counter() - t1
             if progress is not None:
                 progress(k + 1, n)
-        t1 = time.perf_counter()
-        for tr in trackers:
-            tr.finish()
-            tr.release_ring()
-        t_focus += time.perf_counter() - t1
+    t1 = time.perf_counter()
+    for tr in trackers:
+        tr.finish()
+        tr.release_ring()
+    t_focus += time.perf_counter() - t1
+    return _Scan(trackers, composite.image, t_read, t_focus)
+
+
+@contextmanager
+def _slices_in_z_order(load, order, prefetch: bool):
+    """``(rank, slice, seconds waited for it)`` in increasing z; with ``prefetch`` the next
+    slice is decoded in a background thread, which is shut down on leaving."""
+    pool = ThreadPoolExecutor(max_workers=1) if prefetch else None
+    try:
+        yield _read_ahead(load, order, pool)
     finally:
         if pool:
             pool.shutdown(wait=True, cancel_futures=True)
 
-    # ---- peak fits, uncertainty, choice of window ------------------------------------------
-    t2 = time.perf_counter()
-    step = float(np.median(np.diff(zs))) if n > 1 else 1.0
+
+def _read_ahead(load, order, pool):
+    n = len(order)
+    fut = pool.submit(load, int(order[0])) if pool else None
+    for k in range(n):
+        t0 = time.perf_counter()
+        img = fut.result() if pool else load(int(order[k]))
+        if pool and k + 1 < n:
+            fut = pool.submit(load, int(order[k + 1]))
+        yield k, img, time.perf_counter() - t0
+
+
+class _Composite:
+    """All-in-focus image: each pixel from the slice where the main window's focus measure is
+    largest so far (undelayed running arg-max)."""
+
+    def __init__(self, shape, channels):
+        self.best = np.full(shape, -np.inf, np.float32)
+        self.image = np.zeros(tuple(shape) + (3,) if channels == 3 else tuple(shape),
+                              np.float32)
+        self._mask = np.empty(shape, bool)
+
+    def add(self, f, img):
+        np.greater(f, self.best, out=self._mask)
+        cv2.max(f, self.best, dst=self.best)
+        cv2.copyTo(img, self._mask.view(np.uint8), self.image)
+
+
+def _fit_windows(plan: _Plan, trackers, step) -> list[WindowFit]:
+    """Peak fit, significance and uncertainty of every window, on the full grid."""
+    o, zs = plan.options, plan.zs
     fits = []
-    for (px, win, ds), tr in zip(wins, trackers):
-        k_noise = noise_shape(operator=operator, window_px=px, window=win, downsample=ds,
-                              colour=colour, channels=channels)
-        fit = fit_window(tr, zs, step, interpolation=interpolation, shape_k=k_noise,
-                         alpha=DETECTION_ALPHA, prior_dof=SIGMA_MODEL["prior_dof"],
-                         pertuz=(reliability == "pertuz"), window_px=px, downsample=ds)
+    for (px, win, ds), tr in zip(plan.windows, trackers):
+        k_noise = noise_shape(operator=o.operator, window_px=px, window=win, downsample=ds,
+                              colour=o.colour, channels=plan.slices.channels)
+        fit = fit_window(tr, zs, step, interpolation=o.interpolation, shape_k=k_noise,
+                         pertuz=(o.reliability == "pertuz"), window_px=px, downsample=ds)
         add_relief_terms(fit, step, SIGMA_MODEL)
-        fits.append(fit.upsampled((H, W)))
-    best_main = trackers[main].best
-    best_rank = trackers[main].best_rank
-    trackers = None
-    idx, sigma, detected = combine(fits, main, step, prefer=SIGMA_MODEL["prefer"])
+        fits.append(fit.upsampled(plan.slices.shape))
+    return fits
+
+
+@dataclass
+class _Choice:
+    """Per pixel: the chosen window's height, its reliability and σ."""
+
+    height: np.ndarray
+    reliability_db: np.ndarray
+    reliable: np.ndarray
+    sigma_um: np.ndarray
+    detected: np.ndarray
+    window_px_map: np.ndarray
+
+
+def _choose(plan: _Plan, fits: list[WindowFit], step) -> _Choice:
+    """Each pixel takes the window with the smallest σ among those with a significant peak;
+    its reliability and whether it passes the cut."""
+    o = plan.options
+    cut = o.reliability_cut_db
+    idx, sigma, detected = combine(fits, plan.main, step, prefer=SIGMA_MODEL["prefer"])
     pick = idx[None].astype(np.intp)
     height = np.take_along_axis(np.stack([f.height_um for f in fits]), pick, 0)[0]
-    if reliability == "pertuz":
+    if o.reliability == "pertuz":
         rel = np.take_along_axis(np.stack([f.pertuz_db for f in fits]), pick, 0)[0]
-        reliable = rel >= min_reliability_db
+        reliable = rel >= cut
     else:
         rel = -20.0 * np.log10(np.clip(sigma, 1e-3, 1e6))
         rel = np.where(detected, rel, np.minimum(rel, 0.0))
-        reliable = (detected & (rel >= min_reliability_db)) if min_reliability_db > -np.inf \
-            else np.ones((H, W), bool)
+        reliable = (detected & (rel >= cut)) if cut > -np.inf \
+            else np.ones(plan.slices.shape, bool)
     sigma_um = np.where(detected & np.isfinite(sigma), sigma * abs(step), np.nan)
-    window_map = np.array([w[0] for w in wins], np.uint8)[idx]
-    fits = None
-    t3 = time.perf_counter()
+    window_map = np.array([w[0] for w in plan.windows], np.uint8)[idx]
+    return _Choice(height, rel, reliable, sigma_um, detected, window_map)
 
-    height = height.astype(np.float32)
-    h = np.where(reliable, height, np.float32(np.nan)).astype(np.float32)
-    if fill:
-        h = fill_missing(h, method=fill)
-    best_index = order[best_rank].astype(np.int32)
-    t_end = time.perf_counter()
+
+def _params(plan: _Plan, alignment: dict | None) -> dict:
+    """``FocusResult.params``: the options used, the windows and the stack's size."""
+    o, src = plan.options, plan.slices
+    H, W = src.shape
     params = {
-        "operator": operator, "window_px": int(window_px), "window": window,
-        "windows_px": [int(w[0]) for w in wins], "colour": colour,
-        "interpolation": interpolation,
-        "fit_radius": int(r) if interpolation in ("lsq", "lorentz") else None,
-        "reliability": reliability,
-        "min_reliability_db": float(min_reliability_db), "fill": fill or None,
-        "align": (align if isinstance(align, str) else ("ecc" if align else None)),
-        "n_slices": int(n), "shape": [int(H), int(W)], "channels": int(channels),
+        "operator": o.operator, "window_px": int(o.window_px), "window": o.window,
+        "windows_px": [int(w[0]) for w in plan.windows], "colour": o.colour,
+        "interpolation": o.interpolation,
+        "fit_radius": o.fit_radius_used if o.interpolation in ("lsq", "lorentz") else None,
+        "reliability": o.reliability, "min_reliability_db": o.reliability_cut_db,
+        "fill": o.fill, "align": o.align,
+        "n_slices": int(src.n), "shape": [int(H), int(W)], "channels": int(src.channels),
     }
-    if warps is not None:
-        params["alignment"] = {"reference": int(ref),
-                               "warps": [np.asarray(w_).tolist() for w_ in warps]}
-    timings = {"read": t_read, "focus": t_focus, "fit": t3 - t2, "total": t_end - t_start}
-    log.info("height from focus: %d slices %dx%d, %.1f%% unreliable (%.1f%% without a focus "
-             "peak), %.2f s", n, W, H, 100.0 * (1.0 - reliable.mean()),
-             100.0 * (1.0 - detected.mean()), timings["total"])
-    return FocusResult(height_um=h, height_fit_um=height, reliability_db=rel.astype(np.float32),
-                       reliable=reliable, best_index=best_index, focus_max=best_main,
-                       all_in_focus=aif, z_um=z, params=params, timings_s=timings,
-                       height_sigma_um=sigma_um.astype(np.float32), detected=detected,
-                       window_px_map=window_map)
+    if alignment is not None:
+        params["alignment"] = alignment
+    return params

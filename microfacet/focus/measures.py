@@ -31,21 +31,15 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..core.lazy import load
-from .defaults import (
-    COLOURS,
-    DEFAULT_COLOUR,
-    DEFAULT_OPERATOR,
-    DEFAULT_WINDOW,
-    DEFAULT_WINDOW_PX,
-    OPERATORS,
-    WINDOWS,
-)
+from .options import COLOURS, OPERATORS, WINDOWS, FocusOptions, odd_window_reason
 
 cv2 = load("cv2")
 
-__all__ = ["COLOURS", "DEFAULT_COLOUR", "DEFAULT_OPERATOR", "DEFAULT_WINDOW",
-           "DEFAULT_WINDOW_PX", "OPERATORS", "WINDOWS", "check_window", "focus_measure",
-           "focus_measures", "noise_shape", "to_grey"]
+__all__ = ["check_window", "focus_measure", "focus_measures", "noise_shape", "to_grey"]
+
+#: The defaults of the keyword arguments: those of :class:`~microfacet.focus.options.
+#: FocusOptions` (declared there only).
+_DEFAULTS = FocusOptions()
 
 
 _ML_KX = np.array([[-1.0, 2.0, -1.0]], dtype=np.float32)
@@ -76,9 +70,9 @@ def to_grey(image: np.ndarray) -> np.ndarray:
 
 def check_window(window_px, window):
     """Raise ValueError unless ``window_px`` is an odd integer >= 1 and ``window`` known."""
-    if isinstance(window_px, bool) or not isinstance(window_px, (int, np.integer)) \
-            or window_px < 1 or window_px % 2 == 0:
-        raise ValueError(f"window_px must be an odd integer >= 1, got {window_px!r}")
+    reason = odd_window_reason(window_px)
+    if reason is not None:
+        raise ValueError(f"window_px {reason}")
     if window not in WINDOWS:
         raise ValueError(f"window must be 'gaussian' or 'box', not {window!r}")
 
@@ -132,8 +126,8 @@ def _energy(g, operator):
 
 
 def focus_measures(image: np.ndarray, windows: Sequence[tuple[int, str, int]], *,
-                   operator: str = DEFAULT_OPERATOR,
-                   colour: str = DEFAULT_COLOUR) -> list[np.ndarray]:
+                   operator: str = _DEFAULTS.operator,
+                   colour: str = _DEFAULTS.colour) -> list[np.ndarray]:
     """The focus measure of one slice for several windows.
 
     Parameters
@@ -182,9 +176,9 @@ def focus_measures(image: np.ndarray, windows: Sequence[tuple[int, str, int]], *
     return out
 
 
-def focus_measure(image: np.ndarray, *, operator: str = DEFAULT_OPERATOR,
-                  window_px: int = DEFAULT_WINDOW_PX, window: str = DEFAULT_WINDOW,
-                  colour: str = DEFAULT_COLOUR) -> np.ndarray:
+def focus_measure(image: np.ndarray, *, operator: str = _DEFAULTS.operator,
+                  window_px: int = _DEFAULTS.window_px, window: str = _DEFAULTS.window,
+                  colour: str = _DEFAULTS.colour) -> np.ndarray:
     """Focus measure of one slice.
 
     Parameters

@@ -90,6 +90,43 @@ def fit_peak(values: np.ndarray, x: np.ndarray, *, model: str = "lorentz",
     """
     if model not in MODELS:
         raise ValueError(f"model must be one of {MODELS}, not {model!r}")
+    pts = _points(values, x, dtype, vmax)
+    sums = _weighted_sums(pts, model, weighted)
+    a, b, c, good, cof, inv = _solve_parabola(sums, pts.tiny)
+    peak = (a < 0) if model == "gauss" else (a > 0)
+    ok = good & peak & ~pts.flat
+    a_ok = np.where(ok, a, -1.0 if model == "gauss" else 1.0)
+    off = np.clip(np.where(ok, -b / (2.0 * a_ok), 0.0), *_span(sums, pts, weighted))
+    # variance of x0 = -b / 2a per unit residual variance: J M^-1 J^T
+    c00, c01, c11 = cof
+    ja = -off / a_ok
+    jb = -0.5 / a_ok
+    var_unit = (ja * ja * c00 - 2.0 * ja * jb * c01 + jb * jb * c11) * inv
+    var_unit = np.where(ok, np.maximum(var_unit, 0.0), np.inf)
+    rss = np.zeros(pts.vmax.shape, dtype)
+    for k in range(len(sums.ys)):
+        r = sums.ys[k] - (a * sums.xs[k] + b) * sums.xs[k] - c
+        rss += sums.ws[k] * r * r
+    width = np.where(ok, _width(a_ok, b, c, model, pts.tiny), np.inf)
+    return PeakFit(off.astype(dtype, copy=False), np.stack([a, b, c]), ok,
+                   var_unit.astype(dtype, copy=False), rss, sums.n_valid, width.astype(dtype))
+
+
+@dataclass
+class _Points:
+    """The valid values of a fit, per neighbour (NaN, ≤ 0 and positions missing: invalid)."""
+
+    dtype: type
+    tiny: float
+    x: np.ndarray           # positions, (K, ...) or (K,)
+    per_pixel: bool         # positions per pixel
+    valid: list             # K masks
+    vk: list                # K values (0 where invalid)
+    vmax: np.ndarray        # largest valid value (≥ tiny)
+    flat: np.ndarray        # all valid values equal to 1e-6 relative
+
+
+def _points(values, x, dtype, vmax) -> _Points:
     v = np.asarray(values, dtype=dtype)
     K = v.shape[0]
     x = np.asarray(x, dtype=dtype)
@@ -107,44 +144,69 @@ def fit_peak(values: np.ndarray, x: np.ndarray, *, model: str = "lorentz",
     vmin = np.where(valid[0], vk[0], np.inf).astype(dtype)
     for k in range(1, K):
         np.minimum(vmin, np.where(valid[k], vk[k], np.inf), out=vmin)
-    flat = vmax - vmin <= 1e-6 * vmax
-    shape = vmax.shape
-    acc = {name: np.zeros(shape, dtype) for name in ("s0", "s1", "s2", "s3", "s4",
-                                                      "t0", "t1", "t2")}
-    ys, ws, xs = [], [], []
-    n_valid = np.zeros(shape, np.int32)
-    inv_vmax = 1.0 / vmax
-    for k in range(K):
-        u = np.maximum(vk[k] * inv_vmax, tiny)
+    return _Points(dtype, tiny, x, per_pixel, valid, vk, vmax, vmax - vmin <= 1e-6 * vmax)
+
+
+@dataclass
+class _Sums:
+    """Weighted moments of the fit: ``s[i] = Σ w x^i`` (i ≤ 4), ``t[i] = Σ w y x^i`` (i ≤ 2),
+    and per neighbour its ``y``, weight and position."""
+
+    s: list
+    t: list
+    n_valid: np.ndarray
+    ys: list
+    ws: list
+    xs: list
+
+
+def _weighted_sums(pts: _Points, model: str, weighted: bool) -> _Sums:
+    dtype, tiny = pts.dtype, pts.tiny
+    shape = pts.vmax.shape
+    s = [np.zeros(shape, dtype) for _ in range(5)]
+    t = [np.zeros(shape, dtype) for _ in range(3)]
+    out = _Sums(s, t, np.zeros(shape, np.int32), [], [], [])
+    inv_vmax = 1.0 / pts.vmax
+    for k, (valid, vk) in enumerate(zip(pts.valid, pts.vk)):
+        u = np.maximum(vk * inv_vmax, tiny)
         if model == "gauss":
-            y = np.log(np.maximum(vk[k], tiny))
+            y = np.log(np.maximum(vk, tiny))
             w = u * u if weighted else np.ones(shape, dtype)
         else:
             y = 1.0 / np.sqrt(u)
             w = u * u * u if weighted else np.ones(shape, dtype)
-        w = np.where(valid[k], w, 0.0).astype(dtype, copy=False)
-        xk = np.where(valid[k], x[k], 0.0).astype(dtype, copy=False) if per_pixel \
-            else dtype(x[k]) if np.isfinite(x[k]) else dtype(0.0)
-        if not per_pixel and not np.isfinite(x[k]):
+        w = np.where(valid, w, 0.0).astype(dtype, copy=False)
+        xk = pts.x[k]
+        if pts.per_pixel:
+            xk = np.where(valid, xk, 0.0).astype(dtype, copy=False)
+        elif np.isfinite(xk):
+            xk = dtype(xk)
+        else:
+            xk = dtype(0.0)
             w = np.zeros(shape, dtype)
-        n_valid += (w > 0) if weighted else valid[k]
+        out.n_valid += (w > 0) if weighted else valid
         wx = w * xk
         wx2 = wx * xk
-        acc["s0"] += w
-        acc["s1"] += wx
-        acc["s2"] += wx2
-        acc["s3"] += wx2 * xk
-        acc["s4"] += wx2 * xk * xk
+        s[0] += w
+        s[1] += wx
+        s[2] += wx2
+        s[3] += wx2 * xk
+        s[4] += wx2 * xk * xk
         wy = w * y
-        acc["t0"] += wy
-        acc["t1"] += wy * xk
-        acc["t2"] += wx2 * y
-        ys.append(y)
-        ws.append(w)
-        xs.append(xk)
-    s0, s1, s2, s3, s4 = (acc[k] for k in ("s0", "s1", "s2", "s3", "s4"))
-    t0, t1, t2 = acc["t0"], acc["t1"], acc["t2"]
-    # normal equations of  min Σ w (a x² + b x + c − y)²  solved by Cramer's rule
+        t[0] += wy
+        t[1] += wy * xk
+        t[2] += wx2 * y
+        out.ys.append(y)
+        out.ws.append(w)
+        out.xs.append(xk)
+    return out
+
+
+def _solve_parabola(sums: _Sums, tiny):
+    """``a, b, c`` of min Σ w (a x² + b x + c − y)² by Cramer's rule (0 where singular), the
+    mask of the solvable ones, the cofactors ``(c00, c01, c11)`` and 1/det."""
+    s0, s1, s2, s3, s4 = sums.s
+    t0, t1, t2 = sums.t
     c00 = s2 * s0 - s1 * s1            # cofactors of M = [[s4 s3 s2] [s3 s2 s1] [s2 s1 s0]]
     c01 = s3 * s0 - s1 * s2
     c11 = s4 * s0 - s2 * s2
@@ -153,42 +215,33 @@ def fit_peak(values: np.ndarray, x: np.ndarray, *, model: str = "lorentz",
     da = t2 * c00 - s3 * (t1 * s0 - s1 * t0) + s2 * (t1 * s1 - s2 * t0)
     db = s4 * (t1 * s0 - s1 * t0) - t2 * c01 + s2 * (s3 * t0 - t1 * s2)
     dc = s4 * (s2 * t0 - t1 * s1) - s3 * (s3 * t0 - t1 * s2) + t2 * c02
-    good = (np.abs(det) > 1e-12 * np.maximum(s4 * s2 * s0, tiny)) & (n_valid >= 3)
+    good = (np.abs(det) > 1e-12 * np.maximum(s4 * s2 * s0, tiny)) & (sums.n_valid >= 3)
     safe = np.where(good, det, 1.0)
     inv = 1.0 / safe
     a = np.where(good, da * inv, 0.0)
     b = np.where(good, db * inv, 0.0)
     c = np.where(good, dc * inv, 0.0)
-    peak = (a < 0) if model == "gauss" else (a > 0)
-    ok = good & peak & ~flat
-    a_ok = np.where(ok, a, -1.0 if model == "gauss" else 1.0)
-    off = np.where(ok, -b / (2.0 * a_ok), 0.0)
-    lo = np.full(shape, np.inf, dtype)
-    hi = np.full(shape, -np.inf, dtype)
-    for k in range(K):
-        has = ws[k] > 0 if weighted else valid[k]
-        np.minimum(lo, np.where(has, xs[k], np.inf), out=lo)
-        np.maximum(hi, np.where(has, xs[k], -np.inf), out=hi)
-    lo = np.where(np.isfinite(lo), lo, 0.0)
-    hi = np.where(np.isfinite(hi), hi, 0.0)
-    off = np.clip(off, lo, hi)
-    # variance of x0 = -b / 2a per unit residual variance: J M^-1 J^T
-    ja = -off / a_ok
-    jb = -0.5 / a_ok
-    var_unit = (ja * ja * c00 - 2.0 * ja * jb * c01 + jb * jb * c11) * inv
-    var_unit = np.where(ok, np.maximum(var_unit, 0.0), np.inf)
-    rss = np.zeros(shape, dtype)
-    for k in range(K):
-        r = ys[k] - (a * xs[k] + b) * xs[k] - c
-        rss += ws[k] * r * r
+    return a, b, c, good, (c00, c01, c11), inv
+
+
+def _span(sums: _Sums, pts: _Points, weighted: bool):
+    """The smallest and largest position that took part in the fit (0 where none did)."""
+    shape = pts.vmax.shape
+    lo = np.full(shape, np.inf, pts.dtype)
+    hi = np.full(shape, -np.inf, pts.dtype)
+    for k in range(len(sums.xs)):
+        has = sums.ws[k] > 0 if weighted else pts.valid[k]
+        np.minimum(lo, np.where(has, sums.xs[k], np.inf), out=lo)
+        np.maximum(hi, np.where(has, sums.xs[k], -np.inf), out=hi)
+    return np.where(np.isfinite(lo), lo, 0.0), np.where(np.isfinite(hi), hi, 0.0)
+
+
+def _width(a_ok, b, c, model, tiny):
+    """Width of the fitted curve: the Gaussian σ, or the Lorentz half width at 1/4 height."""
     if model == "gauss":
-        width = np.sqrt(-0.5 / a_ok)
-    else:
-        y0 = c - b * b / (4.0 * a_ok)
-        width = np.sqrt(np.maximum(y0, tiny) / a_ok)
-    width = np.where(ok, width, np.inf)
-    return PeakFit(off.astype(dtype, copy=False), np.stack([a, b, c]), ok,
-                   var_unit.astype(dtype, copy=False), rss, n_valid, width.astype(dtype))
+        return np.sqrt(-0.5 / a_ok)
+    y0 = c - b * b / (4.0 * a_ok)
+    return np.sqrt(np.maximum(y0, tiny) / a_ok)
 
 
 def peak_fit(values: np.ndarray, x: np.ndarray, *, weighted: bool = True, dtype=np.float64,

@@ -36,7 +36,22 @@ from .peaks import detection_threshold, fit_peak, pertuz_db
 
 cv2 = load("cv2")
 
-__all__ = ["WindowFit", "add_relief_terms", "combine", "fit_window", "window_spread_px"]
+__all__ = ["DETECTION_ALPHA", "SIGMA_MODEL", "WindowFit", "add_relief_terms", "combine",
+           "fit_window", "window_spread_px"]
+
+#: Nominal false-peak rate per pixel and window of the detection test (the measured rate on
+#: pure noise is 1e-4 to 4e-4: the tails' mean and spread are estimated from few slices). A
+#: constant of the significance test, not a setting: the reliability cut
+#: (:class:`~microfacet.focus.options.FocusOptions` ``min_reliability_db``) is the knob.
+DETECTION_ALPHA = 1e-5
+#: Terms of the height uncertainty, in z steps (module notes; docs/height-from-focus.md,
+#: calibrated with pipelines/focus_coverage.py so that |error| <= 2σ for 96-99 % of the
+#: reliable pixels): σ² = σ_fit² + (slope·s·σ_w)² + (curv·c·σ_w²)²
+#: + (broad·√(w² − (broad_ratio·w_med)²))² + floor², σ_w the window's spread; ``prior_dof``
+#: weighs the image-wide residual variance in σ_fit; ``prefer`` < 1 would favour the main
+#: window in :func:`combine`. Calibration constants of the model, not user options.
+SIGMA_MODEL = {"slope": 0.4, "curv": 1.4, "broad": 0.5, "broad_ratio": 1.5, "floor": 0.03,
+               "prior_dof": 8.0, "prefer": 1.0}
 
 
 @dataclass
@@ -79,8 +94,9 @@ def window_spread_px(window_px: int) -> float:
     return math.sqrt(window_px * window_px / 12.0 + 1.0)
 
 
-def fit_window(tracker, zs, step, *, interpolation, shape_k, alpha, prior_dof,
-               pertuz=False, window_px=7, downsample=1) -> WindowFit:
+def fit_window(tracker, zs, step, *, interpolation, shape_k, window_px, downsample=1,
+               pertuz=False, alpha=DETECTION_ALPHA,
+               prior_dof=SIGMA_MODEL["prior_dof"]) -> WindowFit:
     """Peak fit, significance and σ_fit of every pixel of one window.
 
     Parameters
@@ -90,14 +106,16 @@ def fit_window(tracker, zs, step, *, interpolation, shape_k, alpha, prior_dof,
     zs : ndarray
         Sorted slice heights; ``step`` their median spacing (the unit of the fit).
     interpolation : {"lorentz", "lsq", "gauss3", "none"}
-    shape_k, alpha : float
-        Gamma shape of the measure of noise and the nominal false-peak rate.
-    prior_dof : float
-        Weight (degrees of freedom) of the image-wide residual variance in σ_fit.
-    pertuz : bool
-        Also compute the Pertuz reliability (dB).
+    shape_k : float
+        Gamma shape of the measure of noise.
     window_px, downsample : int
         The window's side (px) and grid (1 full, 2 half), recorded in the result.
+    pertuz : bool
+        Also compute the Pertuz reliability (dB).
+    alpha : float
+        The nominal false-peak rate (:data:`DETECTION_ALPHA`).
+    prior_dof : float
+        Weight (degrees of freedom) of the image-wide residual variance in σ_fit.
 
     Returns
     -------
@@ -153,33 +171,7 @@ def fit_window(tracker, zs, step, *, interpolation, shape_k, alpha, prior_dof,
         height[sl] = zc + off * step
         width[sl] = fit.width
         ok_all[sl] = fit.ok & (fmax > 0)
-        # significance: peak excess over the tails, in units of the tails' noise
-        lo_rank = np.maximum(br - r, 0)
-        hi_rank = np.minimum(br + r, n - 1)
-        nin = hi_rank - lo_rank + 1
-        nt = n - nin
-        vsum = np.zeros(br.shape, np.float32)
-        for k in range(K):
-            vsum += np.nan_to_num(vals[k])
-        if (nt >= 2).all():
-            mu = (tracker.fsum[sl] - vsum) / nt
-        else:
-            vmin = np.nanmin(vals, axis=0)
-            mu = np.where(nt >= 2, (tracker.fsum[sl] - vsum) / np.maximum(nt, 1), vmin)
-        d2in = np.zeros(br.shape, np.float32)
-        nd2in = np.zeros(br.shape, np.int32)
-        for j in range(1, K - 1):          # second differences inside the window
-            has = (br - r + j - 1 >= 0) & (br - r + j + 1 <= n - 1)
-            d2 = vals[j - 1] - 2.0 * vals[j] + vals[j + 1]
-            d2in += np.where(has, d2 * d2, 0.0)
-            nd2in += has
-        nd2 = (n - 2) - nd2in
-        tail_var = np.maximum(tracker.d2sum[sl] - d2in, 0.0) / (6.0 * np.maximum(nd2, 1))
-        tail_var = np.where(nd2 >= 1, tail_var, 0.0)
-        noise = np.sqrt(np.maximum(tail_var, mu * mu / shape_k))
-        excess = fmax - mu
-        signif[sl] = np.where(noise > 0, excess / np.maximum(noise, 1e-30) / thr,
-                              np.where(excess > 0, np.inf, 0.0))
+        signif[sl] = _significance(tracker, sl, n, shape_k) / thr
         if pertuz:
             xp = np.where(np.isfinite(vals[sub]), (xz[sub] if xz.ndim > 1
                                                    else xz[sub][:, None, None]), np.nan)
@@ -196,6 +188,40 @@ def fit_window(tracker, zs, step, *, interpolation, shape_k, alpha, prior_dof,
     return WindowFit(int(window_px), int(downsample), height, sigma_fit, sigma_fit.copy(),
                      np.where(ok_all, width, np.inf).astype(np.float32), detected,
                      signif, pz)
+
+
+def _significance(tracker, sl, n, shape_k):
+    """Peak excess over the mean of the curve's tails, in units of the tails' noise, of the
+    rows ``sl`` (inf for an excess over noiseless tails)."""
+    r, K = tracker.r, tracker.k
+    br = tracker.best_rank[sl]
+    vals = tracker.window[:, sl]
+    lo_rank = np.maximum(br - r, 0)
+    hi_rank = np.minimum(br + r, n - 1)
+    nin = hi_rank - lo_rank + 1
+    nt = n - nin
+    vsum = np.zeros(br.shape, np.float32)
+    for k in range(K):
+        vsum += np.nan_to_num(vals[k])
+    if (nt >= 2).all():
+        mu = (tracker.fsum[sl] - vsum) / nt
+    else:
+        vmin = np.nanmin(vals, axis=0)
+        mu = np.where(nt >= 2, (tracker.fsum[sl] - vsum) / np.maximum(nt, 1), vmin)
+    d2in = np.zeros(br.shape, np.float32)
+    nd2in = np.zeros(br.shape, np.int32)
+    for j in range(1, K - 1):          # second differences inside the window
+        has = (br - r + j - 1 >= 0) & (br - r + j + 1 <= n - 1)
+        d2 = vals[j - 1] - 2.0 * vals[j] + vals[j + 1]
+        d2in += np.where(has, d2 * d2, 0.0)
+        nd2in += has
+    nd2 = (n - 2) - nd2in
+    tail_var = np.maximum(tracker.d2sum[sl] - d2in, 0.0) / (6.0 * np.maximum(nd2, 1))
+    tail_var = np.where(nd2 >= 1, tail_var, 0.0)
+    noise = np.sqrt(np.maximum(tail_var, mu * mu / shape_k))
+    excess = tracker.best[sl] - mu
+    return np.where(noise > 0, excess / np.maximum(noise, 1e-30),
+                    np.where(excess > 0, np.inf, 0.0))
 
 
 def _binned_prior(s2res, dof, signif, use, bins=16):
@@ -237,7 +263,7 @@ def add_relief_terms(fit: WindowFit, step, model: dict) -> None:
         The z step in the unit of ``fit.height_um`` (µm): the terms are in z steps.
     model : dict
         Coefficients ``slope``, ``curv``, ``broad``, ``broad_ratio`` and ``floor`` (z steps),
-        see :data:`microfacet.focus.defaults.SIGMA_MODEL` and the module docstring.
+        see :data:`SIGMA_MODEL` and the module docstring.
     """
     ds = fit.downsample
     spread = window_spread_px(fit.window_px)

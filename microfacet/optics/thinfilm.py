@@ -33,12 +33,12 @@ S. J. Byrnes, "Multilayer optical calculations", arXiv:1603.02720 (the conventio
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.threads import num_threads
 from .constants import optical_constants
 
 __all__ = [
@@ -294,21 +294,9 @@ def _airy(wl, theta, d, n0, n1, n2, polarization, dtype):
     return out[()]
 
 
-def num_threads() -> int:
-    """Threads used for large evaluations: ``$MICROFACET_NUM_THREADS`` or the CPU count."""
-    env = os.environ.get("MICROFACET_NUM_THREADS", "")
-    if env.strip():
-        try:
-            return max(1, int(env))
-        except ValueError:
-            raise ValueError(
-                f"MICROFACET_NUM_THREADS: must be a positive integer, got {env!r}"
-            ) from None
-    return max(1, min(8, os.cpu_count() or 1))
-
-
 def _run_blocks(fn, shape):
-    """Call ``fn(block_index)`` over the blocks of ``shape``, in threads when it pays."""
+    """Call ``fn(block_index)`` over the blocks of ``shape``, in threads when it pays
+    (:func:`microfacet.core.threads.num_threads` of them)."""
     blocks = list(_blocks(shape))
     threads = num_threads() if len(blocks) >= 4 else 1
     if threads == 1:

@@ -8,6 +8,7 @@ module              workflow
 ``batch``           :func:`run_batch`: many stacks, local processes or a Dask cluster,
                     resumable, ``batch_summary.csv``
 ``batch_summary``   the rows and folder names of ``batch_summary.csv``
+``height``          :func:`height_to_folder`: one stack → height-from-focus folder
 ``executors``       local worker processes and Dask clusters
 ==================  ==========================================================
 """
@@ -15,7 +16,8 @@ module              workflow
 from ..core.lazy import attach
 
 __getattr__, __dir__, __all__ = attach(__name__, submodules=(
-    "analyse", "batch", "batch_summary", "executors"), submod_attrs={
+    "analyse", "batch", "batch_summary", "executors", "height"), submod_attrs={
     "analyse": ["StackSource", "analyse_to_folder", "open_stack"],
     "batch": ["BatchInterrupted", "BatchResult", "run_batch"],
+    "height": ["HeightOutput", "height_to_folder"],
 })

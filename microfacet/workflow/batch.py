@@ -49,6 +49,7 @@ from pathlib import Path
 
 from ..analysis.options import AnalysisOptions
 from ..core.errors import InputError
+from ..core.threads import set_num_threads
 from ..io.outdir import OutputFolder, check_output, sweep_stale
 from ..io.results import Results
 from ..io.stack import read_stack
@@ -112,7 +113,7 @@ def _analyse_one(stack: str, out: str, options, overwrite: bool, report: bool,
     worker already shares the machine with the others.
     """
     if threads is not None:
-        os.environ["MICROFACET_NUM_THREADS"] = str(threads)
+        set_num_threads(threads)
     t0 = time.perf_counter()
     row = {"stack": stack, "results": out, "worker": socket.gethostname()}
     try:

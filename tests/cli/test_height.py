@@ -113,6 +113,25 @@ def test_bad_window_option(small_stack, tmp_path, capsys):
     assert "--window-px" in capsys.readouterr().err
 
 
+def test_focus_flags_reach_the_options(small_stack, tmp_path, capsys):
+    """The flags generated from FocusOptions set the options height.json records; errors of
+    the workflow's own parameters name their flag."""
+    d, _ = small_stack
+    out = tmp_path / "o"
+    assert main(["height", str(d), "--out", str(out), "-q", "--window", "box",
+                 "--interpolation", "lsq", "--fit-radius", "3", "--min-reliability-db=-inf",
+                 "--fill", "nearest"]) == 0
+    p = json.loads((out / "height.json").read_text())["parameters"]
+    assert (p["window"], p["interpolation"], p["fit_radius"], p["fill"]) == (
+        "box", "lsq", 3, "nearest")
+    assert p["min_reliability_db"] == -float("inf") and p["align"] is None
+    assert main(["height", str(d), "--out", str(tmp_path / "p"), "--smooth-sigma-px",
+                 "-1"]) == 2
+    assert "--smooth-sigma-px: must be >= 0" in capsys.readouterr().err
+    assert main(["height", str(d), "--out", str(tmp_path / "p"), "--fit-radius", "0"]) == 2
+    assert "--fit-radius: must be an integer in 1..10" in capsys.readouterr().err
+
+
 def test_plain_image_folder(tmp_path):
     """A folder of images without stack.json works with --pixel-size-um and --z-step-um."""
     d = tmp_path / "plain"

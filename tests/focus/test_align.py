@@ -20,10 +20,13 @@ from microfacet.core.errors import InputError
 from microfacet.focus.align import estimate_warps, warp_to_reference, warped_loader
 from microfacet.focus.height import height_from_focus
 from microfacet.focus.measures import focus_measure
+from microfacet.focus.options import FocusOptions
 from microfacet.io.stack import read_stack
 
 PCB = (Path(__file__).resolve().parents[2] / "fixtures" / "focus-stacks"
        / "focus-stack-pcb-topdown-small")
+#: Every pixel keeps its height (no reliability cut).
+ALL = FocusOptions(min_reliability_db=-np.inf)
 PCB_SCALES = [0.939, 0.948, 0.965, 0.986, 1.000, 1.015, 1.035, 1.054, 1.068, 1.085]
 
 
@@ -31,12 +34,12 @@ def test_pcb_alignment_scales_and_sharp_composite():
     """The real PCB stack (lens refocus, ~15 % zoom): the estimated magnifications against
     slice 4 match the source README's, and the aligned composite is sharp in every tile."""
     st = read_stack(PCB)
-    res = height_from_focus(st, align="ecc", reference=4)
+    res = height_from_focus(st, FocusOptions(align="ecc", reference=4))
     warps = [np.array(w) for w in res.params["alignment"]["warps"]]
     scales = [0.5 * (w[0, 0] + w[1, 1]) for w in warps]
     np.testing.assert_allclose(scales, PCB_SCALES, atol=0.01)
     # automatic reference: the most magnified slice (its field lies in every other slice)
-    auto = height_from_focus(st, align=True)
+    auto = height_from_focus(st, FocusOptions(align="ecc"))
     assert auto.params["alignment"]["reference"] == 9
     # sharp everywhere: in each 64-px tile the composite is nearly as sharp as the sharpest
     # aligned slice there
@@ -60,7 +63,7 @@ def test_alignment_recovers_synthetic_zoom_and_drift(render_stack):
     h = (1.0 + 5.0 * xx / W).astype(np.float32)
     z = np.arange(0.0, 7.0, 0.5)
     imgs = render_stack(h, z, seed=9)
-    ref = height_from_focus(imgs, z_um=z, min_reliability_db=-np.inf)
+    ref = height_from_focus(imgs, ALL, z_um=z)
     # each slice magnified about the centre by 1 + 0.006 k and shifted by (0.4 k, -0.3 k) px
     moved, true = [], []
     for k, im in enumerate(imgs):
@@ -70,7 +73,7 @@ def test_alignment_recovers_synthetic_zoom_and_drift(render_stack):
         moved.append(cv2.warpAffine(im, A, (W, H), flags=cv2.INTER_LINEAR,
                                     borderMode=cv2.BORDER_REFLECT))
         true.append(A)
-    res = height_from_focus(moved, z_um=z, align="ecc", reference=0, min_reliability_db=-np.inf)
+    res = height_from_focus(moved, ALL.replace(align="ecc", reference=0), z_um=z)
     gy, gx = np.mgrid[16:H - 16:8, 16:W - 16:8]
     pts = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
     for A, w in zip(true, res.params["alignment"]["warps"]):
@@ -80,7 +83,7 @@ def test_alignment_recovers_synthetic_zoom_and_drift(render_stack):
         assert d.max() < 0.6
     c = (slice(16, -16), slice(16, -16))
     rmse_aligned = np.sqrt(np.mean((res.height_um[c] - h[c]) ** 2))
-    plain = height_from_focus(moved, z_um=z, min_reliability_db=-np.inf)
+    plain = height_from_focus(moved, ALL, z_um=z)
     rmse_plain = np.sqrt(np.mean((plain.height_um[c] - h[c]) ** 2))
     rmse_ref = np.sqrt(np.mean((ref.height_um[c] - h[c]) ** 2))
     assert rmse_aligned < rmse_ref + 0.05
@@ -261,9 +264,9 @@ def test_aligned_all_in_focus_is_sharper_than_without_alignment(render_stack):
                             flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
              for k, im in enumerate(imgs)]
     inner = (slice(16, -16), slice(16, -16))
-    aligned = height_from_focus(moved, z_um=z, align="ecc", reference=0,
-                                min_reliability_db=-np.inf)
-    plain = height_from_focus(moved, z_um=z, min_reliability_db=-np.inf)
+    aligned = height_from_focus(moved, ALL.replace(align="ecc", reference=0),
+                                z_um=z)
+    plain = height_from_focus(moved, ALL, z_um=z)
     e_aligned = np.abs(aligned.all_in_focus - sharp)[inner].mean()
     e_plain = np.abs(plain.all_in_focus - sharp)[inner].mean()
     assert e_aligned < 0.5 * e_plain

@@ -16,14 +16,13 @@ import numpy as np
 import pytest
 
 from microfacet.core.errors import InputError
-from microfacet.focus.height import (
-    DEFAULT_MIN_RELIABILITY_DB,
-    height_from_focus,
-    peak_fit,
-)
+from microfacet.focus.height import height_from_focus, peak_fit
+from microfacet.focus.options import FocusOptions
 from microfacet.io.stack import read_stack, write_stack
 
 COU = Path(__file__).resolve().parents[2] / "fixtures" / "focus-stacks" / "cou2023-synthetic-rough"
+#: Every pixel keeps its height (no reliability cut).
+ALL = FocusOptions(min_reliability_db=-np.inf)
 
 
 def cou_rmse(height, stack_no):
@@ -40,7 +39,7 @@ def cou_stacks():
 
 @pytest.mark.parametrize("stack_no", [1, 2, 3])
 def test_default_method_accuracy_on_ground_truth(cou_stacks, stack_no):
-    res = height_from_focus(cou_stacks[stack_no], min_reliability_db=-np.inf)
+    res = height_from_focus(cou_stacks[stack_no], ALL)
     rmse = cou_rmse(res.height_um, stack_no)
     # issue bar 0.25 slices; the default measured 0.102 / 0.104 / 0.121
     assert rmse <= 0.25
@@ -58,13 +57,13 @@ def test_default_method_accuracy_on_ground_truth(cou_stacks, stack_no):
 def test_naive_baseline_is_worse_and_matches_readme(cou_stacks):
     """SML 5x5 box + 3-point Gaussian reproduces the README's naive numbers (0.218 on
     stack 1), which checks the registration; the default beats it by a wide margin."""
-    naive = height_from_focus(cou_stacks[1], operator="sml", window="box", window_px=5,
-                              interpolation="gauss3", min_reliability_db=-np.inf)
+    naive = height_from_focus(cou_stacks[1], ALL.replace(
+        operator="sml", window="box", window_px=5, interpolation="gauss3"))
     r_naive = cou_rmse(naive.height_um, 1)
     assert abs(r_naive - 0.218) < 0.01
-    argmax = height_from_focus(cou_stacks[1], interpolation="none", min_reliability_db=-np.inf)
+    argmax = height_from_focus(cou_stacks[1], ALL.replace(interpolation="none"))
     assert cou_rmse(argmax.height_um, 1) > 0.3
-    best = height_from_focus(cou_stacks[1], min_reliability_db=-np.inf)
+    best = height_from_focus(cou_stacks[1], ALL)
     assert cou_rmse(best.height_um, 1) < 0.6 * r_naive
 
 
@@ -77,13 +76,13 @@ def test_tilted_plane_uniform_and_unsorted_z(render_stack):
     h = (2.0 + 0.06 * xx + 0.03 * yy).astype(np.float32)   # 2 .. 9.1 µm
     z = np.arange(0.0, 11.5, 0.5)
     imgs = render_stack(h, z)
-    res = height_from_focus(imgs, z_um=z, min_reliability_db=-np.inf)
+    res = height_from_focus(imgs, ALL, z_um=z)
     inner = (slice(6, -6), slice(6, -6))
     err = res.height_um[inner] - h[inner]
     assert np.sqrt(np.mean(err ** 2)) < 0.08          # 0.16 slices of 0.5 µm
     # shuffling the files (with their z) gives the identical map
     perm = np.random.default_rng(3).permutation(len(z))
-    res_p = height_from_focus([imgs[i] for i in perm], z_um=z[perm], min_reliability_db=-np.inf)
+    res_p = height_from_focus([imgs[i] for i in perm], ALL, z_um=z[perm])
     np.testing.assert_allclose(res_p.height_um, res.height_um, rtol=0, atol=1e-5)
     np.testing.assert_array_equal(perm[res_p.best_index], res.best_index)
 
@@ -94,7 +93,7 @@ def test_non_uniform_z(render_stack):
     h = (3.0 + 4.0 * xx / W).astype(np.float32)
     z = np.cumsum(np.r_[0.0, np.tile([0.35, 0.7], 12)])    # alternating spacing, 0..12.6
     imgs = render_stack(h, z, seed=1)
-    res = height_from_focus(imgs, z_um=z, min_reliability_db=-np.inf)
+    res = height_from_focus(imgs, ALL, z_um=z)
     err = res.height_um[6:-6, 6:-6] - h[6:-6, 6:-6]
     assert np.sqrt(np.mean(err ** 2)) < 0.1
     assert abs(np.mean(err)) < 0.03
@@ -107,7 +106,7 @@ def test_rgb_stack_and_all_in_focus(render_stack):
     z = np.arange(0.0, 9.0, 1.0)
     imgs = render_stack(h, z, rgb=True, seed=2)
     sharp = render_stack(np.zeros_like(h), [-0.0], rgb=True, seed=2, blur_per_um=0.0)[0]
-    res = height_from_focus(imgs, z_um=z, min_reliability_db=-np.inf)
+    res = height_from_focus(imgs, ALL, z_um=z)
     assert res.all_in_focus.shape == (H, W, 3)
     # every pixel's composite comes from its sharpest slice, which is near its true height
     assert np.all(np.abs(z[res.best_index][4:-4, 4:-4] - h[4:-4, 4:-4]) <= 1.0)
@@ -125,8 +124,8 @@ def test_reliability_rejects_textureless_region(render_stack):
     z = np.arange(0.0, 11.0, 1.0)
     imgs = render_stack(h, z, noise=0.01, flat_mask=flat, seed=4)
     for op in ("tenengrad", "sml", "glv"):
-        res = height_from_focus(imgs, z_um=z, operator=op)
-        thr = DEFAULT_MIN_RELIABILITY_DB[op]
+        res = height_from_focus(imgs, FocusOptions(operator=op), z_um=z)
+        thr = FocusOptions(operator=op).reliability_cut_db
         # the coarse 15-px window reaches ~2.5 σ = 11 px into the flat half (there it
         # legitimately carries the height of the textured neighbours)
         rel_tex = res.reliability_db[8:-8, 8:W // 2 - 8]
@@ -134,7 +133,7 @@ def test_reliability_rejects_textureless_region(render_stack):
         assert np.mean(rel_tex >= thr) > 0.98, op
         assert np.mean(rel_flat < thr) > 0.98, op
         assert np.isnan(res.height_um[8:-8, W // 2 + 12:-8]).mean() > 0.98
-        filled = height_from_focus(imgs, z_um=z, operator=op, fill=True)
+        filled = height_from_focus(imgs, FocusOptions(operator=op, fill="smooth"), z_um=z)
         assert np.isfinite(filled.height_um).all()
         ok = res.reliable
         np.testing.assert_array_equal(filled.height_um[ok], res.height_um[ok])
@@ -181,20 +180,40 @@ def test_peak_fit_missing_and_degenerate():
 
 
 def test_bad_options():
+    """Options are validated when constructed (naming the field); the images and their
+    heights by height_from_focus."""
     imgs = [np.zeros((8, 8), np.float32)] * 4
     z = [0, 1, 2, 3]
-    with pytest.raises(ValueError, match="operator"):
-        height_from_focus(imgs, z_um=z, operator="laplace")
-    with pytest.raises(ValueError, match="window_px"):
-        height_from_focus(imgs, z_um=z, window_px=4)
-    with pytest.raises(ValueError, match="interpolation"):
-        height_from_focus(imgs, z_um=z, interpolation="cubic")
+    with pytest.raises(InputError, match="^operator: "):
+        FocusOptions(operator="laplace")
+    with pytest.raises(InputError, match="^window_px: "):
+        FocusOptions(window_px=4)
+    with pytest.raises(InputError, match="^interpolation: "):
+        FocusOptions(interpolation="cubic")
+    with pytest.raises(TypeError, match="FocusOptions"):
+        height_from_focus(imgs, {"operator": "sml"}, z_um=z)
     with pytest.raises(ValueError, match="z_um"):
         height_from_focus(imgs, z_um=[0, 1, 2])
     with pytest.raises(ValueError, match="duplicate"):
         height_from_focus(imgs, z_um=[0, 1, 1, 2])
     with pytest.raises(InputError, match="at least 3"):
         height_from_focus(imgs[:2], z_um=[0, 1])
+
+
+def test_default_options_and_params(render_stack):
+    """No options means FocusOptions(); ``params`` records the options in use."""
+    h = np.add.outer(np.linspace(1, 4, 32), np.zeros(40)).astype(np.float32)
+    z = np.arange(6.0)
+    imgs = render_stack(h, z, seed=6)
+    a = height_from_focus(imgs, z_um=z)
+    b = height_from_focus(imgs, FocusOptions(), z_um=z)
+    np.testing.assert_array_equal(a.height_fit_um, b.height_fit_um)
+    assert a.params == b.params
+    assert a.params["windows_px"] == [7, 15] and a.params["min_reliability_db"] == 4.0
+    c = height_from_focus(imgs, FocusOptions(interpolation="gauss3", coarse_window_px=0,
+                                             fine_window_px=3, fill="nearest"), z_um=z)
+    assert c.params["windows_px"] == [3, 7] and c.params["fit_radius"] is None
+    assert c.params["fill"] == "nearest" and np.isfinite(c.height_um).all()
 
 
 def test_memory_does_not_grow_with_slices(tmp_path):

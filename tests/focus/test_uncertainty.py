@@ -8,10 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
-from microfacet.focus.defaults import DEFAULT_MIN_RELIABILITY_DB, SIGMA_MODEL
 from microfacet.focus.height import height_from_focus
 from microfacet.focus.measures import focus_measure
+from microfacet.focus.options import FocusOptions
 from microfacet.focus.uncertainty import (
+    SIGMA_MODEL,
     WindowFit,
     add_relief_terms,
     combine,
@@ -139,7 +140,7 @@ def test_sigma_is_calibrated_on_known_relief(render_contrast, terraces, contrast
         sigs.append(res.height_sigma_um[ok])
     e, s = np.concatenate(errs), np.concatenate(sigs)
     assert e.size > 0.4 * 2 * 80 * 80
-    cut = 10 ** (-DEFAULT_MIN_RELIABILITY_DB["tenengrad"] / 20)    # σ / step at the cut
+    cut = 10 ** (-FocusOptions().reliability_cut_db / 20)    # σ / step at the cut
     assert np.max(s) <= cut * 1.001, np.max(s)
     inside = np.mean(np.abs(e) <= 2 * s)
     assert 0.90 <= inside <= 0.995, inside
@@ -154,7 +155,7 @@ def test_coarse_window_raises_coverage_where_texture_is_weak(render_contrast):
     yy, xx = np.mgrid[0:96, 0:96].astype(np.float32)
     h = 11.5 + 2.5 * np.sin(xx / 17.0) * np.cos(yy / 23.0)
     imgs = render_contrast(h, Z, contrast=0.012, seed=1)
-    one = height_from_focus(imgs, z_um=Z, coarse_window_px=None)
+    one = height_from_focus(imgs, FocusOptions(coarse_window_px=0), z_um=Z)
     two = height_from_focus(imgs, z_um=Z)
     assert two.reliable.mean() > one.reliable.mean() + 0.2
     rmse = np.sqrt(np.nanmean((two.height_um - h) ** 2))
@@ -173,8 +174,8 @@ def test_fit_window_height_on_analytic_curves():
         tr.push((1.0 / (1.0 + (k - mu) ** 2) ** 2 + 1e-3).astype(np.float32), k)
     tr.finish()
     zs = np.arange(12.0) * 0.5
-    fit = fit_window(tr, zs, 0.5, interpolation="lorentz", shape_k=10.0, alpha=1e-5,
-                     prior_dof=8.0)
+    fit = fit_window(tr, zs, 0.5, interpolation="lorentz", shape_k=10.0, window_px=7,
+                     alpha=1e-5, prior_dof=8.0)
     assert fit.detected.all()
     assert np.max(np.abs(fit.height_um - 0.5 * mu)) < 0.01 * 0.5
 
@@ -185,7 +186,7 @@ def test_rgb_stack_of_isoluminant_texture(render_contrast):
     h = 11.0 + 0.03 * xx
     imgs = render_contrast(h, Z, contrast=0.0, chroma=0.08, rgb=True, seed=2)
     luma = height_from_focus(imgs, z_um=Z)
-    rgb = height_from_focus(imgs, z_um=Z, colour="rgb")
+    rgb = height_from_focus(imgs, FocusOptions(colour="rgb"), z_um=Z)
     assert luma.reliable.mean() < 0.05
     assert rgb.reliable.mean() > 0.8
     assert np.sqrt(np.nanmean((rgb.height_um - h) ** 2)) < 0.3

@@ -1,0 +1,119 @@
+"""The thread setting of microfacet's pools (microfacet.core.threads) and where it is read."""
+
+from __future__ import annotations
+
+import importlib
+import os
+
+import numpy as np
+import pytest
+
+from microfacet.core import threads
+from microfacet.core.errors import InputError
+from microfacet.core.threads import (
+    default_num_threads,
+    limited_threads,
+    num_threads,
+    set_num_threads,
+    threads_from_text,
+)
+
+
+@pytest.fixture(autouse=True)
+def _restore():
+    yield
+    set_num_threads(None)
+
+
+def test_default_is_min_of_8_and_the_cpus():
+    assert default_num_threads() == max(1, min(8, os.cpu_count() or 1))
+    assert num_threads() == default_num_threads()
+
+
+def test_set_and_reset():
+    set_num_threads(3)
+    assert num_threads() == 3
+    set_num_threads(np.int64(2))
+    assert num_threads() == 2 and type(num_threads()) is int
+    set_num_threads(None)
+    assert num_threads() == default_num_threads()
+
+
+@pytest.mark.parametrize("bad", [0, -1, 1.5, "2", True])
+def test_bad_values_name_the_parameter(bad):
+    set_num_threads(5)
+    with pytest.raises(InputError) as exc:
+        set_num_threads(bad)
+    assert exc.value.param == "num_threads"
+    assert num_threads() == 5                      # unchanged
+
+
+def test_context_manager_restores_even_on_error():
+    set_num_threads(4)
+    with limited_threads(1) as n:
+        assert n == num_threads() == 1
+    assert num_threads() == 4
+    with pytest.raises(RuntimeError), limited_threads(2):
+        assert num_threads() == 2
+        raise RuntimeError
+    assert num_threads() == 4
+    set_num_threads(None)
+    with limited_threads(None):
+        assert num_threads() == default_num_threads()
+
+
+@pytest.mark.parametrize("text,value", [(None, None), ("", None), ("  ", None), ("4", 4),
+                                        (" 2 ", 2)])
+def test_threads_from_text(text, value):
+    assert threads_from_text(text) == value
+
+
+@pytest.mark.parametrize("text", ["0", "-2", "four", "1.5"])
+def test_threads_from_bad_text_names_the_variable(text):
+    with pytest.raises(InputError, match=r"^\$MICROFACET_NUM_THREADS: must be a positive"):
+        threads_from_text(text)
+
+
+def test_the_library_does_not_read_the_environment(monkeypatch):
+    """Only the command line reads $MICROFACET_NUM_THREADS: setting it changes nothing for
+    the library, and the thin-film pool follows the setting."""
+    from microfacet.optics import thinfilm
+
+    monkeypatch.setenv(threads.ENV_VAR, "1")
+    assert num_threads() == default_num_threads()
+    seen = []
+    monkeypatch.setattr(thinfilm, "ThreadPoolExecutor", _recording_pool(seen))
+    shape = (64, 4096)                               # enough blocks to use the pool
+    with limited_threads(2):
+        thinfilm.reflectance(550.0, np.zeros(shape), np.full(shape, 100.0), 2.2, 2.5 + 3.3j)
+    assert seen == [2]
+
+
+def _recording_pool(seen):
+    from concurrent.futures import ThreadPoolExecutor
+
+    class Recording(ThreadPoolExecutor):
+        def __init__(self, max_workers=None, **kw):
+            seen.append(max_workers)
+            super().__init__(max_workers=max_workers, **kw)
+
+    return Recording
+
+
+def test_command_line_reads_the_variable(monkeypatch, capsys, tmp_path):
+    """cli/main.py sets the threads from $MICROFACET_NUM_THREADS before a command runs; a
+    bad value is a one-line error naming the variable."""
+    cli_main = importlib.import_module("microfacet.cli.main")
+    got = []
+    monkeypatch.setattr(cli_main, "set_num_threads", got.append)
+    argv = ["height", str(tmp_path / "no-stack"), "--out", str(tmp_path / "o")]
+    monkeypatch.setenv(threads.ENV_VAR, "3")
+    assert cli_main.main(argv) == 2                 # the stack is missing: after the setting
+    assert got == [3]
+    monkeypatch.delenv(threads.ENV_VAR)
+    assert cli_main.main(argv) == 2
+    assert got == [3, None]
+    monkeypatch.setenv(threads.ENV_VAR, "zero")
+    capsys.readouterr()
+    assert cli_main.main(argv) == 2
+    assert "$MICROFACET_NUM_THREADS: must be a positive integer" in capsys.readouterr().err
