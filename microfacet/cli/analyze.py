@@ -102,7 +102,7 @@ def run(args) -> int:
     out = Path(args.out)
     opts = analysis_options(args)
     pixel_size_um, z_step_um = plain_folder_values(args)
-    source = workflow.StackSource(args.stack, pixel_size_um, z_step_um, limits_from_args(args))
+    source = io.stack.StackSource(args.stack, pixel_size_um, z_step_um, limits_from_args(args))
     t0 = time.perf_counter()
     with StageProgress("analyze", list(Stage), skip=_skipped(args, opts),
                        quiet=args.quiet) as bar:

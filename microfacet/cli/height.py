@@ -13,7 +13,7 @@ import argparse
 import logging
 import time
 
-from .. import workflow
+from .. import io, workflow
 from ..focus.options import FocusOptions
 from .options import (
     HelpFormatter,
@@ -65,7 +65,7 @@ def run(args) -> int:
     t0 = time.perf_counter()
     options = options_from_args(args, FocusOptions)
     pixel_size_um, z_step_um = plain_folder_values(args)
-    source = workflow.StackSource(args.stack, pixel_size_um, z_step_um, limits_from_args(args))
+    source = io.stack.StackSource(args.stack, pixel_size_um, z_step_um, limits_from_args(args))
     with Progress("height", total=1, unit="slices", quiet=args.quiet) as bar:
         res = workflow.height_to_folder(source, args.out, options=options,
                                         smooth_sigma_px=args.smooth_sigma_px,

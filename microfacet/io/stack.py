@@ -50,6 +50,7 @@ tifffile = load("tifffile")
 __all__ = [
     "FORMAT",
     "Stack",
+    "StackSource",
     "find_images",
     "read_stack",
     "stack_from_images",
@@ -365,3 +366,19 @@ def stack_from_images(folder, *, pixel_size_um: float | None = None,
              "x".join(f"{v:g}" for v in st.pixel_size_yx_um),
              st.sources.get("pixel_size_um", "given"))
     return st
+
+
+@dataclass(frozen=True)
+class StackSource:
+    """Where a stack is and how to read it: a stack folder, or a plain folder of images with
+    ``pixel_size_um`` and ``z_step_um``; image-size ``limits`` (:class:`~microfacet.io.limits.
+    Limits`) checked from the headers before any work."""
+
+    path: object
+    pixel_size_um: object = None
+    z_step_um: float | None = None
+    limits: object = None
+
+    def open(self) -> Stack:
+        return read_stack(self.path, limits=self.limits, pixel_size_um=self.pixel_size_um,
+                          z_step_um=self.z_step_um)

@@ -17,7 +17,7 @@ from ..core.lazy import attach
 
 __getattr__, __dir__, __all__ = attach(__name__, submodules=(
     "analyse", "batch", "batch_summary", "executors", "height"), submod_attrs={
-    "analyse": ["StackSource", "analyse_to_folder", "open_stack"],
+    "analyse": ["analyse_to_folder", "open_stack"],
     "batch": ["BatchInterrupted", "BatchResult", "run_batch"],
     "height": ["HeightOutput", "height_to_folder"],
 })

@@ -3,33 +3,15 @@ into it in one atomic step (``microfacet analyze`` and each batch worker)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from ..analysis.options import AnalysisOptions
 from ..analysis.output import results_size_bytes, save_results
 from ..analysis.pipeline import check_stack_for_analysis, run_stages
 from ..analysis.stages import Stage
 from ..io.outdir import OutputFolder, check_output
-from ..io.stack import Stack, read_stack
+from ..io.stack import Stack, StackSource
 from ..report.writer import write_report
 
-__all__ = ["StackSource", "analyse_to_folder", "open_stack"]
-
-
-@dataclass(frozen=True)
-class StackSource:
-    """Where a stack is and how to read it: a stack folder, or a plain folder of images with
-    ``pixel_size_um`` and ``z_step_um``; image-size ``limits`` (:class:`~microfacet.io.limits.
-    Limits`) checked from the headers before any work."""
-
-    path: object
-    pixel_size_um: object = None
-    z_step_um: float | None = None
-    limits: object = None
-
-    def open(self) -> Stack:
-        return read_stack(self.path, limits=self.limits, pixel_size_um=self.pixel_size_um,
-                          z_step_um=self.z_step_um)
+__all__ = ["analyse_to_folder", "open_stack"]
 
 
 def open_stack(stack, *, limits=None, pixel_size_um=None, z_step_um=None):

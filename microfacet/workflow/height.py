@@ -10,7 +10,6 @@ unreliable), ``normals.npy`` (float32 H×W×3, z up), ``reliability_db.npy`` +
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -24,26 +23,14 @@ from ..core.lazy import load
 from ..focus.height import FocusResult, check_focus_memory, height_from_focus
 from ..focus.normals import normals_from_height, tilt_azimuth_deg
 from ..focus.options import FocusOptions
-from ..io.images import write_image
+from ..io.height_folder import HeightMaps, write_height_folder
 from ..io.outdir import OutputFolder, check_output
-from ..io.stack import Stack
-from .analyse import StackSource
+from ..io.stack import Stack, StackSource
 
 cv2 = load("cv2")
 
-__all__ = ["HEIGHT_FILES", "HEIGHT_FORMAT", "HeightOutput", "height_to_folder"]
+__all__ = ["HeightOutput", "height_to_folder"]
 
-#: ``format`` of ``height.json`` (how :func:`microfacet.io.outdir.output_kind` knows it).
-HEIGHT_FORMAT = "microfacet-height/1"
-#: The files of a height folder and what they hold (recorded in ``height.json``).
-HEIGHT_FILES = {
-    "height_um.npy": "float32 HxW height in µm, NaN where unreliable",
-    "normals.npy": "float32 HxWx3 unit normals (x right, y up, z up)",
-    "all_in_focus.png": "composite of each pixel's sharpest slice",
-    "reliability_db.npy": "float32 HxW reliability in dB",
-    "reliability.png": "reliability 0..40 dB mapped to 0..255",
-    "height.png": "viridis preview of the height (0.5-99.5 percentile), NaN black",
-}
 #: Bytes per pixel a height folder takes at most (checked against the free space).
 BYTES_PER_PIXEL = 32
 
@@ -88,7 +75,7 @@ def height_to_folder(stack, out, *, options: FocusOptions | None = None,
     ----------
     stack : path-like, StackSource or Stack
         A stack folder, or a plain folder of images as a
-        :class:`~microfacet.workflow.analyse.StackSource` with its pixel size and z step.
+        :class:`~microfacet.io.stack.StackSource` with its pixel size and z step.
     out : path-like
         The height folder (the rules of :mod:`microfacet.io.outdir`).
     options : FocusOptions, optional
@@ -140,13 +127,13 @@ def height_to_folder(stack, out, *, options: FocusOptions | None = None,
         tilt, _ = tilt_azimuth_deg(normals)
         t2 = time.perf_counter()
         with claim.writing() as tmp:
-            _write_maps(tmp, st, res, normals)
             timings = {**{k: round(v, 4) for k, v in res.timings_s.items()},
                        "height_from_focus": round(t1 - t0, 4), "normals": round(t2 - t1, 4),
                        "total": round(time.perf_counter() - t0, 4)}
             summary = _summary(st, res, tilt, smooth_sigma_px, timings)
-            (tmp / "height.json").write_text(json.dumps(summary, indent=2) + "\n",
-                                             encoding="utf-8")
+            write_height_folder(tmp, HeightMaps(res.height_um, normals, res.reliability_db,
+                                                res.all_in_focus,
+                                                16 if st.dtype == np.uint16 else 8), summary)
     return HeightOutput(Path(out), st.path, (H, W), st.n_slices,
                         float(summary["stats"]["unreliable_fraction"]), timings)
 
@@ -170,41 +157,11 @@ def _open_for_height(stack) -> Stack:
     return st
 
 
-def _write_maps(folder: Path, st: Stack, res: FocusResult, normals) -> None:
-    """The arrays and images of :data:`HEIGHT_FILES` (all but height.json)."""
-    np.save(folder / "height_um.npy", res.height_um.astype(np.float32))
-    np.save(folder / "normals.npy", normals.astype(np.float32))
-    np.save(folder / "reliability_db.npy", res.reliability_db.astype(np.float32))
-    write_image(folder / "all_in_focus.png", res.all_in_focus,
-                bit_depth=16 if st.dtype == np.uint16 else 8)
-    rel8 = np.round(np.clip(res.reliability_db, 0, 40) / 40 * 255).astype(np.uint8)
-    write_image(folder / "reliability.png", rel8)
-    write_image(folder / "height.png", height_preview(res.height_um)[..., ::-1])  # BGR → RGB
-
-
-def height_preview(h: np.ndarray) -> np.ndarray:
-    """Viridis preview of a height map (0.5-99.5 percentile), NaN black; BGR uint8.
-
-    >>> height_preview(np.array([[0.0, np.nan], [1.0, 2.0]], np.float32))[0, 1].tolist()
-    [0, 0, 0]
-    """
-    ok = np.isfinite(h)
-    out = np.zeros(h.shape + (3,), np.uint8)
-    if ok.any():
-        lo, hi = np.percentile(h[ok], [0.5, 99.5])
-        v = np.clip((h - lo) / max(hi - lo, 1e-12), 0, 1)
-        v8 = np.where(ok, np.round(v * 255), 0).astype(np.uint8)
-        out = cv2.applyColorMap(v8, cv2.COLORMAP_VIRIDIS)
-        out[~ok] = 0
-    return out
-
-
 def _summary(st: Stack, res: FocusResult, tilt, smooth_sigma_px, timings) -> dict:
     """The content of ``height.json``."""
     h = res.height_um
     ok = np.isfinite(h)
     return {
-        "format": HEIGHT_FORMAT,
         "version": __version__,
         "stack": str(st.path),
         "shape": [int(s) for s in st.shape],
@@ -212,7 +169,6 @@ def _summary(st: Stack, res: FocusResult, tilt, smooth_sigma_px, timings) -> dic
         "pixel_size_um": st.pixel_size_um,
         "z_um_range": [float(st.z_um.min()), float(st.z_um.max())],
         "parameters": {**res.params, "smooth_sigma_px": smooth_sigma_px},
-        "files": dict(HEIGHT_FILES),
         "stats": {
             "unreliable_fraction": float(1.0 - ok.mean()),
             "height_um_percentiles_1_50_99": (

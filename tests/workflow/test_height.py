@@ -15,10 +15,10 @@ from microfacet.core.errors import InputError
 from microfacet.focus.height import height_from_focus
 from microfacet.focus.normals import normals_from_height
 from microfacet.focus.options import FocusOptions
+from microfacet.io.height_folder import HEIGHT_FILES
 from microfacet.io.outdir import output_kind
-from microfacet.io.stack import read_stack, write_stack
-from microfacet.workflow import HeightOutput, StackSource, height_to_folder
-from microfacet.workflow.height import HEIGHT_FILES
+from microfacet.io.stack import StackSource, read_stack, write_stack
+from microfacet.workflow import HeightOutput, height_to_folder
 
 COU = (Path(__file__).resolve().parents[2] / "fixtures" / "focus-stacks"
        / "cou2023-synthetic-rough")
