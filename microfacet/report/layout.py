@@ -48,7 +48,7 @@ mcollections = load("matplotlib.collections")
 
 __all__ = ["CMAPS", "COMPONENT_COLOURS", "DE", "Geometry", "HEIGHT_TILT", "HIST_EDGE",
            "HIST_FILL", "MAX_MAP_PX", "NO_VALUE", "PAGE_IN", "PDF_DPI", "PNG_DPI", "Page", "RC",
-           "blank_panel", "category_panel", "colormap", "colour_limits", "colourbar",
+           "blank_panel", "category_panel", "colour_limits", "colour_map", "colourbar",
            "component_colour", "downsample", "draw_table", "finite", "fmt", "histogram",
            "image_axes", "image_box", "map_panel", "number", "pct", "positive",
            "quantile_range", "shorten", "shown", "wrap"]
@@ -252,7 +252,7 @@ class Geometry:
 _MAP_MARGINS = dict(left=0.55, right=0.86, top=0.30, bottom=0.50)
 
 
-def colormap(name):
+def colour_map(name):
     """The matplotlib colour map ``name`` in 255 levels, with NaN drawn in :data:`NO_VALUE`:
     a map then has at most 256 colours, which the PDF stores as an indexed image (a third
     of the bytes, several times faster to compress than RGB)."""
@@ -337,7 +337,7 @@ def map_panel(pg, cell, a, geom, *, title, label, cmap, limits=None, lo=1.0, hi=
     if no_value is None:
         no_value = 1.0 - np.count_nonzero(np.isfinite(a)) / max(a.size, 1)
     vmin, vmax, extend = limits
-    im = ax.imshow(small, cmap=colormap(cmap), vmin=vmin, vmax=vmax, aspect="auto",
+    im = ax.imshow(small, cmap=colour_map(cmap), vmin=vmin, vmax=vmax, aspect="auto",
                    extent=geom.extent(a.shape))
     colourbar(pg, im, box, label, extend=extend, no_value=float(no_value))
     ax.set_title(title)
