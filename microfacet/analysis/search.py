@@ -147,7 +147,7 @@ def parabola(y0, y1, y2):
 
     >>> off, v, c = parabola(np.array([4.0]), np.array([1.0]), np.array([2.0]))
     >>> off.tolist(), v.tolist(), c.tolist()
-    [[0.25], [0.875], [4.0]]
+    ([0.25], [0.875], [4.0])
     """
     y0, y1, y2 = (np.asarray(y) for y in (y0, y1, y2))   # in their own precision
     den = y0 - 2.0 * y1 + y2

@@ -324,7 +324,7 @@ def colours_from_spectra(spectra, wavelength_nm, *, exposure=1.0, illuminant=DEF
     --------
     >>> wl = np.arange(380.0, 781.0, 10.0)
     >>> xyz, lab, rgb, white = colours_from_spectra(np.ones(wl.size), wl)
-    >>> [round(float(v), 3) for v in lab], rgb.tolist()
+    >>> [round(float(v), 3) + 0.0 for v in lab], rgb.tolist()
     ([100.0, 0.0, 0.0], [255, 255, 255])
     """
     e = float(exposure)

@@ -195,7 +195,7 @@ class Results:
         >>> import tempfile, pathlib
         >>> d = pathlib.Path(tempfile.mkdtemp())
         >>> _ = (d / "summary.json").write_text('{"delta_e": {"mean": 1.5}}')
-        >>> Results(d).get("delta_e", "mean"), Results(d).get("ndf", "identified")
+        >>> Results(d).get("delta_e", "mean"), Results(d).get("delta_e", "p99")
         (1.5, None)
         """
         v = self.summary

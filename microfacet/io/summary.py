@@ -13,8 +13,8 @@ The keys are documented in docs/results-format.md.
 
 Examples
 --------
->>> s = Summary.from_json({"format": FORMAT, "thickness": {"mixture": {"components": [
-...     {"weight": 1.0, "mean_nm": 51.0, "sd_nm": 2.0}]}}})
+>>> s = Summary.from_json({"format": FORMAT, "summary_version": 2, "thickness": {"mixture": {
+...     "components": [{"weight": 1.0, "mean_nm": 51.0, "sd_nm": 2.0}]}}})
 >>> s.thickness.mixture["components"][0]["mean_nm"], s.summary_version
 (51.0, 2)
 >>> Summary.from_json({"format": FORMAT, "exposure": "bright"}, where="s.json")
