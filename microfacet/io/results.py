@@ -182,7 +182,10 @@ class Results:
         if not f.is_file():
             raise InputError(f"{one_line(f)}: missing (not a results folder)")
         #: The validated, typed summary (:class:`~microfacet.io.summary.Summary`).
-        self.typed = Summary.from_json(read_json(f), where=one_line(f))
+        raw = read_json(f)
+        #: The ``format`` the file declares (None when it declares none: not written whole).
+        self.declared_format = raw.get("format") if isinstance(raw, dict) else None
+        self.typed = Summary.from_json(raw, where=one_line(f))
         #: ``summary.json`` as a dict (the typed summary's JSON, version-2 layout).
         self.summary = self.typed.to_json()
         self.summary_mtime = f.stat().st_mtime
@@ -238,7 +241,7 @@ class Results:
 
     def _mixture(self, key, cls):
         data = self.get(key, "mixture")
-        if data is None or (isinstance(data, dict) and data.get("components") == []):
+        if not data or (isinstance(data, dict) and data.get("components") == []):
             return None  # no fit (the analysis writes an empty component list)
         try:
             return cls.from_json(data)
@@ -346,7 +349,7 @@ class Results:
             res = Results(folder)
         except InputError as exc:
             return False, f"{exc} (incomplete or not results)"
-        if res.summary.get("format") != FORMAT:
+        if res.declared_format != FORMAT:
             return False, f"{one_line(folder / 'summary.json')}: key 'format' is not {FORMAT}"
         if parameters is not None:
             diff = res.differing_parameters(parameters)

@@ -109,11 +109,13 @@ def test_summary_accessors_and_mixtures(folder):
     r = Results(folder[0])
     assert r.get("delta_e", "mean") == 1.25
     assert r.get("delta_e", "nothing") is None and r.get("format", "x") is None
-    assert r.parameters == {"mode": "joint", "roi_size_px": 255}
+    # a summary without a version is version 1: its flat parameters read as the options tree
+    assert r.parameters == {"mode": "joint", "roi": {"size_px": 255}}
+    assert r.parameter("roi.size_px") == 255 and r.parameter("roi.nothing") is None
     assert r.thickness_mixture() == G and r.ndf_mixture() == F
-    assert r.differing_parameters({"mode": "joint", "roi_size_px": np.int64(255)}) == []
-    assert r.differing_parameters({"mode": "seed", "roi_size_px": 128, "new": 1.0}) == [
-        "mode", "new", "roi_size_px"]
+    assert r.differing_parameters({"mode": "joint", "roi": {"size_px": np.int64(255)}}) == []
+    assert r.differing_parameters({"mode": "seed", "roi": {"size_px": 128}, "new": 1.0}) == [
+        "mode", "new", "roi.size_px"]
 
 
 def test_record_rewrites_the_summary(folder):
@@ -209,7 +211,7 @@ def test_folders_that_are_not_results(tmp_path, setup, match):
 def test_complete(folder, tmp_path):
     path = folder[0]
     assert Results.complete(path) == (True, "")
-    assert Results.complete(path, {"mode": "joint", "roi_size_px": 255}) == (True, "")
+    assert Results.complete(path, {"mode": "joint", "roi": {"size_px": 255}}) == (True, "")
     ok, why = Results.complete(path, {"mode": "seed"})
     assert not ok and "different parameters (mode)" in why and "overwrite" in why
     assert Results.complete(tmp_path / "nothing") == (False, "")
