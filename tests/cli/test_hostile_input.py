@@ -276,7 +276,7 @@ def test_a_results_folder_caught_between_its_two_renames_is_put_back(tmp_path):
 
 
 def test_batch_resume_sweeps_what_killed_workers_left(tmp_path):
-    from microfacet.analysis.pipeline import AnalysisOptions
+    from microfacet.analysis.options import AnalysisOptions, RoiOptions
     from microfacet.workflow.batch import run_batch
 
     s = _stack(tmp_path / "a")
@@ -285,7 +285,7 @@ def test_batch_resume_sweeps_what_killed_workers_left(tmp_path):
     (out / ".a.partial-k9").mkdir()
     (out / ".a.lock").write_text("{}")
     (out / ".b.old-k9").mkdir()
-    result = run_batch([s], out, options=AnalysisOptions(roi_size_px=16), jobs=1,
+    result = run_batch([s], out, options=AnalysisOptions(roi=RoiOptions(size_px=16)), jobs=1,
                        report=False)
     assert len(result.rows) == 1
     assert not [p.name for p in out.iterdir() if p.name.startswith(".")]
@@ -540,12 +540,12 @@ def test_pathological_json(tmp_path, capfd, text, pattern):
 
 
 def test_memory_error_is_one_line(tmp_path, capfd, monkeypatch):
-    import microfacet.workflow.batch as runner
+    import microfacet.workflow.analyse as runner
 
     def boom(*a, **k):
         raise MemoryError()
 
-    monkeypatch.setattr(runner, "analyze_stack", boom)
+    monkeypatch.setattr(runner, "run_stages", boom)
     s = _stack(tmp_path / "s")
     line = _err_line(capfd, main(["analyze", str(s), "--out", str(tmp_path / "o")]))
     assert "out of memory" in line
@@ -553,12 +553,12 @@ def test_memory_error_is_one_line(tmp_path, capfd, monkeypatch):
 
 
 def test_an_internal_error_is_one_line_with_exit_1_and_a_hint(tmp_path, capfd, monkeypatch):
-    import microfacet.workflow.batch as runner
+    import microfacet.workflow.analyse as runner
 
     def bug(*a, **k):
         raise TypeError("unsupported operand")
 
-    monkeypatch.setattr(runner, "analyze_stack", bug)
+    monkeypatch.setattr(runner, "run_stages", bug)
     s = _stack(tmp_path / "s")
     cap_status = main(["analyze", str(s), "--out", str(tmp_path / "o")])
     err = capfd.readouterr().err

@@ -112,12 +112,12 @@ def test_batch_through_a_dask_local_cluster(batch_drawer, tmp_path):
 
 def test_batch_api_and_local_results_match_the_single_stack_command(batch_drawer, tmp_path):
     """The batch row and results folder are those of `microfacet analyze` on the stack."""
-    from microfacet.analysis.pipeline import AnalysisOptions
+    from microfacet.analysis.options import AnalysisOptions, RoiOptions
 
     single = tmp_path / "single"
     assert main(["analyze", str(batch_drawer / "b"), "--out", str(single), *FAST]) == 0
     res = run_batch([batch_drawer / "b"], tmp_path / "batch", jobs=1, report=False,
-                    options=AnalysisOptions(roi_size_px=48))
+                    options=AnalysisOptions(roi=RoiOptions(size_px=48)))
     assert res.n_failed == 0 and res.rows[0]["status"] == "done"
     s1 = json.loads((single / "summary.json").read_text())
     s2 = json.loads((tmp_path / "batch" / "b" / "summary.json").read_text())
