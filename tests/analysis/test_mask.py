@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from microfacet.analysis.mask import colour_mask
+from microfacet.analysis.options import MaskOptions
 
 
 def test_each_reason_is_detected_and_named():
@@ -27,8 +28,8 @@ def test_saturation_threshold_is_on_the_0_255_scale():
     v = 0.8
     keep = np.array([[[v, v * (1 - 15.5 / 255), v]]], np.float32)
     drop = np.array([[[v, v * (1 - 14.5 / 255), v]]], np.float32)
-    assert not colour_mask(keep, shadow_ratio=0).mask[0, 0]
-    assert colour_mask(drop, shadow_ratio=0).mask[0, 0]
+    assert not colour_mask(keep, MaskOptions(shadow_ratio=0)).mask[0, 0]
+    assert colour_mask(drop, MaskOptions(shadow_ratio=0)).mask[0, 0]
 
 
 def test_sixteen_bit_clip_level():

@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from microfacet.analysis.mixtures import MixtureFit, fit_thickness_mixture
+from microfacet.analysis.options import FitOptions
 from microfacet.core.distributions import ThicknessMixture
+from microfacet.core.errors import InputError
+
+
+def _k(max_components, **kw):
+    """The fit options with at most ``max_components`` components."""
+    return FitOptions(max_components=max_components, **kw)
 
 
 def test_thickness_three_components_recovered(thickness_samples):
@@ -28,7 +35,7 @@ def test_thickness_three_components_recovered(thickness_samples):
 
 def test_thickness_single_gaussian_selects_one():
     rng = np.random.default_rng(2)
-    fit = fit_thickness_mixture(rng.normal(125.0, 4.0, 5000), max_components=4)
+    fit = fit_thickness_mixture(rng.normal(125.0, 4.0, 5000), options=_k(4))
     assert fit.n_components == 1
     assert abs(fit.mixture.means_nm[0] - 125.0) < 0.3
     assert abs(fit.mixture.sds_nm[0] - 4.0) < 0.2
@@ -37,8 +44,8 @@ def test_thickness_single_gaussian_selects_one():
 def test_thickness_reproducible_and_subsampled(thickness_samples):
     rng = np.random.default_rng(3)
     d = thickness_samples(rng, [(0.5, 120, 3), (0.5, 140, 3)], 30000)
-    a = fit_thickness_mixture(d, max_components=3, max_samples=5000)
-    b = fit_thickness_mixture(d, max_components=3, max_samples=5000)
+    a = fit_thickness_mixture(d, options=_k(3, thickness_max_samples=5000))
+    b = fit_thickness_mixture(d, options=_k(3, thickness_max_samples=5000))
     assert a.mixture == b.mixture and a.bic_by_k == b.bic_by_k
     assert a.n_samples == 30000 and a.n_fit == 5000 and a.n_effective == 5000
     assert a.n_components == 2
@@ -67,7 +74,7 @@ def test_thickness_correlated_samples_group_prevents_overfit():
 def test_thickness_group_bic_not_only_the_parameter_cap():
     # 30 groups: the p <= n_eff cap allows K up to 10, so the BIC itself must choose
     x, g = _grouped(np.random.default_rng(5), n_groups=30, per_group=500)
-    grouped = fit_thickness_mixture(x, group=g, max_components=5)
+    grouped = fit_thickness_mixture(x, group=g, options=_k(5))
     assert sorted(grouped.bic_by_k) == [1, 2, 3, 4, 5]
     assert grouped.n_components == 2
     np.testing.assert_allclose(grouped.mixture.means_nm, [120, 140], atol=3.0)
@@ -86,7 +93,7 @@ def test_thickness_single_value_is_degenerate():
 
 def test_thickness_few_samples_and_nan():
     d = np.array([100.0, 101.0, np.nan, 150.0, 151.0, np.nan])
-    fit = fit_thickness_mixture(d, max_components=5)
+    fit = fit_thickness_mixture(d, options=_k(5))
     assert fit.n_samples == 4
     assert max(fit.bic_by_k) <= 1 + (4 + 1) // 3  # p = 3K − 1 <= n_effective
     assert fit.degenerate
@@ -96,7 +103,7 @@ def test_thickness_weights():
     rng = np.random.default_rng(6)
     d = np.concatenate([rng.normal(120, 3, 5000), rng.normal(140, 3, 5000)])
     w = np.where(d < 130, 3.0, 1.0)
-    fit = fit_thickness_mixture(d, weights=w, max_components=3)
+    fit = fit_thickness_mixture(d, weights=w, options=_k(3))
     assert fit.n_components == 2
     np.testing.assert_allclose(fit.mixture.weights, [0.75, 0.25], atol=0.03)
     assert fit.n_effective < 10000
@@ -109,16 +116,30 @@ def test_thickness_weights():
     ([1.0, 2.0], {"group": [1, 2, 3]}, "group"),
     ([1.0, 2.0], {"weights": [1.0]}, "weights"),
     ([1.0, 2.0], {"weights": [1.0, -1.0]}, "weights"),
-    ([1.0, 2.0], {"max_components": 0}, "max_components"),
-    ([1.0, 2.0], {"sd_floor_nm": 0}, "sd_floor_nm"),
+    ([1.0, 2.0], {"sigma_nm": [1.0, -1.0]}, "sigma_nm"),
 ])
 def test_thickness_errors(bad, kw, match):
     with pytest.raises(ValueError, match=match):
         fit_thickness_mixture(bad, **kw)
 
 
+@pytest.mark.parametrize("kw, param", [({"max_components": 0}, "max_components"),
+                                       ({"thickness_sd_floor_nm": 0}, "thickness_sd_floor_nm"),
+                                       ({"thickness_max_samples": 5}, "thickness_max_samples")])
+def test_thickness_option_errors_name_the_option(kw, param):
+    with pytest.raises(InputError, match=param) as err:
+        FitOptions(**kw)
+    assert err.value.param == param
+
+
+def test_thickness_sd_floor_is_the_options():
+    fit = fit_thickness_mixture(np.full(50, 120.0),
+                                options=FitOptions(thickness_sd_floor_nm=0.7))
+    assert fit.mixture.sds_nm[0] == pytest.approx(0.7)
+
+
 def test_to_json_serialisable():
-    fit = fit_thickness_mixture(np.random.default_rng(11).normal(130, 3, 2000), max_components=2)
+    fit = fit_thickness_mixture(np.random.default_rng(11).normal(130, 3, 2000), options=_k(2))
     js = json.loads(json.dumps(fit.to_json()))
     assert set(js) >= {"components", "bic", "bic_by_k", "n_effective"}
     assert set(js["bic_by_k"]) == {"1", "2"}
@@ -188,7 +209,7 @@ def test_thickness_deconvolves_heteroscedastic_errors():
     n, mu, s = 4000, 130.0, 3.0
     e = rng.uniform(1.0, 5.0, n)
     x = rng.normal(mu, s, n) + rng.normal(0.0, 1.0, n) * e
-    fit = fit_thickness_mixture(x, sigma_nm=e, max_components=3)
+    fit = fit_thickness_mixture(x, sigma_nm=e, options=_k(3))
     # Fisher information of x_i ~ N(μ, s² + e_i²): I_μ = Σ 1/V_i, I_{s²} = Σ 1/(2 V_i²)
     V = s * s + e * e
     se_mu = 1.0 / math.sqrt(np.sum(1.0 / V))
@@ -199,7 +220,7 @@ def test_thickness_deconvolves_heteroscedastic_errors():
     assert fit.n_components == 1
     assert abs(fit.mixture.sds_nm[0] - s) < 4 * se_s
     assert abs(fit.mixture.means_nm[0] - mu) < 4 * se_mu
-    raw = fit_thickness_mixture(x, max_components=1)        # the noise left in
+    raw = fit_thickness_mixture(x, options=_k(1))        # the noise left in
     assert raw.mixture.sds_nm[0] > s + 10 * se_s
     # the BIC is that of the deconvolved likelihood (independent: scipy.stats.norm)
     ll = _deconvolved_loglik(fit.mixture, x, e, np.ones(n))
@@ -223,7 +244,7 @@ def test_thickness_single_component_is_the_weighted_mle():
     rng = np.random.default_rng(22)
     x = rng.normal(125.0, 6.0, 700)
     a = rng.uniform(0.2, 3.0, 700)
-    fit = fit_thickness_mixture(x, weights=a, max_components=1)
+    fit = fit_thickness_mixture(x, weights=a, options=_k(1))
     m = np.sum(a * x) / np.sum(a)
     sd = math.sqrt(np.sum(a * (x - m) ** 2) / np.sum(a))
     assert fit.mixture.means_nm[0] == pytest.approx(m, rel=1e-9)
@@ -238,9 +259,9 @@ def test_thickness_integer_weights_equal_repeated_samples():
     e = rng.uniform(0.5, 2.0, x.size)
     w = rng.integers(1, 5, x.size)
     # the same n_effective for both (the default would be the Kish size vs the count)
-    a = fit_thickness_mixture(x, sigma_nm=e, weights=w, n_effective=100, max_components=3)
+    a = fit_thickness_mixture(x, sigma_nm=e, weights=w, n_effective=100, options=_k(3))
     b = fit_thickness_mixture(np.repeat(x, w), sigma_nm=np.repeat(e, w), n_effective=100,
-                              max_components=3)
+                              options=_k(3))
     assert a.n_components == b.n_components == 2
     # equal up to the EM's convergence tolerance
     np.testing.assert_allclose(np.array(a.mixture.components), np.array(b.mixture.components),
@@ -255,7 +276,7 @@ def test_thickness_integer_weights_equal_repeated_samples():
 @pytest.mark.parametrize("seed", [0, 1])
 def test_thickness_true_populations_on_a_region_map(k_true, seed):
     x, lab, r = _population_map(seed, k_true)
-    fit = fit_thickness_mixture(x, n_effective=r, max_components=4)
+    fit = fit_thickness_mixture(x, n_effective=r, options=_k(4))
     assert fit.n_components == k_true
     assert fit.n_effective == r
     # each population: ~1000-4000 pixels of fine noise 1 nm about its value
@@ -264,7 +285,7 @@ def test_thickness_true_populations_on_a_region_map(k_true, seed):
     if k_true > 1:   # a clear choice, not a toss-up
         assert fit.bic_margin > PARSIMONY_BIC
     # the regions as groups: the same number of independent samples and the same choice
-    grouped = fit_thickness_mixture(x, group=lab, max_components=4)
+    grouped = fit_thickness_mixture(x, group=lab, options=_k(4))
     assert grouped.n_effective == r and grouped.n_components == k_true
     # the BIC is the area-weighted likelihood rescaled to r observations
     k = fit.n_components
@@ -276,13 +297,13 @@ def test_thickness_true_populations_on_a_region_map(k_true, seed):
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_thickness_single_broad_gaussian_never_gets_extra_components(seed):
     rng = np.random.default_rng(100 + seed)
-    fit = fit_thickness_mixture(rng.normal(130.0, 10.0, 2000), max_components=4)
+    fit = fit_thickness_mixture(rng.normal(130.0, 10.0, 2000), options=_k(4))
     assert fit.n_components == 1
     _check_choice(fit)
     # with per-sample errors: still one (deconvolved) component
     e = rng.uniform(1.0, 4.0, 2000)
     noisy = rng.normal(130.0, 10.0, 2000) + rng.normal(0.0, 1.0, 2000) * e
-    fit = fit_thickness_mixture(noisy, sigma_nm=e, max_components=4)
+    fit = fit_thickness_mixture(noisy, sigma_nm=e, options=_k(4))
     assert fit.n_components == 1
 
 
@@ -301,7 +322,7 @@ def test_thickness_single_broad_gaussian_region_map_gets_one_component(seed):
     lab = _voronoi(rng, (64, 64), 30)
     r = int(lab.max()) + 1
     x = rng.normal(130.0, 10.0, r)[lab] + rng.normal(0.0, 1.0, lab.shape)
-    fit = fit_thickness_mixture(x, n_effective=r, max_components=4)
+    fit = fit_thickness_mixture(x, n_effective=r, options=_k(4))
     _check_choice(fit)
     assert fit.n_components == 1, fit.mixture
 
@@ -317,14 +338,14 @@ def test_thickness_parsimony_rule(delta_bic, k_expected):
     """BIC(K) = -2 ℓ_K n_eff / W + (3K - 1) log n_eff and the fitted ℓ_K do not depend on
     n_eff: choose n_eff so that BIC(2) - BIC(1) is exactly ``delta_bic``."""
     x = _two_close_populations()
-    probe = fit_thickness_mixture(x, n_effective=50, max_components=2)
+    probe = fit_thickness_mixture(x, n_effective=50, options=_k(2))
     d = (probe.log_likelihood_by_k[2] - probe.log_likelihood_by_k[1]) / x.size
     assert d > 0
 
     def gap(n):
         return -2.0 * d * n + 3.0 * math.log(n) - delta_bic
     n_eff = brentq(gap, 3.0 / (2.0 * d), 1e7)     # gap falls monotonically past 3/(2d)
-    fit = fit_thickness_mixture(x, n_effective=n_eff, max_components=2)
+    fit = fit_thickness_mixture(x, n_effective=n_eff, options=_k(2))
     assert fit.info["inadmissible_k"] == []       # both K may win: the BIC decides
     assert fit.bic_by_k[2] - fit.bic_by_k[1] == pytest.approx(delta_bic, abs=1e-6)
     assert fit.n_components == k_expected
@@ -343,7 +364,7 @@ def test_thickness_no_component_at_the_floor_without_errors(seed):
     pop = rng.permutation(np.arange(r) % 3)
     x = (np.asarray(POPULATIONS_NM)[pop] + rng.normal(0.0, 2.0, r))[lab]
     for n_eff in (r, None):           # the honest count, and every pixel independent
-        fit = fit_thickness_mixture(x, n_effective=n_eff, max_components=4)
+        fit = fit_thickness_mixture(x, n_effective=n_eff, options=_k(4))
         assert np.all(fit.mixture.sds_nm > 0.1 * 1.001), fit.mixture
         if fit.n_components > 1:
             assert np.all(fit.mixture.weights * fit.n_effective >= 2.0)
@@ -356,7 +377,7 @@ def test_thickness_no_component_at_the_floor_without_errors(seed):
 
 def test_thickness_smaller_n_effective_never_more_components():
     x, _, r = _population_map(3, 3)
-    ks = [fit_thickness_mixture(x, n_effective=n, max_components=4).n_components
+    ks = [fit_thickness_mixture(x, n_effective=n, options=_k(4)).n_components
           for n in (30.0 * r, r, 6.0, 2.0)]
     assert ks[1] == 3
     assert all(a >= b for a, b in zip(ks, ks[1:])), ks
@@ -402,7 +423,7 @@ def test_xd_em_updates_are_the_textbook_updates(bg):
     a = rng.uniform(0.5, 3.0, x.size)
     start = (np.array([1.0, 2.0, 1.0]), np.array([115.0, 125.0, 135.0]), np.full(3, 16.0))
     for n_iter in (1, 7, 40):
-        ours = _xd_em(x, v, a, *start, 0.01, bg=bg, max_iter=n_iter, tol=-np.inf)
+        ours = _xd_em((x, v, a), start, 0.01, bg=bg, max_iter=n_iter, tol=-np.inf)
         ref = _xd_em_textbook(x, v, a, *start, 0.01, bg, n_iter)
         for got, want in zip(ours, ref):
             np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-13)
@@ -427,7 +448,7 @@ def test_collapse_merges_identical_samples_and_keeps_the_em():
     # the EM on the collapsed samples is the EM on the pixels, update for update
     start = (np.ones(2), np.array([118.0, 138.0]), np.full(2, 9.0))
     for n_iter in (5, 60):
-        full = _xd_em(x, v, a, *start, 0.01, bg=1 / 50, max_iter=n_iter, tol=-np.inf)
-        short = _xd_em(xc, vc, ac, *start, 0.01, bg=1 / 50, max_iter=n_iter, tol=-np.inf)
+        full = _xd_em((x, v, a), start, 0.01, bg=1 / 50, max_iter=n_iter, tol=-np.inf)
+        short = _xd_em((xc, vc, ac), start, 0.01, bg=1 / 50, max_iter=n_iter, tol=-np.inf)
         for got, want in zip(short, full):
             np.testing.assert_allclose(got, want, rtol=1e-10)

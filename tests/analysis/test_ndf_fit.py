@@ -7,7 +7,14 @@ import numpy as np
 import pytest
 
 from microfacet.analysis.ndf_fit import fit_ndf_mixture
+from microfacet.analysis.options import FitOptions
 from microfacet.core.distributions import NDFMixture
+from microfacet.core.errors import InputError
+
+
+def _k(max_components, **kw):
+    """The fit options with at most ``max_components`` lobes."""
+    return FitOptions(max_components=max_components, **kw)
 
 
 def test_ndf_two_lobes_recovered(tilt_samples):
@@ -28,7 +35,7 @@ def test_ndf_two_lobes_recovered(tilt_samples):
 def test_ndf_single_lobe_and_bic_is_tilt_pdf_likelihood(tilt_samples):
     rng = np.random.default_rng(8)
     tilt = tilt_samples(rng, [(1.0, 6.0)], 4000)
-    fit = fit_ndf_mixture(tilt, max_components=3)
+    fit = fit_ndf_mixture(tilt, options=_k(3))
     assert fit.n_components == 1
     assert abs(fit.mixture.sds_deg[0] - 6.0) < 0.2
     # the BIC is that of the tilt density per degree that NDFMixture.tilt_pdf models
@@ -44,7 +51,7 @@ def test_ndf_all_zero_is_degenerate_and_zeros_tolerated(tilt_samples):
     rng = np.random.default_rng(9)
     tilt = tilt_samples(rng, [(1.0, 5.0)], 3000)
     tilt[:30] = 0.0                       # a few exactly-flat pixels
-    fit = fit_ndf_mixture(tilt, max_components=2)
+    fit = fit_ndf_mixture(tilt, options=_k(2))
     assert math.isfinite(fit.bic) and abs(fit.mixture.sds_deg.max() - 5.0) < 0.5
 
 
@@ -55,8 +62,8 @@ def test_ndf_group(tilt_samples):
                              tilt_samples(rng, [(1.0, 9.0)], 4)])
     tilt = np.clip(centre[:, None] + rng.normal(0, 0.1, (8, 1500)), 0, None)
     g = np.repeat(np.arange(8), 1500).reshape(8, 1500)
-    naive = fit_ndf_mixture(tilt, max_components=4)
-    grouped = fit_ndf_mixture(tilt, max_components=4, group=g)
+    naive = fit_ndf_mixture(tilt, options=_k(4))
+    grouped = fit_ndf_mixture(tilt, options=_k(4), group=g)
     assert grouped.n_effective == 8
     assert grouped.n_components <= 2 < naive.n_components
 
@@ -103,9 +110,9 @@ def test_ndf_deconvolves_heteroscedastic_slope_noise(sd_deg):
     n = 4000
     noise = rng.uniform(0.03, 0.12, n)          # per-axis slope noise, comparable to tan 5°
     tilt = _measured_tilts(rng, sd_deg, n, noise)
-    fit = fit_ndf_mixture(tilt, slope_sigma=noise, max_components=3)
+    fit = fit_ndf_mixture(tilt, slope_sigma=noise, options=_k(3))
     se = _sd_deg_se(sd_deg, noise ** 2)
-    naive = fit_ndf_mixture(tilt, max_components=1).mixture.sds_deg[0]
+    naive = fit_ndf_mixture(tilt, options=_k(1)).mixture.sds_deg[0]
     # what no deconvolution gives: atan sqrt(s² + mean σ²); the test tells it from sd_deg
     convolved = math.degrees(math.atan(math.sqrt(math.tan(math.radians(sd_deg)) ** 2
                                                  + np.mean(noise ** 2))))
@@ -119,7 +126,7 @@ def test_ndf_single_lobe_is_the_closed_form_mle():
     rng = np.random.default_rng(31)
     tilt = _measured_tilts(rng, 7.0, 800)
     a = rng.uniform(0.5, 2.0, 800)
-    fit = fit_ndf_mixture(tilt, weights=a, max_components=1)
+    fit = fit_ndf_mixture(tilt, weights=a, options=_k(1))
     m2 = np.tan(np.radians(tilt)) ** 2
     s2 = np.sum(a * m2) / (2.0 * np.sum(a))
     assert fit.mixture.sds_deg[0] == pytest.approx(math.degrees(math.atan(math.sqrt(s2))),
@@ -136,9 +143,9 @@ def test_ndf_censoring_recovers_a_wide_lobe():
     L2 = math.tan(math.radians(NA_LIMIT_DEG)) ** 2
     assert c / n == pytest.approx(math.exp(-L2 / (2 * math.tan(math.radians(22.0)) ** 2)),
                                   abs=0.03)
-    fit = fit_ndf_mixture(tilt[seen], censored_weight=c, censor_tilt_deg=NA_LIMIT_DEG,
-                          max_components=3)
-    dropped = fit_ndf_mixture(tilt[seen], max_components=3)
+    fit = fit_ndf_mixture(tilt[seen], censored=(c, NA_LIMIT_DEG),
+                          options=_k(3))
+    dropped = fit_ndf_mixture(tilt[seen], options=_k(3))
     # censored exponential law of m² (mean 2s²): I(2s²) = n_obs / (2s²)², so the relative
     # error of s is 1 / (2 sqrt(n_obs)): 0.19° here
     s = math.tan(math.radians(22.0))
@@ -150,8 +157,8 @@ def test_ndf_censoring_recovers_a_wide_lobe():
     # dropped instead of censored: clearly narrower (docs: "a 22° lobe read as 12.5°")
     assert dropped.mixture.rms_sd_deg < 22.0 - 5.0
     # against the closed-form censored MLE of one lobe: s² = (Σ m² + C L²) / (2 n_obs)
-    one = fit_ndf_mixture(tilt[seen], censored_weight=c, censor_tilt_deg=NA_LIMIT_DEG,
-                          max_components=1)
+    one = fit_ndf_mixture(tilt[seen], censored=(c, NA_LIMIT_DEG),
+                          options=_k(1))
     m2 = np.tan(np.radians(tilt[seen])) ** 2
     s2 = (m2.sum() + c * L2) / (2.0 * n_obs)
     assert one.mixture.sds_deg[0] == pytest.approx(math.degrees(math.atan(math.sqrt(s2))),
@@ -164,11 +171,11 @@ def test_ndf_censored_weight_in_weight_units():
     tilt = _measured_tilts(rng, 20.0, 2000)
     seen = tilt <= NA_LIMIT_DEG
     c = float((~seen).sum())
-    a = fit_ndf_mixture(tilt[seen], censored_weight=c, censor_tilt_deg=NA_LIMIT_DEG,
-                        n_effective=500, max_components=1)
+    a = fit_ndf_mixture(tilt[seen], censored=(c, NA_LIMIT_DEG),
+                        n_effective=500, options=_k(1))
     b = fit_ndf_mixture(tilt[seen], weights=np.full(int(seen.sum()), 2.0),
-                        censored_weight=2 * c, censor_tilt_deg=NA_LIMIT_DEG, n_effective=500,
-                        max_components=1)
+                        censored=(2 * c, NA_LIMIT_DEG), n_effective=500,
+                        options=_k(1))
     assert a.mixture.sds_deg[0] == pytest.approx(b.mixture.sds_deg[0], abs=1e-6)
     assert a.info["censored_fraction"] == pytest.approx(b.info["censored_fraction"])
 
@@ -178,7 +185,7 @@ def test_ndf_integer_weights_equal_repeated_samples(tilt_samples):
     tilt = tilt_samples(rng, [(0.6, 3.0), (0.4, 10.0)], 600)
     noise = rng.uniform(0.005, 0.02, 600)
     w = rng.integers(1, 5, 600)
-    kw = dict(n_effective=150, max_components=3)
+    kw = dict(n_effective=150, options=_k(3))
     a = fit_ndf_mixture(tilt, slope_sigma=noise, weights=w, **kw)
     b = fit_ndf_mixture(np.repeat(tilt, w), slope_sigma=np.repeat(noise, w), **kw)
     assert a.n_components == b.n_components
@@ -193,7 +200,7 @@ def test_ndf_single_lobe_of_facets_gets_one_lobe(seed):
     rng = np.random.default_rng(40 + seed)
     noise = rng.uniform(0.01, 0.05, 300)
     fit = fit_ndf_mixture(_measured_tilts(rng, 8.0, 300, noise), slope_sigma=noise,
-                          max_components=4)
+                          options=_k(4))
     assert fit.n_components == 1
     assert abs(fit.mixture.sds_deg[0] - 8.0) < 4 * _sd_deg_se(8.0, noise ** 2)
 
@@ -222,15 +229,36 @@ def test_width_relative_error_closed_forms():
 
 
 @pytest.mark.parametrize("kw, match", [
-    ({"censored_weight": 10.0}, "censor_tilt_deg"),
-    ({"censored_weight": 10.0, "censor_tilt_deg": 95.0}, "censor_tilt_deg"),
-    ({"censored_weight": -1.0, "censor_tilt_deg": 20.0}, "censored_weight"),
+    ({"censored": (10.0, None)}, "censored: a limit"),
+    ({"censored": (10.0, 95.0)}, "censored: a limit"),
+    ({"censored": (-1.0, 20.0)}, "censored: weight"),
+    ({"censored": (np.nan, 20.0)}, "censored: weight"),
     ({"slope_sigma": [0.1, -0.1, 0.1]}, "slope_sigma"),
-    ({"sd_floor_deg": 0.0}, "sd_floor_deg"),
 ])
-def test_ndf_option_errors(kw, match):
+def test_ndf_argument_errors(kw, match):
     with pytest.raises(ValueError, match=match):
         fit_ndf_mixture([1.0, 2.0, 3.0], **kw)
+
+
+def test_no_censored_weight_is_no_censoring():
+    tilt = _measured_tilts(np.random.default_rng(36), 6.0, 500)
+    a = fit_ndf_mixture(tilt, options=_k(2))
+    b = fit_ndf_mixture(tilt, censored=(0.0, None), options=_k(2))
+    assert a.mixture == b.mixture and b.info["censored_fraction"] == 0.0
+
+
+@pytest.mark.parametrize("kw, param", [({"ndf_sd_floor_deg": 0.0}, "ndf_sd_floor_deg"),
+                                       ({"ndf_sd_floor_deg": 89.5}, "ndf_sd_floor_deg"),
+                                       ({"ndf_max_samples": 0}, "ndf_max_samples")])
+def test_ndf_option_errors_name_the_option(kw, param):
+    with pytest.raises(InputError, match=param) as err:
+        FitOptions(**kw)
+    assert err.value.param == param
+
+
+def test_ndf_sd_floor_is_the_options():
+    fit = fit_ndf_mixture(np.zeros(40), options=FitOptions(ndf_sd_floor_deg=0.5))
+    assert fit.mixture.sds_deg[0] == pytest.approx(0.5)
 
 
 # ------------------------------------------------------------------ the EM itself: the
@@ -270,7 +298,7 @@ def test_rayleigh_em_updates_are_the_textbook_updates(censored):
     L2 = math.tan(math.radians(NA_LIMIT_DEG)) ** 2
     start = (np.array([1.0, 1.0, 2.0]), np.array([0.001, 0.01, 0.05]))
     for n_iter in (1, 9, 50):
-        ours = _rayleigh_em(m2, v, a, censored, L2, *start, 1e-6, max_iter=n_iter,
+        ours = _rayleigh_em((m2, v, a), (censored, L2), start, 1e-6, max_iter=n_iter,
                             tol=-np.inf)
         ref = _rayleigh_em_textbook(m2, v, a, censored, L2, *start, 1e-6, n_iter)
         for got, want in zip(ours, ref):
@@ -292,12 +320,13 @@ def test_rayleigh_em_on_collapsed_samples_is_the_em_on_the_pixels():
     start = (np.ones(2), np.array([0.002, 0.03]))
     # update for update, and to convergence
     for n_iter in (3, 40):
-        full = _rayleigh_em(m2, v, a, 40.0, 0.25, *start, 1e-6, max_iter=n_iter, tol=-np.inf)
-        short = _rayleigh_em(m2c, vc, ac, 40.0, 0.25, *start, 1e-6, max_iter=n_iter,
+        full = _rayleigh_em((m2, v, a), (40.0, 0.25), start, 1e-6, max_iter=n_iter,
+                            tol=-np.inf)
+        short = _rayleigh_em((m2c, vc, ac), (40.0, 0.25), start, 1e-6, max_iter=n_iter,
                              tol=-np.inf)
         for got, want in zip(short, full):
             np.testing.assert_allclose(got, want, rtol=1e-10)
-    full = _rayleigh_em(m2, v, a, 40.0, 0.25, *start, 1e-6)
-    short = _rayleigh_em(m2c, vc, ac, 40.0, 0.25, *start, 1e-6)
+    full = _rayleigh_em((m2, v, a), (40.0, 0.25), start, 1e-6)
+    short = _rayleigh_em((m2c, vc, ac), (40.0, 0.25), start, 1e-6)
     for got, want in zip(short, full):
         np.testing.assert_allclose(got, want, rtol=1e-9)

@@ -5,13 +5,20 @@ import numpy as np
 import pytest
 
 from microfacet import colour as color
+from microfacet.analysis.options import RoiOptions
 from microfacet.analysis.roi import fit_roi_thickness, nearest_roi_index, roi_grid
+from microfacet.colour.model import FilmColourModel
 from microfacet.colour.table import build_colour_table
 
 
 @pytest.fixture(scope="module")
 def table():
     return build_colour_table(thickness_range_nm=(0, 400), theta_range_deg=(0, 27))
+
+
+@pytest.fixture(scope="module")
+def model(table):
+    return FilmColourModel(table)
 
 
 def _render(table, thickness, tilt, exposure):
@@ -31,7 +38,7 @@ def test_roi_grid_tiles_cover_the_image():
 
 
 @pytest.mark.parametrize("exposure", [0.7, 1.0, 1.4])
-def test_recovers_roi_thickness_and_exposure(table, exposure):
+def test_recovers_roi_thickness_and_exposure(table, model, exposure):
     rng = np.random.default_rng(1)
     H, W = 64, 128
     d = np.where(np.arange(W)[None, :] < 64, 118.0, 146.0) + np.zeros((H, 1))
@@ -39,7 +46,7 @@ def test_recovers_roi_thickness_and_exposure(table, exposure):
     lab = _render(table, d, tilt, exposure)
     lab += rng.normal(0, 0.3, lab.shape).astype(np.float32)
     rois = roi_grid((H, W), size_px=64)
-    fit = fit_roi_thickness(lab, tilt, np.zeros((H, W), bool), table, rois=rois)
+    fit = fit_roi_thickness(lab, tilt, np.zeros((H, W), bool), model, RoiOptions(), rois=rois)
     assert fit.exposure == pytest.approx(exposure, rel=0.02)
     np.testing.assert_allclose(fit.thickness_nm, [118.0, 146.0], atol=0.3)
     assert np.all(fit.mean_delta_e < 1.0)
@@ -47,13 +54,13 @@ def test_recovers_roi_thickness_and_exposure(table, exposure):
     assert fit.exposure_estimated
 
 
-def test_masked_roi_is_nan_and_given_exposure_is_used(table):
+def test_masked_roi_is_nan_and_given_exposure_is_used(table, model):
     H, W = 32, 64
     lab = _render(table, np.full((H, W), 60.0), np.full((H, W), 5.0), 1.0)
     mask = np.zeros((H, W), bool)
     mask[:, 32:] = True
-    fit = fit_roi_thickness(lab, np.full((H, W), 5.0), mask, table,
-                            rois=roi_grid((H, W), size_px=32), exposure=1.0)
+    fit = fit_roi_thickness(lab, np.full((H, W), 5.0), mask, model.with_exposure(3.0),
+                            RoiOptions(), rois=roi_grid((H, W), size_px=32), exposure=1.0)
     assert fit.thickness_nm[0] == pytest.approx(60.0, abs=0.2)
     assert np.isnan(fit.thickness_nm[1]) and fit.n_pixels[1] == 0
-    assert not fit.exposure_estimated
+    assert not fit.exposure_estimated and fit.exposure == 1.0   # not the model's 3.0

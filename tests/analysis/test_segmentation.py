@@ -14,12 +14,14 @@ import pytest
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
+from microfacet.analysis.options import JointOptions
 from microfacet.analysis.segmentation import (
     merge_adjacent,
     plane_from_moments,
     plane_moments,
     segment_facets,
 )
+from microfacet.core.errors import InputError
 
 H, W = 128, 160
 
@@ -160,8 +162,23 @@ def test_bad_options_name_the_parameter():
         segment_facets(lab, facet_px=0)
     with pytest.raises(ValueError, match="lab"):
         segment_facets(np.zeros((10, 10)), facet_px=4)
-    with pytest.raises(ValueError, match="alpha"):
-        segment_facets(lab, facet_px=4, alpha=1.5)
+    for bad in ({"merge_alpha": 1.5}, {"max_area_factor": 0.5}, {"merge_rounds": 0}):
+        with pytest.raises(InputError) as err:
+            JointOptions(**bad)
+        assert err.value.param == next(iter(bad))
+
+
+def test_the_area_cap_is_the_options():
+    """``joint.max_area_factor`` sets where the merging of a uniform image stops: pieces of
+    at most that many facet areas on average, about twice as large for twice the cap."""
+    lab = np.full((H, W, 3), [50.0, 20.0, 10.0]) + np.random.default_rng(2).normal(
+        0, 1.0, (H, W, 3))
+    area = math.pi / 4 * 16.0 ** 2
+    mean = {f: np.bincount(segment_facets(lab, facet_px=16.0, noise_de=1.0,
+                                          options=JointOptions(max_area_factor=f)).ravel()
+                           ).mean() for f in (2.0, 4.0)}
+    assert mean[2.0] <= 2.0 * area and mean[4.0] <= 4.0 * area
+    assert mean[4.0] > 1.5 * mean[2.0], mean
 
 
 # ------------------------------------------------------------------------ plane moments

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from microfacet.analysis import analyze_stack
+from microfacet.analysis import analyse_stack
 from microfacet.analysis.output import write_results
 from microfacet.io.images import read_png
 from microfacet.report import PAGES, write_report
@@ -21,7 +21,7 @@ STACK = Path(__file__).resolve().parents[2] / "fixtures/stacks/nd-fixture"
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
     """A results folder written by the analysis of the nd fixture (once per test module)."""
-    r = analyze_stack(STACK)
+    r = analyse_stack(STACK)
     return write_results(r, tmp_path_factory.mktemp("res") / "nd")
 
 
