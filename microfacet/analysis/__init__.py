@@ -28,14 +28,6 @@ The film's model colour is :class:`microfacet.colour.model.FilmColourModel`. Not
 imports the forward models or the report.
 """
 
-from ..core.lazy import attach
+from ..core.lazy import attach_stub
 
-__getattr__, __dir__, __all__ = attach(__name__, submodules=(
-    "options", "stages", "surface", "colour_image", "mask", "roi", "search", "tilt",
-    "segmentation", "planes", "facet_thickness", "joint", "sampling", "mixtures", "ndf_fit",
-    "distributions", "identification", "pipeline", "output"),
-    submod_attrs={
-    "options": ["AnalysisOptions"],
-    "pipeline": ["AnalysisResult", "analyse_stack"],
-    "output": ["write_results"],
-})
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

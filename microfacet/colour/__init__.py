@@ -11,6 +11,8 @@ module              concern
 ``srgb``            RGB ↔ XYZ, image ↔ Lab, model colours as sRGB
 ``difference``      CIEDE2000 (fast, float32), CIE94, CIE76, ``delta_e(method=)``
 ``table``           the colour table: model colour on a (θ, d) grid, with its error
+``model``           :class:`FilmColourModel`: the film's colour as the microscope sees it
+``arrays``          array checks the modules share (float dtypes kept, channels last)
 ==================  ==========================================================
 
 Which parts delegate to colour-science and which are kept ours, with the measurements:
@@ -19,21 +21,6 @@ load on first use; ``import microfacet.colour`` imports neither colour-science n
 submodules.
 """
 
-from ..core.lazy import attach
+from ..core.lazy import attach_stub
 
-__getattr__, __dir__, __all__ = attach(__name__, submodules=(
-    "datasets", "colorimetry", "adaptation", "transfer", "srgb", "difference", "table"),
-    submod_attrs={
-        "datasets": ["OBSERVERS", "cmfs", "illuminant_key", "illuminant_sd",
-                     "known_illuminants", "observer_name"],
-        "colorimetry": ["lab_to_xyz", "spectral_weights", "spectrum_to_lab",
-                        "spectrum_to_xyz", "white_xyz", "xyz_to_lab"],
-        "adaptation": ["BRADFORD", "bradford_matrix"],
-        "transfer": ["srgb_decode", "srgb_encode"],
-        "srgb": ["SRGB_TO_XYZ", "SRGB_WHITE_XYZ", "XYZ_TO_SRGB", "colours_from_spectra",
-                 "image_white_xyz", "lab_to_srgb", "linear_srgb_to_xyz",
-                 "model_xyz_to_linear_srgb", "srgb_to_lab", "xyz_to_linear_srgb"],
-        "difference": ["METHODS", "delta_e", "delta_e_2000", "delta_e_76", "delta_e_94"],
-        "table": ["ColourTable", "SPECTRAL_STEPS_NM", "WAVELENGTH_RANGE_NM",
-                  "build_colour_table", "choose_spectral_step", "direct_xyz"],
-    })
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

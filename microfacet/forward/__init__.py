@@ -10,14 +10,13 @@ module              concern
 ``angular``         angular colour maps of any model; the display exposure rule
 ``compare``         ΔE00 against a measured map; fitting exposure and eq. 6's n
 ``scene``           synthetic surfaces, thickness fields and sharp images
+``relief``          relief beyond planar facets: shaped cells, domes, terraces, pits, dust
+``imaging``         the microscope's pupil, vignetting, white balance and drift
+``synth_params``    :class:`SynthParams` and the imaging variations
 ``synth``           synthetic focus stacks (presets, noise, defocus, truth)
 ==================  ==========================================================
 """
 
-from ..core.lazy import attach
+from ..core.lazy import attach_stub
 
-__getattr__, __dir__, __all__ = attach(__name__, submodules=(
-    "halfvector", "brdf", "eq6", "angular", "compare", "scene", "synth"), submod_attrs={
-    "angular": ["simulate_map", "display_exposure"],
-    "synth": ["SynthParams", "generate_stack", "preset"],
-})
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

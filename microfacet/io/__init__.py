@@ -12,6 +12,8 @@ module              format / concern
                     SurfaceTopography ``.al3d``, ``.plu``, ``.sur``, ``.vk4``, ``.datx``, ...)
 ``x3p``             ISO 25178-72 ``.x3p`` height maps, read and written
 ``results``         the results folder (``microfacet-results/1``): :class:`Results`
+``summary``         its ``summary.json`` as a typed, versioned :class:`Summary`
+``height_folder``   the height folder of ``microfacet height`` (``microfacet-height/1``)
 ``angular_map``     angular maps (``microfacet-angular/1``)
 ``spectrum``        measured spectra (spectrometer text exports)
 ``jsonfile``        strict JSON reading
@@ -20,17 +22,6 @@ module              format / concern
 ==================  ==========================================================
 """
 
-from ..core.lazy import attach
+from ..core.lazy import attach_stub
 
-__getattr__, __dir__, __all__ = attach(__name__, submodules=(
-    "angular_map", "images", "instruments", "jsonfile", "limits", "lock", "outdir", "results",
-    "spectrum", "stack", "stack_checks", "stack_write", "tiff_meta", "x3p"), submod_attrs={
-    "stack": ["Stack", "find_images", "read_stack", "stack_from_images", "write_stack",
-              "write_stack_json"],
-    "instruments": ["HeightMap", "read_height_map"],
-    "x3p": ["read_x3p", "write_x3p"],
-    "spectrum": ["Spectrum", "read_spectrum"],
-    "results": ["Results"],
-    "outdir": ["OutputFolder", "atomic_output_dir"],
-    "limits": ["Limits"],
-})
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

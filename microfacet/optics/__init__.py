@@ -4,18 +4,13 @@ the thickness from a measured spectrum.
 ==================  ==========================================================
 module              concern
 ==================  ==========================================================
-``constants``       bundled n + ik sets (refractiveindex.info, CC0), the defaults
+``constants``       bundled n + ik sets (refractiveindex.info, CC0)
+``defaults``        the default film and substrate sets (``DEFAULT_FILM``, ...)
 ``thinfilm``        ambient / film / substrate reflectance, s, p, unpolarised
 ``spectrumfit``     oxide thickness of least squares to a spectrum (seed §2.5)
 ==================  ==========================================================
 """
 
-from ..core.lazy import attach
+from ..core.lazy import attach_stub
 
-__getattr__, __dir__, __all__ = attach(__name__, submodules=(
-    "constants", "thinfilm", "spectrumfit"), submod_attrs={
-    "constants": ["DEFAULT_FILM", "DEFAULT_SUBSTRATE", "OpticalConstantSet", "known_sets",
-                  "load_set", "optical_constants", "resolve_index"],
-    "thinfilm": ["reflectance"],
-    "spectrumfit": ["SpectrumFit", "fit_thickness"],
-})
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)

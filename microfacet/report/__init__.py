@@ -15,13 +15,6 @@ Names load on first use: ``import microfacet.report`` imports neither matplotlib
 modules.
 """
 
-from ..core.lazy import attach
+from ..core.lazy import attach_stub
 
-__getattr__, __dir__, __all__ = attach(
-    __name__,
-    submodules=("arrays", "context", "figures", "layout", "page_angular", "page_distributions",
-                "page_maps", "page_overview", "page_parameters", "writer"),
-    submod_attrs={"writer": ["PAGES", "write_report"],
-                  "page_parameters": ["parameter_tables"],
-                  "figures": ["plot_maps"],
-                  "layout": ["MAX_MAP_PX", "NO_VALUE"]})
+__getattr__, __dir__, __all__ = attach_stub(__name__, __file__)
