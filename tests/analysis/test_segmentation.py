@@ -228,6 +228,6 @@ def test_merge_adjacent_merges_mutual_best_pairs_while_allowed():
     merged, m = merge_adjacent(labels, moments, cost, max_rounds=30)
     assert np.unique(merged).size == 3
     np.testing.assert_allclose(np.sort(m[:, 1] / m[:, 0]), [0.05, 5.1, 20.05])
-    same, _ = merge_adjacent(labels, moments, max_rounds=30, cost=lambda a, b: (np.zeros(len(a), bool),
-                                                            np.zeros(len(a))))
+    same, _ = merge_adjacent(labels, moments, max_rounds=30,
+                             cost=lambda a, b: (np.zeros(len(a), bool), np.zeros(len(a))))
     assert np.unique(same).size == 6

@@ -1,9 +1,7 @@
-"""Facets (microfacet.analysis.facets): a plane per facet through reliable heights, the
-thickness of each facet within its interference order, the distance from a facet boundary.
+"""Facet planes (microfacet.analysis.planes): a plane per facet through reliable heights,
+its calibrated slope noise, and the distance from a facet boundary.
 
-References are analytic: planes of known slope with white or correlated noise, images
-rendered by 1 nm spectral integration at a known thickness and tilt per facet
-(:func:`~microfacet.colour.table.direct_xyz`, not the table the search uses).
+References are analytic: planes of known slope with white or correlated noise.
 """
 
 from __future__ import annotations
@@ -12,16 +10,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from microfacet import colour as color
-from microfacet.analysis.facets import (
-    facet_edge_distance,
-    facet_thickness,
-    fit_facet_planes,
-    order_half_width_nm,
-)
-from microfacet.colour.table import build_colour_table, direct_xyz
-
-# ------------------------------------------------------------------------ fit_facet_planes
+from microfacet.analysis.options import JointOptions
+from microfacet.analysis.planes import facet_edge_distance, fit_facet_planes
 
 PX = 0.5  # µm per pixel
 
@@ -43,6 +33,7 @@ def _planes(labels, rng, slope=(-0.5, 0.5)):
 
 def _fit(labels, h, sigma=0.01, reliable=None, **kw):
     rel = np.ones(h.shape, bool) if reliable is None else reliable
+    kw.setdefault("min_pixels", JointOptions().min_plane_pixels)
     return fit_facet_planes(labels, h, height_sigma_um=sigma, reliable=rel, pixel_size_um=PX,
                             **kw)
 
@@ -67,10 +58,11 @@ def test_planes_on_non_square_pixels_are_the_planes_on_the_sample():
     h = a[labels] * xx * 0.5 + b[labels] * yy * 0.2
     rel = np.ones(h.shape, bool)
     ff = fit_facet_planes(labels, h, height_sigma_um=0.01, reliable=rel,
-                          pixel_size_um=(0.2, 0.5))
+                          pixel_size_um=(0.2, 0.5), min_pixels=8)
     np.testing.assert_allclose(ff.slope_x, a, rtol=0, atol=1e-9)
     np.testing.assert_allclose(ff.slope_y, b, rtol=0, atol=1e-9)
-    sq = fit_facet_planes(labels, h, height_sigma_um=0.01, reliable=rel, pixel_size_um=0.2)
+    sq = fit_facet_planes(labels, h, height_sigma_um=0.01, reliable=rel, pixel_size_um=0.2,
+                          min_pixels=8)
     np.testing.assert_allclose(sq.slope_x, 2.5 * a, rtol=1e-9, atol=1e-9)
 
 
@@ -95,6 +87,14 @@ def test_only_reliable_heights_are_used():
     assert np.isnan(ff.tilt_deg[1:3]).all() and np.isnan(ff.tilt_sigma_deg[1:3]).all()
     assert np.isnan(ff.slope_sigma[1:3]).all()
     assert ff.n_pixels.tolist() == [144 - 16 - 1, 5, 12, 144]
+    # the fewest pixels is the option: 5 reliable pixels off one line make a plane at 4
+    rel5 = np.ones(h.shape, bool)
+    rel5[:, 12:24] = False
+    rel5[0, 12:16] = rel5[1, 12] = True
+    few = _fit(labels, np.where(np.isfinite(h), h, 0.0), reliable=rel5, min_pixels=4)
+    assert few.fitted[1] and few.n_pixels[1] == 5
+    np.testing.assert_allclose([few.slope_x[1], few.slope_y[1]], [a[1], b[1]], atol=1e-9)
+    assert not _fit(labels, h, reliable=rel5, min_pixels=6).fitted[1]
 
 
 @pytest.mark.parametrize("side", [8, 16])
@@ -145,112 +145,6 @@ def test_correlated_errors_need_the_correlation_area(window, side):
     assert 0.7 < z_good < 1.4 and z_naive > 1.5, (z_good, z_naive)
 
 
-# ------------------------------------------------------------------------ facet_thickness
-
-
-@pytest.fixture(scope="module")
-def table():
-    return build_colour_table(thickness_range_nm=(0.0, 400.0), theta_range_deg=(0.0, 27.0))
-
-
-def _facet_image(labels, d_facet, t_facet, exposure):
-    """Lab image of facets at thickness ``d_facet`` and tilt ``t_facet`` (per label), by
-    1 nm spectral integration."""
-    xyz = direct_xyz(t_facet[labels], d_facet[labels], spectral_step_nm=1.0) * exposure
-    white = color.spectral_weights(np.arange(380.0, 781.0, 1.0)).sum(axis=0)
-    return color.xyz_to_lab(xyz, white=white).astype(np.float32)
-
-
-def test_the_order_window_is_less_than_half_a_colour_period(table):
-    """TiO2 at 560 nm (n ≈ 2.5): the colours repeat every ~110 nm; ±0.45 of that."""
-    hw = order_half_width_nm(table)
-    assert 45 < hw < 55
-
-
-def test_facet_thickness_is_recovered_at_the_facet_tilt(table):
-    """The ROI's thickness may be up to ±40 nm off (a ROI mixing 112/130/148 nm regions read
-    118 nm, and the old ±30 nm window piled 18 % of the pixels at its edge)."""
-    rng = np.random.default_rng(4)
-    labels = _block_labels(8, 6, 8)
-    S = int(labels.max()) + 1
-    d = rng.uniform(100.0, 170.0, S)
-    t = rng.uniform(0.0, 25.0, S)
-    lab = _facet_image(labels, d, t, exposure=0.9)
-    roi = (d + rng.uniform(-40, 40, S))[labels]
-    usable = np.ones(labels.shape, bool)
-    usable[labels == 5] = False                             # a facet with no usable pixel
-    ft = facet_thickness(labels, lab, usable, t, roi, table, exposure=0.9)
-    assert ft.thickness_nm.shape == ft.delta_e.shape == ft.sigma_nm.shape == (S,)
-    assert np.isnan(ft.thickness_nm[5]) and np.isnan(ft.delta_e[5])
-    ok = np.arange(S) != 5
-    np.testing.assert_allclose(ft.thickness_nm[ok], d[ok], atol=0.3)
-    assert np.all(ft.delta_e[ok] < 0.3) and not ft.at_window_edge[ok].any()
-    # the neighbouring orders fit worse (by 1.5-15 ΔE00 here): the order is not in doubt
-    assert np.all(ft.delta_e_other_order[ok] > ft.delta_e[ok] + 1.0)
-    assert np.median(ft.delta_e_other_order[ok]) > 5.0
-    # at a wrong tilt the colour fits worse (tilt and thickness are not interchangeable)
-    wrong = facet_thickness(labels, lab, usable, np.clip(t + 10, 0, 27), roi, table,
-                            exposure=0.9)
-    assert np.median(wrong.delta_e[ok]) > np.median(ft.delta_e[ok])
-
-
-def test_thickness_sigma_is_calibrated_against_colour_noise(table):
-    """Gaussian Lab noise of 2 per component on 36-pixel facets, its ΔE00 size measured as
-    the analysis does: the thickness errors scatter as ``sigma_nm`` says (z within
-    0.7-1.4)."""
-    rng = np.random.default_rng(5)
-    labels = _block_labels(6, 20, 20)      # 36-px facets
-    S = int(labels.max()) + 1
-    d = rng.uniform(110.0, 160.0, S)
-    t = np.zeros(S)
-    lab = _facet_image(labels, d, t, exposure=1.0) + rng.normal(0, 2.0, labels.shape + (3,))
-    from microfacet.analysis.colour_image import estimate_colour_noise
-    noise = estimate_colour_noise(lab, np.zeros(labels.shape, bool))
-    ft = facet_thickness(labels, lab, np.ones(labels.shape, bool), t, d[labels], table,
-                         exposure=1.0, noise_de=noise)
-    z = (ft.thickness_nm - d) / ft.sigma_nm
-    assert 0.7 < np.std(z) < 1.4, np.std(z)
-
-
-def test_the_tilt_error_adds_to_the_thickness_error(table):
-    rng = np.random.default_rng(6)
-    labels = _block_labels(8, 4, 4)
-    S = int(labels.max()) + 1
-    d = np.full(S, 130.0)
-    t = np.full(S, 15.0)
-    lab = _facet_image(labels, d, t, exposure=1.0)
-    base = facet_thickness(labels, lab, np.ones(labels.shape, bool), t, d[labels], table,
-                           exposure=1.0)
-    more = facet_thickness(labels, lab, np.ones(labels.shape, bool), t, d[labels], table,
-                           exposure=1.0, tilt_sigma_deg=np.full(S, 5.0))
-    # d·tanθ₁·cosθ/(n cosθ₁)·σθ at 15°, n ≈ 2.5: ≈ 130 × 0.104 × 0.97 / 2.5 × 0.087 ≈ 0.46
-    extra = np.sqrt(more.sigma_nm ** 2 - base.sigma_nm ** 2)
-    np.testing.assert_allclose(extra, 0.46, rtol=0.25)
-    assert rng is not None
-
-
-def test_interior_pixels_keep_a_dark_rim_out_of_the_facet_colour(table):
-    """Each facet's boundary ring is shadowed (half as bright): with ``interior`` (distance
-    from the facet boundary ≥ 1.5 px) the thickness is that of the facet; without, the mean
-    colour is pulled off."""
-    rng = np.random.default_rng(5)
-    labels = _block_labels(12, 4, 5)
-    S = int(labels.max()) + 1
-    d = rng.uniform(100.0, 170.0, S)
-    t = rng.uniform(0.0, 20.0, S)
-    lab = _facet_image(labels, d, t, exposure=1.0)
-    edge = facet_edge_distance(labels) < 1.5
-    shadow = _facet_image(labels, d, t, exposure=0.5)
-    lab[edge] = shadow[edge]
-    usable = np.ones(labels.shape, bool)
-    roi = d[labels]
-    th_in = facet_thickness(labels, lab, usable, t, roi, table, exposure=1.0,
-                            interior=~edge).thickness_nm
-    th_all = facet_thickness(labels, lab, usable, t, roi, table, exposure=1.0).thickness_nm
-    np.testing.assert_allclose(th_in, d, atol=0.3)
-    assert np.max(np.abs(th_all - d)) > 1.0
-
-
 # ------------------------------------------------------------------ facet_edge_distance
 
 
@@ -268,8 +162,8 @@ def test_edge_distance_of_a_vertical_and_a_horizontal_boundary():
 
 def test_edge_distance_without_any_boundary_is_not_small():
     """One facet covering the image (a small image, or a large facet size: segment_facets
-    then returns one segment) has no boundary; no pixel is near one. Today the distances
-    are measured from outside the top-left corner, so pixel (0, 0) is 'on the rim' and is
-    left out of the interior (distance < 1.5) in joint_tilts."""
+    then returns one segment) has no boundary; no pixel is near one, so every pixel is
+    interior (the joint stage's distance >= ``joint.interior_px``)."""
     d = facet_edge_distance(np.zeros((20, 30), np.int32))
     assert np.all(d > 30), d.min()
+    assert np.all(d >= JointOptions().interior_px)
