@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.defaults import DEFAULT_ILLUMINANT
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
 from .images import IMAGE_SUFFIXES, MultiPageTiff, convert_samples, decode_image
@@ -119,7 +120,7 @@ class Stack:
     dtype: np.dtype
     channels: int
     color_space: str = "sRGB"
-    illuminant: str = "D65"
+    illuminant: str = DEFAULT_ILLUMINANT
     illumination: dict = field(default_factory=lambda: dict(DEFAULT_ILLUMINATION))
     film: str = ""
     substrate: str = ""

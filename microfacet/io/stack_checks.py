@@ -1,8 +1,9 @@
 """Validation of a ``stack.json`` (format ``microfacet-stack/1``) before any work.
 
-:func:`stack_fields` checks every key and every image header (each against the
-:class:`~microfacet.io.limits.Limits` as soon as it is read) and returns the fields of a
-:class:`~microfacet.io.stack.Stack`; any breach raises
+:func:`stack_fields` checks every key against its spec (:mod:`microfacet.io.stack_schema`:
+kind, range or allowed values; the rules between keys) and every image header (each
+against the :class:`~microfacet.io.limits.Limits` as soon as it is read), and returns the
+fields of a :class:`~microfacet.io.stack.Stack`; any breach raises
 :class:`~microfacet.core.errors.InputError` with one message naming the file and the key or
 slice at fault. Keys the format does not define, and valid values that are almost surely a
 unit mistake, are logged as warnings (docs/stack-format.md).
@@ -21,38 +22,43 @@ import math
 import os
 import re
 import stat
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
-from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, known_sets
 from .images import IMAGE_SUFFIXES, ImageInfo, image_info, npy_info, read_tiff_headers
 from .limits import Limits
+from .stack_schema import (
+    ABSENT,
+    DEFAULT_ILLUMINATION,
+    EXCLUSIVE,
+    FORMAT,
+    IMAGE_KEYS,
+    KNOWN_KEYS,
+    SPECS,
+    TOGETHER,
+    KeySpec,
+)
 from .tiff_meta import tiff_scale
 
 tifffile = load("tifffile")
 
-__all__ = ["DEFAULT_ILLUMINATION", "KNOWN_KEYS", "PLAUSIBLE_PIXEL_SIZE_UM", "find_images",
-           "stack_fields", "warn_height_unit"]
+__all__ = ["DEFAULT_ILLUMINATION", "FORMAT", "KNOWN_KEYS", "PLAUSIBLE_PIXEL_SIZE_UM",
+           "check_value", "find_images", "stack_fields", "warn_height_unit"]
 
 log = logging.getLogger("microfacet.io.stack")
 
-#: The ``format`` string of a stack.json.
-FORMAT = "microfacet-stack/1"
-DEFAULT_ILLUMINATION = {"geometry": "coaxial", "numerical_aperture": 0.8}
-_COLOR_SPACES = ("sRGB", "linear-sRGB")
-#: The keys of stack.json this format defines (others are kept in ``meta`` with a warning).
-KNOWN_KEYS = ("format", "pixel_size_um", "slices", "tiff", "z_um", "z_step_um", "color_space",
-              "illuminant", "illumination", "film", "substrate", "exposure", "height_um",
-              "image", "synthetic")
-_ILLUMINATION_KEYS = ("geometry", "numerical_aperture")
 #: Pixel sizes outside this range (µm) are almost surely a unit mistake: warned about.
-PLAUSIBLE_PIXEL_SIZE_UM = (0.01, 100.0)
+PLAUSIBLE_PIXEL_SIZE_UM = SPECS["pixel_size_um"].plausible
+_TIFF = (".tif", ".tiff")
 
 
+# ------------------------------------------------------------------ one value, from its spec
 def _is_number(v) -> bool:
     """A JSON number that fits a float (a 400-digit integer does not)."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):
@@ -64,24 +70,200 @@ def _is_number(v) -> bool:
     return True
 
 
-def _pixel_size_value(ps, where: str) -> tuple[float, float]:
-    """A stack.json ``pixel_size_um`` (a number, or ``[y, x]``) as ``(y, x)`` µm."""
-    vals = ps if isinstance(ps, list) else [ps]
-    if len(vals) not in (1, 2) or not all(
-            _is_number(v) and math.isfinite(v) and v > 0 for v in vals):
-        raise InputError(f"{where}: must be a finite number > 0, got {ps!r} (or a list "
-                         f"[y, x] of two)")
+def _number_reason(spec: KeySpec, v) -> str | None:
+    """Why ``v`` is not a number the spec allows (None when it is)."""
+    ok = _is_number(v) and math.isfinite(v)
+    if ok and spec.low is not None:
+        ok = v > spec.low if spec.low_exclusive else v >= spec.low
+    if ok and spec.high is not None:
+        ok = v <= spec.high
+    if ok and spec.nonzero:
+        ok = v != 0
+    return None if ok else f"must be a finite {spec.range_text()}, got {v!r}"
+
+
+def _check_number(spec: KeySpec, v, where: str) -> None:
+    reason = _number_reason(spec, v)
+    if reason is not None:
+        raise InputError(f"{where}: {reason}")
+
+
+def _check_size(spec: KeySpec, v, where: str) -> None:
+    vals = v if isinstance(v, list) else [v]
+    if len(vals) not in (1, 2) or any(_number_reason(spec, x) for x in vals):
+        raise InputError(f"{where}: must be a finite {spec.range_text()}, got {v!r} (or a "
+                         f"list [y, x] of two)")
+
+
+def _check_string(spec: KeySpec, v, where: str) -> None:
+    allowed = spec.allowed()
+    if allowed is not None:
+        if v in allowed:
+            return
+        if callable(spec.choices):
+            why = f"unknown {spec.noun} {v!r}; known: {', '.join(allowed)}"
+        else:
+            why = f"{v!r} is not {allowed[0]!r}" if len(allowed) == 1 else \
+                f"{v!r} is not one of {allowed}"
+        raise InputError(f"{where}: {why}")
+    if spec.kind == "name" and (not isinstance(v, str) or not v.strip()):
+        raise InputError(f"{where}: must be a non-empty name, got {v!r}")
+    if not isinstance(v, str):
+        raise InputError(f"{where}: must be a string, got {v!r}")
+
+
+def _check_path(spec: KeySpec | None, v, where: str) -> None:
+    """A relative path string (where it leads is checked by :func:`_resolve_inside`)."""
+    if not isinstance(v, str) or not v:
+        raise InputError(f"{where}: must be a non-empty relative path string, got {v!r}")
+    if "\x00" in v:
+        raise InputError(f"{where}: {v!r} contains a NUL byte")
+    if os.path.isabs(v) or v.startswith(("/", "\\")):
+        raise InputError(f"{where}: {v!r} is an absolute path; paths must be relative "
+                         f"to the stack folder")
+
+
+def _check_paths(spec: KeySpec, v, where: str) -> None:
+    if not isinstance(v, list) or not v:
+        raise InputError(f"{where}: must be a non-empty list of relative paths")
+    for i, rel in enumerate(v):
+        _check_path(spec, rel, f"{where}[{i}]")
+
+
+def _check_numbers(spec: KeySpec, v, where: str) -> None:
+    if not isinstance(v, list):
+        raise InputError(f"{where}: must be a list of numbers")
+    for i, x in enumerate(v):
+        if not _is_number(x) or not math.isfinite(x):
+            raise InputError(f"{where}[{i}]: must be a finite number, got {x!r}")
+
+
+def _check_object(spec: KeySpec, v, where: str) -> None:
+    if not isinstance(v, dict):
+        raise InputError(f"{where}: must be an object, got {v!r}")
+    for sub in spec.fields:
+        if sub.name in v:
+            check_value(sub, v[sub.name], f"{where}: {sub.name}")
+
+
+_CHECKS = {"string": _check_string, "name": _check_string, "number": _check_number,
+           "size": _check_size, "path": _check_path, "paths": _check_paths,
+           "numbers": _check_numbers, "object": _check_object, "any": lambda *_: None}
+
+
+def check_value(spec: KeySpec, value, where: str) -> None:
+    """Raise :class:`InputError` (``"WHERE: reason"``) when ``value`` is not what ``spec``
+    allows; what needs the folder or the other keys (a path's target, the length of
+    ``z_um``) is checked by :func:`stack_fields`.
+
+    >>> check_value(SPECS["exposure"], 0, "key 'exposure'")
+    Traceback (most recent call last):
+    ...
+    microfacet.core.errors.InputError: key 'exposure': must be a finite number > 0, got 0
+    """
+    _CHECKS[spec.kind](spec, value, where)
+
+
+def _size_yx(value, where: str) -> tuple[float, float]:
+    """A ``pixel_size_um`` (a number, or ``[y, x]``) as ``(y, x)`` µm."""
+    _check_size(SPECS["pixel_size_um"], value, where)
+    vals = value if isinstance(value, list) else [value]
     return (float(vals[0]), float(vals[-1]))
 
 
+# ------------------------------------------------------------------- the stack being checked
+@dataclass
+class _Check:
+    """A stack.json being checked: the folder, the keys, the file's name in messages and
+    the image headers read so far."""
+
+    root: Path
+    meta: dict
+    jpath: Path
+    limits: Limits
+    given: dict
+    plain: bool
+    infos: list = field(default_factory=list)
+
+    @property
+    def shown(self) -> str:
+        return one_line(self.jpath)
+
+    def where(self, key: str) -> str:
+        return f"{self.shown}: key {key!r}"
+
+    def has(self, key: str) -> bool:
+        """The key is given (a JSON null counts as absent where its spec says so)."""
+        if SPECS[key].null_absent:
+            return self.meta.get(key) is not None
+        return key in self.meta
+
+    def add(self, name: str, where_text: str, info: ImageInfo) -> None:
+        """One image header: checked against the limits and the first header."""
+        self.limits.check_image(info.shape, where_text)
+        if self.infos:
+            _check_consistent(self.shown, name, info, *self.infos[0])
+        self.infos.append((name, info))
+
+
+def _values(c: _Check, *, slices_only: bool) -> dict:
+    """Every key (those read only with slices, or the others) checked against its spec:
+    ``{key: value, or its default}`` (an object: its defaults updated with what is given)."""
+    out = {}
+    for spec in SPECS.values():
+        if spec.slices_only != slices_only:
+            continue
+        if not c.has(spec.name):
+            if spec.required:
+                expected = f" (expected {spec.choices[0]!r})" if spec.choices else ""
+                raise InputError(f"{c.where(spec.name)}: missing{expected}")
+            default = spec.default_value()
+            out[spec.name] = None if default is ABSENT else default
+            continue
+        value = c.meta[spec.name]
+        check_value(spec, value, c.where(spec.name))
+        out[spec.name] = {**spec.default_value(), **value} if spec.kind == "object" else value
+    return out
+
+
+def _check_rules(c: _Check) -> None:
+    """The rules between keys: given together, not both, where the images come from."""
+    for (a, b), what in TOGETHER:
+        if c.has(a) != c.has(b):
+            missing = b if c.has(a) else a
+            raise InputError(f"{c.where(missing)}: missing ({what} needs both {a!r} and "
+                             f"{b!r})")
+    with_slices = c.has("slices") or c.has("tiff")
+    for a, b in EXCLUSIVE:
+        read = with_slices or not (SPECS[a].slices_only or SPECS[b].slices_only)
+        if read and c.has(a) and c.has(b):
+            raise InputError(f"{c.where(b)}: give either {a!r} or {b!r}, not both")
+    if not any(c.has(k) for k in IMAGE_KEYS):
+        raise InputError(f"{c.where('slices')}: missing (give 'slices', 'tiff', or an export "
+                         f"'height_um' + 'image')")
+
+
+def _check_given(given: dict) -> None:
+    """The caller's ``pixel_size_um`` and ``z_step_um`` (an error names the parameter)."""
+    for key, value in given.items():
+        if value is None:
+            continue
+        if key == "pixel_size_um":
+            try:
+                pixel_size_yx(value)
+            except ValueError:
+                raise InputError(f"must be a finite number > 0 or a [y, x] pair, got "
+                                 f"{value!r}", param=key) from None
+            continue
+        reason = _number_reason(SPECS[key], value)
+        if reason is not None:
+            raise InputError(reason, param=key)
+
+
+# ------------------------------------------------------------------------------ files
 def _resolve_inside(root: Path, rel, where: str) -> Path:
-    if not isinstance(rel, str) or not rel:
-        raise InputError(f"{where}: must be a non-empty relative path string, got {rel!r}")
-    if "\x00" in rel:
-        raise InputError(f"{where}: {rel!r} contains a NUL byte")
-    if os.path.isabs(rel) or rel.startswith(("/", "\\")):
-        raise InputError(f"{where}: {rel!r} is an absolute path; paths must be relative "
-                         f"to the stack folder")
+    """The file ``rel`` names, which must be inside ``root``."""
+    _check_path(None, rel, where)
     try:
         p = (root / rel).resolve(strict=False)
     except (RuntimeError, OSError) as exc:  # a symlink loop (RuntimeError up to Python 3.12)
@@ -102,6 +284,18 @@ def _resolve_inside(root: Path, rel, where: str) -> Path:
     return p
 
 
+def _file(c: _Check, key: str, index: int | None = None) -> Path:
+    """The file of a path key (of item ``index`` of a list of paths), of a type its spec
+    allows."""
+    spec = SPECS[key]
+    rel = c.meta[key] if index is None else c.meta[key][index]
+    where = c.where(key) if index is None else f"{c.where(key)}[{index}]"
+    p = _resolve_inside(c.root, rel, where)
+    if spec.suffixes and p.suffix.lower() not in spec.suffixes:
+        raise InputError(f"{where}: {p.name} is not a {'/'.join(spec.suffixes)} file")
+    return p
+
+
 def _check_consistent(shown, name, info, ref_name, ref_info) -> None:
     if info.shape != ref_info.shape:
         raise InputError(f"{shown}: {name}: size {info.shape[1]}x{info.shape[0]} differs from "
@@ -114,20 +308,216 @@ def _check_consistent(shown, name, info, ref_name, ref_info) -> None:
                          f"{ref_name} ({ref_info.channels}); mixed grey and colour slices")
 
 
+def _slices(c: _Check) -> tuple[Path, ...]:
+    """The files of ``slices``, every header read and checked."""
+    paths = tuple(_file(c, "slices", i) for i in range(len(c.meta["slices"])))
+    for i, p in enumerate(paths):
+        wt = f"{c.where('slices')}[{i}] ({one_line(p.name)})"
+        c.add(f"slices[{i}] ({one_line(p.name)})", wt, image_info(p, wt))
+    c.limits.check_stack(len(paths), c.infos[0][1].shape, c.where("slices"))
+    return paths
+
+
+def _multipage(c: _Check) -> tuple[Path, bool]:
+    """The file of ``tiff``, every page header read and checked; True when every page is
+    encoded like the first."""
+    path = _file(c, "tiff")
+    uniform = read_tiff_headers(path, c.where("tiff"), c.add)
+    if not c.infos:
+        raise InputError(f"{c.where('tiff')} ({path.name}): TIFF has no pages")
+    c.limits.check_stack(len(c.infos), c.infos[0][1].shape, c.where("tiff"))
+    return path, uniform
+
+
+# ----------------------------------------------------------------------------- the export
+class _Export(NamedTuple):
+    """A microscope export: the height map, the image, its header, and the pixel size the
+    instrument file gives (None: none)."""
+
+    height: Path | None = None
+    image: Path | None = None
+    info: ImageInfo | None = None
+    pixel_size_um: object = None
+
+
+def _tiff_height_header(path: Path, wh: str) -> tuple[tuple, np.dtype]:
+    try:
+        with tifffile.TiffFile(path) as tf:
+            page = tf.pages[0]
+            shape, dtype = tuple(page.shape), np.dtype(page.dtype)
+            offs, cnts = page.dataoffsets, page.databytecounts
+    except Exception as exc:
+        raise InputError(f"{wh}: unreadable TIFF ({exc})") from None
+    if any(o + c > path.stat().st_size for o, c in zip(offs, cnts)):
+        raise InputError(f"{wh}: truncated TIFF")
+    return shape, dtype
+
+
+def _instrument_header(path: Path, wh: str) -> tuple[tuple, object]:
+    """Shape and pixel size of an instrument file (Keyence, Zygo, Digital Surf, ...)."""
+    try:
+        # looked up here, not at import: the module may not be installed
+        hm = load("microfacet.io.instruments").read_height_map(path)
+    except ModuleNotFoundError as exc:
+        if exc.name != "microfacet.io.instruments":
+            raise
+        raise InputError(f"{wh}: height map must be a TIFF or .npy file") from None
+    except (InputError, OSError, ValueError) as exc:
+        raise InputError(f"{wh}: {one_line(exc)}") from None
+    return tuple(hm.height_um.shape), hm.pixel_size_um
+
+
+def _height_map_header(path: Path, wh: str) -> tuple[tuple, object]:
+    """Shape of a height map (floating point) and the pixel size its file gives, if any."""
+    suffix = path.suffix.lower()
+    if suffix == ".npy":
+        shape, dtype = npy_info(path, wh)
+    elif suffix in _TIFF:
+        shape, dtype = _tiff_height_header(path, wh)
+    else:
+        shape, px = _instrument_header(path, wh)
+        return shape, px
+    if dtype.kind != "f":
+        raise InputError(f"{wh}: height map must be floating point, got {dtype}")
+    return shape, None
+
+
+def _export(c: _Check) -> _Export:
+    """The microscope export (``height_um`` + ``image``), headers checked."""
+    if not c.has("height_um"):
+        return _Export()
+    height = _file(c, "height_um")
+    wh = f"{c.where('height_um')} ({height.name})"
+    hshape, px = _height_map_header(height, wh)
+    if len(hshape) != 2:
+        raise InputError(f"{wh}: height map must be 2-D, got shape {hshape}")
+    c.limits.check_image(hshape, wh)
+    image = _file(c, "image")
+    wi = f"{c.where('image')} ({one_line(image.name)})"
+    info = image_info(image, wi)
+    c.limits.check_image(info.shape, wi)
+    if info.shape != hshape:
+        raise InputError(f"{c.where('image')} ({image.name}): size {info.shape} does not "
+                         f"match the height map {hshape}")
+    return _Export(height, image, info, px)
+
+
+# --------------------------------------------------- pixel size and z: where they come from
+def _differs(given, used, where: str) -> None:
+    """Warn when the caller gave a value that stack.json overrides."""
+    if given is not None and _is_number(used) and not math.isclose(given, used, rel_tol=1e-9):
+        log.warning("%s: %g µm is used, not the given %g µm (stack.json wins)", where, used,
+                    given)
+
+
+def _missing(c: _Check, where: str, *, need_z: bool, has_ps: bool = False) -> None:
+    """Raise the one-line error for a pixel size or z spacing found nowhere."""
+    if not c.plain:
+        hint = "give 'z_um' or 'z_step_um'" if has_ps else "not in the image metadata either"
+        raise InputError(f"{where}: missing ({hint})")
+    what = " and ".join(n for n, need in (("`pixel_size_um`", not has_ps),
+                                           ("`z_step_um`", need_z)) if need)
+    found = c.meta.get("slices") or [c.meta.get("tiff")]
+    raise InputError(f"{one_line(c.root / 'stack.json')}: missing stack.json; to read the "
+                     f"{len(found)} image(s) in the folder ({one_line(found[0])} ...) as a "
+                     f"stack give {what} (their metadata has no such value), or write a "
+                     f"stack.json (microfacet init)")
+
+
+def _metadata_scale(c: _Check, files: list, tiff_path: Path | None, need: bool):
+    """The scale in the first TIFF's metadata (the multi-page TIFF, the first slice or the
+    export's height map) when a value is needed and there is one."""
+    first = next((p for p in files if p is not None and p.suffix.lower() in _TIFF), None)
+    if first is None or not need:
+        return None
+    return tiff_scale(first, c.where("tiff" if tiff_path else "slices"))
+
+
+def _pixel_size(c: _Check, ps, export: _Export, scale, need_z: bool):
+    """``(y, x)`` µm and where it came from."""
+    given = c.given.get("pixel_size_um")
+    if ps is not None:
+        yx = _size_yx(ps, c.where("pixel_size_um"))
+        if given is not None:
+            for g, used in zip(pixel_size_yx(given), yx):
+                _differs(g, used, c.where("pixel_size_um"))
+        return yx, "stack.json"
+    if given is not None:
+        return pixel_size_yx(given), "given"
+    if export.pixel_size_um is not None:
+        yx = _size_yx([float(v) for v in export.pixel_size_um], c.where("height_um"))
+        return yx, f"instrument file {one_line(export.height.name)}"
+    if scale is not None and scale.pixel_size_yx_um is not None:
+        return scale.pixel_size_yx_um, scale.source
+    _missing(c, c.where("pixel_size_um"),
+             need_z=need_z and (scale is None or scale.z_step_um is None))
+
+
+def _z_step(c: _Check, scale) -> tuple[float | None, str]:
+    """The z step (None: the positions are stack.json's) and where z came from."""
+    given = c.given.get("z_step_um")
+    if c.has("z_um") or c.has("z_step_um"):
+        if c.has("z_step_um"):
+            _differs(given, c.meta["z_step_um"], c.where("z_step_um"))
+        return None, "given" if c.plain else "stack.json"
+    if given is not None:
+        return float(given), "given"
+    if scale is not None and scale.z_step_um is not None:
+        return scale.z_step_um, scale.source
+    _missing(c, c.where("z_um"), need_z=True, has_ps=True)
+
+
+def _z_positions(c: _Check, n: int, step: float | None, what: str) -> np.ndarray:
+    """The height of each of the ``n`` slices, µm (``what``: the slices, in messages)."""
+    if step is None and not c.has("z_um"):
+        step = float(c.meta["z_step_um"])
+    if step is not None:
+        return np.arange(n, dtype=np.float64) * step
+    z = c.meta["z_um"]                                 # a list of finite numbers (its spec)
+    if len(z) != n:
+        raise InputError(f"{c.where('z_um')}: has {len(z)} values but there are {n} {what}")
+    z_um = np.asarray(z, dtype=np.float64)
+    vals, counts = np.unique(z_um, return_counts=True)
+    if vals.size != n:
+        raise InputError(f"{c.where('z_um')}: duplicate height {vals[counts > 1][0]:g} µm")
+    return z_um
+
+
+def _scale_and_z(c: _Check, values: dict, export: _Export, files: dict):
+    """The pixel size ``(y, x)``, the z positions and where each came from."""
+    n = len(c.infos)
+    need_ps = (values["pixel_size_um"] is None and c.given.get("pixel_size_um") is None
+               and export.pixel_size_um is None)
+    need_z = bool(n) and not c.has("z_um") and not c.has("z_step_um") and \
+        c.given.get("z_step_um") is None
+    tiff_path = files["tiff"]
+    scale = _metadata_scale(c, [tiff_path, *files["slices"][:1], export.height], tiff_path,
+                            need_ps or need_z)
+    ps_yx, source = _pixel_size(c, values["pixel_size_um"], export, scale, need_z)
+    sources = {"pixel_size_um": source}
+    if not n:
+        return ps_yx, np.zeros(0, dtype=np.float64), sources
+    step, sources["z_um"] = _z_step(c, scale)
+    what = f"pages in {tiff_path.name}" if tiff_path else "slices"
+    return ps_yx, _z_positions(c, n, step, what), sources
+
+
+# -------------------------------------------------------------------------------- warnings
+def _warn_unknown(keys, known, shown: str, inside: str = "") -> None:
+    for key in keys:
+        if key not in known:
+            near = difflib.get_close_matches(key, known, n=1, cutoff=0.6)
+            hint = f"; did you mean {near[0]!r}?" if near else \
+                " (not used)" if inside else " (kept, not used)"
+            log.warning("%s: %sunknown key %r%s", shown, inside, key, hint)
+
+
 def _warn_unknown_keys(meta: dict, jpath: Path) -> None:
-    for key in meta:
-        if key not in KNOWN_KEYS:
-            near = difflib.get_close_matches(key, KNOWN_KEYS, n=1, cutoff=0.6)
-            hint = f"; did you mean {near[0]!r}?" if near else " (kept, not used)"
-            log.warning("%s: unknown key %r%s", one_line(jpath), key, hint)
+    _warn_unknown(meta, KNOWN_KEYS, one_line(jpath))
     illum = meta.get("illumination")
     if isinstance(illum, dict):
-        for key in illum:
-            if key not in _ILLUMINATION_KEYS:
-                near = difflib.get_close_matches(key, _ILLUMINATION_KEYS, n=1, cutoff=0.6)
-                hint = f"; did you mean {near[0]!r}?" if near else " (not used)"
-                log.warning("%s: key 'illumination': unknown key %r%s", one_line(jpath), key,
-                            hint)
+        _warn_unknown(illum, [f.name for f in SPECS["illumination"].fields], one_line(jpath),
+                      "key 'illumination': ")
 
 
 def _warn_implausible(jpath: Path, pixel_size_yx_um, z_um: np.ndarray, shape) -> None:
@@ -152,28 +542,7 @@ def _warn_implausible(jpath: Path, pixel_size_yx_um, z_um: np.ndarray, shape) ->
                         "step; if z is in mm, multiply it by 1000", one_line(jpath), step)
 
 
-def _differs(given, used, where: str) -> None:
-    """Warn when the caller gave a value that stack.json overrides."""
-    if given is not None and _is_number(used) and not math.isclose(given, used, rel_tol=1e-9):
-        log.warning("%s: %g µm is used, not the given %g µm (stack.json wins)", where, used,
-                    given)
-
-
-def _missing(root: Path, meta: dict, plain: bool, where: str, *, need_z: bool,
-             has_ps: bool = False) -> None:
-    """Raise the one-line error for a pixel size or z spacing found nowhere."""
-    if not plain:
-        hint = "give 'z_um' or 'z_step_um'" if has_ps else "not in the image metadata either"
-        raise InputError(f"{where}: missing ({hint})")
-    what = " and ".join(n for n, need in (("`pixel_size_um`", not has_ps),
-                                           ("`z_step_um`", need_z)) if need)
-    found = meta.get("slices") or [meta.get("tiff")]
-    raise InputError(f"{one_line(root / 'stack.json')}: missing stack.json; to read the "
-                     f"{len(found)} image(s) in the folder ({one_line(found[0])} ...) as a "
-                     f"stack give {what} (their metadata has no such value), or write a "
-                     f"stack.json (microfacet init)")
-
-
+# ------------------------------------------------------------------------------ stack.json
 def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
                  given: dict | None = None, plain: bool = False) -> dict:
     """Validate the stack.json ``meta`` of the folder ``root`` (``jpath`` names it in
@@ -183,264 +552,36 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
     used where stack.json has no value; ``plain`` says ``meta`` was made up for a folder
     without stack.json (the messages for a missing value say so).
     """
-    shown = one_line(jpath)
-    given = given or {}
-
-    def where(key):
-        return f"{shown}: key {key!r}"
-
+    c = _Check(root, meta, jpath, limits, given or {}, plain)
     _warn_unknown_keys(meta, jpath)
-
-    fmt = meta.get("format")
-    if fmt is None:
-        raise InputError(f"{where('format')}: missing (expected {FORMAT!r})")
-    if fmt != FORMAT:
-        raise InputError(f"{where('format')}: {fmt!r} is not {FORMAT!r}")
-
-    ps = meta.get("pixel_size_um")
-    ps_yx = None if ps is None else _pixel_size_value(ps, where("pixel_size_um"))
-    for key, value in given.items():
-        if value is None:
-            continue
-        if key == "pixel_size_um":
-            try:
-                pixel_size_yx(value)
-            except ValueError:
-                raise InputError(f"must be a finite number > 0 or a [y, x] pair, got "
-                                 f"{value!r}", param=key) from None
-            continue
-        if not _is_number(value) or not math.isfinite(value) or value == 0 or (
-                key == "pixel_size_um" and value < 0):
-            need = "> 0" if key == "pixel_size_um" else "!= 0"
-            raise InputError(f"must be a finite number {need}, got {value!r}", param=key)
-
-    # --- optional keys -------------------------------------------------------------------
-    color_space = meta.get("color_space", "sRGB")
-    if color_space not in _COLOR_SPACES:
-        raise InputError(f"{where('color_space')}: {color_space!r} is not one of {_COLOR_SPACES}")
-    illuminant = meta.get("illuminant", "D65")
-    if not isinstance(illuminant, str) or not illuminant.strip():
-        raise InputError(f"{where('illuminant')}: must be a non-empty name, got {illuminant!r}")
-    illum = meta.get("illumination", {})
-    if not isinstance(illum, dict):
-        raise InputError(f"{where('illumination')}: must be an object, got {illum!r}")
-    illumination = dict(DEFAULT_ILLUMINATION)
-    illumination.update(illum)
-    na = illumination.get("numerical_aperture")
-    if not _is_number(na) or not math.isfinite(na) or not 0 < na <= 1:
-        raise InputError(f"{where('illumination')}: numerical_aperture must be a number in "
-                         f"(0, 1], got {na!r}")
-    if not isinstance(illumination.get("geometry"), str):
-        raise InputError(f"{where('illumination')}: geometry must be a string")
-
-    known = known_sets()
-    names = {}
-    for key, default in (("film", DEFAULT_FILM), ("substrate", DEFAULT_SUBSTRATE)):
-        name = meta.get(key, default)
-        if name not in known:
-            raise InputError(f"{where(key)}: unknown optical-constant set {name!r}; known: "
-                             f"{', '.join(known)}")
-        names[key] = name
-    exposure = meta.get("exposure")
-    if exposure is not None and (not _is_number(exposure) or not math.isfinite(exposure)
-                                 or exposure <= 0):
-        raise InputError(f"{where('exposure')}: must be a finite number > 0, got {exposure!r}")
-
-    # --- export ----------------------------------------------------------------------------
-    export_height = export_image = None
-    export_shape = export_px = None
-    has_h, has_img = "height_um" in meta, "image" in meta
-    if has_h != has_img:
-        missing = "image" if has_h else "height_um"
-        raise InputError(f"{where(missing)}: missing (a microscope export needs both "
-                         f"'height_um' and 'image')")
-    if has_h:
-        export_height = _resolve_inside(root, meta["height_um"], where("height_um"))
-        wh = f"{where('height_um')} ({export_height.name})"
-        if export_height.suffix.lower() == ".npy":
-            hshape, hdtype = npy_info(export_height, wh)
-            if hdtype.kind != "f":
-                raise InputError(f"{wh}: height map must be floating point, got {hdtype}")
-        elif export_height.suffix.lower() in (".tif", ".tiff"):
-            try:
-                with tifffile.TiffFile(export_height) as tf:
-                    page = tf.pages[0]
-                    hshape, hdtype = tuple(page.shape), np.dtype(page.dtype)
-                    offs, cnts = page.dataoffsets, page.databytecounts
-            except Exception as exc:
-                raise InputError(f"{wh}: unreadable TIFF ({exc})") from None
-            if any(o + c > export_height.stat().st_size for o, c in zip(offs, cnts)):
-                raise InputError(f"{wh}: truncated TIFF")
-            if hdtype.kind != "f":
-                raise InputError(f"{wh}: height map must be floating point, got {hdtype}")
-        else:  # an instrument file (Keyence, Zygo, Digital Surf, ...)
-            try:
-                # looked up here, not at import: the module may not be installed
-                hm = load("microfacet.io.instruments").read_height_map(export_height)
-            except ModuleNotFoundError as exc:
-                if exc.name != "microfacet.io.instruments":
-                    raise
-                raise InputError(f"{wh}: height map must be a TIFF or .npy file") from None
-            except (InputError, OSError, ValueError) as exc:
-                raise InputError(f"{wh}: {one_line(exc)}") from None
-            hshape, export_px = tuple(hm.height_um.shape), hm.pixel_size_um
-        if len(hshape) != 2:
-            raise InputError(f"{wh}: height map must be 2-D, got shape {hshape}")
-        limits.check_image(hshape, wh)
-        export_image = _resolve_inside(root, meta["image"], where("image"))
-        wi = f"{where('image')} ({one_line(export_image.name)})"
-        info = image_info(export_image, wi)
-        limits.check_image(info.shape, wi)
-        if info.shape != hshape:
-            raise InputError(f"{where('image')} ({export_image.name}): size {info.shape} does not "
-                             f"match the height map {hshape}")
-        export_shape = info
-
-    # --- slices ----------------------------------------------------------------------------
-    has_slices, has_tiff = "slices" in meta, "tiff" in meta
-    if has_slices and has_tiff:
-        raise InputError(f"{where('tiff')}: give either 'slices' or 'tiff', not both")
-    if not has_slices and not has_tiff and not has_h:
-        raise InputError(f"{where('slices')}: missing (give 'slices', 'tiff', or an export "
-                         f"'height_um' + 'image')")
-    slice_paths: list[Path] = []
-    tiff_path = None
-    if has_slices:
-        sl = meta["slices"]
-        if not isinstance(sl, list) or not sl:
-            raise InputError(f"{where('slices')}: must be a non-empty list of relative paths")
-        for i, rel in enumerate(sl):
-            p = _resolve_inside(root, rel, f"{where('slices')}[{i}]")
-            slice_paths.append(p)
-        n = len(slice_paths)
-    elif has_tiff:
-        tiff_path = _resolve_inside(root, meta["tiff"], where("tiff"))
-        if tiff_path.suffix.lower() not in (".tif", ".tiff"):
-            raise InputError(f"{where('tiff')}: {tiff_path.name} is not a .tif/.tiff file")
-        n = None
-    else:
-        n = 0
-
-    # z (where it comes from is settled below, once the first TIFF can be asked)
-    has_z, has_step = "z_um" in meta, "z_step_um" in meta
-    if n != 0 and has_z and has_step:
-        raise InputError(f"{where('z_step_um')}: give either 'z_um' or 'z_step_um', not both")
-
-    # headers, each checked against the limits and against the first as soon as it is read
-    infos: list[tuple[str, ImageInfo]] = []
-
-    def add(name, where_text, info):
-        limits.check_image(info.shape, where_text)
-        if infos:
-            _check_consistent(shown, name, info, *infos[0])
-        infos.append((name, info))
-
+    values = _values(c, slices_only=False)
+    _check_given(c.given)
+    _check_rules(c)
+    export = _export(c)
+    files = {"slices": (), "tiff": None}
     tiff_uniform = False
-    if tiff_path is not None:
-        tiff_uniform = read_tiff_headers(tiff_path, where("tiff"), add)
-        n = len(infos)
-        if n == 0:
-            raise InputError(f"{where('tiff')} ({tiff_path.name}): TIFF has no pages")
-        limits.check_stack(n, infos[0][1].shape, where("tiff"))
-
-    # --- pixel size and z: stack.json, else given, else instrument file, else TIFF metadata
-    first_tiff = tiff_path or next((p for p in slice_paths[:1] + [export_height]
-                                    if p is not None and p.suffix.lower() in (".tif", ".tiff")),
-                                   None)
-    scale = None
-    if first_tiff is not None and (ps_yx is None and given.get("pixel_size_um") is None
-                                   and export_px is None
-                                   or n and not has_z and not has_step
-                                   and given.get("z_step_um") is None):
-        scale = tiff_scale(first_tiff, where("tiff" if tiff_path else "slices"))
-    sources = {}
-    if ps_yx is not None:
-        sources["pixel_size_um"] = "stack.json"
-        if given.get("pixel_size_um") is not None:
-            for g, used in zip(pixel_size_yx(given["pixel_size_um"]), ps_yx):
-                _differs(g, used, where("pixel_size_um"))
-    elif given.get("pixel_size_um") is not None:
-        ps_yx, sources["pixel_size_um"] = pixel_size_yx(given["pixel_size_um"]), "given"
-    elif export_px is not None:
-        ps_yx = _pixel_size_value([float(v) for v in export_px], where("height_um"))
-        sources["pixel_size_um"] = f"instrument file {one_line(export_height.name)}"
-    elif scale is not None and scale.pixel_size_yx_um is not None:
-        ps_yx, sources["pixel_size_um"] = scale.pixel_size_yx_um, scale.source
-    else:
-        _missing(root, meta, plain, where("pixel_size_um"),
-                 need_z=n and not has_z and not has_step and given.get("z_step_um") is None
-                 and (scale is None or scale.z_step_um is None))
-    step = None
-    if n and (has_z or has_step):
-        sources["z_um"] = "given" if plain else "stack.json"
-        if has_step:
-            _differs(given.get("z_step_um"), meta["z_step_um"], where("z_step_um"))
-    elif n and given.get("z_step_um") is not None:
-        step, sources["z_um"] = float(given["z_step_um"]), "given"
-    elif n and scale is not None and scale.z_step_um is not None:
-        step, sources["z_um"] = scale.z_step_um, scale.source
-    elif n:
-        _missing(root, meta, plain, where("z_um"), need_z=True, has_ps=True)
-
-    if n:
-        if step is not None:
-            z_um = np.arange(n, dtype=np.float64) * step
-        elif "z_um" in meta:
-            z = meta["z_um"]
-            if not isinstance(z, list):
-                raise InputError(f"{where('z_um')}: must be a list of numbers")
-            if len(z) != n:
-                what = "slices" if has_slices else f"pages in {tiff_path.name}"
-                raise InputError(f"{where('z_um')}: has {len(z)} values but there are {n} {what}")
-            for i, v in enumerate(z):
-                if not _is_number(v) or not math.isfinite(v):
-                    raise InputError(f"{where('z_um')}[{i}]: must be a finite number, got {v!r}")
-            z_um = np.asarray(z, dtype=np.float64)
-            if np.unique(z_um).size != n:
-                vals, counts = np.unique(z_um, return_counts=True)
-                raise InputError(f"{where('z_um')}: duplicate height {vals[counts > 1][0]:g} µm")
-        else:
-            s = meta["z_step_um"]
-            if not _is_number(s) or not math.isfinite(s) or s == 0:
-                raise InputError(f"{where('z_step_um')}: must be a finite non-zero number, "
-                                 f"got {s!r}")
-            z_um = np.arange(n, dtype=np.float64) * float(s)
-    else:
-        z_um = np.zeros(0, dtype=np.float64)
-
-    if has_slices:
-        for i, p in enumerate(slice_paths):
-            wt = f"{where('slices')}[{i}] ({one_line(p.name)})"
-            add(f"slices[{i}] ({one_line(p.name)})", wt, image_info(p, wt))
-        limits.check_stack(n, infos[0][1].shape, where("slices"))
-
-    ref_info = infos[0][1] if infos else export_shape
-    if infos and export_shape is not None and export_shape.shape != ref_info.shape:
-        raise InputError(f"{where('image')}: export size {export_shape.shape} differs from the "
-                         f"slices {ref_info.shape}")
-    _warn_implausible(jpath, ps_yx, z_um, ref_info.shape)
-
+    if c.has("slices"):
+        files["slices"] = _slices(c)
+    elif c.has("tiff"):
+        files["tiff"], tiff_uniform = _multipage(c)
+    if c.infos:
+        values.update(_values(c, slices_only=True))
+    ps_yx, z_um, sources = _scale_and_z(c, values, export, files)
+    ref = c.infos[0][1] if c.infos else export.info
+    if c.infos and export.info is not None and export.info.shape != ref.shape:
+        raise InputError(f"{c.where('image')}: export size {export.info.shape} differs from "
+                         f"the slices {ref.shape}")
+    _warn_implausible(jpath, ps_yx, z_um, ref.shape)
+    exposure = values["exposure"]
     return dict(
-        path=root,
-        pixel_size_yx_um=ps_yx,
-        sources=sources,
-        z_um=z_um,
-        slice_paths=tuple(slice_paths),
-        tiff_path=tiff_path,
-        shape=ref_info.shape,
-        dtype=ref_info.dtype,
-        channels=ref_info.channels,
-        color_space=color_space,
-        illuminant=illuminant,
-        illumination=illumination,
-        film=names["film"],
-        substrate=names["substrate"],
+        path=root, pixel_size_yx_um=ps_yx, sources=sources, z_um=z_um,
+        slice_paths=files["slices"], tiff_path=files["tiff"], shape=ref.shape,
+        dtype=ref.dtype, channels=ref.channels, color_space=values["color_space"],
+        illuminant=values["illuminant"], illumination=values["illumination"],
+        film=values["film"], substrate=values["substrate"],
         exposure=None if exposure is None else float(exposure),
-        export_height_path=export_height,
-        export_image_path=export_image,
-        meta=meta,
-        tiff_uniform=tiff_uniform,
-    )
+        export_height_path=export.height, export_image_path=export.image, meta=meta,
+        tiff_uniform=tiff_uniform)
 
 
 #: Median |slope| of a height map above which its unit is almost surely wrong (real
