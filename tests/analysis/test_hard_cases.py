@@ -21,7 +21,7 @@ Where each case is covered (``here`` = this file; other files in tests/analysis/
 * film thinner than 5 nm: here (colour table and ROI thickness fit).
 * every pixel masked (grey images, saturation 0): here, InputError (API and CLI); too few
   unmasked pixels in every ROI: here, InputError.
-* ROI larger than the image: here, one ROI of the image's size; ``roi_size_px`` < 8 names
+* ROI larger than the image: here, one ROI of the image's size; ``roi.size_px`` < 8 names
   the option.
 * one-slice (and two-slice) stack: here, InputError (analyze and the CLI);
   ``height_from_focus``: tests/focus/test_height.py::test_bad_options.
@@ -53,7 +53,8 @@ import numpy as np
 import pytest
 
 from microfacet import colour as color
-from microfacet.analysis import AnalysisOptions, analyze_stack, write_results
+from microfacet.analysis import AnalysisOptions, analyse_stack, write_results
+from microfacet.analysis.options import MaskOptions, RoiOptions
 from microfacet.cli import main
 from microfacet.core.errors import InputError
 from microfacet.forward.synth import generate_stack, preset
@@ -64,6 +65,8 @@ tmm = pytest.importorskip("tmm")
 
 SIZE = 64
 N_SLICES = 5
+#: One ROI of the whole image (a side far larger than the 64 px images).
+ONE_ROI = RoiOptions(size_px=10_000)
 
 
 def _tmm_R(pol, n0, n1, n2, d, theta_deg, wl):
@@ -186,6 +189,7 @@ def fit_table():
 def test_thickness_fit_of_a_film_thinner_than_5_nm(fit_table, d_true):
     from microfacet.analysis.mixtures import fit_thickness_mixture
     from microfacet.analysis.roi import fit_roi_thickness, roi_grid
+    from microfacet.colour.model import FilmColourModel
 
     rng = np.random.default_rng(1)
     H = W = 40
@@ -193,11 +197,12 @@ def test_thickness_fit_of_a_film_thinner_than_5_nm(fit_table, d_true):
     lab = _direct_lab(tilt, np.full((H, W), d_true), fit_table.white_xyz).astype(np.float32)
     rois = roi_grid((H, W), size_px=255)
     mask = np.zeros((H, W), bool)
-    known = fit_roi_thickness(lab, tilt, mask, fit_table, rois=rois, exposure=1.0)
+    model = FilmColourModel(fit_table)
+    known = fit_roi_thickness(lab, tilt, mask, model, RoiOptions(), rois=rois, exposure=1.0)
     # no saturation at the lower end of the range, nothing NaN
     assert np.isfinite(known.thickness_nm).all() and np.isfinite(known.mean_delta_e).all()
     assert known.thickness_nm[0] == pytest.approx(d_true, abs=0.1)
-    free = fit_roi_thickness(lab, tilt, mask, fit_table, rois=rois)
+    free = fit_roi_thickness(lab, tilt, mask, model, RoiOptions(), rois=rois)
     assert np.isfinite(free.thickness_nm).all() and 0.5 < free.exposure < 2.0
     assert free.thickness_nm[0] == pytest.approx(d_true, abs=0.5)
     fit = fit_thickness_mixture(np.full(H * W, known.thickness_nm[0]))
@@ -222,8 +227,8 @@ def sd(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def clean(sd):
-    # roi_size_px far larger than the 64 px image: one ROI of the image's size
-    return analyze_stack(sd["path"], AnalysisOptions(roi_size_px=10_000))
+    # roi.size_px far larger than the 64 px image: one ROI of the image's size
+    return analyse_stack(sd["path"], AnalysisOptions(roi=ONE_ROI))
 
 
 def _summary(result, out):
@@ -244,15 +249,16 @@ def test_roi_larger_than_the_image_is_one_roi_of_the_image(clean, sd):
     roi = clean.roi
     assert roi.row0.tolist() == [0] and roi.col0.tolist() == [0]
     assert (roi.height_px, roi.width_px) == (SIZE, SIZE)
-    assert roi.n_pixels[0] == int((~clean.mask.mask).sum())
+    assert roi.n_pixels[0] == int((~clean.colour.mask.mask).sum())
     assert roi.thickness_nm[0] == pytest.approx(float(sd["truth"]["thickness_nm"].mean()), abs=1.0)
 
 
 def test_roi_smaller_than_8_px_is_refused_naming_the_option(sd, tmp_path, capsys):
-    with pytest.raises(ValueError, match="roi_size_px"):
-        analyze_stack(sd["path"], AnalysisOptions(roi_size_px=4))
-    with pytest.raises(ValueError, match="roi_stride_px"):
-        analyze_stack(sd["path"], AnalysisOptions(roi_size_px=16, roi_stride_px=32))
+    with pytest.raises(InputError, match=r"roi\.size_px: must be >= 8") as err:
+        AnalysisOptions.from_dict({"roi": {"size_px": 4}})
+    assert err.value.param == "roi.size_px"
+    with pytest.raises(InputError, match=r"roi\.stride_px: must be in \[1, roi\.size_px\]"):
+        AnalysisOptions.from_dict({"roi": {"size_px": 16, "stride_px": 32}})
     out = tmp_path / "o"
     assert main(["analyze", str(sd["path"]), "--out", str(out), "--roi-size-px", "4"]) == 2
     err = capsys.readouterr().err
@@ -282,10 +288,11 @@ def test_every_pixel_masked_is_a_clear_input_error(tmp_path, capsys):
 
     imgs = _grey_stack(tmp_path / "grey")
     # independent check of the premise: every slice has saturation 0 everywhere
-    assert all(colour_mask(im / 255.0, shadow_ratio=0).low_saturation.all() for im in imgs)
+    assert all(colour_mask(im / 255.0, MaskOptions(shadow_ratio=0)).low_saturation.all()
+               for im in imgs)
     with pytest.raises(InputError, match=r"grey/stack\.json: key 'slices': no colour information"
                                          r".*every pixel is masked.*low saturation 100%") as ei:
-        analyze_stack(tmp_path / "grey")
+        analyse_stack(tmp_path / "grey")
     assert "\n" not in str(ei.value)
     out = tmp_path / "out"
     assert main(["analyze", str(tmp_path / "grey"), "--out", str(out), "-q"]) == 2
@@ -300,7 +307,7 @@ def test_too_few_unmasked_pixels_is_a_clear_input_error(tmp_path):
     _grey_stack(tmp_path / "grey", patch=patch)
     with pytest.raises(InputError, match=r"stack\.json: key 'slices'.*only (\d) unmasked pixels, "
                                          r"too few in every region of interest"):
-        analyze_stack(tmp_path / "grey")
+        analyse_stack(tmp_path / "grey")
 
 
 def test_sixteen_bit_full_scale_is_clipped_everywhere_and_refused(tmp_path):
@@ -308,7 +315,7 @@ def test_sixteen_bit_full_scale_is_clipped_everywhere_and_refused(tmp_path):
     write_stack(tmp_path / "white", [full] * N_SLICES, z_step_um=1.0, pixel_size_um=0.2)
     assert read_stack(tmp_path / "white").dtype == np.uint16
     with pytest.raises(InputError, match=r"key 'slices'.*every pixel is masked.*clipped 100%"):
-        analyze_stack(tmp_path / "white")
+        analyse_stack(tmp_path / "white")
 
 
 def test_sixteen_bit_partly_clipped_masks_exactly_the_clipped_pixels(tmp_path):
@@ -316,15 +323,16 @@ def test_sixteen_bit_partly_clipped_masks_exactly_the_clipped_pixels(tmp_path):
     p = preset("16bit", height_px=SIZE, width_px=SIZE, n_slices=N_SLICES, seed=4, exposure=2.5,
                thickness=preset("sd").thickness)
     generate_stack(tmp_path / "s16", p)
-    r = analyze_stack(tmp_path / "s16", AnalysisOptions(roi_size_px=10_000))
+    r = analyse_stack(tmp_path / "s16", AnalysisOptions(roi=ONE_ROI))
     assert read_stack(tmp_path / "s16").dtype == np.uint16
     aif = r.focus.all_in_focus  # the slices' code values / 65535
     at_full_scale = np.any(np.round(aif * 65535) >= 65535, axis=-1)
     assert 0.02 < at_full_scale.mean() < 0.98       # the case is really there
-    assert r.mask.clipped[at_full_scale].all() and not r.mask.clipped[~at_full_scale].any()
-    assert np.isnan(r.thickness_nm[at_full_scale]).all()
-    ok = ~r.mask.mask
-    assert np.isfinite(r.thickness_nm[ok]).all() and np.isfinite(r.tilt_deg[ok]).all()
+    mask, px = r.colour.mask, r.pixels
+    assert mask.clipped[at_full_scale].all() and not mask.clipped[~at_full_scale].any()
+    assert np.isnan(px.thickness_nm[at_full_scale]).all()
+    ok = ~mask.mask
+    assert np.isfinite(px.thickness_nm[ok]).all() and np.isfinite(px.tilt_deg[ok]).all()
 
 
 @pytest.mark.parametrize("n", [1, 2])
@@ -333,7 +341,7 @@ def test_fewer_than_three_slices_is_a_clear_input_error(tmp_path, capsys, sd, n)
     assert read_stack(tmp_path / "few").n_slices == n  # the format allows it
     with pytest.raises(InputError, match=rf"few/stack\.json: key 'slices'.*at least 3 slices.*"
                                          rf"has {n}"):
-        analyze_stack(tmp_path / "few")
+        analyse_stack(tmp_path / "few")
     for cmd in ("analyze", "height"):
         assert main([cmd, str(tmp_path / "few"), "--out", str(tmp_path / "o")]) == 2
         err = capsys.readouterr().err
@@ -344,13 +352,14 @@ def test_fewer_than_three_slices_is_a_clear_input_error(tmp_path, capsys, sd, n)
 def test_identical_slices_give_no_height_and_colour_only_tilts(sd, tmp_path, caplog):
     write_stack(tmp_path / "same", [sd["slices"][2]] * N_SLICES, z_step_um=0.5,
                 pixel_size_um=sd["stack"].pixel_size_um)
-    with caplog.at_level(logging.WARNING, logger="microfacet.analysis.pipeline"):
-        r = analyze_stack(tmp_path / "same", AnalysisOptions(roi_size_px=10_000))
+    with caplog.at_level(logging.WARNING, logger="microfacet.analysis"):
+        r = analyse_stack(tmp_path / "same", AnalysisOptions(roi=ONE_ROI))
     assert "no pixel has a reliable height" in caplog.text
     assert np.isnan(r.focus.height_um).all() and not r.focus.reliable.any()
-    assert np.all(r.tilt_height_deg == 0)          # the fitted height is flat, not noise
-    ok = ~r.mask.mask
-    assert ok.mean() > 0.9 and np.isfinite(r.thickness_nm[ok]).all()
+    assert r.surface.no_focus
+    assert np.all(r.surface.tilt_deg == 0)          # the fitted height is flat, not noise
+    ok = ~r.colour.mask.mask
+    assert ok.mean() > 0.9 and np.isfinite(r.pixels.thickness_nm[ok]).all()
     # thickness from colour alone is still right (tilts are small on this preset)
     truth = sd["truth"]["thickness_nm"]
     assert r.roi.thickness_nm[0] == pytest.approx(float(truth.mean()), abs=1.0)
@@ -360,7 +369,8 @@ def test_identical_slices_give_no_height_and_colour_only_tilts(sd, tmp_path, cap
     assert np.isnan(np.load(tmp_path / "res" / "normals.npy")).all()
     # no height: the NDF is fitted for inspection but not identified, and says why
     assert s["thickness"]["mixture"]["components"] and s["thickness"]["mixture"]["identified"]
-    assert s["ndf"]["identified"] is False and s["ndf"]["mixture"]["identified"] is False
+    assert s["ndf"]["identified"] is False and "identified" not in s["ndf"]["mixture"]
+    assert s["ndf"]["reason_code"] == "few_planes"
     assert "height from focus gives a plane on 0 of" in s["ndf"]["reason"]
     assert any(w.startswith("NDF not identified") for w in s["warnings"])
 
@@ -384,7 +394,7 @@ def test_heavy_noise_gives_a_finite_result_that_reports_its_unreliability(sd, cl
     p = preset("sd", height_px=SIZE, width_px=SIZE, n_slices=N_SLICES, seed=3, full_well_e=3.0,
                read_noise=0.3)
     generate_stack(tmp_path / "noisy", p)
-    r = analyze_stack(tmp_path / "noisy", AnalysisOptions(roi_size_px=10_000))
+    r = analyse_stack(tmp_path / "noisy", AnalysisOptions(roi=ONE_ROI))
     s = _summary(r, tmp_path / "res")
     c = _summary(clean, tmp_path / "clean")
     assert s["colour_noise_de"] > 10 * c["colour_noise_de"]
@@ -394,9 +404,9 @@ def test_heavy_noise_gives_a_finite_result_that_reports_its_unreliability(sd, cl
     assert (s["facets"]["height_plane_area_fraction"]
             < c["facets"]["height_plane_area_fraction"])
     assert s["ndf"]["identified"] is False and s["ndf"]["reason"]
-    ok = ~r.mask.mask
+    ok = ~r.colour.mask.mask
     for name in ("thickness_nm", "tilt_deg", "tilt_sigma_deg", "delta_e"):
-        a = getattr(r, name)
+        a = getattr(r.pixels, name)
         assert np.isfinite(a[ok]).all() and np.isnan(a[~ok]).all(), name
     for name in ("thickness_pdf.csv", "ndf_pdf.csv"):
         _, _, hist, mix = _pdf_integral(tmp_path / "res" / name)
@@ -411,12 +421,13 @@ def test_unsorted_z_in_stack_json_gives_the_same_analysis(sd, clean, tmp_path):
                 illumination=sd["stack"].illumination)
     st = read_stack(tmp_path / "shuffled")
     assert list(st.z_um) != sorted(st.z_um)
-    r = analyze_stack(st, AnalysisOptions(roi_size_px=10_000))
+    r = analyse_stack(st, AnalysisOptions(roi=ONE_ROI))
     np.testing.assert_allclose(r.focus.height_fit_um, clean.focus.height_fit_um, rtol=0,
                                atol=1e-4)
     np.testing.assert_array_equal(np.isnan(r.focus.height_um), np.isnan(clean.focus.height_um))
     np.testing.assert_array_equal(np.asarray(perm)[r.focus.best_index], clean.focus.best_index)
-    np.testing.assert_allclose(r.thickness_nm, clean.thickness_nm, atol=1e-3, equal_nan=True)
+    np.testing.assert_allclose(r.pixels.thickness_nm, clean.pixels.thickness_nm, atol=1e-3,
+                               equal_nan=True)
     # and the height is the true one where reliable (unsorted z were not mixed up)
     ok = r.focus.reliable
     assert np.median(np.abs(r.focus.height_um[ok] - sd["truth"]["height_um"][ok])) < 0.2
@@ -426,10 +437,10 @@ def test_tiny_numerical_aperture_still_gives_an_ndf_table(sd, tmp_path):
     write_stack(tmp_path / "na", sd["slices"], z_um=list(sd["stack"].z_um),
                 pixel_size_um=sd["stack"].pixel_size_um,
                 illumination={"geometry": "coaxial", "numerical_aperture": 0.02})
-    r = analyze_stack(tmp_path / "na", AnalysisOptions(roi_size_px=10_000, mode="seed"))
+    r = analyse_stack(tmp_path / "na", AnalysisOptions(roi=ONE_ROI, mode="seed"))
     max_tilt = math.degrees(math.asin(0.02)) / 2.0   # 0.573°: fewer than 2 cells of 0.5°
-    assert r.max_tilt_deg == pytest.approx(max_tilt)
-    tl = r.tilt_deg[np.isfinite(r.tilt_deg)]
+    assert r.scene.max_tilt_deg == pytest.approx(max_tilt)
+    tl = r.pixels.tilt_deg[np.isfinite(r.pixels.tilt_deg)]
     assert tl.size and tl.min() >= 0 and tl.max() <= max_tilt + 1e-6
     assert 0 < np.mean(tl == 0) < 1          # tilts at both ends of the range
     _summary(r, tmp_path / "res")
@@ -447,8 +458,8 @@ def test_tiny_numerical_aperture_still_gives_an_ndf_table(sd, tmp_path):
 
 def test_single_thickness_value_end_to_end(sd, tmp_path):
     # seed mode with one ROI: every pixel gets the ROI's thickness, a one-value histogram
-    r = analyze_stack(sd["path"], AnalysisOptions(roi_size_px=10_000, mode="seed"))
-    vals = np.unique(r.thickness_nm[np.isfinite(r.thickness_nm)])
+    r = analyse_stack(sd["path"], AnalysisOptions(roi=ONE_ROI, mode="seed"))
+    vals = np.unique(r.pixels.thickness_nm[np.isfinite(r.pixels.thickness_nm)])
     assert vals.size == 1
     s = _summary(r, tmp_path / "res")
     mix = s["thickness"]["mixture"]
@@ -525,7 +536,7 @@ def test_all_non_finite_height_map_and_non_finite_normals():
 
 
 def test_facet_planes_ignore_non_finite_heights():
-    from microfacet.analysis.facets import fit_facet_planes
+    from microfacet.analysis.planes import fit_facet_planes
 
     rows, cols = np.mgrid[0:20, 0:20]
     h = 0.1 * cols * 0.5       # dh/dx = 0.1 with 0.5 µm pixels
@@ -536,7 +547,7 @@ def test_facet_planes_ignore_non_finite_heights():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         ff = fit_facet_planes(labels, h, height_sigma_um=np.full(h.shape, 0.01),
-                              reliable=np.isfinite(h), pixel_size_um=0.5)
+                              reliable=np.isfinite(h), pixel_size_um=0.5, min_pixels=8)
     assert ff.fitted.tolist() == [True, False]
     assert ff.tilt_deg[0] == pytest.approx(math.degrees(math.atan(0.1)), abs=1e-6)
     # no height, no guess: the unfitted facet has no tilt

@@ -9,13 +9,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from microfacet.analysis import AnalysisOptions, analyze_stack
-from microfacet.analysis.facets import facet_edge_distance
+from microfacet.analysis import AnalysisOptions, analyse_stack
 from microfacet.analysis.joint import JointResult, height_inputs
-from microfacet.analysis.surface import surface_normals
+from microfacet.analysis.options import JointOptions
+from microfacet.analysis.planes import facet_edge_distance
 from microfacet.forward.synth import generate_stack, preset
 
 N_SLICES = 8
+OPTIONS = JointOptions()
 
 
 @pytest.fixture(scope="module")
@@ -23,10 +24,9 @@ def nd(tmp_path_factory):
     """A small nd stack (96×96 px, 8 slices), its joint analysis, its surface and truth."""
     path = tmp_path_factory.mktemp("joint") / "nd"
     generate_stack(path, preset("nd", height_px=96, width_px=96, n_slices=N_SLICES, seed=3))
-    r = analyze_stack(path, AnalysisOptions(mode="joint"))
-    surface = surface_normals(r.focus, pixel_size_um=r.stack.pixel_size_um)
+    r = analyse_stack(path, AnalysisOptions(mode="joint"))
     truth = {k: np.load(path / "truth" / f"{k}.npy") for k in ("tilt_deg", "height_um")}
-    return {"result": r, "surface": surface, "truth": truth}
+    return {"result": r, "surface": r.surface, "truth": truth}
 
 
 # ------------------------------------------------------------------ height_inputs
@@ -34,7 +34,8 @@ def nd(tmp_path_factory):
 
 def test_height_inputs_from_focus_are_the_reliable_heights(nd):
     foc = nd["surface"].focus
-    h, sig, rel, corr = height_inputs(nd["surface"], from_focus=True)
+    hi = height_inputs(nd["surface"], OPTIONS, from_focus=True)
+    h, sig, rel, corr = hi.height_um, hi.sigma_um, hi.reliable, hi.correlation_px
     assert h.shape == sig.shape == rel.shape == foc.reliable.shape and rel.dtype == bool
     assert rel.mean() > 0.5                                   # a textured nd stack
     assert not np.any(rel & ~foc.reliable)                    # only reliable pixels
@@ -48,13 +49,18 @@ def test_height_inputs_from_focus_are_the_reliable_heights(nd):
     z = np.sort(np.asarray(foc.z_um))
     assert np.median(sig[rel]) < np.median(np.diff(z))
     # correlated over the focus window: 0.7 window² (documented, measured)
+    assert OPTIONS.focus_error_correlation == 0.7
     assert corr == pytest.approx(0.7 * foc.params["window_px"] ** 2)
+    other = height_inputs(nd["surface"], JointOptions(focus_error_correlation=0.35),
+                          from_focus=True)
+    assert other.correlation_px == pytest.approx(corr / 2)
 
 
 def test_height_inputs_without_per_pixel_errors_use_a_quarter_step(nd):
     s = nd["surface"]
     foc = dataclasses.replace(s.focus, height_sigma_um=None)
-    h, sig, rel, _ = height_inputs(dataclasses.replace(s, focus=foc), from_focus=True)
+    hi = height_inputs(dataclasses.replace(s, focus=foc), OPTIONS, from_focus=True)
+    h, sig, rel = hi.height_um, hi.sigma_um, hi.reliable
     step = float(np.median(np.diff(np.sort(np.asarray(foc.z_um)))))
     np.testing.assert_allclose(sig, 0.25 * step)
     np.testing.assert_array_equal(rel, foc.reliable & np.isfinite(h))
@@ -62,14 +68,15 @@ def test_height_inputs_without_per_pixel_errors_use_a_quarter_step(nd):
 
 def test_height_inputs_of_an_export_and_of_no_focus(nd):
     s = nd["surface"]
-    h, sig, rel, corr = height_inputs(s, from_focus=False)
-    np.testing.assert_array_equal(rel, np.isfinite(h))      # every finite height
-    assert np.all(sig > 0) and np.ptp(sig) == 0 and sig.max() < 1e-3 and corr == 1.0
-    h, sig, rel, corr = height_inputs(dataclasses.replace(s, no_focus=True), from_focus=True)
-    assert not rel.any() and np.isnan(sig).all()
+    hi = height_inputs(s, OPTIONS, from_focus=False)
+    np.testing.assert_array_equal(hi.reliable, np.isfinite(hi.height_um))   # every finite one
+    np.testing.assert_array_equal(hi.sigma_um, OPTIONS.export_sigma_um)    # tiny: residuals
+    assert OPTIONS.export_sigma_um < 1e-3 and hi.correlation_px == 1.0
+    hi = height_inputs(dataclasses.replace(s, no_focus=True), OPTIONS, from_focus=True)
+    assert not hi.reliable.any() and np.isnan(hi.sigma_um).all()
 
 
-# ------------------------------------------------------------------ joint_tilts
+# ------------------------------------------------------------------ the joint stages
 
 
 def test_facets_cover_the_image(nd):
@@ -88,14 +95,16 @@ def test_facets_cover_the_image(nd):
 
 def test_planes_are_fitted_where_heights_are_reliable(nd):
     j = nd["result"].joint
-    _, _, rel, _ = height_inputs(nd["surface"], from_focus=True)
+    rel = height_inputs(nd["surface"], OPTIONS, from_focus=True).reliable
     S = j.area_px.size
-    # plane fits use reliable pixels at least 1 px inside the facet
-    usable = np.bincount(j.facets[rel & (facet_edge_distance(j.facets) >= 1.0)], minlength=S)
+    # plane fits use reliable pixels at least joint.plane_edge_px (1 px) inside the facet
+    inside = facet_edge_distance(j.facets) >= OPTIONS.plane_edge_px
+    usable = np.bincount(j.facets[rel & inside], minlength=S)
     pl = j.planes
     assert pl.fitted.dtype == bool and pl.fitted.mean() > 0.8
     assert np.all(pl.n_pixels[pl.fitted] <= usable[pl.fitted])
-    assert np.all(pl.n_pixels[pl.fitted] >= 8)               # min_pixels
+    assert OPTIONS.min_plane_pixels == 8
+    assert np.all(pl.n_pixels[pl.fitted] >= 8)               # joint.min_plane_pixels
     assert not np.any(pl.fitted & (usable < 8))
     assert np.all(np.isfinite(pl.tilt_deg[pl.fitted]) & np.isfinite(pl.tilt_sigma_deg[pl.fitted]))
     assert np.all(np.isnan(pl.tilt_deg[~pl.fitted]))        # no height, no guess
@@ -109,7 +118,7 @@ def test_censored_mask_is_a_per_facet_boolean(nd):
     # one value per facet: a facet is dark (more than half its pixels steep) or not
     per_facet = np.bincount(j.facets.ravel(), weights=j.censored.ravel()) / j.area_px
     assert np.all((per_facet == 0) | (per_facet == 1))
-    steep = np.bincount(j.facets.ravel(), weights=r.mask.steep.ravel()) / j.area_px
+    steep = np.bincount(j.facets.ravel(), weights=r.colour.mask.steep.ravel()) / j.area_px
     np.testing.assert_array_equal(per_facet == 1, steep > 0.5)
 
 
@@ -121,7 +130,9 @@ def test_pixels_take_their_facets_thickness(nd):
     assert has.mean() > 0.8
     np.testing.assert_allclose(d[has], j.thickness.thickness_nm[j.facets[has]], rtol=1e-6)
     t = j.pixels.tilt_deg[has]
-    assert np.all(np.isfinite(t)) and t.min() >= 0 and t.max() <= r.max_tilt_deg + 1e-6
+    assert np.all(np.isfinite(t)) and t.min() >= 0 and t.max() <= r.scene.max_tilt_deg + 1e-6
+    # the result's per-pixel estimates are the joint stage's
+    assert r.pixels is j.pixels
 
 
 def test_plane_tilt_intervals_are_calibrated_against_the_truth(nd):
