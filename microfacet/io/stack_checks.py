@@ -206,12 +206,12 @@ class _Check:
         self.infos.append((name, info))
 
 
-def _values(c: _Check, *, slices_only: bool) -> dict:
-    """Every key (those read only with slices, or the others) checked against its spec:
+def _values(c: _Check, which) -> dict:
+    """The keys whose spec ``which(spec)`` is true, each checked against its spec:
     ``{key: value, or its default}`` (an object: its defaults updated with what is given)."""
     out = {}
     for spec in SPECS.values():
-        if spec.slices_only != slices_only:
+        if not which(spec):
             continue
         if not c.has(spec.name):
             if spec.required:
@@ -554,9 +554,10 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
     """
     c = _Check(root, meta, jpath, limits, given or {}, plain)
     _warn_unknown_keys(meta, jpath)
-    values = _values(c, slices_only=False)
+    values = _values(c, lambda s: s.required)
     _check_given(c.given)
     _check_rules(c)
+    values.update(_values(c, lambda s: not s.required and not s.slices_only))
     export = _export(c)
     files = {"slices": (), "tiff": None}
     tiff_uniform = False
@@ -565,7 +566,7 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
     elif c.has("tiff"):
         files["tiff"], tiff_uniform = _multipage(c)
     if c.infos:
-        values.update(_values(c, slices_only=True))
+        values.update(_values(c, lambda s: s.slices_only))
     ps_yx, z_um, sources = _scale_and_z(c, values, export, files)
     ref = c.infos[0][1] if c.infos else export.info
     if c.infos and export.info is not None and export.info.shape != ref.shape:
