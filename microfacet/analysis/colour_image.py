@@ -13,8 +13,7 @@ from ..colour.srgb import srgb_encode, srgb_to_lab
 from .mask import ColourMask, colour_mask
 from .options import MaskOptions
 
-__all__ = ["ColourImage", "estimate_colour_noise", "measure_colour", "no_colour_message",
-           "quantization_noise_de"]
+__all__ = ["ColourImage", "estimate_colour_noise", "measure_colour"]
 
 log = logging.getLogger(__name__)
 

@@ -29,8 +29,7 @@ from .search import coarse_to_fine, refine
 
 optimize = load("scipy.optimize")
 
-__all__ = ["FacetColours", "FacetImage", "FacetThickness", "facet_thickness",
-           "refine_exposure_on_facets"]
+__all__ = ["FacetThickness", "facet_thickness", "refine_exposure_on_facets"]
 
 #: Facets per chunk of the vectorised searches (bounded temporaries).
 _CHUNK = 2048

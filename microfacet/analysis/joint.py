@@ -40,8 +40,7 @@ from .planes import FacetFit, facet_edge_distance, fit_facet_planes
 from .segmentation import segment_facets
 from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
 
-__all__ = ["HeightInputs", "JointResult", "Segmented", "facet_labels", "height_inputs",
-           "joint_facets", "joint_pixel_tilts"]
+__all__ = ["JointResult", "Segmented", "facet_labels", "joint_facets", "joint_pixel_tilts"]
 
 log = logging.getLogger(__name__)
 

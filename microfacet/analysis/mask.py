@@ -18,7 +18,7 @@ from .options import MaskOptions
 
 cv2 = load("cv2")
 
-__all__ = ["ColourMask", "colour_mask", "steep_facet_mask"]
+__all__ = ["ColourMask", "colour_mask"]
 
 
 @dataclass

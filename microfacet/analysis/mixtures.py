@@ -57,16 +57,7 @@ from .sampling import Samples, collapse, prepare
 
 threadpoolctl = load("threadpoolctl")
 
-__all__ = [
-    "MixtureFit",
-    "bic_score",
-    "choose_k",
-    "fit_thickness_mixture",
-    "k_max_for",
-    "k_note",
-    "run_em",
-    "single_thread",
-]
+__all__ = ["MixtureFit", "choose_k", "fit_thickness_mixture"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 

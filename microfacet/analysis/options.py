@@ -45,8 +45,8 @@ from ..focus.options import FocusOptions
 from ..optics.constants import known_sets, load_set
 from ..optics.defaults import DEFAULT_FILM, DEFAULT_ILLUMINANT, DEFAULT_SUBSTRATE
 
-__all__ = ["MODES", "AnalysisOptions", "FitOptions", "JointOptions", "MaskOptions",
-           "OpticsOptions", "RoiOptions", "Scene", "TiltOptions", "scene_of"]
+__all__ = ["AnalysisOptions", "FitOptions", "JointOptions", "MaskOptions", "OpticsOptions",
+           "RoiOptions", "Scene", "TiltOptions", "scene_of"]
 
 MODES = ("joint", "seed")
 

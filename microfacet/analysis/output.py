@@ -34,7 +34,7 @@ from .identification import (
     mean_plane_tilt_deg,
 )
 
-__all__ = ["build_summary", "results_size_bytes", "save_results", "write_results"]
+__all__ = ["results_size_bytes", "save_results", "write_results"]
 
 #: Bytes per pixel of the results folder (float32 maps, normals, mask, facets, PNG, the
 #: float32 TIFF copies for microscopy tools and the .x3p height map) and the report's size.

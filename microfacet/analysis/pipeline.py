@@ -35,8 +35,7 @@ from .stages import Stage
 from .surface import measure_height, surface_normals
 from .tilt import seed_tilts, tilt_grid
 
-__all__ = ["AnalysisResult", "MEMORY_BASE_BYTES", "MEMORY_BYTES_PER_PIXEL", "analyse_stack",
-           "check_stack_for_analysis", "run_stages"]
+__all__ = ["AnalysisResult", "analyse_stack", "check_stack_for_analysis", "run_stages"]
 
 #: Peak memory of :func:`analyse_stack` ≈ base + per pixel × H × W, set just above what
 #: ``/usr/bin/time -f %M microfacet analyze`` measured on nd stacks of 16 slices: 597, 926 and

@@ -25,7 +25,7 @@ from .segmentation import plane_from_moments, plane_moments
 
 ndimage = load("scipy.ndimage")
 
-__all__ = ["FacetFit", "facet_edge_distance", "fit_facet_planes"]
+__all__ = ["FacetFit", "fit_facet_planes"]
 
 
 @dataclass

@@ -45,7 +45,7 @@ from .search import local_minima, parabola
 ndimage = load("scipy.ndimage")
 optimize = load("scipy.optimize")
 
-__all__ = ["RoiFit", "fit_roi_thickness", "nearest_roi_index", "roi_grid", "thickness_per_roi"]
+__all__ = ["RoiFit", "fit_roi_thickness", "roi_grid", "thickness_per_roi"]
 
 log = logging.getLogger(__name__)
 

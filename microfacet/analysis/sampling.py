@@ -28,7 +28,7 @@ from ..core.lazy import load
 
 stats = load("scipy.stats")
 
-__all__ = ["Regions", "Samples", "collapse", "positive_int", "prepare", "thickness_regions"]
+__all__ = ["Regions", "Samples", "collapse", "prepare", "thickness_regions"]
 
 
 @dataclass
@@ -141,7 +141,7 @@ def thickness_regions(labels, value, sigma, *, alpha=0.01) -> Regions:
 # ------------------------------------------------------------- the fits' samples
 
 
-def positive_int(x, name):
+def _positive_int(x, name):
     if isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < 1:
         raise ValueError(f"{name}: expected an integer >= 1, got {x!r}")
     return int(x)

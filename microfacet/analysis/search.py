@@ -28,8 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Minimum", "Scan", "coarse_to_fine", "full_scan", "local_minima", "parabola",
-           "refine"]
+__all__ = ["Minimum", "Scan", "coarse_to_fine", "refine"]
 
 
 @dataclass

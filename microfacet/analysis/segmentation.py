@@ -38,8 +38,7 @@ measure = load("skimage.measure")
 segmentation = load("skimage.segmentation")
 stats = load("scipy.stats")
 
-__all__ = ["merge_adjacent", "neighbour_pairs", "plane_from_moments", "plane_moments",
-           "segment_facets"]
+__all__ = ["merge_adjacent", "segment_facets"]
 
 #: Grey used for the segmentation where the Lab image is NaN.
 _NAN_LAB = (50.0, 0.0, 0.0)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-__all__ = ["Stage", "StageInfo", "stage_table"]
+__all__ = ["Stage", "stage_table"]
 
 
 @dataclass(frozen=True)

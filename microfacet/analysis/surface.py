@@ -15,12 +15,12 @@ from ..focus.height import FocusResult, height_from_focus
 from ..focus.normals import normals_from_height, tilt_azimuth_deg
 from ..focus.options import FocusOptions
 
-__all__ = ["Surface", "export_as_focus", "measure_height", "surface_normals"]
+__all__ = ["Surface", "measure_height", "surface_normals"]
 
 log = logging.getLogger(__name__)
 
 
-def export_as_focus(stack) -> FocusResult:
+def _export_as_focus(stack) -> FocusResult:
     """A :class:`~microfacet.focus.height.FocusResult` from a microscope export (``height_um``
     + ``image`` in stack.json): the height map as given (non-finite = unreliable), the export
     image as the all-in-focus composite, no focus measure (reliability NaN)."""
@@ -47,7 +47,7 @@ def measure_height(stack, options: FocusOptions) -> FocusResult:
         A stack of slices with fewer than 3 of them (naming stack.json and 'slices').
     """
     if not stack.has_slices:
-        return export_as_focus(stack)
+        return _export_as_focus(stack)
     if stack.n_slices < 3:
         raise InputError(f"{stack.path / 'stack.json'}: key 'slices': height from focus needs "
                          f"at least 3 slices, the stack has {stack.n_slices}")

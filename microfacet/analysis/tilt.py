@@ -30,8 +30,7 @@ import numpy as np
 from .options import TiltOptions
 from .search import coarse_to_fine, refine
 
-__all__ = ["PixelEstimates", "TiltInversion", "TiltRows", "invert_tilt", "model_lab_rows",
-           "seed_tilts", "tilt_grid"]
+__all__ = ["TiltInversion", "TiltRows", "invert_tilt", "model_lab_rows", "seed_tilts"]
 
 #: Pixels per chunk of the search (bounded temporaries).
 CHUNK_PX = 65536

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["channels", "float_array"]
+__all__ = []
 
 
 def float_array(x: Any, name: str) -> np.ndarray:

@@ -61,12 +61,8 @@ from .datasets import (  # re-exported: their import path here is public
 
 colour = load("colour")
 
-__all__ = [
-    "OBSERVERS", "cmfs", "illuminant_key", "illuminant_sd", "known_illuminants",
-    "observer_name",  # from .datasets
-    "lab_to_xyz", "spectral_weights", "spectrum_to_lab", "spectrum_to_xyz", "white_xyz",
-    "xyz_to_lab",
-]
+__all__ = ["OBSERVERS", "known_illuminants", "lab_to_xyz", "spectral_weights", "spectrum_to_lab",
+           "spectrum_to_xyz", "white_xyz", "xyz_to_lab"]
 
 #: CIELAB constants (CIE 15:2018, exact rationals).
 _EPSILON = 216.0 / 24389.0

@@ -23,15 +23,7 @@ from ..core.lazy import load
 
 colour = load("colour")
 
-__all__ = [
-    "CMF_RANGE_NM",
-    "OBSERVERS",
-    "cmfs",
-    "illuminant_key",
-    "illuminant_sd",
-    "known_illuminants",
-    "observer_name",
-]
+__all__ = ["OBSERVERS", "cmfs", "illuminant_key", "illuminant_sd", "known_illuminants"]
 
 _CIE1931 = "CIE 1931 2 Degree Standard Observer"
 _CIE1964 = "CIE 1964 10 Degree Standard Observer"

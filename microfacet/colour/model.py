@@ -40,7 +40,7 @@ from ..optics.thinfilm import reflectance_period_nm
 from .colorimetry import xyz_to_lab
 from .difference import METHODS, delta_e
 
-__all__ = ["COLOUR_PERIOD_WAVELENGTH_NM", "FilmColourModel"]
+__all__ = ["FilmColourModel"]
 
 #: Wavelength at which the film's index sets the colour period and the refraction angle
 #: (the middle of the visible range, where the CMFs weigh most).

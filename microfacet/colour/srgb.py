@@ -49,22 +49,9 @@ from .colorimetry import (
 )
 from .transfer import srgb_decode, srgb_encode
 
-__all__ = [
-    "BRADFORD",
-    "SRGB_TO_XYZ",
-    "SRGB_WHITE_XYZ",
-    "XYZ_TO_SRGB",
-    "bradford_matrix",
-    "colours_from_spectra",
-    "image_white_xyz",
-    "lab_to_srgb",
-    "linear_srgb_to_xyz",
-    "model_xyz_to_linear_srgb",
-    "srgb_decode",
-    "srgb_encode",
-    "srgb_to_lab",
-    "xyz_to_linear_srgb",
-]
+__all__ = ["BRADFORD", "SRGB_TO_XYZ", "SRGB_WHITE_XYZ", "XYZ_TO_SRGB", "colours_from_spectra",
+           "lab_to_srgb", "linear_srgb_to_xyz", "model_xyz_to_linear_srgb", "srgb_to_lab",
+           "xyz_to_linear_srgb"]
 
 #: The white point and observer the sRGB standard (IEC 61966-2-1:1999) is defined for.
 SRGB_ILLUMINANT, SRGB_OBSERVER = "D65", "2"

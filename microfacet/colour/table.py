@@ -37,13 +37,7 @@ from .colorimetry import spectral_weights, xyz_to_lab
 from .difference import delta_e_2000
 from .srgb import model_xyz_to_linear_srgb
 
-__all__ = [
-    "ColourTable",
-    "SPECTRAL_STEPS_NM",
-    "build_colour_table",
-    "choose_spectral_step",
-    "direct_xyz",
-]
+__all__ = ["ColourTable", "build_colour_table", "choose_spectral_step", "direct_xyz"]
 
 log = logging.getLogger(__name__)
 

@@ -25,8 +25,8 @@ special = load("scipy.special")
 stats = load("scipy.stats")
 integrate = load("scipy.integrate")
 
-__all__ = ["cell_edges", "histogram_density", "mixture_cdf", "ndf_D_from_tilt_histogram",
-           "pdf_table", "wasserstein1", "wasserstein1_pdf"]
+__all__ = ["cell_edges", "histogram_density", "ndf_D_from_tilt_histogram", "pdf_table",
+           "wasserstein1"]
 
 _DEG = math.pi / 180.0
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["InputError", "one_line", "option_name", "plain_params", "render_params"]
+__all__ = ["InputError", "one_line", "plain_params", "render_params"]
 
 _PARAM_REF = re.compile(r"`([A-Za-z_][A-Za-z0-9_.]*)`")
 

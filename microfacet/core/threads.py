@@ -24,8 +24,7 @@ from numbers import Integral
 
 from .errors import InputError
 
-__all__ = ["ENV_VAR", "default_num_threads", "limited_threads", "num_threads",
-           "set_num_threads", "threads_from_text"]
+__all__ = ["ENV_VAR", "limited_threads", "num_threads", "set_num_threads", "threads_from_text"]
 
 #: The environment variable the command line reads (:func:`threads_from_text`).
 ENV_VAR = "MICROFACET_NUM_THREADS"

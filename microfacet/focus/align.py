@@ -33,7 +33,7 @@ from .measures import to_grey
 
 cv2 = load("cv2")
 
-__all__ = ["estimate_warps", "warp_to_reference", "warped_loader"]
+__all__ = ["estimate_warps", "warped_loader"]
 
 log = logging.getLogger(__name__)
 

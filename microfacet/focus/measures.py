@@ -35,7 +35,7 @@ from .options import COLOURS, OPERATORS, WINDOWS, FocusOptions, odd_window_reaso
 
 cv2 = load("cv2")
 
-__all__ = ["check_window", "focus_measure", "focus_measures", "noise_shape", "to_grey"]
+__all__ = ["focus_measure", "focus_measures"]
 
 #: The defaults of the keyword arguments: those of :class:`~microfacet.focus.options.
 #: FocusOptions` (declared there only).
@@ -68,7 +68,7 @@ def to_grey(image: np.ndarray) -> np.ndarray:
     raise ValueError(f"image must have shape (H, W) or (H, W, 3), got {img.shape}")
 
 
-def check_window(window_px, window):
+def _check_window(window_px, window):
     """Raise ValueError unless ``window_px`` is an odd integer >= 1 and ``window`` known."""
     reason = odd_window_reason(window_px)
     if reason is not None:
@@ -148,7 +148,7 @@ def focus_measures(image: np.ndarray, windows: Sequence[tuple[int, str, int]], *
     if operator not in OPERATORS:
         raise ValueError(f"operator must be one of {OPERATORS}, not {operator!r}")
     for px, win, ds in windows:
-        check_window(px, win)
+        _check_window(px, win)
         if ds not in (1, 2):
             raise ValueError(f"downsample must be 1 or 2, got {ds!r}")
     g = _channels(image, colour)
@@ -201,7 +201,7 @@ def focus_measure(image: np.ndarray, *, operator: str = _DEFAULTS.operator,
     ndarray of float32, shape (H, W)
         Non-negative; larger is sharper.
     """
-    check_window(window_px, window)
+    _check_window(window_px, window)
     return focus_measures(image, [(window_px, window, 1)], operator=operator,
                           colour=colour)[0]
 

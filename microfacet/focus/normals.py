@@ -35,10 +35,10 @@ from ..core.pixels import pixel_size_yx
 
 cv2 = load("cv2")
 
-__all__ = ["gradient_nan", "normals_from_height", "smooth_nan", "tilt_azimuth_deg"]
+__all__ = ["normals_from_height", "tilt_azimuth_deg"]
 
 
-def smooth_nan(height: np.ndarray, sigma_px: float) -> np.ndarray:
+def _smooth_nan(height: np.ndarray, sigma_px: float) -> np.ndarray:
     """NaN-aware Gaussian smoothing (normalised convolution); NaN stays NaN.
 
     Parameters
@@ -65,7 +65,7 @@ def smooth_nan(height: np.ndarray, sigma_px: float) -> np.ndarray:
     return out
 
 
-def gradient_nan(height: np.ndarray, spacing: float = 1.0):
+def _gradient_nan(height: np.ndarray, spacing: float = 1.0):
     """NaN-aware finite-difference gradient along rows and columns.
 
     Parameters
@@ -135,11 +135,11 @@ def normals_from_height(height_um: np.ndarray, *, pixel_size_um,
     pixel_yx = pixel_size_yx(pixel_size_um)
     if not math.isfinite(smooth_sigma_px) or smooth_sigma_px < 0:
         raise ValueError(f"smooth_sigma_px must be >= 0, got {smooth_sigma_px!r}")
-    d_row, d_col = gradient_nan(h, pixel_yx)
+    d_row, d_col = _gradient_nan(h, pixel_yx)
     if smooth_sigma_px > 0:
         # smoothing the slopes (not the height) keeps planes exact up to the borders
-        d_row = smooth_nan(d_row, smooth_sigma_px).astype(np.float64)
-        d_col = smooth_nan(d_col, smooth_sigma_px).astype(np.float64)
+        d_row = _smooth_nan(d_row, smooth_sigma_px).astype(np.float64)
+        d_col = _smooth_nan(d_col, smooth_sigma_px).astype(np.float64)
     dhdx = d_col
     dhdy = -d_row               # y points up = decreasing row
     inv = 1.0 / np.sqrt(1.0 + dhdx * dhdx + dhdy * dhdy)

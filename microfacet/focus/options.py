@@ -42,9 +42,7 @@ from numbers import Integral, Real
 
 from ..core.options import Options, option
 
-__all__ = ["ALIGN_METHODS", "COLOURS", "EARLIER_DEFAULT", "FILLS", "FocusOptions",
-           "INTERPOLATIONS", "OPERATORS", "RELIABILITIES", "RELIABILITY_CUTS_DB", "WINDOWS",
-           "odd_window_reason"]
+__all__ = ["EARLIER_DEFAULT", "FocusOptions", "OPERATORS"]
 
 #: Focus measures (:func:`microfacet.focus.measures.focus_measure`); a new one also needs its
 #: cuts in :data:`RELIABILITY_CUTS_DB`.

@@ -36,7 +36,7 @@ from ..core.lazy import load
 
 special = load("scipy.special")
 
-__all__ = ["PeakFit", "detection_threshold", "fit_peak", "peak_fit", "pertuz_db"]
+__all__ = ["PeakFit", "detection_threshold", "fit_peak", "pertuz_db"]
 
 MODELS = ("lorentz", "gauss")
 

@@ -36,8 +36,7 @@ from .peaks import detection_threshold, fit_peak, pertuz_db
 
 cv2 = load("cv2")
 
-__all__ = ["DETECTION_ALPHA", "SIGMA_MODEL", "WindowFit", "add_relief_terms", "combine",
-           "fit_window", "window_spread_px"]
+__all__ = ["WindowFit", "combine", "fit_window"]
 
 #: Nominal false-peak rate per pixel and window of the detection test (the measured rate on
 #: pure noise is 1e-4 to 4e-4: the tails' mean and spread are estimated from few slices). A

@@ -36,8 +36,8 @@ from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from . import brdf, eq6
 from .halfvector import half_angle_deg
 
-__all__ = ["DISPLAY_CORE_DEG", "MODELS", "display_exposure", "simulate_map",
-           "simulate_memory_bytes", "with_exposure"]
+__all__ = ["DISPLAY_CORE_DEG", "display_exposure", "simulate_map", "simulate_memory_bytes",
+           "with_exposure"]
 
 MODELS = ("microfacet", "eq6", "half-vector")
 #: Light and view angles up to this set the display scale of a microfacet or eq. 6 map.

@@ -91,19 +91,8 @@ from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from ..optics.thinfilm import reflectance
 from .halfvector import in_plane_directions
 
-__all__ = [
-    "FilmAverage",
-    "MAX_THICKNESS_NODES",
-    "check_ndf",
-    "default_wavelengths",
-    "microfacet_brdf",
-    "microfacet_brdf_inplane",
-    "microfacet_geometry",
-    "thickness_nodes",
-    "trapezoid_weights",
-    "unit_directions",
-    "wavelength_grid",
-]
+__all__ = ["FilmAverage", "default_wavelengths", "microfacet_brdf", "microfacet_brdf_inplane",
+           "microfacet_geometry", "thickness_nodes"]
 
 _DEG = math.pi / 180.0
 #: Largest number of distinct incidence angles evaluated exactly; beyond it a table.
@@ -326,7 +315,7 @@ def unit_directions(x, name):
         return v / n
 
 
-def check_ndf(ndf, name="ndf"):
+def _check_ndf(ndf, name="ndf"):
     """``ndf`` if it is an :class:`NDFMixture`, else ValueError naming ``name``."""
     if not isinstance(ndf, NDFMixture):
         raise ValueError(f"{name}: expected an NDFMixture, got {type(ndf).__name__}")
@@ -358,7 +347,7 @@ def microfacet_geometry(light, view, ndf):
     >>> float(td), round(float(g), 3)   # D(0) / 4 = 1 / (4 π α²), α = √2 tan 10°
     (0.0, 1.28)
     """
-    ndf = check_ndf(ndf)
+    ndf = _check_ndf(ndf)
     lu = unit_directions(light, "light")
     vu = unit_directions(view, "view")
     lu, vu = np.broadcast_arrays(lu, vu)

@@ -26,8 +26,7 @@ from .eq6 import Eq6Kernel
 
 optimize = load("scipy.optimize")
 
-__all__ = ["Eq6Fit", "delta_e_map", "fit_eq6", "fit_exposure", "mean_delta_e",
-           "specular_mask"]
+__all__ = ["Eq6Fit", "delta_e_map", "fit_eq6", "fit_exposure", "mean_delta_e"]
 
 
 def specular_mask(theta_light_deg, theta_view_deg, *, halfwidth_deg=10.0):

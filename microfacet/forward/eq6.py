@@ -24,8 +24,7 @@ from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from .brdf import FilmAverage, trapezoid_weights, unit_directions
 from .halfvector import signed_angles
 
-__all__ = ["Eq6Kernel", "eq6_reflectance", "eq6_reflectance_inplane", "inplane_tilt_density",
-           "theta_m_grid"]
+__all__ = ["Eq6Kernel", "eq6_reflectance", "eq6_reflectance_inplane", "inplane_tilt_density"]
 
 _DEG = math.pi / 180.0
 

@@ -26,14 +26,8 @@ import numpy as np
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from ..optics.thinfilm import reflectance
 
-__all__ = [
-    "signed_angles",
-    "half_angle_deg",
-    "half_angle_from_vectors",
-    "half_vector",
-    "in_plane_directions",
-    "spectra",
-]
+__all__ = ["half_angle_deg", "half_angle_from_vectors", "half_vector", "in_plane_directions",
+           "spectra"]
 
 
 def signed_angles(x, name):

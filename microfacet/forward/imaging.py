@@ -18,8 +18,7 @@ from ..core.lazy import load
 
 cv2 = load("cv2")
 
-__all__ = ["apply_white_balance", "drift_offsets_px", "pupil_fraction", "pupil_limit_deg",
-           "shift_image", "vignetting_factor"]
+__all__ = ["pupil_fraction", "pupil_limit_deg", "vignetting_factor"]
 
 #: Tilt grid of the tabulated pupil fraction (degrees).
 _THETA_STEP_DEG = 0.1

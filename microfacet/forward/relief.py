@@ -19,8 +19,8 @@ from ..core.lazy import load
 cv2 = load("cv2")
 spatial = load("scipy.spatial")
 
-__all__ = ["FEATURE_CODES", "Carving", "carve_pits", "carve_scratches", "dome_relief",
-           "dust_layer", "shaped_cells", "smooth_field", "terrace_offsets_um"]
+__all__ = ["Carving", "FEATURE_CODES", "carve_pits", "carve_scratches", "dome_relief", "dust_layer",
+           "shaped_cells", "terrace_offsets_um"]
 
 #: Codes of ``truth/feature.npy``.
 FEATURE_CODES = {"facet": 0, "pit": 1, "scratch": 2, "dust": 3}

@@ -32,7 +32,7 @@ from .relief import (
 
 ndimage = load("scipy.ndimage")
 
-__all__ = ["STREAMS", "Scene", "render_scene"]
+__all__ = ["Scene", "render_scene"]
 
 #: Random streams ``[seed, k]`` of the variations (k = 1 is the sensor noise's).
 STREAMS = {"facets": 2, "terraces": 3, "pits": 4, "scratches": 5, "dust": 6, "drift": 7}

@@ -69,22 +69,7 @@ from .synth_params import (
 
 cv2 = load("cv2")
 
-__all__ = [
-    "apply_sensor",
-    "MAX_SLICES",
-    "PRESETS",
-    "SynthParams",
-    "SynthResult",
-    "ThicknessComponent",
-    "TiltLobe",
-    "defocus_sigma_px",
-    "generate_stack",
-    "parse_variation",
-    "preset",
-    "render_scene",
-    "slice_positions_um",
-    "truth_summary",
-]
+__all__ = ["MAX_SLICES", "PRESETS", "SynthResult", "generate_stack", "parse_variation", "preset"]
 
 log = logging.getLogger(__name__)
 
@@ -233,7 +218,7 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
     0 facet, 1 pit, 2 scratch, 3 dust), ``truth/all_in_focus.png`` (the noise-free sharp
     image with every deterministic imaging effect: brightness, grooves, dust, vignetting,
     white balance, clipping; no noise, blur, drift or JPEG) and ``truth/params.json``
-    (:func:`truth_summary`). With drift, the truth is in the frame of the slices' mean
+    (:func:`_truth_summary`). With drift, the truth is in the frame of the slices' mean
     position. Memory: a ladder of ~12 blurred copies of the image, independent of the
     slice count.
 
@@ -298,7 +283,7 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
         sharp = srgb_encode(np.clip(scene.linear_rgb, 0, 1), dtype=np.uint8)
         write_image(truth / "all_in_focus.png", sharp)
         truth_meta = {"format": "microfacet-synth-truth/1", "params": p.to_json(),
-                      "z_um": [float(v) for v in z], **truth_summary(scene, p, clipped=clipped),
+                      "z_um": [float(v) for v in z], **_truth_summary(scene, p, clipped=clipped),
                       "drift_px": drift.round(6).tolist()}
         (truth / "params.json").write_text(json.dumps(truth_meta, indent=1))
         optional = {"illumination": {"geometry": "coaxial",
@@ -315,7 +300,7 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
     return SynthResult(Path(out), p, z, timings)
 
 
-def truth_summary(scene, p, *, clipped) -> dict:
+def _truth_summary(scene, p, *, clipped) -> dict:
     """What ``truth/params.json`` records about a scene besides its parameters.
 
     Keys: ``regions`` (per thickness region: ``id``, ``component``, ``thickness_nm`` drawn

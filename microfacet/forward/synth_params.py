@@ -29,8 +29,7 @@ from ..optics.defaults import DEFAULT_FILM, DEFAULT_SUBSTRATE
 # numpy-backed, needed only to validate: not imported by `microfacet --help`
 constants = load("microfacet.optics.constants")
 
-__all__ = ["IMAGING_VARIATIONS", "MAX_SLICES", "VARIATIONS", "SynthParams",
-           "ThicknessComponent", "TiltLobe", "parse_variation"]
+__all__ = ["SynthParams", "ThicknessComponent", "TiltLobe", "VARIATIONS", "parse_variation"]
 
 #: Most slices a synthetic stack may have.
 MAX_SLICES = 10_000

@@ -20,8 +20,7 @@ from .images import write_image
 
 cv2 = load("cv2")
 
-__all__ = ["HEIGHT_FILES", "HEIGHT_FORMAT", "HeightMaps", "height_preview",
-           "write_height_folder"]
+__all__ = ["HEIGHT_FILES", "HeightMaps", "write_height_folder"]
 
 #: ``format`` of ``height.json`` (how :func:`microfacet.io.outdir.output_kind` knows it).
 HEIGHT_FORMAT = "microfacet-height/1"

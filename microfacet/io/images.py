@@ -50,10 +50,8 @@ from ..core.pixels import pixel_size_yx
 cv2 = load("cv2")
 tifffile = load("tifffile")
 
-__all__ = ["IMAGE_SUFFIXES", "ImageInfo", "MultiPageTiff", "convert_samples",
-           "decode_image", "image_info", "npy_info", "png_pixel_size_um", "read_png",
-           "read_tiff_headers", "tiff_page_info", "to_code_values",
-           "to_rgb_or_grey", "write_float_tiff", "write_image"]
+__all__ = ["ImageInfo", "MultiPageTiff", "convert_samples", "decode_image", "image_info",
+           "png_pixel_size_um", "read_png", "read_tiff_headers", "write_float_tiff", "write_image"]
 
 #: File suffixes accepted for slices and export images (lower case).
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
@@ -142,7 +140,7 @@ def _jpeg_info(path: Path, where: str) -> ImageInfo:
     return ImageInfo((h, w), np.dtype(np.uint8), ncomp)
 
 
-def tiff_page_info(page, where: str, file_size: int) -> ImageInfo:
+def _tiff_page_info(page, where: str, file_size: int) -> ImageInfo:
     shape = tuple(int(s) for s in page.shape)
     dtype = np.dtype(page.dtype) if page.dtype is not None else None
     if dtype not in (np.dtype(np.uint8), np.dtype(np.uint16)):
@@ -165,7 +163,7 @@ def tiff_page_info(page, where: str, file_size: int) -> ImageInfo:
 def _tiff_info(path: Path, where: str) -> ImageInfo:
     try:
         with tifffile.TiffFile(path) as tf:
-            return tiff_page_info(tf.pages[0], where, path.stat().st_size)
+            return _tiff_page_info(tf.pages[0], where, path.stat().st_size)
     except InputError:
         raise
     except Exception as exc:  # tifffile raises assorted errors on corrupt files
@@ -190,7 +188,7 @@ def image_info(path: Path, where: str) -> ImageInfo:
 # ----------------------------------------------------------------------------------- decoding
 
 
-def to_rgb_or_grey(img: np.ndarray) -> np.ndarray:
+def _to_rgb_or_grey(img: np.ndarray) -> np.ndarray:
     """Drop alpha; grey stays (H, W); colour comes back (H, W, 3)."""
     if img.ndim == 3:
         if img.shape[2] == 1:
@@ -244,7 +242,7 @@ def _decode_raw(path: Path, where: str, page: int | None) -> np.ndarray:
     try:
         if suffix in (".tif", ".tiff"):
             img = tifffile.imread(path, key=0 if page is None else page)
-            return to_rgb_or_grey(np.asarray(img))
+            return _to_rgb_or_grey(np.asarray(img))
         with _opencv_warnings_off():
             img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED | cv2.IMREAD_IGNORE_ORIENTATION)
         if img is None:
@@ -254,7 +252,7 @@ def _decode_raw(path: Path, where: str, page: int | None) -> np.ndarray:
                 img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
             elif img.shape[2] == 3:
                 img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-        return to_rgb_or_grey(img)
+        return _to_rgb_or_grey(img)
     except InputError:
         raise
     except Exception as exc:
@@ -283,7 +281,7 @@ class MultiPageTiff:
                 img = self._tf.pages[index].asarray()
         except Exception as exc:
             raise InputError(f"{where}: cannot decode image ({exc})") from None
-        img = to_rgb_or_grey(np.asarray(img))
+        img = _to_rgb_or_grey(np.asarray(img))
         if channels == 1 and img.ndim == 3:
             img = img[..., 0]
         return img
@@ -350,7 +348,7 @@ def read_tiff_headers(tiff_path: Path, where: str, add) -> bool:
             coding0 = None
             for k, page in enumerate(tf.pages):
                 wk = f"{where} ({name} page {k})"
-                add(f"{one_line(tiff_path)} page {k}", wk, tiff_page_info(page, wk, fsize))
+                add(f"{one_line(tiff_path)} page {k}", wk, _tiff_page_info(page, wk, fsize))
                 coding = tuple(getattr(page, a, None) for a in _TIFF_CODING)
                 coding0 = coding if coding0 is None else coding0
                 uniform &= coding == coding0 and not page.is_tiled

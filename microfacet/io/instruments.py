@@ -47,7 +47,7 @@ from .x3p import HeightMap, read_x3p
 tifffile = load("tifffile")
 SurfaceTopography = load("SurfaceTopography")
 
-__all__ = ["HeightMap", "NATIVE_SUFFIXES", "read_height_map"]
+__all__ = ["read_height_map"]
 
 #: Suffixes read without SurfaceTopography.
 NATIVE_SUFFIXES = (".npy", ".tif", ".tiff", ".x3p")

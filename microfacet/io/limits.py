@@ -35,8 +35,7 @@ from dataclasses import dataclass
 
 from ..core.errors import InputError
 
-__all__ = ["DEFAULT_MAX_MEGAPIXELS", "DEFAULT_MAX_STACK_MEGAPIXELS", "Limits",
-           "MAX_JSON_BYTES", "MAX_SPECTRUM_ROWS", "available_memory_bytes", "check_memory"]
+__all__ = ["DEFAULT_MAX_MEGAPIXELS", "DEFAULT_MAX_STACK_MEGAPIXELS", "Limits", "check_memory"]
 
 DEFAULT_MAX_MEGAPIXELS = 50.0
 DEFAULT_MAX_STACK_MEGAPIXELS = 20000.0
@@ -88,7 +87,7 @@ class Limits:
                              f"`max_stack_megapixels` raises it")
 
 
-def available_memory_bytes() -> int | None:
+def _available_memory_bytes() -> int | None:
     """Memory available to a new process here (Linux ``MemAvailable``), or None if unknown."""
     try:
         with open("/proc/meminfo", encoding="ascii") as fh:
@@ -118,7 +117,7 @@ def check_memory(need_bytes: float, what: str, *, param: str | None = None,
     budget_bytes : float, optional
         A fixed budget instead of the machine's available memory.
     """
-    avail = available_memory_bytes() if budget_bytes is None else budget_bytes
+    avail = _available_memory_bytes() if budget_bytes is None else budget_bytes
     if avail is None:
         return
     usable = 0.9 * avail if budget_bytes is None else avail

@@ -48,8 +48,7 @@ from pathlib import Path
 from ..core.errors import InputError, one_line
 from .lock import acquire, current_umask, lock_path, release
 
-__all__ = ["KINDS", "OutputFolder", "atomic_output_dir", "check_output", "current_umask",
-           "output_kind", "sweep_stale"]
+__all__ = ["OutputFolder", "atomic_output_dir", "check_output", "sweep_stale"]
 
 #: The kinds of output folder microfacet writes, and how messages call them.
 KINDS = {

@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 
 from ..core.errors import InputError
 
-__all__ = ["FORMAT", "MAX_COMPONENTS", "MAX_ITEMS", "SUMMARY_VERSION", "DeltaE", "FacetCounts",
-           "Inputs", "NdfSection", "RoiCounts", "Summary", "ThicknessSection"]
+__all__ = ["DeltaE", "FacetCounts", "Inputs", "NdfSection", "RoiCounts", "Summary",
+           "ThicknessSection"]
 
 FORMAT = "microfacet-results/1"
 #: Version of the summary's layout within the format (2: no repeated keys, structured

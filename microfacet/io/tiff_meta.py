@@ -22,7 +22,7 @@ from ..core.lazy import load
 
 tifffile = load("tifffile")
 
-__all__ = ["TiffScale", "scale_of", "tiff_scale", "unit_um"]
+__all__ = ["TiffScale", "tiff_scale"]
 
 log = logging.getLogger("microfacet.io.stack")
 

@@ -42,7 +42,7 @@ import numpy as np
 from ..core.errors import InputError, one_line
 from ..core.pixels import pixel_size_yx
 
-__all__ = ["DATA_TYPES", "HeightMap", "read_x3p", "write_x3p"]
+__all__ = ["HeightMap", "read_x3p", "write_x3p"]
 
 #: X3P data types of the z axis and their numpy types (little-endian).
 DATA_TYPES = {"I": np.dtype("<i2"), "L": np.dtype("<i4"), "F": np.dtype("<f4"),

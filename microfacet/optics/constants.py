@@ -23,15 +23,8 @@ import numpy as np
 
 from .defaults import DEFAULT_FILM, DEFAULT_SUBSTRATE
 
-__all__ = [
-    "DEFAULT_FILM",
-    "DEFAULT_SUBSTRATE",
-    "OpticalConstantSet",
-    "known_sets",
-    "load_set",
-    "optical_constants",
-    "resolve_index",
-]
+__all__ = ["DEFAULT_FILM", "DEFAULT_SUBSTRATE", "OpticalConstantSet", "known_sets", "load_set",
+           "optical_constants", "resolve_index"]
 
 
 _DATA_PACKAGE = "microfacet.data"

@@ -41,13 +41,7 @@ import numpy as np
 from ..core.threads import num_threads
 from .constants import optical_constants
 
-__all__ = [
-    "FresnelProducts",
-    "fresnel_reflectance",
-    "normal_wavevector",
-    "reflectance",
-    "reflectance_period_nm",
-]
+__all__ = ["fresnel_reflectance", "reflectance", "reflectance_period_nm"]
 
 _POLARIZATIONS = ("s", "p", "unpolarized")
 

@@ -24,8 +24,7 @@ import numpy as np
 
 from ..core.densities import histogram_density
 
-__all__ = ["MAX_MAP_PX", "block_mean", "colour_limits", "display_block", "downsample",
-           "finite", "histogram", "limits_of", "quantile_range", "value_stats"]
+__all__ = ["MAX_MAP_PX", "colour_limits", "downsample", "histogram", "value_stats"]
 
 #: Maps are block-averaged so that neither side exceeds this many pixels (map panels are
 #: 2.2–3.3 inches wide: 512 pixels is over 150 per inch; larger maps only fatten the PDF).

@@ -18,7 +18,7 @@ from ..io.results import IMAGES, MAPS, TABLES, Results
 from .arrays import limits_of, value_stats
 from .layout import Geometry, positive
 
-__all__ = ["Context", "DRAWN_FILES"]
+__all__ = ["Context"]
 
 #: The files a panel is drawn from (all optional; page 4 lists the missing ones), named by
 #: :mod:`microfacet.io.results`.

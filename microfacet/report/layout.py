@@ -46,12 +46,9 @@ mcolors = load("matplotlib.colors")
 mpatches = load("matplotlib.patches")
 mcollections = load("matplotlib.collections")
 
-__all__ = ["CMAPS", "COMPONENT_COLOURS", "DE", "Geometry", "HEIGHT_TILT", "HIST_EDGE",
-           "HIST_FILL", "MAX_MAP_PX", "NO_VALUE", "PAGE_IN", "PDF_DPI", "PNG_DPI", "Page", "RC",
-           "blank_panel", "category_panel", "colour_limits", "colour_map", "colourbar",
-           "component_colour", "downsample", "draw_table", "finite", "fmt", "histogram",
-           "image_axes", "image_box", "map_panel", "number", "pct", "positive",
-           "quantile_range", "shorten", "shown", "wrap"]
+__all__ = ["Geometry", "MAX_MAP_PX", "NO_VALUE", "Page", "blank_panel", "category_panel",
+           "colour_map", "colourbar", "draw_table", "finite", "histogram", "map_panel",
+           "quantile_range"]
 
 #: Colour of a pixel without a value (masked or NaN) on every map.
 NO_VALUE = "#a3a3a3"
@@ -259,7 +256,7 @@ def colour_map(name):
     return mpl.colormaps[name].resampled(255).with_extremes(bad=NO_VALUE)
 
 
-def image_box(cell, shape, geom=None):
+def _image_box(cell, shape, geom=None):
     """The box ``(x0, y0, w, h)`` inches in ``cell`` of an image of ``shape``: exactly the
     image's aspect on the sample (``geom``, a :class:`Geometry`; pixels when None), as large
     as the margins (and a colour bar) allow, centred."""
@@ -272,9 +269,9 @@ def image_box(cell, shape, geom=None):
 
 
 def image_axes(pg, cell, shape, geom=None):
-    """Axes on the :func:`image_box` of ``shape`` in ``cell`` (so a colour bar beside it is
+    """Axes on the :func:`_image_box` of ``shape`` in ``cell`` (so a colour bar beside it is
     as tall as the image), and that box."""
-    box = image_box(cell, shape, geom)
+    box = _image_box(cell, shape, geom)
     ax = pg.axes(*box)
     for sp in ax.spines.values():
         sp.set_visible(True)

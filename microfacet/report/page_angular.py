@@ -17,7 +17,7 @@ from ..forward.angular import DISPLAY_CORE_DEG, display_exposure, simulate_map, 
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, known_sets
 from .layout import blank_panel, shorten
 
-__all__ = ["ANGLES_DEG", "NAME", "TITLE", "WAVELENGTH_NM", "draw", "optics", "predicted_maps"]
+__all__ = ["NAME", "TITLE", "draw"]
 
 NAME = "angular"
 TITLE = "predicted angular colour"

@@ -35,7 +35,7 @@ from .layout import (
 
 mticker = load("matplotlib.ticker")
 
-__all__ = ["NAME", "TITLE", "draw", "plain_math"]
+__all__ = ["NAME", "TITLE", "draw"]
 
 NAME = "distributions"
 TITLE = "thickness and facet-normal distributions"

@@ -15,7 +15,7 @@ from .layout import (
     map_panel,
 )
 
-__all__ = ["NAME", "TITLE", "component_codes", "draw"]
+__all__ = ["NAME", "TITLE", "draw"]
 
 NAME = "maps"
 TITLE = "thickness, tilt and colour-difference maps"
