@@ -137,10 +137,11 @@ class KeySpec:
             return self.choices_doc
         if self.choices is not None:
             return " or ".join(f"`{json.dumps(c)}`" for c in self.choices)
-        suffixes = f" ({', '.join(self.suffixes)})" if self.suffixes else ""
+        suffixes = f" to a {'/'.join(f'`{x}`' for x in self.suffixes)} file" \
+            if self.suffixes else ""
         return {"string": "string", "name": "non-empty string", "number": self.range_text(),
                 "size": f"{self.range_text()}, or `[y, x]`", "path": "relative path" + suffixes,
-                "paths": "list of relative paths", "numbers": "list of numbers",
+                "paths": "list of relative paths", "numbers": "list of finite numbers",
                 "object": "object", "any": "any"}[self.kind]
 
 
@@ -174,7 +175,7 @@ SPECS = {s.name: s for s in (
             "order, any spacing, no repeats", unit="µm", slices_only=True,
             when="with slices, unless `z_step_um` or the first TIFF's metadata gives it"),
     KeySpec("z_step_um", "number", "slice *i* is at *i*·`z_step_um`", unit="µm",
-            nonzero=True, slices_only=True, when="instead of `z_um`"),
+            nonzero=True, slices_only=True, when="with slices, instead of `z_um`"),
     KeySpec("color_space", "string", "encoding of the images: gamma-encoded or linear",
             default="sRGB", choices=("sRGB", "linear-sRGB")),
     KeySpec("illuminant", "name", "the light the images are white-balanced to, a name "
@@ -184,7 +185,7 @@ SPECS = {s.name: s for s in (
             fields=ILLUMINATION_FIELDS),
     KeySpec("film", **_OPTICAL_SET, default=DEFAULT_FILM,
             doc="the oxide's optical constants ([optical-constants.md](optical-constants.md)); "
-                "`--film` overrides it"),
+                "an unknown name is an error that lists the known ones; `--film` overrides it"),
     KeySpec("substrate", **_OPTICAL_SET, default=DEFAULT_SUBSTRATE,
             doc="the metal's optical constants; `--substrate` overrides it"),
     KeySpec("exposure", "number", "scale from the model's linear sRGB to the image's; "
