@@ -1,18 +1,16 @@
-"""Helpers shared by the pipeline scripts: timing, Markdown tables and pages, numbers, Pareto
-fronts, figures, CSV and output folders, direct colour, noisy synthetic scenes, the focus
-stacks with ground truth.
+"""Helpers shared by the studies: timing, Markdown tables and pages, numbers, Pareto fronts,
+figures, CSV, direct colour, noisy synthetic scenes, the focus stacks with ground truth.
 
-Not a script: every ``pipelines/<script>.py`` is run as a script, so this folder is on
-``sys.path`` and the scripts import ``from _shared import ...``.
+Imported as ``from pipelines import _shared``. Studies return their tables; what they say
+while they work goes to stderr (:func:`note`).
 """
 
 from __future__ import annotations
 
-import argparse
 import csv
 import math
-import re
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -94,14 +92,22 @@ def md_table(header, rows):
     return "\n".join([md_header(header)] + [md_row(r) for r in rows])
 
 
-class Doc:
-    """A Markdown page written while it is printed: ``doc(text)`` prints and keeps ``text``."""
+def note(*parts):
+    """Say what a study is doing (stderr: stdout is the table)."""
+    print(*parts, file=sys.stderr, flush=True)
 
-    def __init__(self):
+
+class Doc:
+    """A Markdown page kept while it is written: ``doc(text)`` keeps ``text`` (and shows it
+    on stderr as progress); ``doc.text()`` is the page."""
+
+    def __init__(self, *, echo=True):
         self.parts = []
+        self.echo = echo
 
     def __call__(self, text=""):
-        print(text, flush=True)
+        if self.echo:
+            note(text)
         self.parts.append(text)
 
     def text(self):
@@ -177,28 +183,8 @@ def save_figure(fig, path, *, dpi=90):
     return path
 
 
-def output_folder(out, *, quick, name):
-    """``--out`` if given, else docs/ for a full run and out/<name>-quick/ for a quick one."""
-    if out:
-        return Path(out)
-    return ROOT / (f"out/{name}-quick" if quick else "docs")
 
 
-def parser(doc, *, quick=None, repeat=False, out=None):
-    """ArgumentParser described by the first line of ``doc``, with the usual options.
-
-    ``quick``: help of ``--quick``; ``repeat``: default of ``--repeat`` (False: no option);
-    ``out``: help of ``--out`` (default None).
-    """
-    ap = argparse.ArgumentParser(description=doc.strip().splitlines()[0])
-    if quick:
-        ap.add_argument("--quick", action="store_true", help=quick)
-    if repeat is not False:
-        ap.add_argument("--repeat", type=int, default=repeat,
-                        help="timing repeats (the minimum is kept)")
-    if out:
-        ap.add_argument("--out", default=None, help=out)
-    return ap
 
 
 def _csv_cell(v):
@@ -221,17 +207,6 @@ def write_csv(path, rows, columns):
     return path
 
 
-def replace_block(path, start, end, text):
-    """Replace the text between the markers ``start`` and ``end`` (appended if absent)."""
-    path = Path(path)
-    body = path.read_text()
-    block = f"{start}\n{text}\n{end}"
-    if start in body:
-        body = re.sub(re.escape(start) + r".*?" + re.escape(end), lambda m: block, body,
-                      flags=re.S)
-    else:
-        body = body.rstrip() + "\n\n" + block + "\n"
-    path.write_text(body)
 
 
 def git_describe():
@@ -282,7 +257,7 @@ def noisy_scene(name="nd", *, size, seed=11):
     sc = render_scene(p)
     lab, enc = through_sensor(sc.linear_rgb, p, np.random.default_rng([seed, 1]))
     mask = colour_mask(enc).mask
-    return p, sc, lab, mask, estimate_colour_noise(lab, mask)
+    return p, sc, lab, mask, estimate_colour_noise(lab, mask, delta_e_method="CIEDE2000")
 
 
 def worst_mean_error(true_means, fit_means):

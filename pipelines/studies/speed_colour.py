@@ -1,67 +1,90 @@
-"""Benchmark microfacet.colour against colour-science at the sizes the analysis uses.
+"""microfacet.colour against colour-science (and CIEDE2000 against scikit-image) at the sizes
+the analysis uses.
 
-Usage::
+``part="functions"`` (the default): for each function family (XYZ <-> Lab, sRGB
+decode/encode, RGB <-> XYZ with and without Bradford adaptation, the Bradford matrix, spectral
+weights and spectral integration, the whole image <-> Lab paths, CIEDE2000) it times
+microfacet's function and the colour-science equivalent on the same inputs, interleaved in one
+loop (best of ``repeat``, the machine is shared), measures the peak memory of one call of each
+with ``tracemalloc`` (numpy's allocations are traced; the input is not counted, the output
+is), and the largest absolute difference of the outputs after putting them on the same
+convention (XYZ with the perfect reflector at ``Y = 1``; colour-science's ``sd_to_XYZ`` gives
+``Y = 100``). colour-science runs at its default "reference" domain-range scale. ``ratio`` is
+colour-science time / microfacet time (> 1: microfacet is faster); ``rule`` applies the
+project's rule (keep our implementation only if colour-science is > 1.5x slower or needs
+> 1.5x the memory on a hot-path size). Sizes: a 12-megapixel image (4000 x 3000 x 3), model
+tables of 1e5 and 1e6 colours, reflectance arrays of 1e4 and 1e5 spectra x 81 wavelengths
+(380-780 nm, 5 nm), 1e6 Lab pairs.
 
-    python pipelines/bench_colour_science.py [--quick] [--repeat 5] [--only NAME ...]
+``part="ciede2000"``: ``delta_e_2000`` (float64, float32) against colour-science and
+scikit-image on ``n`` random Lab pairs (half near each other, ΔLab ~ N(0, 5), half
+independent): ms per 1e6 pairs, pairs/s, time ratio to microfacet float64 and the largest
+|ΔE − colour's ΔE| (float32 rows against colour on the float32-rounded inputs).
 
-For each function family (XYZ <-> Lab, sRGB decode/encode, RGB <-> XYZ with and without
-Bradford adaptation, the Bradford matrix, spectral weights and spectral integration, and
-the whole image <-> Lab paths) it times microfacet's function and the colour-science
-equivalent on the same inputs, interleaved in one loop (best of ``--repeat``, the machine
-is shared), measures the peak memory of one call of each with ``tracemalloc`` (numpy's
-allocations are traced; the input is not counted, the output is), and the largest
-absolute difference of the outputs after putting them on the same convention (XYZ with
-the perfect reflector at ``Y = 1``; colour-science's ``sd_to_XYZ`` gives ``Y = 100``).
-colour-science runs at its default "reference" domain-range scale.
-
-It prints one Markdown table: ``ratio`` is colour-science time / microfacet time (> 1:
-microfacet is faster); ``rule`` applies the project's rule (keep our implementation only
-if colour-science is > 1.5x slower or needs > 1.5x the memory on a hot-path size).
-Sizes: a 12-megapixel image (4000 x 3000 x 3), model tables of 1e5 and 1e6 colours, and
-reflectance arrays of 1e4 and 1e5 spectra x 81 wavelengths (380-780 nm, 5 nm).
-``--quick``: a 1-megapixel image, 1e5 colours, 1e4 spectra, best of 2.
-
-To measure another checkout of microfacet (e.g. the implementation before a change), put
-it first on the path: ``PYTHONPATH=/path/to/checkout python pipelines/bench_...``.
+To measure another checkout of microfacet (e.g. the implementation before a change), put it
+first on the path: ``PYTHONPATH=/path/to/checkout python -m pipelines run speed-colour``.
 """
 
 from __future__ import annotations
 
-import argparse
 import gc
 import platform
 import time
 import tracemalloc
 import warnings
+from pathlib import Path
 
 import numpy as np
+
+from pipelines import Study
+from pipelines._shared import md_table, note
+
+STUDY = Study(
+    name="speed-colour",
+    question="Is each colour function of microfacet faster or leaner than colour-science's "
+             "(the rule for keeping our own), and CIEDE2000 than scikit-image's?",
+    doc=("docs/colour-benchmarks.md", "speed-colour"),
+    run_time="5 min",
+    quick_time="15 s",
+    options={"part": ("functions", "functions (against colour-science) or ciede2000 "
+                                   "(delta_e_2000 against colour-science and scikit-image)"),
+             "repeat": (0, "timing repeats, best kept (0: 5, or 1 with --quick)"),
+             "only": ("", "functions: only names containing one of these (comma-separated)"),
+             "memory": (True, "functions: measure peak memory with tracemalloc"),
+             "n": (1_000_000, "ciede2000: number of Lab pairs"),
+             "seed": (0, "random inputs")},
+)
 
 MB = 1024.0 * 1024.0
 HOT = "hot"  # a row at a hot-path size: the 1.5x rule applies
 COLD = "one-off"  # (3, 3) matrices, whites, cached weights: delegate whatever the ratio
 
 
-def _best_pair(ours, theirs, repeat):
+def _best_pair(ours, theirs, repeat, *, boost=True):
     """Best-of-``repeat`` seconds of two callables, timed alternately in one loop.
 
-    Calls under 0.1 s get 5x the repeats (the shared machine's noise is larger there).
+    With ``boost`` (a full run), calls under 0.1 s get 5x the repeats (the shared machine's
+    noise is larger there) and the garbage collector runs before each call (a quick run
+    skips it: with colour-science imported one collection takes ~0.1 s).
     """
     t0 = time.perf_counter()
     theirs()
-    repeat = repeat if time.perf_counter() - t0 > 0.1 else 5 * repeat
+    repeat = repeat if not boost or time.perf_counter() - t0 > 0.1 else 5 * repeat
     best = [float("inf"), float("inf")]
     for _ in range(repeat):
         for k, fn in enumerate((ours, theirs)):
-            gc.collect()
+            if boost:
+                gc.collect()
             t0 = time.perf_counter()
             fn()
             best[k] = min(best[k], time.perf_counter() - t0)
     return best
 
 
-def _peak_mb(fn):
+def _peak_mb(fn, *, collect=True):
     """Peak traced memory (MB) of one call above what was allocated before it."""
-    gc.collect()
+    if collect:
+        gc.collect()
     tracemalloc.start()
     try:
         base = tracemalloc.get_traced_memory()[0]
@@ -81,6 +104,19 @@ def _max_abs(a, b):
         return float(np.nanmax(np.abs(a - b)))
 
 
+def lab_pairs(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` random Lab pairs: half near each other (ΔLab ~ N(0, 5)), half independent."""
+    rng = np.random.default_rng(seed)
+
+    def lab(k):
+        return np.column_stack([rng.uniform(0, 100, k), rng.uniform(-128, 128, k),
+                                rng.uniform(-128, 128, k)])
+
+    lab1 = lab(n)
+    half = n // 2
+    return lab1, np.concatenate([lab1[:half] + rng.normal(0, 5, (half, 3)), lab(n - half)])
+
+
 def _cases(args):  # noqa: C901  (one flat list of cases reads best)
     import colour
 
@@ -88,10 +124,11 @@ def _cases(args):  # noqa: C901  (one flat list of cases reads best)
     from microfacet.colour import colorimetry
 
     rng = np.random.default_rng(args.seed)
-    h, w = (750, 1000) if args.quick else (3000, 4000)
+    h, w = (150, 200) if args.quick else (3000, 4000)
     img_label = f"{h}x{w}x3"
-    tables = (10**5,) if args.quick else (10**5, 10**6)
-    n_spectra = (10**4,) if args.quick else (10**4, 10**5)
+    tables = (10**4,) if args.quick else (10**5, 10**6)
+    n_spectra = (10**3,) if args.quick else (10**4, 10**5)
+    n_pairs = 10**4 if args.quick else 10**6
 
     cs = colour.RGB_COLOURSPACES["sRGB"]
     # The same sRGB as microfacet's: IEC matrix, its exact inverse, white = M @ (1, 1, 1).
@@ -210,6 +247,14 @@ def _cases(args):  # noqa: C901  (one flat list of cases reads best)
                 lambda r=r: colour.msds_to_XYZ(r, cmfs, ill, method="Integration",
                                                shape=shape) / 100.0, HOT)
 
+    # -- CIEDE2000 (ours is float32 throughout for float32 input)
+    lab1, lab2 = lab_pairs(n_pairs, args.seed)
+    for dt in (np.float32, np.float64):
+        a, b = lab1.astype(dt), lab2.astype(dt)
+        add("delta_e_2000", f"({n_pairs:.0e}, 3) pairs", dt,
+            lambda a=a, b=b: mc.delta_e_2000(a, b),
+            lambda a=a, b=b: colour.delta_E(a, b, method="CIE 2000"), HOT)
+
     # -- whole image paths (the analysis: uint8 camera image -> Lab; Lab -> uint8 preview)
     add("srgb_to_lab", img_label, np.uint8, lambda: mc.srgb_to_lab(img8),
         lambda: srgb_to_lab_colour(img8), HOT)
@@ -228,20 +273,12 @@ def _rule(ratio, mem_ratio, kind):
     return "comparable: delegate"
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="small sizes, best of 2")
-    parser.add_argument("--repeat", type=int, default=None, help="repeats (best is kept)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--only", nargs="*", default=None,
-                        help="run only functions whose name contains one of these")
-    parser.add_argument("--no-memory", action="store_true", help="skip tracemalloc runs")
-    args = parser.parse_args(argv)
-    repeat = args.repeat or (2 if args.quick else 5)
-    if repeat < 1:
-        parser.error("--repeat must be >= 1")
+class _Args:
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
 
-    warnings.simplefilter("ignore")
+
+def functions_table(args) -> str:
     import colour
 
     import microfacet
@@ -250,28 +287,82 @@ def main(argv=None):
     cases = _cases(args)
     if args.only:
         cases = [c for c in cases if any(s in c["fn"] for s in args.only)]
-
-    print(f"colour-science {colour.__version__}, numpy {np.__version__}, "
-          f"Python {platform.python_version()}, {platform.machine()}; best of {repeat}; "
-          f"microfacet from {microfacet.__file__.rsplit('/microfacet/', 1)[0]}")
-    print()
-    print("| function | size | dtype | ours ms | colour-science ms | ratio | max abs diff "
-          "| peak MB ours / theirs | rule |")
-    print("|---|---|---|---:|---:|---:|---:|---:|---|")
+    note(f"colour-science {colour.__version__}, numpy {np.__version__}, "
+         f"Python {platform.python_version()}, {platform.machine()}; best of {args.repeat}; "
+         f"microfacet from {microfacet.__file__.rsplit('/microfacet/', 1)[0]}")
+    rows = []
     for c in cases:
-        t_ours, t_theirs = _best_pair(c["ours"], c["theirs"], repeat)
+        t_ours, t_theirs = _best_pair(c["ours"], c["theirs"], args.repeat,
+                                       boost=not args.quick)
         diff = _max_abs(c["ours"](), c["theirs"]())
-        if args.no_memory:
+        if not args.memory:
             m_ours = m_theirs = float("nan")
         else:
-            m_ours, m_theirs = _peak_mb(c["ours"]), _peak_mb(c["theirs"])
+            m_ours, m_theirs = (_peak_mb(c[k], collect=not args.quick)
+                                for k in ("ours", "theirs"))
         ratio = t_theirs / t_ours
         mem_ratio = m_theirs / m_ours if m_ours > 0 else float("nan")
         ms = (lambda t: f"{t * 1e3:.3f}") if t_ours < 1e-3 else (lambda t: f"{t * 1e3:.1f}")
-        print(f"| {c['fn']} | {c['size']} | {c['dtype']} | {ms(t_ours)} | {ms(t_theirs)} | "
-              f"{ratio:.2f} | {diff:.1e} | {m_ours:.1f} / {m_theirs:.1f} | "
-              f"{_rule(ratio, mem_ratio, c['kind'])} |", flush=True)
+        rows.append([c["fn"], c["size"], c["dtype"], ms(t_ours), ms(t_theirs), f"{ratio:.2f}",
+                     f"{diff:.1e}", f"{m_ours:.1f} / {m_theirs:.1f}",
+                     _rule(ratio, mem_ratio, c["kind"])])
+        note(" | ".join(rows[-1]))
+    table = md_table(["function", "size", "dtype", "ours ms", "colour-science ms", "ratio",
+                      "max abs diff", "peak MB ours / theirs", "rule"], rows)
+    # right-align the numeric columns, as the doc's table
+    lines = table.splitlines()
+    lines[1] = "|---|---|---|---:|---:|---:|---:|---:|---|"
+    return (f"colour-science {colour.__version__}, numpy {np.__version__}, Python "
+            f"{platform.python_version()}, {platform.machine()}; best of {args.repeat}\n\n"
+            + "\n".join(lines))
 
 
-if __name__ == "__main__":
-    main()
+def ciede2000_table(n: int, repeat: int, seed: int) -> str:
+    import colour
+    import skimage
+    from skimage.color import deltaE_ciede2000
+
+    from microfacet.colour import delta_e_2000
+
+    lab1, lab2 = lab_pairs(n, seed)
+    lab1_32, lab2_32 = lab1.astype(np.float32), lab2.astype(np.float32)
+    ref = colour.delta_E(lab1, lab2, method="CIE 2000")
+    ref32 = colour.delta_E(lab1_32.astype(np.float64), lab2_32.astype(np.float64),
+                           method="CIE 2000")
+    methods = [
+        ("microfacet float64", lambda: delta_e_2000(lab1, lab2), ref),
+        ("microfacet float32", lambda: delta_e_2000(lab1_32, lab2_32), ref32),
+        (f"colour-science {colour.__version__}",
+         lambda: colour.delta_E(lab1, lab2, method="CIE 2000"), ref),
+        (f"scikit-image {skimage.__version__}", lambda: deltaE_ciede2000(lab1, lab2), ref),
+    ]
+    rows = []
+    for name, fn, reference in methods:
+        best, out = float("inf"), None
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            out = fn()
+            best = min(best, time.perf_counter() - t0)
+        rows.append((name, best, float(np.max(np.abs(np.asarray(out, np.float64) - reference)))))
+    base = rows[0][1]
+    note(f"n = {n} pairs, best of {repeat}; numpy {np.__version__}, Python "
+         f"{platform.python_version()}, {platform.machine()}")
+    table = md_table(["method", "ms per 1e6 pairs", "pairs/s",
+                      "time ratio vs microfacet float64", "max abs(dE - colour dE)"],
+                     [[name, f"{t * 1e3 * 1e6 / n:.1f}", f"{n / t:.3g}", f"{t / base:.2f}",
+                       f"{err:.1e}"] for name, t, err in rows])
+    lines = table.splitlines()
+    lines[1] = "|---|---:|---:|---:|---:|"
+    return "\n".join(lines)
+
+
+def run(*, quick: bool, out: Path, part="functions", repeat=0, only="", memory=True,
+        n=1_000_000, seed=0) -> str:
+    repeat = repeat or (1 if quick else 5)
+    warnings.simplefilter("ignore")
+    if part == "ciede2000":
+        return ciede2000_table(min(n, 10**5) if quick else n, repeat, seed)
+    if part != "functions":
+        raise ValueError(f"part: functions or ciede2000, got {part!r}")
+    return functions_table(_Args(quick=quick, repeat=repeat, seed=seed, memory=memory,
+                                 only=[x for x in (only or "").split(",") if x]))
