@@ -1,11 +1,10 @@
 """Identification (microfacet.analysis.identification): whether colour can carry tilt
-(against docs/conditioning.md), the thickness and NDF reasons, the user warnings, and the
-distributions stage of the joint mode on a small synthetic stack (with and without focus
-information)."""
+(against docs/conditioning.md), the thickness and NDF judgements and their structured
+reasons, and the user warnings. The distributions stage that calls them on a real analysis:
+test_distributions.py."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from types import SimpleNamespace as NS
 
@@ -13,27 +12,29 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from microfacet.analysis import AnalysisOptions, analyze_stack
+from microfacet.analysis.distributions import Distributions
 from microfacet.analysis.identification import (
-    AMBIGUOUS_ORDER_DE,
-    EXCESS_DELTA_E,
-    MAX_WIDTH_ERROR,
     MEDIAN_NOISE_FLOOR_FACTOR,
-    MIN_NDF_FACETS,
+    NO_SAMPLES,
     NOISE_FLOOR_FACTOR,
+    Judgement,
+    NdfEvidence,
+    Reason,
+    ambiguous_order,
     analysis_warnings,
     colour_tilt_contrast,
-    fit_joint_distributions,
     mean_plane_tilt_deg,
-    thickness_reason,
+    ndf_judgement,
+    seed_ndf_judgement,
+    thickness_judgement,
     unexplained_facets,
 )
 from microfacet.analysis.mixtures import MixtureFit
+from microfacet.analysis.options import FitOptions
+from microfacet.colour.model import FilmColourModel
 from microfacet.core.distributions import ThicknessMixture
-from microfacet.forward.synth import generate_stack, preset
-from microfacet.io.stack import read_stack, write_stack
 
-N_SLICES = 8
+OPTIONS = FitOptions()
 
 # ------------------------------------------------------------------ colour_tilt_contrast
 
@@ -43,6 +44,11 @@ def table():
     from microfacet.colour.table import build_colour_table
 
     return build_colour_table(thickness_range_nm=(30.0, 160.0), theta_range_deg=(0.0, 20.0))
+
+
+@pytest.fixture(scope="module")
+def model(table):
+    return FilmColourModel(table)
 
 
 def _raw_tilt_change(table, d, tilt=10.0):
@@ -65,29 +71,36 @@ def test_tilt_colour_change_agrees_with_the_conditioning_page(table, d, j10):
     assert _raw_tilt_change(table, d) == pytest.approx(expected, rel=0.3)
 
 
-def test_colour_tilt_contrast_is_small_at_a_thin_film(table):
+def test_colour_tilt_contrast_is_small_at_a_thin_film(table, model):
     # docs/conditioning.md: at 51 nm σ_tilt is 17° at 10° with σ_n = 1 ("tilt from colour is
     # weak everywhere"; "1° of tilt at 10° looks like 0.1 nm of thickness"): a 10° tilt at
     # 51 nm is mimicked by a thickness change, far below half a ΔE00
-    c = colour_tilt_contrast(table, 51.0, exposure=1.0)
+    c = colour_tilt_contrast(model, 51.0)
     assert 0.0 <= c < 0.5
     # never more than the tilt's raw change (d itself is among the candidate thicknesses)
     for d in (51.0, 100.0, 130.0):
-        assert colour_tilt_contrast(table, d, exposure=1.0) <= _raw_tilt_change(table, d) + 1e-3
+        assert colour_tilt_contrast(model, d) <= _raw_tilt_change(table, d) + 1e-3
     # and at 130 nm, where the raw change is > 1 ΔE00, a ±10 % thickness change still
     # mimics most of it ("one degree ≙ 0.06 nm")
-    assert colour_tilt_contrast(table, 130.0, exposure=1.0) < 0.5 * _raw_tilt_change(table, 130.0)
+    assert colour_tilt_contrast(model, 130.0) < 0.5 * _raw_tilt_change(table, 130.0)
 
 
-def test_colour_tilt_contrast_grows_with_the_tilt(table):
+def test_colour_tilt_contrast_grows_with_the_tilt(model):
     # a tilt of 0° changes nothing; the contrast is a distance, ≥ 0
-    assert colour_tilt_contrast(table, 51.0, exposure=1.0, tilt_deg=0.0) == pytest.approx(
-        0.0, abs=1e-3)
-    c = [colour_tilt_contrast(table, 130.0, exposure=1.0, tilt_deg=t) for t in (5.0, 20.0)]
+    assert colour_tilt_contrast(model, 51.0, tilt_deg=0.0) == pytest.approx(0.0, abs=1e-3)
+    c = [colour_tilt_contrast(model, 130.0, tilt_deg=t) for t in (5.0, 20.0)]
     assert 0.0 <= c[0] <= c[1]
 
 
-# ------------------------------------------------------------------ thickness_reason
+def test_colour_tilt_contrast_uses_the_models_colour_difference(table):
+    """The contrast is measured in the model's ΔE: CIE76 differences are larger than
+    CIEDE2000's for these chromatic colours."""
+    c76 = colour_tilt_contrast(FilmColourModel(table, delta_e_method="CIE76"), 130.0)
+    c00 = colour_tilt_contrast(FilmColourModel(table), 130.0)
+    assert c76 > c00 > 0
+
+
+# ------------------------------------------------------------------ thickness_judgement
 
 
 def _roi(thickness, ambiguity, runner_up=None):
@@ -97,34 +110,112 @@ def _roi(thickness, ambiguity, runner_up=None):
                                       else np.asarray(runner_up, float)))
 
 
-def test_thickness_reason_empty_for_unambiguous_rois():
-    assert thickness_reason(_roi([120, 131, 140, 150], [5.0, 3.0, 2.0, 8.0])) == ""
+def _why(roi, options=OPTIONS, **kw):
+    """The thickness judgement's sentence with option paths ("" when identified)."""
+    j = thickness_judgement(roi, options, **kw)
+    assert j.identified == (j.reason is None)
+    return "" if j.identified else j.reason.plain()
+
+
+def test_ambiguous_order_is_a_runner_up_within_the_threshold():
+    thr = OPTIONS.ambiguous_order_de
+    gaps = np.array([0.0, thr - 0.01, thr, thr + 0.01, np.nan, np.inf])
+    assert ambiguous_order(gaps, thr).tolist() == [True, True, False, False, False, False]
+
+
+def test_thickness_identified_for_unambiguous_rois():
+    assert _why(_roi([120, 131, 140, 150], [5.0, 3.0, 2.0, 8.0])) == ""
     # exactly half ambiguous is not "most"
-    assert thickness_reason(_roi([120, 131, 140, 150], [0.2, 0.3, 2.0, 8.0])) == ""
+    assert _why(_roi([120, 131, 140, 150], [0.2, 0.3, 2.0, 8.0])) == ""
 
 
-def test_thickness_reason_names_the_ambiguous_regions():
+def test_thickness_reason_names_the_ambiguous_regions_and_the_option():
     roi = _roi([120, 131, 140, 150, np.nan], [0.2, 0.9, 0.1, 8.0, 0.0],
                runner_up=[240, 262, 287, 300, 10])
-    r = thickness_reason(roi)
+    j = thickness_judgement(roi, OPTIONS)
+    assert not j.identified
+    r = j.reason.plain()
     # 3 of the 4 ROIs with a value (the NaN ROI does not count); the example is the most
     # ambiguous one (140 nm, runner-up 287 nm)
     assert "3 of 4 regions" in r
     assert "140 nm" in r and "287 nm" in r
-    assert "--thickness-range" in r
+    # structured: a code, the option to act on, named by its path (a flag on the command line)
+    assert j.reason.code == "order_ambiguous"
+    assert j.reason.parameter == "optics.thickness_range_nm"
+    assert "`optics.thickness_range_nm`" in j.reason.text and "`" not in r
+    assert "--thickness-range-nm" in j.reason.render(
+        {"optics.thickness_range_nm": "--thickness-range-nm"})
+    assert j.to_json() == {"identified": False, "reason": r, "reason_code": "order_ambiguous",
+                           "reason_parameter": "optics.thickness_range_nm"}
+
+
+def test_the_ambiguity_threshold_is_the_options():
+    roi = _roi([120, 131, 140], [0.5, 0.6, 8.0])
+    assert _why(roi) != ""                                   # 0.5 and 0.6 < 1 ΔE
+    assert _why(roi, FitOptions(ambiguous_order_de=0.4)) == ""
 
 
 def test_thickness_reason_edge_and_joint_mode():
     unamb = _roi([120, 131], [5.0, 5.0])
-    assert thickness_reason(unamb, edge_fraction=0.4) == ""
-    edge = thickness_reason(unamb, edge_fraction=0.7)
-    assert "70 %" in edge and "edge" in edge
+    assert _why(unamb, edge_fraction=0.4) == ""
+    edge = thickness_judgement(unamb, OPTIONS, edge_fraction=0.7).reason
+    assert "70 %" in edge.plain() and "edge" in edge.plain()
+    assert edge.code == "order_window_edge" and edge.parameter == "optics.film"
     # joint mode: by area (other_order_fraction), whatever the ROIs say
     amb_rois = _roi([120, 131], [0.1, 0.1])
-    assert thickness_reason(amb_rois, other_order_fraction=0.2) == ""
-    r = thickness_reason(unamb, other_order_fraction=0.8)
+    assert _why(amb_rois, other_order_fraction=0.2) == ""
+    r = _why(unamb, other_order_fraction=0.8)
     assert "80 %" in r and "interference order uncertain" in r
-    assert "70 %" in thickness_reason(unamb, edge_fraction=0.7, other_order_fraction=0.1)
+    assert "70 %" in _why(unamb, edge_fraction=0.7, other_order_fraction=0.1)
+    assert Judgement(True).to_json() == {"identified": True, "reason": "", "reason_code": None,
+                                         "reason_parameter": None}
+
+
+# ------------------------------------------------------------------ ndf_judgement
+
+
+def _evidence(**kw):
+    e = dict(n_fit=100, n_total=120, plane_area_fraction=0.9, width_relative_error=0.1,
+             censored_fraction=0.1, colour_contrast_de=0.1, colour_error_de=1.0,
+             thickness_nm=51.0)
+    return NdfEvidence(**(e | kw))
+
+
+def test_ndf_identified_at_the_options_limits():
+    o = OPTIONS
+    assert ndf_judgement(_evidence(), o).identified
+    assert ndf_judgement(_evidence(n_fit=o.min_ndf_facets,
+                                   width_relative_error=o.max_width_error,
+                                   censored_fraction=o.max_censored_fraction), o).identified
+    for kw, code in (({"n_fit": o.min_ndf_facets - 1}, "few_planes"),
+                     ({"width_relative_error": o.max_width_error + 0.01}, "noisy_slopes"),
+                     ({"censored_fraction": o.max_censored_fraction + 0.01}, "censored")):
+        j = ndf_judgement(_evidence(**kw), o)
+        assert not j.identified and j.reason.code == code, kw
+    # censoring is named before the other reasons
+    j = ndf_judgement(_evidence(n_fit=0, censored_fraction=0.9), o)
+    assert j.reason.code == "censored" and "90 % of the surface" in j.reason.plain()
+
+
+def test_ndf_reason_says_whether_colour_could_stand_in():
+    weak = ndf_judgement(_evidence(n_fit=0, n_total=40, plane_area_fraction=0.0), OPTIONS)
+    assert "height from focus gives a plane on 0 of 40 facets (0.0 % of the area)" in \
+        weak.reason.plain()
+    assert "colour cannot carry tilt at 51 nm" in weak.reason.plain()
+    assert weak.reason.parameter is None
+    # contrast above colour_contrast_factor × the facet colour error: try the seed mode
+    strong = ndf_judgement(_evidence(n_fit=0, colour_contrast_de=3.1, colour_error_de=1.0),
+                           OPTIONS)
+    assert strong.reason.parameter == "mode" and "`mode` seed" in strong.reason.text
+    assert "try mode seed" in strong.reason.plain()
+
+
+def test_seed_ndf_identified_only_where_colour_carries_tilt():
+    f = OPTIONS.colour_contrast_factor
+    assert seed_ndf_judgement(f * 0.5 + 0.01, 130.0, 0.5, OPTIONS).identified
+    j = seed_ndf_judgement(f * 0.5 - 0.01, 130.0, 0.5, OPTIONS)
+    assert not j.identified and j.reason.code == "colour_only" and j.reason.parameter == "mode"
+    assert "130 nm" in j.reason.plain()
 
 
 # ------------------------------------------------------------------ analysis_warnings
@@ -137,160 +228,61 @@ def test_noise_floor_factors_are_those_of_three_gaussian_components():
                                                       abs=1e-4)
 
 
-def _fit(identified=True, reason=""):
-    return MixtureFit(ThicknessMixture([(1.0, 130.0, 3.0)]), 0.0, {1: 0.0}, 10, 10.0,
-                      identified=identified, reason=reason)
+def _fit():
+    return MixtureFit(ThicknessMixture([(1.0, 130.0, 3.0)]), 0.0, {1: 0.0}, 10, 10.0)
+
+
+def _dist(roi=None, *, thickness=True, ndf=True, tj=Judgement(True), nj=Judgement(True),
+          ndf_fit=None):
+    """Distributions with the ROI flags the distributions stage computes (ambiguous: a
+    runner-up within ``fits.ambiguous_order_de``)."""
+    roi = _roi([130.0, 131.0], [5.0, 5.0]) if roi is None else roi
+    fitted = np.isfinite(roi.thickness_nm)
+    amb = fitted & ambiguous_order(roi.ambiguity_delta_e, OPTIONS.ambiguous_order_de)
+    return Distributions(_fit() if thickness else None,
+                         ndf_fit if ndf_fit is not None else (_fit() if ndf else None),
+                         tj, nj, amb, fitted)
+
+
+def _warn(dist, *, median=1.0, noise=1.0, tilt=None, options=OPTIONS):
+    return analysis_warnings(dist, delta_e_median=median, noise_de=noise, mean_plane_tilt=tilt,
+                             options=options)
 
 
 def test_analysis_warnings_none_when_all_is_well():
-    roi = _roi([130.0, 131.0], [5.0, 5.0])
-    assert analysis_warnings(thickness_fit=_fit(), ndf_fit=_fit(), roi=roi,
-                             delta_e_median=1.0, noise_de=1.0) == []
-    assert analysis_warnings(thickness_fit=_fit(), ndf_fit=_fit(), roi=roi,
-                             delta_e_median=None, noise_de=1.0) == []
+    assert _warn(_dist()) == []
+    assert _warn(_dist(), median=None) == []
 
 
 def test_analysis_warnings_lines():
-    roi = _roi([130.0, 131.0, 150.0, np.nan], [0.2, 5.0, AMBIGUOUS_ORDER_DE - 0.01, 0.0])
-    w = analysis_warnings(thickness_fit=_fit(False, "the order is uncertain"),
-                          ndf_fit=_fit(False, "no height"), roi=roi, delta_e_median=1.0,
-                          noise_de=1.0)
-    assert len(w) == 3
-    assert w[0].startswith("thickness distribution not identified") and \
-        w[0].endswith("the order is uncertain")
-    assert w[1].startswith("NDF not identified") and w[1].endswith("no height")
-    assert w[2].startswith("2 of 3 ROIs have an ambiguous interference order")
-    missing = analysis_warnings(thickness_fit=None, ndf_fit=_fit(), roi=_roi([1.0], [9.0]),
-                                delta_e_median=None, noise_de=1.0)
-    assert len(missing) == 1 and "no thickness values" in missing[0]
+    roi = _roi([130.0, 131.0, 150.0, np.nan], [0.2, 5.0, OPTIONS.ambiguous_order_de - 0.01, 0.0])
+    w = _warn(_dist(roi, tj=Judgement(False, Reason("x", "the order is uncertain")),
+                    nj=Judgement(False, Reason("y", "no height", "mode"))))
+    assert len(w) == 3 and all(isinstance(x, Reason) for x in w)
+    assert w[0].plain().startswith("thickness distribution not identified") and \
+        w[0].plain().endswith("the order is uncertain")
+    assert w[0].code == "not_identified_thickness"
+    assert w[1].plain().startswith("NDF not identified") and w[1].plain().endswith("no height")
+    assert w[1].code == "not_identified_ndf" and w[1].parameter == "mode"
+    assert w[2].plain().startswith("2 of 3 ROIs have an ambiguous interference order")
+    assert w[2].code == "ambiguous_rois" and w[2].parameter == "optics.thickness_range_nm"
+    missing = _warn(_dist(_roi([1.0], [9.0]), thickness=False, tj=NO_SAMPLES["thickness"]),
+                    median=None)
+    assert len(missing) == 1 and "no thickness values" in missing[0].plain()
+    assert "inspection only" not in missing[0].plain()          # there is no fit to inspect
 
 
 def test_analysis_warnings_excess_delta_e_threshold():
     # the median ΔE00 of pure noise σ per Lab component is σ·sqrt(median χ²₃)
-    roi = _roi([130.0], [5.0])
+    excess = OPTIONS.excess_delta_e
     for noise in (0.5, 2.0):
         floor = noise * math.sqrt(stats.chi2(3).median())
-
-        def warn(median):
-            return analysis_warnings(thickness_fit=_fit(), ndf_fit=_fit(), roi=roi,
-                                     delta_e_median=median, noise_de=noise)
-        assert warn(floor + EXCESS_DELTA_E - 0.01) == []
-        w = warn(floor + EXCESS_DELTA_E + 0.01)
-        assert len(w) == 1 and w[0].startswith(f"median dE00 {floor + EXCESS_DELTA_E + 0.01:.2f}")
-        assert "noise floor" in w[0]
-
-
-# ------------------------------------------------------------------ the joint mode's fits
-
-
-@pytest.fixture(scope="module")
-def nd(tmp_path_factory):
-    """A small nd stack (96×96 px, 8 slices), its joint analysis, and the same slice 8
-    times (no focus information) analysed too."""
-    root = tmp_path_factory.mktemp("ident")
-    path = root / "nd"
-    generate_stack(path, preset("nd", height_px=96, width_px=96, n_slices=N_SLICES, seed=3))
-    r = analyze_stack(path, AnalysisOptions(mode="joint"))
-    st = read_stack(path)
-    mid = np.round(st.read_slice(N_SLICES // 2) * 255).astype(np.uint8)
-    write_stack(root / "same", [mid] * N_SLICES, z_step_um=0.5, pixel_size_um=st.pixel_size_um,
-                illumination=st.illumination)
-    same = analyze_stack(root / "same", AnalysisOptions(mode="joint"))
-    return {"path": path, "result": r, "same": same}
-
-
-def test_joint_ndf_identified_with_good_heights(nd):
-    r = nd["result"]
-    assert r.focus.reliable.mean() > 0.5                  # the premise: heights are good
-    nfit = r.ndf_fit
-    assert nfit.identified is True and nfit.reason == ""
-    assert nfit.info["facets"] >= MIN_NDF_FACETS
-    assert nfit.info["width_relative_error"] <= MAX_WIDTH_ERROR
-    # one sample per facet with a height plane: the facets used are the independent samples
-    assert nfit.n_samples == nfit.info["facets"]
-    assert nfit.info["samples"].startswith("facet plane tilts")
-    assert not any(w.startswith("NDF not identified") for w in r.warnings)
-    tfit = r.thickness_fit
-    j = r.joint
-    cens_frac = np.bincount(j.facets.ravel(), weights=j.censored.ravel(),
-                            minlength=j.area_px.size) / j.area_px
-    samples = (np.isfinite(j.thickness.thickness_nm) & (cens_frac < 0.5)
-               & ~unexplained_facets(j.thickness.delta_e))
-    assert tfit.identified and tfit.info["facets"] == int(samples.sum()) == tfit.n_samples
-    # n_eff: the area-weighted count of the thickness regions, at most their number
-    assert 1.0 <= tfit.n_effective <= tfit.info["thickness_regions"]
-
-
-def test_joint_ndf_not_identified_without_focus_information(nd):
-    s = nd["same"]
-    assert not s.focus.reliable.any()                      # the premise: no focus information
-    nfit = s.ndf_fit
-    assert nfit is not None and nfit.identified is False
-    assert "height" in nfit.reason
-    assert nfit.info["facets"] == 0
-    assert nfit.info["samples"].startswith("per-pixel tilt")
-    # colour at ~115 nm cannot stand in (a 10° tilt is mimicked by a thickness change)
-    assert "colour cannot carry tilt" in nfit.reason
-    assert any(w.startswith("NDF not identified") and "height" in w for w in s.warnings)
-
-
-def test_joint_ndf_reason_without_focus_names_the_missing_heights(nd):
-    s = nd["same"]
-    j = s.joint
-    dark = float(j.censored.mean())
-    assert dark < 0.05                              # the premise: few dark pixels, if any
-    # the reason is the missing heights, not censoring of "100 %" of the surface
-    reason = s.ndf_fit.reason
-    assert f"height from focus gives a plane on 0 of {j.area_px.size} facets" in reason
-    assert "tilted past the objective's acceptance" not in reason
-
-
-def _usable_planes(r):
-    """Facets whose plane tilt the NDF may use: fitted, finite, not dark, within the
-    acceptance (steeper planes count as censored)."""
-    j = r.joint
-    cens_frac = np.bincount(j.facets.ravel(), weights=j.censored.ravel(),
-                            minlength=j.area_px.size) / j.area_px
-    t = j.planes.tilt_deg
-    return (j.planes.fitted & np.isfinite(t) & (cens_frac < 0.5)
-            & (np.nan_to_num(t, nan=90.0) <= r.max_tilt_deg))
-
-
-def test_joint_ndf_few_planes_is_not_identified(nd):
-    r = nd["result"]
-    j = r.joint
-    keep = np.flatnonzero(_usable_planes(r))[:MIN_NDF_FACETS - 5]
-    fitted = np.zeros_like(j.planes.fitted)
-    fitted[keep] = True
-    few = dataclasses.replace(j, planes=dataclasses.replace(j.planes, fitted=fitted),
-                              censored=np.zeros_like(j.censored))
-    _, nfit = fit_joint_distributions(few, roi=r.roi, table=r.table,
-                                      max_tilt_deg=r.max_tilt_deg)
-    assert nfit.identified is False
-    assert f"plane on {keep.size} of {j.area_px.size} facets" in nfit.reason
-    assert nfit.n_samples == keep.size
-
-
-def test_joint_ndf_mostly_censored_is_not_identified(nd):
-    r = nd["result"]
-    j = r.joint
-    # the largest facets, covering more than 60 % of the area, past the acceptance (dark)
-    order = np.argsort(j.area_px)[::-1]
-    n = int(np.searchsorted(np.cumsum(j.area_px[order]), 0.6 * j.area_px.sum())) + 1
-    dark = np.isin(j.facets, order[:n])
-    cens = dataclasses.replace(j, censored=dark)
-    _, nfit = fit_joint_distributions(cens, roi=r.roi, table=r.table,
-                                      max_tilt_deg=r.max_tilt_deg)
-    used = _usable_planes(NS(joint=cens, max_tilt_deg=r.max_tilt_deg))
-    steep = (j.planes.fitted & ~np.isin(np.arange(j.area_px.size), order[:n])
-             & (np.nan_to_num(j.planes.tilt_deg) > r.max_tilt_deg))
-    c = dark.sum() + j.area_px[steep].sum()
-    frac = c / (c + j.area_px[used].sum())
-    assert frac > 0.5
-    assert nfit.identified is False
-    assert f"{100 * frac:.0f} % of the surface is tilted past" in nfit.reason
-    assert nfit.info["censored_fraction"] == pytest.approx(frac, rel=1e-9)
-    assert nfit.n_samples == int(used.sum())
+        assert _warn(_dist(), median=floor + excess - 0.01, noise=noise) == []
+        w = _warn(_dist(), median=floor + excess + 0.01, noise=noise)
+        assert len(w) == 1 and w[0].plain().startswith(f"median dE00 {floor + excess + 0.01:.2f}")
+        assert "noise floor" in w[0].plain() and w[0].code == "colours_unexplained"
+    # the margin is the option
+    assert _warn(_dist(), median=floor + 0.5, noise=2.0, options=FitOptions(excess_delta_e=0.4))
 
 
 def _joint_with_planes(slope_x, slope_y, area):
@@ -318,8 +310,24 @@ def test_mean_plane_tilt_is_the_area_weighted_facet_slope():
 
 @pytest.mark.parametrize("tilt,warned", [(1.9, False), (2.1, True)])
 def test_a_sample_tilted_by_half_the_ndf_width_is_reported(tilt, warned):
-    ndf = NS(mixture=NS(rms_sd_deg=4.0), identified=True, reason="")
-    roi = NS(thickness_nm=np.array([100.0]), ambiguity_delta_e=np.array([9.0]))
-    w = analysis_warnings(thickness_fit=None, ndf_fit=ndf, roi=roi, delta_e_median=None,
-                          noise_de=1.0, mean_plane_tilt_deg=tilt)
-    assert any("mean plane is tilted" in x for x in w) == warned
+    assert OPTIONS.sample_tilt_warn_fraction == 0.5
+    dist = _dist(_roi([100.0], [9.0]), ndf_fit=NS(mixture=NS(rms_sd_deg=4.0)))
+    w = _warn(dist, median=None, tilt=tilt)
+    assert any("mean plane is tilted" in x.plain() for x in w) == warned
+    assert [x.code for x in w] == (["sample_tilted"] if warned else [])
+
+
+def test_unexplained_facets_are_robust_outliers():
+    rng = np.random.default_rng(4)
+    de = rng.normal(1.0, 0.3, 200)
+    de[:3] = [9.0, 12.0, np.nan]
+    out = unexplained_facets(de, OPTIONS.unexplained_mads)
+    assert out[:2].all() and not out[2:].any()
+    # the cut is median + mads × 1.4826 MAD (computed here): just below stays, above goes
+    med = np.nanmedian(de)
+    mad = 1.4826 * np.nanmedian(np.abs(de - med))
+    de[3], de[4] = med + 4.5 * mad, med + 5.5 * mad
+    out = unexplained_facets(de, 5.0)
+    assert not out[3] and out[4]
+    assert not unexplained_facets(de, 6.0)[4]
+    assert not unexplained_facets(np.array([1.0, 9.0, 1.0, np.nan]), 5.0).any()   # < 5 facets
