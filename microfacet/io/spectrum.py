@@ -172,6 +172,28 @@ def read_spectrum(path, *, columns=None) -> Spectrum:
     if not path.is_file():
         raise InputError(f"{shown}: no such file")
     wanted = parse_columns(columns) if columns is not None else None
+    lines, notes = _open_lines(path, shown)
+    previous, first = _first_numeric_row(lines, shown)
+    header, delim = _layout(previous, first, notes)
+    iw, ir = _choose_columns(shown, header, len(_split(first[1], delim)), wanted, notes)
+    names = [_column_name(header, i) for i in (iw, ir)]
+    wl, R = _read_numbers(shown, _chain([first[:2]], lines), delim, (iw, ir), names)
+    distinct = np.unique(wl).size
+    if distinct < MIN_WAVELENGTHS:
+        raise InputError(f"{shown}: column {names[0]}: {distinct} distinct wavelength(s) "
+                         f"in {len(wl)} rows; a thickness fit needs at least {MIN_WAVELENGTHS}")
+    wl = _wavelength_unit(wl, names[0], header is not None, notes)
+    R = _reflectance_unit(shown, R, names[1], header is not None, notes)
+    _log_notes(shown, notes, distinct, R)
+    order = np.argsort(wl, kind="stable")
+    return Spectrum(wavelength_nm=wl[order], reflectance=R[order],
+                    columns=(names[0].strip("'"), names[1].strip("'")),
+                    notes=tuple(n for n, _ in notes))
+
+
+# ------------------------------------------------------------------------- read_spectrum
+def _open_lines(path, shown):
+    """An iterator over ``(lineno, text)`` and the notes so far (the encoding)."""
     notes = []
     try:
         text_lines, encoding = _read_lines(path, shown)
@@ -179,9 +201,12 @@ def read_spectrum(path, *, columns=None) -> Spectrum:
         raise InputError(f"{shown}: cannot read ({exc})") from None
     if encoding != "utf-8":
         notes.append(("not UTF-8: read as Windows-1252", logging.INFO))
-    lines = iter(text_lines)
+    return iter(text_lines), notes
 
-    # --- preamble, header and delimiter: up to the first numeric row
+
+def _first_numeric_row(lines, shown):
+    """The line before the first row of numbers (None: none) and that row,
+    ``(lineno, line, delimiter)``; ``lines`` is left after it."""
     previous, first = None, None
     for lineno, line in lines:
         if _skipped(line):
@@ -200,21 +225,26 @@ def read_spectrum(path, *, columns=None) -> Spectrum:
             raise InputError(f"{shown}: empty file")
         raise InputError(f"{shown}: no row of numbers (wavelength and reflectance) in the first "
                          f"{min(previous[0], MAX_PREAMBLE_LINES):,} lines")
-    lineno, line, delim = first
+    return previous, first
+
+
+def _layout(previous, first, notes):
+    """The header (None: none) and the delimiter, noted with the decimal comma."""
+    _, line, delim = first
     fields = _split(line, delim)
     header = _header(previous, delim) if previous is not None else None
     comma = delim != "," and any(_DECIMAL_COMMA.match(f) for f in fields)
     where = f"header on line {previous[0]}" if header else "no header"
     notes.append((f"{_DELIM_NAMES[delim]}-delimited{', decimal comma' if comma else ''}; "
                   f"{where}", logging.INFO))
+    return header, delim
 
-    iw, ir = _choose_columns(shown, header, len(fields), wanted, notes)
-    names = [_column_name(header, i) for i in (iw, ir)]
 
-    # --- the numbers
+def _read_numbers(shown, rows, delim, columns, names):
+    """Wavelengths and reflectances of the numeric ``rows`` (the chosen ``columns``)."""
+    iw, ir = columns
     wl, R = [], []
-    rows = [(lineno, line)]
-    for row_no, row in _chain(rows, lines):
+    for row_no, row in rows:
         if _skipped(row):
             continue
         parts = _split(row, delim)
@@ -231,14 +261,11 @@ def read_spectrum(path, *, columns=None) -> Spectrum:
         if len(wl) > MAX_SPECTRUM_ROWS:
             raise InputError(f"{shown}: more than {MAX_SPECTRUM_ROWS:,} rows; a spectrum has a "
                              f"few thousand at most")
-    wl, R = np.array(wl), np.array(R)
-    distinct = np.unique(wl).size
-    if distinct < MIN_WAVELENGTHS:
-        raise InputError(f"{shown}: column {names[0]}: {distinct} distinct wavelength(s) "
-                         f"in {len(wl)} rows; a thickness fit needs at least {MIN_WAVELENGTHS}")
+    return np.array(wl), np.array(R)
 
-    wl = _wavelength_unit(wl, names[0], header is not None, notes)
-    R = _reflectance_unit(shown, R, names[1], header is not None, notes)
+
+def _log_notes(shown, notes, distinct, R):
+    """Log every note, and warn about few wavelengths or an implausibly dark spectrum."""
     for note, level in notes:
         log.log(level, "%s: %s", shown, note)
     if distinct < FEW_WAVELENGTHS:
@@ -248,10 +275,6 @@ def read_spectrum(path, *, columns=None) -> Spectrum:
         log.warning("%s: the largest reflectance is %.3g (%.2g %%); anodized titanium reflects "
                     "20-60 %% at its maxima: check the file's unit (fraction or percent) or its "
                     "scale (fit_scale fits one)", shown, R.max(), 100 * R.max())
-    order = np.argsort(wl, kind="stable")
-    return Spectrum(wavelength_nm=wl[order], reflectance=R[order],
-                    columns=(names[0].strip("'"), names[1].strip("'")),
-                    notes=tuple(n for n, _ in notes))
 
 
 # ------------------------------------------------------------------------------ lines
