@@ -1,5 +1,15 @@
 """The colour stage: the all-in-focus image as CIELAB, the mask of pixels without colour
-information, and the image's colour noise (seed §3.3.3 step 2, first half)."""
+information, and the image's colour noise (seed §3.3.3 step 2, first half).
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.3 (2) (the microscope image as Lab).
+.. [2] G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula: implementation
+   notes, supplementary test data, and mathematical observations", Color Res. Appl. 30 (2005)
+   21-30, doi:10.1002/col.20070.
+"""
 
 from __future__ import annotations
 

@@ -4,6 +4,12 @@ The seed masks pixels whose HSV saturation is below 15 (on the 0-255 scale): the
 highlights and the shadows. We also mask dark pixels (facets tilted past the objective's
 acceptance reflect outside it) and pixels with a clipped channel (their colour is not the
 film's).
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.3 (2) (pixels of saturation below 15 masked: highlights and shadows).
 """
 
 from __future__ import annotations

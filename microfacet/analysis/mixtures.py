@@ -40,6 +40,23 @@ The EM (both fitters)
     Identical samples are fitted as one, with their summed weight
     (:func:`~microfacet.analysis.sampling.collapse`); the updates are computed from sums
     over (component, sample) arrays, without per-update temporaries.
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.3 and Fig. 18 (the thickness distribution as three Gaussians).
+.. [2] A. P. Dempster, N. M. Laird, D. B. Rubin, "Maximum likelihood from incomplete data via
+   the EM algorithm", J. R. Stat. Soc. B 39(1) (1977) 1-38,
+   doi:10.1111/j.2517-6161.1977.tb01600.x.
+.. [3] J. Bovy, D. W. Hogg, S. T. Roweis, "Extreme deconvolution: inferring complete
+   distribution functions from noisy, heterogeneous and incomplete observations", Ann. Appl.
+   Stat. 5(2B) (2011) 1657-1677, doi:10.1214/10-AOAS439.
+.. [4] G. Schwarz, "Estimating the dimension of a model", Ann. Statist. 6(2) (1978) 461-464,
+   doi:10.1214/aos/1176344136.
+.. [5] R. E. Kass, A. E. Raftery, "Bayes factors", J. Am. Stat. Assoc. 90(430) (1995) 773-795,
+   doi:10.1080/01621459.1995.10476572 (the evidence scale of BIC differences).
+.. [6] L. Kish, *Survey Sampling*, Wiley, New York (1965) (the effective sample size).
 """
 
 from __future__ import annotations

@@ -21,6 +21,23 @@ Weights and the model choice
     Samples are weighted by area (the NDF is a distribution per unit projected area); K by
     the BIC of :mod:`microfacet.analysis.mixtures` with its honest ``n_eff`` (facets, not
     pixels) and its admissibility rules.
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.3 and Fig. 19 (the normals as two zero-mean Gaussian lobes).
+.. [2] A. P. Dempster, N. M. Laird, D. B. Rubin, "Maximum likelihood from incomplete data via
+   the EM algorithm", J. R. Stat. Soc. B 39(1) (1977) 1-38,
+   doi:10.1111/j.2517-6161.1977.tb01600.x.
+.. [3] J. Bovy, D. W. Hogg, S. T. Roweis, "Extreme deconvolution: inferring complete
+   distribution functions from noisy, heterogeneous and incomplete observations", Ann. Appl.
+   Stat. 5(2B) (2011) 1657-1677, doi:10.1214/10-AOAS439.
+.. [4] G. Schwarz, "Estimating the dimension of a model", Ann. Statist. 6(2) (1978) 461-464,
+   doi:10.1214/aos/1176344136.
+.. [5] B. Walter, S. R. Marschner, H. Li, K. E. Torrance, "Microfacet models for refraction
+   through rough surfaces", Eurographics Symposium on Rendering (2007) 195-206,
+   doi:10.2312/EGWR/EGSR07/195-206 (Beckmann lobes).
 """
 
 from __future__ import annotations

@@ -9,8 +9,9 @@ inversion. Accuracy of both: docs/accuracy.md. Results are written by :mod:`.out
 
 References
 ----------
-.. [1] N. Nagata et al., "Simulation Technology for Titanium Oxide Layer Interference Color"
-   (the seed), §3.3.3.
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.3.
 """
 
 from __future__ import annotations

@@ -28,6 +28,15 @@ over ROIs of the best *median* ΔE (a log-spaced scan over 0.25-4, then a bounde
 refinement), on a random sample of pixels per ROI, before the per-ROI fits. The median
 keeps partly shadowed pixels (facet boundaries, grooves: right hue, too dark) from pulling
 the exposure down.
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.3 (2) (thickness per ROI of least mean ΔE).
+.. [2] G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula: implementation
+   notes, supplementary test data, and mathematical observations", Color Res. Appl. 30 (2005)
+   21-30, doi:10.1002/col.20070.
 """
 
 from __future__ import annotations

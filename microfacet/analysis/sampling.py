@@ -15,6 +15,13 @@ The samples the mixtures are fitted to are prepared here too: :func:`prepare` (f
 values, weights, errors; a reproducible subsample; the Kish size of the weights) and
 :func:`collapse` (identical samples as one, carrying their summed weight: per-pixel values
 repeat their region's or facet's, and the fits' cost grows with the samples).
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.3 and Fig. 18 (thickness regions).
+.. [2] L. Kish, *Survey Sampling*, Wiley, New York (1965) (the effective sample size).
 """
 
 from __future__ import annotations

@@ -21,6 +21,14 @@ tuned scale:
 
 The sufficient statistics of a weighted plane fit are sums (:func:`plane_moments`), so the
 test of a merge costs one 3×3 solve per neighbour pair, vectorised over all pairs.
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.2 and Fig. 17 (one colour, one flat facet).
+.. [2] P. F. Felzenszwalb, D. P. Huttenlocher, "Efficient graph-based image segmentation", Int.
+   J. Comput. Vision 59(2) (2004) 167-181, doi:10.1023/B:VISI.0000022288.19776.77.
 """
 
 from __future__ import annotations

@@ -18,6 +18,15 @@ sensitivity J = |dLab/dθ| (ΔE00 per degree, from the model at the solution),
 the tilt of the facet's plane fitted on the height map), the objective is
 ΔE²/σ_n² + (θ − θ_p)²/σ_p², σ_θ = (J²/σ_n² + 1/σ_p²)^(-1/2), and the colour's share of the
 information ``J²/σ_n² / (J²/σ_n² + 1/σ_p²)`` says which information dominated.
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.3 (3) (the normal of least ΔE at the ROI's thickness).
+.. [2] G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula: implementation
+   notes, supplementary test data, and mathematical observations", Color Res. Appl. 30 (2005)
+   21-30, doi:10.1002/col.20070.
 """
 
 from __future__ import annotations

@@ -6,6 +6,14 @@ that illuminant's white by a Bradford (von Kries in sharpened cone space) adapta
 (``colour.adaptation.matrix_chromatic_adaptation_VonKries``), wrapped to validate its
 arguments (docs/colour-benchmarks.md).
 
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.2.1 and §2.6 (measured colours as RGB; a D65 light source).
+.. [2] K. M. Lam, "Metamerism and colour constancy", PhD thesis, University of Bradford (1985)
+   (the Bradford transform).
+
 Examples
 --------
 >>> import numpy as np

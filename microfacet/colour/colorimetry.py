@@ -29,6 +29,13 @@ wavelength grid*; :func:`spectrum_to_lab` uses the white of that grid,
 1 nm 360-830 nm grid (the CIE definition); it is the default white of :func:`xyz_to_lab` /
 :func:`lab_to_xyz`. The image (sRGB) side and its white: :mod:`microfacet.colour.srgb`.
 
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.4 (spectral reflectance to colour).
+.. [2] CIE 015:2018, *Colorimetry*, 4th ed., CIE, Vienna (2018), doi:10.25039/TR.015.2018.
+
 Examples
 --------
 >>> import numpy as np

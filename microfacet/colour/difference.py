@@ -6,6 +6,18 @@ float32 when given float32 (``python pipelines/bench_color.py``, docs/benchmarks
 the analysis evaluates it billions of times. :func:`delta_e` selects a formula by name, for
 experiments that compare formulas (docs/speed-vs-error.md).
 
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.5 and §3.5 (mean ΔE, the colour tolerance grades).
+.. [2] G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula: implementation
+   notes, supplementary test data, and mathematical observations", Color Res. Appl. 30 (2005)
+   21-30, doi:10.1002/col.20070.
+.. [3] CIE 116-1995, *Industrial Colour-Difference Evaluation* (CIE94), CIE, Vienna (1995).
+.. [4] CIE 015:2018, *Colorimetry*, 4th ed., CIE, Vienna (2018), doi:10.25039/TR.015.2018
+   (CIE76).
+
 Examples
 --------
 >>> round(float(delta_e([50.0, 2.6772, -79.7751], [50.0, 0.0, -82.7485])), 4)

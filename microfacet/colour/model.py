@@ -10,8 +10,9 @@ together, so that no stage builds Lab from the table by hand.
 
 References
 ----------
-.. [1] N. Nagata et al., "Simulation Technology for Titanium Oxide Layer Interference
-   Color", Nippon Steel Technical Report (the seed), §2.4, §3.3.3.
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.4, §3.3.3.
 .. [2] G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula",
    Color Res. Appl. 30 (2005) 21-30, doi:10.1002/col.20070.
 

@@ -22,6 +22,15 @@ computes in float64 only and forms several full-size temporaries, so its uint8 i
 chain peaks at 1957 MB against 675 MB here (the analysis must fit a 12 MP image in 3 GB)
 and takes 6.4× longer.
 
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.2.1 and §3.3.3 (image colours as Lab).
+.. [2] IEC 61966-2-1:1999, *Multimedia systems and equipment - Colour measurement and management
+   - Part 2-1: Default RGB colour space - sRGB*.
+.. [3] CIE 015:2018, *Colorimetry*, 4th ed., CIE, Vienna (2018), doi:10.25039/TR.015.2018.
+
 Examples
 --------
 >>> import numpy as np

@@ -19,8 +19,16 @@ Model only what the scene needs:
 Both measured errors are stored on the table (``spectral_error_de00``,
 ``interp_error_de00``), so users can see what they get.
 
-Reference: Nagata et al., §2.4 (spectral reflectance → colour) and §3.3.3 (the Lab
-comparison that the colour analysis makes with this table).
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.4 (spectral reflectance to colour) and §3.3.3 (the Lab comparison that the colour analysis
+   makes with this table).
+.. [2] CIE 015:2018, *Colorimetry*, 4th ed., CIE, Vienna (2018), doi:10.25039/TR.015.2018.
+.. [3] G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula: implementation
+   notes, supplementary test data, and mathematical observations", Color Res. Appl. 30 (2005)
+   21-30, doi:10.1002/col.20070.
 """
 
 from __future__ import annotations

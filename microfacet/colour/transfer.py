@@ -6,6 +6,14 @@ table and float32 stays float32, which on a 12 MP image is 2.6-7× faster with 2
 memory (docs/colour-benchmarks.md, ``python pipelines/bench_colour_science.py``); the
 integer output of :func:`srgb_encode` (rounded, NaN -> 0) has no colour-science equivalent.
 
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.2.1 (measured colours as RGB, Fig. 5).
+.. [2] IEC 61966-2-1:1999, *Multimedia systems and equipment - Colour measurement and management
+   - Part 2-1: Default RGB colour space - sRGB*.
+
 Examples
 --------
 >>> import numpy as np

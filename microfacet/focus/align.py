@@ -18,6 +18,15 @@ Methods
 The reference frame is the slice whose field of view is covered by the most other slices
 (for a lens that zooms while focusing, the most magnified slice), unless given. Every slice
 is then warped into that frame (bilinear, border replicated).
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.2 (the focus stack of the optical microscope).
+.. [2] G. D. Evangelidis, E. Z. Psarakis, "Parametric image alignment using enhanced correlation
+   coefficient maximization", IEEE Trans. Pattern Anal. Mach. Intell. 30(10) (2008) 1858-1865,
+   doi:10.1109/TPAMI.2008.113.
 """
 
 from __future__ import annotations

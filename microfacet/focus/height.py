@@ -33,6 +33,16 @@ ground-truth stacks and the coverage on rendered stacks of known relief and text
    ``reliability="pertuz"``: the Pertuz et al. (2013) ratio of the earlier versions.
 6. All-in-focus composite: each pixel from its sharpest slice (main window).
 
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.2 (the height map from the focus position of each pixel, Fig. 16).
+.. [2] S. K. Nayar, Y. Nakagawa, "Shape from focus", IEEE Trans. Pattern Anal. Mach. Intell.
+   16(8) (1994) 824-831, doi:10.1109/34.308479.
+.. [3] S. Pertuz, D. Puig, M. A. Garcia, "Analysis of focus measure operators for
+   shape-from-focus", Pattern Recognit. 46 (2013), doi:10.1016/j.patcog.2012.11.011.
+
 Examples
 --------
 >>> import numpy as np

@@ -14,6 +14,18 @@ with :func:`cv2.pyrDown`, then windowed with the remaining spread), which is exa
 windows of 11 px and more and costs a quarter. The defaults were chosen from measurements
 (docs/height-from-focus.md).
 
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.2 (the height map from the focus position of each pixel).
+.. [2] S. Pertuz, D. Puig, M. A. Garcia, "Analysis of focus measure operators for
+   shape-from-focus", Pattern Recognit. 46 (2013), doi:10.1016/j.patcog.2012.11.011.
+.. [3] S. K. Nayar, Y. Nakagawa, "Shape from focus", IEEE Trans. Pattern Anal. Mach. Intell.
+   16(8) (1994) 824-831, doi:10.1109/34.308479 (sum-modified-Laplacian).
+.. [4] E. Krotkov, "Focusing", Int. J. Comput. Vision 1 (1988) 223-237, doi:10.1007/BF00127822
+   (Tenengrad).
+
 Examples
 --------
 >>> import numpy as np

@@ -13,6 +13,14 @@ so on a sphere cap of radius ``R`` pixels the angular error is about
 with R = 60 px to within 0.05° up to 45° tilt and 0.25° up to 60° tilt, and a tilted plane
 exactly.
 
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.3 (1) (the normal map of the height map).
+.. [2] H. Knutsson, C.-F. Westin, "Normalized and differential convolution", Proc. IEEE CVPR
+   (1993) 515-523, doi:10.1109/CVPR.1993.341081 (NaN-aware smoothing).
+
 Examples
 --------
 >>> import numpy as np

@@ -15,6 +15,17 @@ The variance of the peak position follows from the normal equations (delta metho
 ``s²`` the residual variance per unit weight (estimated by :mod:`microfacet.focus.height`,
 pooled with its image-wide median at the same peak significance).
 
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.2 (the height map from the focus position of each pixel).
+.. [2] S. Pertuz, D. Puig, M. A. Garcia, "Analysis of focus measure operators for
+   shape-from-focus", Pattern Recognit. 46 (2013), doi:10.1016/j.patcog.2012.11.011 (the
+   reliability ratio).
+.. [3] S. K. Nayar, Y. Nakagawa, "Shape from focus", IEEE Trans. Pattern Anal. Mach. Intell.
+   16(8) (1994) 824-831, doi:10.1109/34.308479 (Gaussian peak interpolation).
+
 Examples
 --------
 >>> import numpy as np

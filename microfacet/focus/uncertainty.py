@@ -22,6 +22,14 @@ The uncertainty of a height, in z steps (docs/height-from-focus.md for the calib
 Significance: the peak excess ``F_max − μ`` over the tails' mean μ, in units of the tails'
 noise ``max(√(Σd²/6N), μ/√k)`` (``d`` second differences along z, ``k`` the Gamma shape of
 the measure of white noise), against :func:`~microfacet.focus.peaks.detection_threshold`.
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.3.2 (the height map, Fig. 16).
+.. [2] S. Pertuz, D. Puig, M. A. Garcia, "Analysis of focus measure operators for
+   shape-from-focus", Pattern Recognit. 46 (2013), doi:10.1016/j.patcog.2012.11.011.
 """
 
 from __future__ import annotations

@@ -19,6 +19,16 @@ Display exposure (:func:`display_exposure`)
     half-vector map is shown at exposure 1 (a white diffuser is white); a microfacet or eq. 6
     map, whose specular peak and grazing rise are far above 1, is scaled so that the 98th
     percentile of Y over light and view angles up to :data:`DISPLAY_CORE_DEG` is 0.9 of white.
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   Figs. 5, 10 and 20 (angular colour distributions).
+.. [2] CIE 015:2018, *Colorimetry*, 4th ed., CIE, Vienna (2018), doi:10.25039/TR.015.2018.
+.. [3] B. Walter, S. R. Marschner, H. Li, K. E. Torrance, "Microfacet models for refraction
+   through rough surfaces", Eurographics Symposium on Rendering (2007) 195-206,
+   doi:10.2312/EGWR/EGSR07/195-206.
 """
 
 from __future__ import annotations

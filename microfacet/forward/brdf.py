@@ -71,10 +71,18 @@ Functions accept any direction pairs (``(..., 3)`` vectors) or in-plane angles.
 
 References
 ----------
-Nagata et al., §3.4 eq. (6) and §2.3-2.4 eq. (5). B. Walter, S. Marschner, H. Li,
-K. Torrance, "Microfacet models for refraction through rough surfaces", EGSR 2007.
-E. Heitz, "Understanding the masking-shadowing function in microfacet-based BRDFs",
-JCGT 3(2), 2014.
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.4 eq. (6) and §2.3-2.4 eq. (5).
+.. [2] B. Walter, S. R. Marschner, H. Li, K. E. Torrance, "Microfacet models for refraction
+   through rough surfaces", Eurographics Symposium on Rendering (2007) 195-206,
+   doi:10.2312/EGWR/EGSR07/195-206.
+.. [3] E. Heitz, "Understanding the masking-shadowing function in microfacet-based BRDFs", J.
+   Comput. Graph. Tech. 3(2) (2014), https://jcgt.org/published/0003/02/03/.
+.. [4] S. Fujimoto, K. Tobitani, M. Kamei, N. Nagata, T. Akagi, K. Takahashi, S. Yamamura,
+   "Normal Distribution Model of Microfacets Based on Color Image Analysis for Titanium Surface
+   with Thin Film Interference Color", J. Japan Soc. Precision Eng. 86(12) (2020) 1051-1056 (the
+   seed's ref. 2).
 """
 
 from __future__ import annotations

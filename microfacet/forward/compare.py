@@ -7,6 +7,15 @@ over all cells and the mean outside the **specular region**
 direction; the half-vector tilt is then ≤ 5°). The seed's half-vector evaluation excluded
 that region; its microfacet evaluation used all cells. Cells where either map is NaN (masked
 measurements) are left out of both means and counted.
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.5 Table 2 and §3.5 Fig. 20 (mean ΔE against measured maps).
+.. [2] G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula: implementation
+   notes, supplementary test data, and mathematical observations", Color Res. Appl. 30 (2005)
+   21-30, doi:10.1002/col.20070.
 """
 
 from __future__ import annotations

@@ -9,6 +9,18 @@ the in-plane facet-tilt density (:func:`inplane_tilt_density`) and n the cosine-
 exponent. The overall scale is arbitrary (the seed fits n and compares colours after
 exposure). :class:`Eq6Kernel` tabulates everything but n, so fitting n costs one weighted sum
 per trial. The physically based counterpart: :mod:`microfacet.forward.brdf`.
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §3.4, eq. (6).
+.. [2] S. Fujimoto, K. Tobitani, M. Kamei, N. Nagata, T. Akagi, K. Takahashi, S. Yamamura,
+   "Normal Distribution Model of Microfacets Based on Color Image Analysis for Titanium Surface
+   with Thin Film Interference Color", J. Japan Soc. Precision Eng. 86(12) (2020) 1051-1056 (the
+   seed's ref. 2).
+.. [3] R. L. Cook, K. E. Torrance, "A reflectance model for computer graphics", ACM Trans.
+   Graph. 1(1) (1982) 7-24, doi:10.1145/357290.357293.
 """
 
 from __future__ import annotations

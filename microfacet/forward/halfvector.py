@@ -17,6 +17,19 @@ positive on the mirror side (so θ_view = θ_light is the specular direction),
 This module gives θ_d for in-plane angles and for 3-D unit vectors and the reflectance
 spectra there; angular colour maps like the seed's Fig. 10 are
 ``simulate_map(model="half-vector")`` (:mod:`microfacet.forward.angular`).
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.3-2.4, eq. (5), Figs. 9-10.
+.. [2] H. Fujii, K. Tobitani, Y. Tani, M. Kamei, N. Nagata, T. Akagi, K. Takahashi, S. Yamamura,
+   "Color of Oxide Layered Coating on Titanium Considering Interference from Fine Structure",
+   IEICE Trans. Inf. & Syst. (Japanese ed.) J102-D(6) (2019) 464-472,
+   doi:10.14923/transinfj.2018JDP7030 (the half-vector model; the seed's ref. 1).
+.. [3] B. Walter, S. R. Marschner, H. Li, K. E. Torrance, "Microfacet models for refraction
+   through rough surfaces", Eurographics Symposium on Rendering (2007) 195-206,
+   doi:10.2312/EGWR/EGSR07/195-206 (the half vector).
 """
 
 from __future__ import annotations

@@ -5,6 +5,22 @@ The tables are copied unchanged from the refractiveindex.info database (CC0 1.0)
 
 The default film and substrate and why: :mod:`microfacet.optics.defaults`.
 
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.4 (the complex refractive index of the film).
+.. [2] M. N. Polyanskiy, "Refractiveindex.info database of optical constants", Sci. Data 11
+   (2024) 94, doi:10.1038/s41597-023-02898-2 (every set; the paper of each:
+   ``microfacet/data/optical_constants/SOURCES.md``).
+.. [3] A. Jolivet et al., "Structural, optical, and electrical properties of TiO2 thin films
+   deposited by ALD: Impact of the substrate, the deposited thickness and the deposition
+   temperature", Appl. Surf. Sci. 608 (2023) 155214, doi:10.1016/j.apsusc.2022.155214 (the
+   default film).
+.. [4] P. B. Johnson, R. W. Christy, "Optical constants of transition metals: Ti, V, Cr, Mn, Fe,
+   Co, Ni, and Pd", Phys. Rev. B 9 (1974) 5056-5070, doi:10.1103/PhysRevB.9.5056 (the default
+   substrate).
+
 Examples
 --------
 >>> from microfacet.optics import optical_constants

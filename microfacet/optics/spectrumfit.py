@@ -16,6 +16,14 @@ carried by where the fringes are. So one multiplicative scale is fitted by defau
 (``fit_scale=True``: a spectrum measured at 0.8 of its true level still returns its
 thickness); with ``fit_scale=False`` the level is trusted, and a warning is logged when a
 free scale would have fitted far better (the data look scaled).
+
+References
+----------
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.5 (the thickness of a sample from its spectrum, Table 1).
+.. [2] M. Born, E. Wolf, *Principles of Optics*, 7th ed., Cambridge University Press (1999),
+   doi:10.1017/CBO9781139644181.
 """
 
 from __future__ import annotations

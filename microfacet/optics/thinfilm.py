@@ -25,10 +25,13 @@ Numerical care
 
 References
 ----------
-Nagata et al., "Simulation Technology for Titanium Oxide Layer Interference Color",
-§2.4, eqs. (2)-(4). M. Born, E. Wolf, *Principles of Optics*, §1.6 and §14.4.
-S. J. Byrnes, "Multilayer optical calculations", arXiv:1603.02720 (the conventions of
-``tmm``, which the tests use as the independent reference).
+.. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
+   Technology for Titanium Oxide Layer Interference Color", Technical Report (the seed paper),
+   §2.4, eqs. (2)-(4).
+.. [2] M. Born, E. Wolf, *Principles of Optics*, 7th ed., Cambridge University Press (1999),
+   doi:10.1017/CBO9781139644181, §1.6 and §14.4.
+.. [3] S. J. Byrnes, "Multilayer optical calculations", arXiv:1603.02720 (2016) (the conventions
+   of ``tmm``, which the tests use as the independent reference).
 """
 
 from __future__ import annotations
