@@ -8,9 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from microfacet.analysis import write_results
+from microfacet.analysis import AnalysisOptions, write_results
+from microfacet.analysis.stages import Stage
 from microfacet.cli import main
 from microfacet.core.errors import InputError
+from microfacet.io.summary import Summary
 
 FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "stacks" / "nd-fixture"
 TRUTH = FIXTURE / "truth"
@@ -36,7 +38,12 @@ def test_results_folder_follows_the_spec(results):
     for f in ("all_in_focus.png", "report.pdf"):
         assert (results / f).stat().st_size > 0
     s = json.loads((results / "summary.json").read_text())
-    assert s["format"] == "microfacet-results/1"
+    assert s["format"] == "microfacet-results/1" and s["summary_version"] == 2
+    # the typed summary reads it back unchanged, and its parameters are the options tree
+    assert Summary.from_json(s).to_json() == s
+    assert AnalysisOptions.from_dict(s["parameters"]) == AnalysisOptions()
+    assert s["inputs"]["film"] and "film" not in s           # version 2: no repeated keys
+    assert set(s["timings_s"]) >= {st.key for st in Stage if st is not Stage.WRITE}
     for comp in s["thickness"]["mixture"]["components"]:
         assert set(comp) >= {"weight", "mean_nm", "sd_nm"}
     means = [c["mean_nm"] for c in s["thickness"]["mixture"]["components"]]

@@ -1,6 +1,7 @@
 """The analysis end to end (microfacet.analysis.pipeline) on the bundled synthetic stack,
-against its truth: the joint mode beats the seed's method, the exposure from stack.json, a
-microscope export without slices."""
+against its truth: the joint mode beats the seed's method, the stages in the order of the
+Stage enum, the exposure from stack.json, a microscope export without slices, the options
+reaching their stages."""
 
 import json
 import shutil
@@ -11,7 +12,9 @@ import pytest
 import tifffile
 from PIL import Image
 
-from microfacet.analysis import AnalysisOptions, analyze_stack
+from microfacet.analysis import AnalysisOptions, analyse_stack
+from microfacet.analysis.options import FitOptions, OpticsOptions, RoiOptions
+from microfacet.analysis.stages import JOINT_ONLY, Stage
 from microfacet.cli import main
 from microfacet.core.densities import wasserstein1
 from microfacet.io.x3p import read_x3p
@@ -27,12 +30,13 @@ def test_joint_mode_beats_the_seed_method_on_truth(nd_analysis):
     err = {}
     for mode in ("seed", "joint"):
         r = nd_analysis(mode)
-        ok = np.isfinite(r.thickness_nm)
-        okt = np.isfinite(r.tilt_deg) & vis
+        d, t = r.pixels.thickness_nm, r.pixels.tilt_deg
+        ok = np.isfinite(d)
+        okt = np.isfinite(t) & vis
         err[mode] = dict(
-            d=float(np.mean(np.abs(r.thickness_nm[ok] - d_true[ok]))),
-            t=float(np.median(np.abs(r.tilt_deg[okt] - t_true[okt]))),
-            w1=wasserstein1(r.tilt_deg[okt], t_true[vis]),
+            d=float(np.mean(np.abs(d[ok] - d_true[ok]))),
+            t=float(np.median(np.abs(t[okt] - t_true[okt]))),
+            w1=wasserstein1(t[okt], t_true[vis]),
             de=r.delta_e_stats["mean"])
     j, s = err["joint"], err["seed"]
     assert j["d"] < s["d"] and j["t"] < s["t"] and j["w1"] < s["w1"] and j["de"] < s["de"]
@@ -46,8 +50,15 @@ def test_exposure_from_stack_json_is_used(tmp_path):
     meta = json.loads((st / "stack.json").read_text())
     meta["exposure"] = 1.0
     (st / "stack.json").write_text(json.dumps(meta))
-    r = analyze_stack(st, AnalysisOptions(mode="seed", max_components=2))
-    assert r.exposure == 1.0 and r.exposure_source == "stack.json"
+    r = analyse_stack(st, AnalysisOptions(mode="seed", fits=FitOptions(max_components=2)))
+    assert r.exposure == 1.0 and r.scene.exposure_source == "stack.json"
+    assert r.roi.exposure == 1.0 and not r.roi.exposure_estimated
+    assert r.thickness_fit.n_components <= 2 and max(r.thickness_fit.bic_by_k) <= 2
+    # the option overrides the stack's
+    o = AnalysisOptions(mode="seed", optics=OpticsOptions(exposure=0.8),
+                        fits=FitOptions(max_components=2))
+    r = analyse_stack(st, o)
+    assert r.exposure == 0.8 and r.scene.exposure_source == "option"
 
 
 def test_microscope_export_is_analysed_without_slices(tmp_path):
@@ -141,18 +152,34 @@ def test_an_instrument_file_export_is_analysed_with_its_own_pixel_size(tmp_path)
 
 
 def test_the_colour_difference_formula_reaches_every_stage(tmp_path):
-    """``AnalysisOptions.delta_e_method`` is passed through the pipeline: with CIE76 the
-    per-pixel ΔE is CIE76 between each pixel and its model colour, and the ROI fit reports
-    CIE76 differences too (they differ from the CIEDE2000 run)."""
+    """``optics.delta_e_method`` is passed through the pipeline: with CIE76 the per-pixel ΔE
+    is CIE76 between each pixel and its model colour, and the ROI fit reports CIE76
+    differences too (they differ from the CIEDE2000 run). The stages are announced in the
+    order of the Stage enum, and each is timed under its key."""
     from microfacet import colour as color
 
-    opts = dict(roi_size_px=128)
-    r76 = analyze_stack(FIXTURE, AnalysisOptions(delta_e_method="CIE76", **opts))
-    ok = np.isfinite(r76.delta_e)
-    xyz = r76.table.xyz_at(r76.tilt_deg[ok], r76.thickness_nm[ok]) * r76.exposure
-    model = color.xyz_to_lab(xyz.astype(np.float32),
-                             white=r76.table.white_xyz.astype(np.float32))
-    np.testing.assert_allclose(r76.delta_e[ok], color.delta_e_76(model, r76.lab[ok]),
+    roi = RoiOptions(size_px=128)
+    seen = []
+    r76 = analyse_stack(FIXTURE, AnalysisOptions(roi=roi, optics=OpticsOptions(
+        delta_e_method="CIE76")), progress=seen.append)
+    assert r76.model.delta_e_method == "CIE76"
+    px, table = r76.pixels, r76.model.table
+    ok = np.isfinite(px.delta_e)
+    xyz = table.xyz_at(px.tilt_deg[ok], px.thickness_nm[ok]) * r76.exposure
+    model = color.xyz_to_lab(xyz.astype(np.float32), white=table.white_xyz.astype(np.float32))
+    np.testing.assert_allclose(px.delta_e[ok], color.delta_e_76(model, r76.colour.lab[ok]),
                                rtol=1e-3, atol=1e-3)
-    r00 = analyze_stack(FIXTURE, AnalysisOptions(**opts))
+    r00 = analyse_stack(FIXTURE, AnalysisOptions(roi=roi))
     assert not np.allclose(r76.roi.mean_delta_e, r00.roi.mean_delta_e)
+    # the stages of the analysis (writing and the report are the workflow's), in order
+    analysis = [s for s in Stage if s not in (Stage.WRITE, Stage.REPORT)]
+    assert seen == analysis
+    assert set(r76.timings_s) == {s.key for s in analysis} | {"total"}
+    assert r76.timings_s["total"] >= sum(r76.timings_s[s.key] for s in analysis) - 1e-3
+
+
+def test_the_seed_mode_skips_the_joint_stages(nd_analysis):
+    r = nd_analysis("seed")
+    keys = {s.key for s in Stage if s not in JOINT_ONLY + (Stage.WRITE, Stage.REPORT)}
+    assert set(r.timings_s) == keys | {"total"} and r.joint is None
+    assert set(nd_analysis("joint").timings_s) == keys | {s.key for s in JOINT_ONLY} | {"total"}
