@@ -27,6 +27,7 @@ distinct wavelengths (duplicates are kept and counted). See docs/fit-spectrum.md
 from __future__ import annotations
 
 import csv
+import itertools
 import logging
 import re
 from dataclasses import dataclass
@@ -172,12 +173,16 @@ def read_spectrum(path, *, columns=None) -> Spectrum:
     if not path.is_file():
         raise InputError(f"{shown}: no such file")
     wanted = parse_columns(columns) if columns is not None else None
-    lines, notes = _open_lines(path, shown)
-    previous, first = _first_numeric_row(lines, shown)
-    header, delim = _layout(previous, first, notes)
+    try:
+        text_lines, encoding = _read_lines(path, shown)
+    except OSError as exc:
+        raise InputError(f"{shown}: cannot read ({exc})") from None
+    notes = [] if encoding == "utf-8" else [("not UTF-8: read as Windows-1252", logging.INFO)]
+    lines = iter(text_lines)
+    header, delim, first = _first_numeric_row(lines, shown, notes)
     iw, ir = _choose_columns(shown, header, len(_split(first[1], delim)), wanted, notes)
     names = [_column_name(header, i) for i in (iw, ir)]
-    wl, R = _read_numbers(shown, _chain([first[:2]], lines), delim, (iw, ir), names)
+    wl, R = _read_numbers(shown, itertools.chain([first], lines), delim, (iw, ir), names)
     distinct = np.unique(wl).size
     if distinct < MIN_WAVELENGTHS:
         raise InputError(f"{shown}: column {names[0]}: {distinct} distinct wavelength(s) "
@@ -191,22 +196,9 @@ def read_spectrum(path, *, columns=None) -> Spectrum:
                     notes=tuple(n for n, _ in notes))
 
 
-# ------------------------------------------------------------------------- read_spectrum
-def _open_lines(path, shown):
-    """An iterator over ``(lineno, text)`` and the notes so far (the encoding)."""
-    notes = []
-    try:
-        text_lines, encoding = _read_lines(path, shown)
-    except OSError as exc:
-        raise InputError(f"{shown}: cannot read ({exc})") from None
-    if encoding != "utf-8":
-        notes.append(("not UTF-8: read as Windows-1252", logging.INFO))
-    return iter(text_lines), notes
-
-
-def _first_numeric_row(lines, shown):
-    """The line before the first row of numbers (None: none) and that row,
-    ``(lineno, line, delimiter)``; ``lines`` is left after it."""
+def _first_numeric_row(lines, shown, notes):
+    """The header (None: none), the delimiter and the first row of numbers
+    ``(lineno, line)``, noted; ``lines`` is left after that row."""
     previous, first = None, None
     for lineno, line in lines:
         if _skipped(line):
@@ -215,7 +207,7 @@ def _first_numeric_row(lines, shown):
             continue
         delim = _data_delimiter(line)
         if delim is not None:
-            first = (lineno, line, delim)
+            first = (lineno, line)
             break
         previous = (lineno, line)
         if lineno > MAX_PREAMBLE_LINES:
@@ -225,19 +217,12 @@ def _first_numeric_row(lines, shown):
             raise InputError(f"{shown}: empty file")
         raise InputError(f"{shown}: no row of numbers (wavelength and reflectance) in the first "
                          f"{min(previous[0], MAX_PREAMBLE_LINES):,} lines")
-    return previous, first
-
-
-def _layout(previous, first, notes):
-    """The header (None: none) and the delimiter, noted with the decimal comma."""
-    _, line, delim = first
-    fields = _split(line, delim)
     header = _header(previous, delim) if previous is not None else None
-    comma = delim != "," and any(_DECIMAL_COMMA.match(f) for f in fields)
+    comma = delim != "," and any(_DECIMAL_COMMA.match(f) for f in _split(first[1], delim))
     where = f"header on line {previous[0]}" if header else "no header"
     notes.append((f"{_DELIM_NAMES[delim]}-delimited{', decimal comma' if comma else ''}; "
                   f"{where}", logging.INFO))
-    return header, delim
+    return header, delim, first
 
 
 def _read_numbers(shown, rows, delim, columns, names):
@@ -307,11 +292,6 @@ def _read_lines(path, shown):
             continue
         return out, ("utf-8" if encoding in ("utf-8-sig", "utf-16") else encoding)
     raise InputError(f"{shown}: cannot decode as text (not UTF-8, UTF-16 or Windows-1252)")
-
-
-def _chain(first, rest):
-    yield from first
-    yield from rest
 
 
 def _skipped(line):
