@@ -1,21 +1,19 @@
-"""Benchmark: an in-plane 90 x 90 angular map (spectra + Lab + sRGB) with a 3-component
-thickness mixture and a 2-lobe NDF, for the microfacet BRDF and seed eq. 6.
+"""An in-plane 90 x 90 angular map (spectra + Lab + sRGB) with a 3-component thickness mixture
+and a 2-lobe NDF, for the microfacet BRDF and seed eq. 6.
 
 Baseline (measured in the same run): naive per-pair evaluation — for each (light, view)
 pair, the thin-film reflectance over all the thickness nodes (and, for eq. 6, all tilt
 terms) in one vectorised call per pair, no table reuse. It is timed on a subset of pairs
-and extrapolated to 8100; the largest relative difference from the fast path on that
-subset is printed.
-
-    python pipelines/bench_simulate.py [--repeat 5]
+and extrapolated to 8100; the table gives the largest relative difference from the fast
+path on that subset.
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
-from _shared import best_of, md_header, md_row, parser
 
 from microfacet.core.distributions import NDFMixture, ThicknessMixture
 from microfacet.forward.angular import simulate_map
@@ -24,6 +22,19 @@ from microfacet.forward.eq6 import theta_m_grid
 from microfacet.forward.halfvector import in_plane_directions
 from microfacet.optics import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from microfacet.optics.thinfilm import reflectance
+from pipelines import Study
+from pipelines._shared import best_of, md_table, note
+
+STUDY = Study(
+    name="speed-simulate",
+    question="How fast is a 90 × 90 angular map of the forward models against naive "
+             "per-pair evaluation?",
+    doc=("docs/benchmarks.md", "speed-simulate"),
+    run_time="1 min",
+    quick_time="10 s",
+    options={"repeat": (5, "timing repeats (the minimum is kept)"),
+             "subset": (180, "pairs timed for the naive baseline")},
+)
 
 G3 = ThicknessMixture([(0.3, 112.0, 3.0), (0.45, 130.0, 3.0), (0.25, 149.0, 3.0)])
 F2 = NDFMixture([(0.6, 3.0), (0.4, 9.0)])
@@ -58,34 +69,28 @@ def naive_eq6(tl, tv, wl, step=0.5):
     return np.array(out)
 
 
-def main(argv=None):
-    ap = parser(__doc__, repeat=5)
-    ap.add_argument("--subset", type=int, default=180, help="pairs timed for the baseline")
-    args = ap.parse_args(argv)
+def run(*, quick: bool, out: Path, repeat=5, subset=180) -> str:
+    if quick:
+        repeat, subset = 1, min(subset, 20)
     t = np.arange(90.0)
     wl = default_wavelengths()
     simulate_map(model="microfacet", thickness=G3, ndf=F2, theta_light_deg=t[:3],
                  theta_view_deg=t[:3])  # warm-up
     rng = np.random.default_rng(0)
-    idx = rng.choice(8100, args.subset, replace=False)
+    idx = rng.choice(8100, subset, replace=False)
     tl_s, tv_s = t[idx // 90], t[idx % 90]
     rows = []
     for model, naive in (("microfacet", naive_microfacet), ("eq6", naive_eq6)):
         best, m = best_of(lambda model=model: simulate_map(
             model=model, thickness=G3, ndf=F2, n=N_LOBE, theta_light_deg=t, theta_view_deg=t),
-            args.repeat)
+            repeat)
         tim = m.meta["timings_s"]
         t_naive, ref = best_of(lambda naive=naive: naive(tl_s, tv_s, wl), 1)
-        t_naive *= 8100 / args.subset
+        t_naive *= 8100 / subset
         fast = m.spectra.reshape(8100, -1)[idx]
         err = float(np.max(np.abs(fast - ref)) / np.max(np.abs(ref)))
-        rows.append((model, best, tim, t_naive, err))
-    print(md_header(["model", "fast map (s)", "of which spectra / colour (s)",
-                     "naive per-pair (s, extrapolated)", "speed-up", "max rel. diff"]))
-    for model, best, tim, tn, err in rows:
-        print(md_row([model, f"{best:.3f}", f"{tim['spectra']:.3f} / {tim['colour']:.3f}",
-                      f"{tn:.2f}", f"{tn / best:.0f}x", f"{err:.1e}"]))
-
-
-if __name__ == "__main__":
-    main()
+        rows.append([model, f"{best:.3f}", f"{tim['spectra']:.3f} / {tim['colour']:.3f}",
+                     f"{t_naive:.2f}", f"{t_naive / best:.0f}x", f"{err:.1e}"])
+        note(" | ".join(rows[-1]))
+    return md_table(["model", "fast map (s)", "of which spectra / colour (s)",
+                     "naive per-pair (s, extrapolated)", "speed-up", "max rel. diff"], rows)

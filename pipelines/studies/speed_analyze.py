@@ -1,0 +1,171 @@
+"""`microfacet analyze` against decoding its slices, at 1, 4 and 12 megapixels.
+
+For each size an nd-preset stack of ``slices`` slices is generated (cached in ``work``,
+default ``out/stacks``), then, in one run on the same machine:
+
+- **decode**: reading and decoding every slice alone (``Stack.read_slice``), the baseline;
+- **analyze**: the whole ``microfacet analyze STACK --out OUT`` command, report included, in
+  a fresh process (imports included), its wall time and peak RSS (``os.wait4``), and the
+  per-stage ``timings_s`` of its summary.json.
+
+Ratios to the decode time of the same run are what docs/benchmarks.md quotes (this machine is
+shared and noisy); ``repeat`` keeps the fastest of several runs. How the run met the targets
+of the speed issue is said on stderr.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from pipelines import Study
+from pipelines._shared import best_of, md_table, note
+
+STUDY = Study(
+    name="speed-analyze",
+    question="What does `microfacet analyze` cost, stage by stage, against decoding the "
+             "slices, at 1, 4 and 12 megapixels?",
+    doc=("docs/benchmarks.md", "speed-analyze"),
+    run_time="15 min",
+    quick_time="15 s",
+    options={"sizes": ("1,4,12", "megapixels, comma-separated"),
+             "slices": (40, "slices per stack"),
+             "work": ("", "cache folder for the stacks (default out/stacks)"),
+             "repeat": (1, "runs per size (the fastest is kept)")},
+)
+
+#: The targets of the speed issue (docs/benchmarks.md).
+TARGET_STAGES_X = 4.0       # analysis stages together / decode
+TARGET_WHOLE_X_1MP = 8.0    # whole analyze, report included / decode, at 1 MP
+TARGET_RSS_1MP_MB = 500.0
+TARGET_RSS_PER_MP_MB = 150.0
+TARGET_12MP_S = 60.0
+TARGET_12MP_MB = 3000.0
+
+
+
+def stages() -> tuple:
+    """The analysis stages' ``timings_s`` keys (without writing and the report)."""
+    from microfacet.analysis.stages import Stage
+
+    return tuple(s.value.key for s in Stage if s not in (Stage.WRITE, Stage.REPORT))
+
+
+def stack_for(work: Path, mp: float, slices: int) -> Path:
+    side = int(round(np.sqrt(mp * 1e6) / 16.0)) * 16
+    path = work / f"nd-{side}x{side}-{slices}"
+    if not (path / "stack.json").is_file():
+        from microfacet.forward.synth import generate_stack, preset
+        generate_stack(path, preset("nd", seed=3, height_px=side, width_px=side,
+                                    n_slices=slices))
+    return path
+
+
+def decode_time(path: Path) -> float:
+    from microfacet.io.limits import Limits
+    from microfacet.io.stack import read_stack
+    st = read_stack(path, limits=Limits(max_megapixels=100, max_stack_megapixels=2000))
+
+    def decode_all():
+        for i in range(st.n_slices):
+            st.read_slice(i, dtype=np.uint8)
+    t, _ = best_of(decode_all, 2)
+    return t
+
+
+def run_analyze(path: Path, out: Path, extra=()):
+    """Wall time (s), peak RSS (MB) and summary of one ``microfacet analyze`` process."""
+    if out.exists():
+        shutil.rmtree(out)
+    cmd = [sys.executable, "-m", "microfacet", "analyze", str(path), "--out", str(out), "-q",
+           "--max-megapixels", "100", "--max-stack-megapixels", "2000", *extra]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    err = proc.stderr.read().decode(errors="replace")
+    proc.stderr.close()
+    if status != 0:
+        raise SystemExit(f"analyze failed on {path}: {err.strip()}")
+    summary = json.loads((out / "summary.json").read_text())
+    return wall, usage.ru_maxrss / 1024.0, summary
+
+
+def targets(cols) -> list:
+    """One line per target of the speed issue: met or missed."""
+    lines = []
+    c = list(cols.values())
+    for col in c:
+        ok = col["stages"] / col["decode"] <= TARGET_STAGES_X
+        lines.append(f"{col['mp']:.1f} MP: analysis stages {col['stages'] / col['decode']:.1f}x "
+                     f"decode (target <= {TARGET_STAGES_X:g}x) {'met' if ok else 'MISSED'}")
+    one = min(c, key=lambda x: abs(x["mp"] - 1.0))
+    if abs(one["mp"] - 1.0) < 0.2:
+        x = one["wall"] / one["decode"]
+        lines.append(f"1 MP: whole command {x:.1f}x decode (target <= {TARGET_WHOLE_X_1MP:g}x) "
+                     f"{'met' if x <= TARGET_WHOLE_X_1MP else 'MISSED'}")
+        lines.append(f"1 MP: peak RSS {one['rss']:.0f} MB (target <= {TARGET_RSS_1MP_MB:g}) "
+                     f"{'met' if one['rss'] <= TARGET_RSS_1MP_MB else 'MISSED'}")
+    if len(c) > 1:
+        slope = np.polyfit([x["mp"] for x in c], [x["rss"] for x in c], 1)[0]
+        lines.append(f"RSS growth {slope:.0f} MB per MP (target <= {TARGET_RSS_PER_MP_MB:g}) "
+                     f"{'met' if slope <= TARGET_RSS_PER_MP_MB else 'MISSED'}")
+    big = max(c, key=lambda x: x["mp"])
+    if big["mp"] > 10:
+        ok = big["wall"] < TARGET_12MP_S and big["rss"] < TARGET_12MP_MB
+        lines.append(f"{big['mp']:.1f} MP: {big['wall']:.0f} s and {big['rss']:.0f} MB (target "
+                     f"< {TARGET_12MP_S:g} s and < {TARGET_12MP_MB:g} MB) "
+                     f"{'met' if ok else 'MISSED'}")
+    return lines
+
+
+def run(*, quick: bool, out: Path, sizes="1,4,12", slices=40, work="", repeat=1) -> str:
+    mps = [float(s) for s in sizes.split(",")]
+    if quick:
+        mps, slices, repeat = [0.0164], min(slices, 8), 1   # 128 x 128
+    work = Path(work) if work else out / "stacks"
+    work.mkdir(parents=True, exist_ok=True)
+    keys = stages()
+    cols = {}
+    for mp in mps:
+        path = stack_for(work, mp, slices)
+        dec = decode_time(path)
+        best = None
+        for _ in range(max(1, repeat)):
+            res = run_analyze(path, out / f"results-{path.name}",
+                              ["--no-report"] if quick else ())
+            if best is None or res[0] < best[0]:
+                best = res
+        wall, rss, summary = best
+        t = summary["timings_s"]
+        h, w = summary["inputs"]["shape"]
+        cols[mp] = dict(mp=h * w / 1e6, decode=dec, wall=wall, rss=rss, t=t,
+                        stages=sum(t.get(k, 0.0) for k in keys))
+        note(f"{path.name}: decode {dec:.2f} s, analyze {wall:.1f} s, peak RSS {rss:.0f} MB")
+    note(f"nd preset, {slices} slices, `microfacet analyze` in a fresh process "
+         f"(python {sys.version.split()[0]}, {os.cpu_count()} cores)")
+    names = [f"{c['mp']:.1f} MP" if c["mp"] >= 0.1 else f"{c['mp']:.3f} MP"
+             for c in cols.values()]
+    rows = [["decode the slices", *[f"{c['decode']:.2f}" for c in cols.values()],
+             *["1.0" for _ in cols]]]
+    for k in keys + ("write", "report"):
+        vals = [c["t"].get(k) for c in cols.values()]
+        rows.append([k, *["" if v is None else f"{v:.2f}" for v in vals],
+                     *["" if v is None else f"{v / c['decode']:.2f}"
+                       for v, c in zip(vals, cols.values())]])
+    rows.append(["**analysis stages**", *[f"{c['stages']:.2f}" for c in cols.values()],
+                 *[f"{c['stages'] / c['decode']:.1f}" for c in cols.values()]])
+    rows.append(["**whole command (wall)**", *[f"{c['wall']:.2f}" for c in cols.values()],
+                 *[f"{c['wall'] / c['decode']:.1f}" for c in cols.values()]])
+    rows.append(["peak RSS (MB)", *[f"{c['rss']:.0f}" for c in cols.values()],
+                 *["" for _ in cols]])
+    note("targets:\n  " + "\n  ".join(targets(cols)))
+    return md_table(["", *[f"{n} (s)" for n in names], *[f"{n} (× decode)" for n in names]],
+                    rows)
