@@ -267,7 +267,16 @@ class OpticsOptions(Options):
 @dataclass(frozen=True)
 class AnalysisOptions(Options):
     """Options of :func:`~microfacet.analysis.pipeline.analyse_stack` (defaults follow the
-    seed; the sections are listed in the module notes)."""
+    seed; the sections are listed in the module notes).
+
+    Examples
+    --------
+    >>> o = AnalysisOptions(mode="seed").replace(roi={"size_px": 128})
+    >>> o.mode, o.roi.size_px
+    ('seed', 128)
+    >>> AnalysisOptions.from_dict(o.to_dict()) == o
+    True
+    """
 
     mode: str = option("joint", help="joint: facet planes + colour; seed: the paper's "
                                      "per-pixel inversion", choices=MODES, cli=True)

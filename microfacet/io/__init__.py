@@ -5,6 +5,7 @@ module              format / concern
 ==================  ==========================================================
 ``stack``           focus stacks (``microfacet-stack/1``): :class:`Stack`
 ``stack_checks``    validation of ``stack.json`` before any work; images of a plain folder
+``stack_schema``    the keys of ``stack.json`` as data: types, ranges, defaults
 ``stack_write``     writing ``stack.json`` (validated first) and stacks of images
 ``images``          image headers, decoding, writing (PNG with pHYs, JPEG, TIFF, ``.npy``)
 ``tiff_meta``       physical size in TIFF metadata (OME, ImageJ, resolution tags)
