@@ -1,9 +1,9 @@
 """Validation of a ``stack.json`` (format ``microfacet-stack/1``) before any work.
 
-:func:`stack_fields` checks every key against its spec (:mod:`microfacet.io.stack_schema`:
-kind, range or allowed values; the rules between keys) and every image header (each
-against the :class:`~microfacet.io.limits.Limits` as soon as it is read), and returns the
-fields of a :class:`~microfacet.io.stack.Stack`; any breach raises
+:func:`stack_fields` checks every key against its spec and the rules between keys
+(:mod:`microfacet.io.stack_schema`), then what the keys name: the files inside the folder and
+every image header (each against the :class:`~microfacet.io.limits.Limits` as soon as it is
+read), and returns the fields of a :class:`~microfacet.io.stack.Stack`; any breach raises
 :class:`~microfacet.core.errors.InputError` with one message naming the file and the key or
 slice at fault. Keys the format does not define, and valid values that are almost surely a
 unit mistake, are logged as warnings (docs/stack-format.md).
@@ -34,141 +34,30 @@ from ..core.pixels import pixel_size_yx
 from .images import IMAGE_SUFFIXES, ImageInfo, image_info, npy_info, read_tiff_headers
 from .limits import Limits
 from .stack_schema import (
-    ABSENT,
     DEFAULT_ILLUMINATION,
-    EXCLUSIVE,
     FORMAT,
-    IMAGE_KEYS,
     KNOWN_KEYS,
     SPECS,
-    TOGETHER,
-    KeySpec,
+    check_relative_path,
+    check_rules,
+    check_value,
+    checked_values,
+    is_number,
+    number_reason,
+    present,
 )
 from .tiff_meta import tiff_scale
 
 tifffile = load("tifffile")
 
 __all__ = ["DEFAULT_ILLUMINATION", "FORMAT", "KNOWN_KEYS", "PLAUSIBLE_PIXEL_SIZE_UM",
-           "check_value", "find_images", "stack_fields", "warn_height_unit"]
+           "find_images", "stack_fields", "warn_height_unit"]
 
 log = logging.getLogger("microfacet.io.stack")
 
 #: Pixel sizes outside this range (µm) are almost surely a unit mistake: warned about.
 PLAUSIBLE_PIXEL_SIZE_UM = SPECS["pixel_size_um"].plausible
 _TIFF = (".tif", ".tiff")
-
-
-# ------------------------------------------------------------------ one value, from its spec
-def _is_number(v) -> bool:
-    """A JSON number that fits a float (a 400-digit integer does not)."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return False
-    try:
-        float(v)
-    except OverflowError:
-        return False
-    return True
-
-
-def _number_reason(spec: KeySpec, v) -> str | None:
-    """Why ``v`` is not a number the spec allows (None when it is)."""
-    ok = _is_number(v) and math.isfinite(v)
-    if ok and spec.low is not None:
-        ok = v > spec.low if spec.low_exclusive else v >= spec.low
-    if ok and spec.high is not None:
-        ok = v <= spec.high
-    if ok and spec.nonzero:
-        ok = v != 0
-    return None if ok else f"must be a finite {spec.range_text()}, got {v!r}"
-
-
-def _check_number(spec: KeySpec, v, where: str) -> None:
-    reason = _number_reason(spec, v)
-    if reason is not None:
-        raise InputError(f"{where}: {reason}")
-
-
-def _check_size(spec: KeySpec, v, where: str) -> None:
-    vals = v if isinstance(v, list) else [v]
-    if len(vals) not in (1, 2) or any(_number_reason(spec, x) for x in vals):
-        raise InputError(f"{where}: must be a finite {spec.range_text()}, got {v!r} (or a "
-                         f"list [y, x] of two)")
-
-
-def _check_string(spec: KeySpec, v, where: str) -> None:
-    allowed = spec.allowed()
-    if allowed is not None:
-        if v in allowed:
-            return
-        if callable(spec.choices):
-            why = f"unknown {spec.noun} {v!r}; known: {', '.join(allowed)}"
-        else:
-            why = f"{v!r} is not {allowed[0]!r}" if len(allowed) == 1 else \
-                f"{v!r} is not one of {allowed}"
-        raise InputError(f"{where}: {why}")
-    if spec.kind == "name" and (not isinstance(v, str) or not v.strip()):
-        raise InputError(f"{where}: must be a non-empty name, got {v!r}")
-    if not isinstance(v, str):
-        raise InputError(f"{where}: must be a string, got {v!r}")
-
-
-def _check_path(spec: KeySpec | None, v, where: str) -> None:
-    """A relative path string (where it leads is checked by :func:`_resolve_inside`)."""
-    if not isinstance(v, str) or not v:
-        raise InputError(f"{where}: must be a non-empty relative path string, got {v!r}")
-    if "\x00" in v:
-        raise InputError(f"{where}: {v!r} contains a NUL byte")
-    if os.path.isabs(v) or v.startswith(("/", "\\")):
-        raise InputError(f"{where}: {v!r} is an absolute path; paths must be relative "
-                         f"to the stack folder")
-
-
-def _check_paths(spec: KeySpec, v, where: str) -> None:
-    if not isinstance(v, list) or not v:
-        raise InputError(f"{where}: must be a non-empty list of relative paths")
-    for i, rel in enumerate(v):
-        _check_path(spec, rel, f"{where}[{i}]")
-
-
-def _check_numbers(spec: KeySpec, v, where: str) -> None:
-    if not isinstance(v, list):
-        raise InputError(f"{where}: must be a list of numbers")
-    for i, x in enumerate(v):
-        if not _is_number(x) or not math.isfinite(x):
-            raise InputError(f"{where}[{i}]: must be a finite number, got {x!r}")
-
-
-def _check_object(spec: KeySpec, v, where: str) -> None:
-    if not isinstance(v, dict):
-        raise InputError(f"{where}: must be an object, got {v!r}")
-    for sub in spec.fields:
-        if sub.name in v:
-            check_value(sub, v[sub.name], f"{where}: {sub.name}")
-
-
-_CHECKS = {"string": _check_string, "name": _check_string, "number": _check_number,
-           "size": _check_size, "path": _check_path, "paths": _check_paths,
-           "numbers": _check_numbers, "object": _check_object, "any": lambda *_: None}
-
-
-def check_value(spec: KeySpec, value, where: str) -> None:
-    """Raise :class:`InputError` (``"WHERE: reason"``) when ``value`` is not what ``spec``
-    allows; what needs the folder or the other keys (a path's target, the length of
-    ``z_um``) is checked by :func:`stack_fields`.
-
-    >>> check_value(SPECS["exposure"], 0, "key 'exposure'")
-    Traceback (most recent call last):
-    ...
-    microfacet.core.errors.InputError: key 'exposure': must be a finite number > 0, got 0
-    """
-    _CHECKS[spec.kind](spec, value, where)
-
-
-def _size_yx(value, where: str) -> tuple[float, float]:
-    """A ``pixel_size_um`` (a number, or ``[y, x]``) as ``(y, x)`` µm."""
-    _check_size(SPECS["pixel_size_um"], value, where)
-    vals = value if isinstance(value, list) else [value]
-    return (float(vals[0]), float(vals[-1]))
 
 
 # ------------------------------------------------------------------- the stack being checked
@@ -193,10 +82,7 @@ class _Check:
         return f"{self.shown}: key {key!r}"
 
     def has(self, key: str) -> bool:
-        """The key is given (a JSON null counts as absent where its spec says so)."""
-        if SPECS[key].null_absent:
-            return self.meta.get(key) is not None
-        return key in self.meta
+        return present(self.meta, key)
 
     def add(self, name: str, where_text: str, info: ImageInfo) -> None:
         """One image header: checked against the limits and the first header."""
@@ -204,43 +90,6 @@ class _Check:
         if self.infos:
             _check_consistent(self.shown, name, info, *self.infos[0])
         self.infos.append((name, info))
-
-
-def _values(c: _Check, which) -> dict:
-    """The keys whose spec ``which(spec)`` is true, each checked against its spec:
-    ``{key: value, or its default}`` (an object: its defaults updated with what is given)."""
-    out = {}
-    for spec in SPECS.values():
-        if not which(spec):
-            continue
-        if not c.has(spec.name):
-            if spec.required:
-                expected = f" (expected {spec.choices[0]!r})" if spec.choices else ""
-                raise InputError(f"{c.where(spec.name)}: missing{expected}")
-            default = spec.default_value()
-            out[spec.name] = None if default is ABSENT else default
-            continue
-        value = c.meta[spec.name]
-        check_value(spec, value, c.where(spec.name))
-        out[spec.name] = {**spec.default_value(), **value} if spec.kind == "object" else value
-    return out
-
-
-def _check_rules(c: _Check) -> None:
-    """The rules between keys: given together, not both, where the images come from."""
-    for (a, b), what in TOGETHER:
-        if c.has(a) != c.has(b):
-            missing = b if c.has(a) else a
-            raise InputError(f"{c.where(missing)}: missing ({what} needs both {a!r} and "
-                             f"{b!r})")
-    with_slices = c.has("slices") or c.has("tiff")
-    for a, b in EXCLUSIVE:
-        read = with_slices or not (SPECS[a].slices_only or SPECS[b].slices_only)
-        if read and c.has(a) and c.has(b):
-            raise InputError(f"{c.where(b)}: give either {a!r} or {b!r}, not both")
-    if not any(c.has(k) for k in IMAGE_KEYS):
-        raise InputError(f"{c.where('slices')}: missing (give 'slices', 'tiff', or an export "
-                         f"'height_um' + 'image')")
 
 
 def _check_given(given: dict) -> None:
@@ -255,7 +104,7 @@ def _check_given(given: dict) -> None:
                 raise InputError(f"must be a finite number > 0 or a [y, x] pair, got "
                                  f"{value!r}", param=key) from None
             continue
-        reason = _number_reason(SPECS[key], value)
+        reason = number_reason(SPECS[key], value)
         if reason is not None:
             raise InputError(reason, param=key)
 
@@ -263,7 +112,7 @@ def _check_given(given: dict) -> None:
 # ------------------------------------------------------------------------------ files
 def _resolve_inside(root: Path, rel, where: str) -> Path:
     """The file ``rel`` names, which must be inside ``root``."""
-    _check_path(None, rel, where)
+    check_relative_path(rel, where)
     try:
         p = (root / rel).resolve(strict=False)
     except (RuntimeError, OSError) as exc:  # a symlink loop (RuntimeError up to Python 3.12)
@@ -405,7 +254,7 @@ def _export(c: _Check) -> _Export:
 # --------------------------------------------------- pixel size and z: where they come from
 def _differs(given, used, where: str) -> None:
     """Warn when the caller gave a value that stack.json overrides."""
-    if given is not None and _is_number(used) and not math.isclose(given, used, rel_tol=1e-9):
+    if given is not None and is_number(used) and not math.isclose(given, used, rel_tol=1e-9):
         log.warning("%s: %g µm is used, not the given %g µm (stack.json wins)", where, used,
                     given)
 
@@ -431,6 +280,13 @@ def _metadata_scale(c: _Check, files: list, tiff_path: Path | None, need: bool):
     if first is None or not need:
         return None
     return tiff_scale(first, c.where("tiff" if tiff_path else "slices"))
+
+
+def _size_yx(value, where: str) -> tuple[float, float]:
+    """A ``pixel_size_um`` (a number, or ``[y, x]``) as ``(y, x)`` µm."""
+    check_value(SPECS["pixel_size_um"], value, where)
+    vals = value if isinstance(value, list) else [value]
+    return (float(vals[0]), float(vals[-1]))
 
 
 def _pixel_size(c: _Check, ps, export: _Export, scale, need_z: bool):
@@ -554,10 +410,10 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
     """
     c = _Check(root, meta, jpath, limits, given or {}, plain)
     _warn_unknown_keys(meta, jpath)
-    values = _values(c, lambda s: s.required)
+    values = checked_values(meta, c.where, lambda s: s.required)
     _check_given(c.given)
-    _check_rules(c)
-    values.update(_values(c, lambda s: not s.required and not s.slices_only))
+    check_rules(meta, c.where)
+    values.update(checked_values(meta, c.where, lambda s: not s.required and not s.slices_only))
     export = _export(c)
     files = {"slices": (), "tiff": None}
     tiff_uniform = False
@@ -566,7 +422,7 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
     elif c.has("tiff"):
         files["tiff"], tiff_uniform = _multipage(c)
     if c.infos:
-        values.update(_values(c, lambda s: s.slices_only))
+        values.update(checked_values(meta, c.where, lambda s: s.slices_only))
     ps_yx, z_um, sources = _scale_and_z(c, values, export, files)
     ref = c.infos[0][1] if c.infos else export.info
     if c.infos and export.info is not None and export.info.shape != ref.shape:

@@ -1,9 +1,12 @@
-"""The keys of a ``stack.json`` (format ``microfacet-stack/1``) as data.
+"""The keys of a ``stack.json`` (format ``microfacet-stack/1``) as data, and what each allows.
 
-Each key :data:`stack.json <SPECS>` accepts is one :class:`KeySpec`: its kind of value, the
+Each key stack.json accepts is one :class:`KeySpec` in :data:`SPECS`: its kind of value, the
 range or the allowed values, the unit, whether it is required, its default and one line of
-doc. :mod:`microfacet.io.stack_checks` checks a stack.json from these specs (and the rules
-between keys: :data:`EXCLUSIVE`, :data:`TOGETHER`), and the table of keys in
+doc; the rules between keys are :data:`EXCLUSIVE`, :data:`TOGETHER` and :data:`IMAGE_KEYS`.
+What the keys say on their own follows from them: :func:`check_value` (one value against
+its spec), :func:`checked_values` (the keys of a stack.json, with their defaults) and
+:func:`check_rules`; what they say about the folder (files, image headers, where the pixel
+size comes from) is :mod:`microfacet.io.stack_checks`'. The table of keys in
 docs/stack-format.md is :func:`markdown_table` (a test compares them; :func:`embed_table`
 rewrites the doc's table).
 
@@ -18,15 +21,20 @@ Examples
 from __future__ import annotations
 
 import json
+import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..core.defaults import DEFAULT_ILLUMINANT
+from ..core.errors import InputError
 from ..optics.constants import known_sets
 from ..optics.defaults import DEFAULT_FILM, DEFAULT_NUMERICAL_APERTURE, DEFAULT_SUBSTRATE
 
 __all__ = ["ABSENT", "DEFAULT_ILLUMINATION", "EXCLUSIVE", "FORMAT", "KINDS", "KNOWN_KEYS",
-           "KeySpec", "MARKERS", "SPECS", "TOGETHER", "embed_table", "markdown_table"]
+           "KeySpec", "MARKERS", "SPECS", "TOGETHER", "check_relative_path", "check_rules",
+           "check_value", "checked_values", "embed_table", "is_number", "markdown_table",
+           "number_reason", "present"]
 
 #: The ``format`` string of a stack.json.
 FORMAT = "microfacet-stack/1"
@@ -209,6 +217,158 @@ IMAGE_KEYS = ("slices", "tiff", "height_um")
 DEFAULT_ILLUMINATION = SPECS["illumination"].default_value()
 
 
+# ------------------------------------------------------------------ one value, from its spec
+def is_number(v) -> bool:
+    """A JSON number that fits a float (a 400-digit integer does not)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        float(v)
+    except OverflowError:
+        return False
+    return True
+
+
+def number_reason(spec: KeySpec, v) -> str | None:
+    """Why ``v`` is not a number the spec allows (None when it is)."""
+    ok = is_number(v) and math.isfinite(v)
+    if ok and spec.low is not None:
+        ok = v > spec.low if spec.low_exclusive else v >= spec.low
+    if ok and spec.high is not None:
+        ok = v <= spec.high
+    if ok and spec.nonzero:
+        ok = v != 0
+    return None if ok else f"must be a finite {spec.range_text()}, got {v!r}"
+
+
+def _check_number(spec: KeySpec, v, where: str) -> None:
+    reason = number_reason(spec, v)
+    if reason is not None:
+        raise InputError(f"{where}: {reason}")
+
+
+def _check_size(spec: KeySpec, v, where: str) -> None:
+    vals = v if isinstance(v, list) else [v]
+    if len(vals) not in (1, 2) or any(number_reason(spec, x) for x in vals):
+        raise InputError(f"{where}: must be a finite {spec.range_text()}, got {v!r} (or a "
+                         f"list [y, x] of two)")
+
+
+def _check_string(spec: KeySpec, v, where: str) -> None:
+    allowed = spec.allowed()
+    if allowed is not None:
+        if v in allowed:
+            return
+        if callable(spec.choices):
+            why = f"unknown {spec.noun} {v!r}; known: {', '.join(allowed)}"
+        else:
+            why = f"{v!r} is not {allowed[0]!r}" if len(allowed) == 1 else \
+                f"{v!r} is not one of {allowed}"
+        raise InputError(f"{where}: {why}")
+    if spec.kind == "name" and (not isinstance(v, str) or not v.strip()):
+        raise InputError(f"{where}: must be a non-empty name, got {v!r}")
+    if not isinstance(v, str):
+        raise InputError(f"{where}: must be a string, got {v!r}")
+
+
+def check_relative_path(v, where: str) -> None:
+    """A relative path string (where it leads is the stack folder's business)."""
+    if not isinstance(v, str) or not v:
+        raise InputError(f"{where}: must be a non-empty relative path string, got {v!r}")
+    if "\x00" in v:
+        raise InputError(f"{where}: {v!r} contains a NUL byte")
+    if os.path.isabs(v) or v.startswith(("/", "\\")):
+        raise InputError(f"{where}: {v!r} is an absolute path; paths must be relative "
+                         f"to the stack folder")
+
+
+def _check_paths(spec: KeySpec, v, where: str) -> None:
+    if not isinstance(v, list) or not v:
+        raise InputError(f"{where}: must be a non-empty list of relative paths")
+    for i, rel in enumerate(v):
+        check_relative_path(rel, f"{where}[{i}]")
+
+
+def _check_numbers(spec: KeySpec, v, where: str) -> None:
+    if not isinstance(v, list):
+        raise InputError(f"{where}: must be a list of numbers")
+    for i, x in enumerate(v):
+        if not is_number(x) or not math.isfinite(x):
+            raise InputError(f"{where}[{i}]: must be a finite number, got {x!r}")
+
+
+def _check_object(spec: KeySpec, v, where: str) -> None:
+    if not isinstance(v, dict):
+        raise InputError(f"{where}: must be an object, got {v!r}")
+    for sub in spec.fields:
+        if sub.name in v:
+            check_value(sub, v[sub.name], f"{where}: {sub.name}")
+
+
+_CHECKS = {"string": _check_string, "name": _check_string, "number": _check_number,
+           "size": _check_size, "path": lambda _, v, where: check_relative_path(v, where),
+           "paths": _check_paths, "numbers": _check_numbers, "object": _check_object,
+           "any": lambda *_: None}
+
+
+def check_value(spec: KeySpec, value, where: str) -> None:
+    """Raise :class:`InputError` (``"WHERE: reason"``) when ``value`` is not what ``spec``
+    allows; what needs the folder or the other keys (a path's target, the length of
+    ``z_um``) is checked by :func:`microfacet.io.stack_checks.stack_fields`.
+
+    >>> check_value(SPECS["exposure"], 0, "key 'exposure'")
+    Traceback (most recent call last):
+    ...
+    microfacet.core.errors.InputError: key 'exposure': must be a finite number > 0, got 0
+    """
+    _CHECKS[spec.kind](spec, value, where)
+
+
+def present(meta: dict, key: str) -> bool:
+    """The stack.json ``meta`` gives ``key`` (a JSON null counts as absent where its spec
+    says so)."""
+    return meta.get(key) is not None if SPECS[key].null_absent else key in meta
+
+
+def checked_values(meta: dict, where: Callable[[str], str], which) -> dict:
+    """The keys of ``meta`` whose spec ``which(spec)`` is true, each checked against its
+    spec (``where(key)`` names it in messages): ``{key: value, or its default}`` (an object:
+    its defaults updated with what is given)."""
+    out = {}
+    for spec in SPECS.values():
+        if not which(spec):
+            continue
+        if not present(meta, spec.name):
+            if spec.required:
+                expected = f" (expected {spec.choices[0]!r})" if spec.choices else ""
+                raise InputError(f"{where(spec.name)}: missing{expected}")
+            default = spec.default_value()
+            out[spec.name] = None if default is ABSENT else default
+            continue
+        value = meta[spec.name]
+        check_value(spec, value, where(spec.name))
+        out[spec.name] = {**spec.default_value(), **value} if spec.kind == "object" else value
+    return out
+
+
+def check_rules(meta: dict, where: Callable[[str], str]) -> None:
+    """The rules between keys: :data:`TOGETHER`, :data:`EXCLUSIVE` (those read only with
+    slices when there are slices), at least one of :data:`IMAGE_KEYS`."""
+    for (a, b), what in TOGETHER:
+        if present(meta, a) != present(meta, b):
+            missing = b if present(meta, a) else a
+            raise InputError(f"{where(missing)}: missing ({what} needs both {a!r} and {b!r})")
+    with_slices = present(meta, "slices") or present(meta, "tiff")
+    for a, b in EXCLUSIVE:
+        read = with_slices or not (SPECS[a].slices_only or SPECS[b].slices_only)
+        if read and present(meta, a) and present(meta, b):
+            raise InputError(f"{where(b)}: give either {a!r} or {b!r}, not both")
+    if not any(present(meta, k) for k in IMAGE_KEYS):
+        raise InputError(f"{where('slices')}: missing (give 'slices', 'tiff', or an export "
+                         f"'height_um' + 'image')")
+
+
+# ---------------------------------------------------------------------------------- docs
 def _default_text(spec: KeySpec) -> str:
     if spec.kind == "object" or spec.default is not ABSENT:
         return f"`{json.dumps(spec.default_value())}`"
