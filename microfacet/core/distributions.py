@@ -25,6 +25,9 @@ Normals
 Both serialise to the ``summary.json`` form of the results format
 (``{"components": [{"weight", "mean_nm", "sd_nm"}]}`` and
 ``{"form": "gaussian-slope", "components": [{"weight", "mean_deg": 0, "sd_deg"}]}``).
+Reading that form (``from_json``, for data from a file) refuses more than
+:data:`MAX_COMPONENTS` components before looking at any of them, so a file claiming a
+million components costs nothing.
 """
 
 from __future__ import annotations
@@ -38,10 +41,32 @@ from .lazy import load
 
 special = load("scipy.special")
 
-__all__ = ["NDF_FORM", "NDFMixture", "ThicknessMixture"]
+__all__ = ["MAX_COMPONENTS", "NDF_FORM", "NDFMixture", "ThicknessMixture"]
 
 NDF_FORM = "gaussian-slope"
+#: Most components a mixture read with ``from_json`` may have. The analysis fits at most 10
+#: (``fits.max_components``); a file claiming more is refused before any component is read,
+#: because the forward models' cost grows with the component count.
+MAX_COMPONENTS = 10
 _DEG = math.pi / 180.0
+
+
+def _json_components(data, name) -> list:
+    """The ``components`` list of a mixture's JSON form, at most :data:`MAX_COMPONENTS` long
+    (ValueError naming the mixture)."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{name}: expected an object with 'components', got "
+                         f"{type(data).__name__}")
+    if "components" not in data:
+        raise ValueError(f"{name}: missing key 'components'")
+    comps = data["components"]
+    if not isinstance(comps, list):
+        raise ValueError(f"{name}: 'components' must be a list, got {type(comps).__name__}")
+    if len(comps) > MAX_COMPONENTS:
+        raise ValueError(f"{name}: {len(comps):,} components, more than {MAX_COMPONENTS}")
+    if not all(isinstance(c, dict) for c in comps):
+        raise ValueError(f"{name}: every component must be an object")
+    return comps
 
 
 def _components(items, name, n):
@@ -126,8 +151,19 @@ class ThicknessMixture:
 
     @classmethod
     def from_json(cls, data) -> "ThicknessMixture":
+        """The mixture of its JSON form (at most :data:`MAX_COMPONENTS` components).
+
+        >>> ThicknessMixture.from_json({"components": [{"weight": 1, "mean_nm": 51,
+        ...                                             "sd_nm": 2}]}).means_nm.tolist()
+        [51.0]
+        >>> ThicknessMixture.from_json({"components": [{}] * 10**6})
+        Traceback (most recent call last):
+        ...
+        ValueError: thickness mixture: 1,000,000 components, more than 10
+        """
+        comps = _json_components(data, "thickness mixture")
         try:
-            return cls([(c["weight"], c["mean_nm"], c["sd_nm"]) for c in data["components"]])
+            return cls([(c["weight"], c["mean_nm"], c["sd_nm"]) for c in comps])
         except (KeyError, TypeError) as exc:
             raise ValueError(f"thickness mixture: missing key {exc}") from None
 
@@ -221,11 +257,12 @@ class NDFMixture:
 
     @classmethod
     def from_json(cls, data) -> "NDFMixture":
+        """The lobes of their JSON form (at most :data:`MAX_COMPONENTS` components)."""
         form = data.get("form", NDF_FORM) if isinstance(data, dict) else None
         if form != NDF_FORM:
             raise ValueError(f"NDF mixture: unsupported form {form!r} (expected {NDF_FORM!r})")
+        comps = _json_components(data, "NDF mixture")
         try:
-            comps = data["components"]
             if any(abs(float(c.get("mean_deg", 0.0))) > 1e-9 for c in comps):
                 raise ValueError("NDF mixture: lobes must have mean_deg 0")
             return cls([(c["weight"], c["sd_deg"]) for c in comps])

@@ -37,8 +37,8 @@ from .jsonfile import json_safe, read_json
 from .summary import FORMAT, Summary
 from .x3p import write_x3p
 
-__all__ = ["FORMAT", "IMAGES", "MAPS", "Results", "TABLES", "TIFF_COPIES", "X3P_COPIES",
-           "pixel_size_of", "write_results_files"]
+__all__ = ["FORMAT", "IMAGES", "MAPS", "OPTICS_KEYS", "Results", "TABLES", "TIFF_COPIES",
+           "X3P_COPIES", "pixel_size_of", "write_results_files"]
 
 #: Maps of a results folder: name -> (file, what it holds). Shapes are H×W (H×W×3 for the
 #: normals); floats are float32 with NaN where there is no value.
@@ -56,6 +56,8 @@ MAPS = {
     "facets": ("facets.npy", "int32 facet label per pixel (joint mode)"),
 }
 _NDIM = {"normals": 3}
+#: The optics ``summary["inputs"]`` records (:meth:`Results.optics`).
+OPTICS_KEYS = ("film", "substrate", "illuminant")
 #: Images: name -> file.
 IMAGES = {"all_in_focus": "all_in_focus.png"}
 #: Copies of maps for microscopy tools (Fiji, tifffile): map name -> (file, value unit);
@@ -241,21 +243,51 @@ class Results:
 
     def _mixture(self, key, cls):
         data = self.get(key, "mixture")
-        if not data or (isinstance(data, dict) and data.get("components") == []):
+        if data is None or (isinstance(data, dict) and data.get("components") == []):
             return None  # no fit (the analysis writes an empty component list)
         try:
             return cls.from_json(data)
         except (ValueError, TypeError, AttributeError) as exc:
             raise InputError(f"{one_line(self.path / 'summary.json')}: key "
-                             f"'{key}.mixture': {exc}") from None
+                             f"'{key}.mixture': {one_line(exc)}") from None
 
     def thickness_mixture(self) -> ThicknessMixture | None:
-        """The fitted thickness mixture, or None when there is none."""
+        """The fitted thickness mixture, or None when there is none.
+
+        Raises
+        ------
+        InputError
+            One line naming ``summary.json`` and the key ``thickness.mixture``: a component
+            that is not a valid Gaussian, or more than
+            :data:`~microfacet.core.distributions.MAX_COMPONENTS` of them.
+        """
         return self._mixture("thickness", ThicknessMixture)
 
     def ndf_mixture(self) -> NDFMixture | None:
-        """The fitted NDF lobes, or None when there are none."""
+        """The fitted NDF lobes, or None when there are none (errors as
+        :meth:`thickness_mixture`, naming the key ``ndf.mixture``)."""
         return self._mixture("ndf", NDFMixture)
+
+    def optics(self) -> dict:
+        """The optics the analysis modelled: ``film``, ``substrate`` and ``illuminant`` from
+        ``summary["inputs"]`` (the top level of an old summary), those recorded as non-empty
+        text.
+
+        >>> import tempfile, pathlib
+        >>> d = pathlib.Path(tempfile.mkdtemp())
+        >>> _ = (d / "summary.json").write_text('{"summary_version": 2, "inputs": '
+        ...                                     '{"film": "TiO2_x", "illuminant": "D50"}}')
+        >>> Results(d).optics()
+        {'film': 'TiO2_x', 'illuminant': 'D50'}
+        """
+        out = {}
+        for key in OPTICS_KEYS:
+            value = self.get("inputs", key)
+            if not (isinstance(value, str) and value):
+                value = self.summary.get(key)
+            if isinstance(value, str) and value:
+                out[key] = value
+        return out
 
     def record(self, *keys_and_value) -> None:
         """Set ``summary[k0]...[kn] = value`` and rewrite ``summary.json`` atomically

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 
 import numpy as np
 import pytest
@@ -209,3 +210,23 @@ def test_ndf_json_round_trip(f):
 def test_invalid_components_are_refused_naming_the_mixture_and_component(make, match):
     with pytest.raises(ValueError, match=match):
         make()
+
+
+@pytest.mark.parametrize("cls, comp, name", [
+    (ThicknessMixture, {"weight": 1, "mean_nm": 51, "sd_nm": 2}, "thickness mixture"),
+    (NDFMixture, {"weight": 1, "mean_deg": 0, "sd_deg": 5}, "NDF mixture"),
+])
+def test_from_json_refuses_more_than_max_components_before_reading_them(cls, comp, name):
+    """A file claiming a million components is refused at once (the forward models' cost
+    grows with the count); MAX_COMPONENTS are read."""
+    from microfacet.core.distributions import MAX_COMPONENTS
+
+    assert len(cls.from_json({"components": [comp] * MAX_COMPONENTS}).components) == 10
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=rf"^{name}: 1,000,000 components, more than 10$"):
+        cls.from_json({"components": [comp] * 10**6})
+    assert time.perf_counter() - t0 < 0.1
+    with pytest.raises(ValueError, match=rf"^{name}: 'components' must be a list, got dict"):
+        cls.from_json({"components": {"0": comp}})
+    with pytest.raises(ValueError, match=rf"^{name}: every component must be an object"):
+        cls.from_json({"components": [comp, [1, 2, 3]]})

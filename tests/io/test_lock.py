@@ -6,8 +6,14 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import socket
+import subprocess
+import sys
+import textwrap
+import threading
+import time
 
 import pytest
 
@@ -86,3 +92,111 @@ def test_current_umask_reads_without_changing():
         assert lk.current_umask() == 0o027
     finally:
         os.umask(old)
+
+
+# ------------------------------------------------ a lock read before its holder wrote it
+_SLOW_HOLDER = textwrap.dedent("""
+    import fcntl, json, os, socket, sys
+    fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT, 0o644)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)   # locked, the file not written yet
+    print("locked", flush=True)
+    sys.stdin.readline()
+    data = json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "started": "now",
+                       "command": "slow"}).encode()
+    os.pwrite(fd, data, 0)
+    os.ftruncate(fd, len(data))
+    print("written", flush=True)
+    sys.stdin.readline()
+""")
+
+
+@pytest.fixture
+def slow_holder():
+    """``slow_holder(lock_path)``: a process that takes the lock and writes its record only
+    when told (a line on its stdin), as a run between its ``flock`` and its write."""
+    procs = []
+
+    def start(path):
+        p = subprocess.Popen([sys.executable, "-c", _SLOW_HOLDER, str(path)],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        procs.append(p)
+        assert p.stdout.readline().strip() == "locked"
+        return p
+    yield start
+    for p in procs:
+        p.kill()
+        p.wait(timeout=30)
+
+
+def _tell(p, delay_s):
+    def go():
+        p.stdin.write("\n")
+        p.stdin.flush()
+    timer = threading.Timer(delay_s, go)
+    timer.start()
+    return timer
+
+
+@pytest.mark.parametrize("old_content", ["", '{"pid": 1', "dead"])
+def test_a_lock_read_before_its_holder_wrote_it_names_the_holder(tmp_path, slow_holder,
+                                                                 old_content):
+    """Two runs racing for one output: the loser reads the lock file while the winner has
+    locked it but not written it yet (empty, half-written, or a dead run's record): it waits
+    for the record instead of reporting ``pid None on None, since None``."""
+    path = lk.lock_path(tmp_path, "out")
+    if old_content == "dead":
+        gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                              capture_output=True, text=True, check=True)
+        old_content = json.dumps({"pid": int(gone.stdout), "host": socket.gethostname(),
+                                  "started": "earlier", "command": "dead"})
+    path.write_text(old_content)
+    p = slow_holder(path)
+    timer = _tell(p, 0.3)
+    with pytest.raises(InputError) as err:
+        lk.acquire(path, shown="the output")
+    timer.join()
+    assert f"pid {p.pid} on {socket.gethostname()}, since now" in str(err.value)
+    assert "None" not in str(err.value) and "earlier" not in str(err.value)
+
+
+def test_a_holder_that_never_writes_is_a_run_starting_not_none(tmp_path, slow_holder,
+                                                               monkeypatch):
+    monkeypatch.setattr(lk, "HOLDER_WAIT_S", 0.1)
+    path = lk.lock_path(tmp_path, "out")
+    slow_holder(path)
+    t0 = time.monotonic()
+    with pytest.raises(InputError, match=r"another microfacet run \(another process, "
+                                         r"starting\)") as err:
+        lk.acquire(path, shown="the output")
+    assert "None" not in str(err.value) and time.monotonic() - t0 < 5
+
+
+_RACER = textwrap.dedent("""
+    import sys, time
+    from pathlib import Path
+    from microfacet.core.errors import InputError
+    from microfacet.io.lock import acquire, release
+    path, start = Path(sys.argv[1]), float(sys.argv[2])
+    while time.time() < start:
+        pass
+    for _ in range(150):
+        try:
+            if acquire(path, shown="out"):
+                release(path)
+        except InputError as exc:
+            print(exc, flush=True)
+""")
+
+
+def test_racing_runs_always_name_the_holder(tmp_path):
+    """Processes taking and releasing one lock as fast as they can (the old code printed
+    ``pid None`` for most refusals): every refusal names a pid."""
+    path = lk.lock_path(tmp_path, "out")
+    start = time.time() + 1.0
+    procs = [subprocess.Popen([sys.executable, "-c", _RACER, str(path), str(start)],
+                              stdout=subprocess.PIPE, text=True) for _ in range(4)]
+    lines = [line for p in procs for line in p.communicate(timeout=120)[0].splitlines()]
+    assert all(p.returncode == 0 for p in procs)
+    assert lines, "no refusal: the processes did not race"
+    assert not [line for line in lines if "None" in line], lines[:3]
+    assert all(re.search(r"\(pid \d+ on |another process, starting", line) for line in lines)
