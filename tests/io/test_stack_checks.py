@@ -171,3 +171,25 @@ def test_bad_given_values_name_the_option(tmp_path, kw, option):
     assert ei.value.cli_message().startswith(f"{option}: must be a finite number")
 
 
+
+
+def test_an_export_only_stack_does_not_read_the_z_keys(tmp_path):
+    """``z_um`` and ``z_step_um`` are read only with slices (docs/stack-format.md)."""
+    d = tmp_path / "e"
+    d.mkdir()
+    np.save(d / "h.npy", np.zeros((H, W), np.float32))
+    cv2.imwrite(str(d / "aif.png"), np.zeros((H, W, 3), np.uint8))
+    meta = {"format": "microfacet-stack/1", "pixel_size_um": 0.5, "height_um": "h.npy",
+            "image": "aif.png", "z_um": "not read", "z_step_um": 0}
+    (d / "stack.json").write_text(json.dumps(meta))
+    st = read_stack(d)
+    assert st.n_slices == 0 and st.sources == {"pixel_size_um": "stack.json"}
+
+
+def test_null_is_absent_only_where_the_spec_says_so(good_stack):
+    d = good_stack()
+    _patch(d, exposure=None)
+    assert read_stack(d).exposure is None
+    _patch(d, color_space=None)
+    with pytest.raises(InputError, match=r"key 'color_space': None is not one of"):
+        read_stack(d)
