@@ -13,35 +13,34 @@ MountainsMap .mnt, measured by real instruments):
    height tilts, the thickness it found and its NDF.
 
 The film colour is synthetic (these instruments image no anodized titanium); the relief,
-units, pixel sizes and slopes are the instruments'. The figure shows, per file, the colour
-image, the height and the per-pixel tilt histogram with the fitted NDF.
-
-Run::
-
-    python pipelines/instrument_gallery.py [--thickness-nm 70] [--docs]
-
-``--docs`` writes docs/img/real-instruments.png. Needs the ``instruments`` extra.
+units, pixel sizes and slopes are the instruments'. The figure (``out/real-instruments.png``;
+``--docs`` copies it to docs/img/) shows, per file, the colour image, the height and the
+per-pixel tilt histogram with the fitted NDF. The stacks are made in ``out`` (the instrument
+file copied into each): the fixtures are only read. Needs the ``instruments`` extra.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import shutil
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from _shared import DOCS, ROOT, md_table, pyplot, save_figure
 
-from microfacet.cli import main as cli_main
-from microfacet.colour.srgb import srgb_encode
-from microfacet.colour.table import build_colour_table
-from microfacet.focus.normals import normals_from_height, tilt_azimuth_deg
-from microfacet.io.images import write_image
-from microfacet.io.instruments import read_height_map
-from microfacet.io.results import Results
+from pipelines import ROOT, Study
+from pipelines._shared import md_table, note, pyplot, save_figure
+
+STUDY = Study(
+    name="gallery-instruments",
+    question="Do real instrument height maps read as SurfaceTopography reads them, and what "
+             "does `microfacet analyze` make of them?",
+    doc=("docs/real-data.md", "gallery-instruments"),
+    run_time="1 min",
+    quick_time="10 s",
+    options={"thickness_nm": (70.0, "thickness of the synthetic uniform film, nm")},
+    doc_files={"real-instruments.png": "docs/img/real-instruments.png"},
+)
 
 FILES = ROOT / "fixtures" / "instrument-heights"
 NAMES = ("al3d-1.al3d", "plu-1.plu", "mnt-1.mnt")
@@ -66,6 +65,10 @@ def surface_topography_values(path):
 
 def colour_image(h, pixel_yx, thickness_nm):
     """8-bit sRGB of a uniform film at each pixel's tilt (normals of the height map)."""
+    from microfacet.colour.srgb import srgb_encode
+    from microfacet.colour.table import build_colour_table
+    from microfacet.focus.normals import normals_from_height, tilt_azimuth_deg
+
     tilt, _ = tilt_azimuth_deg(normals_from_height(h, pixel_size_um=pixel_yx))
     table = build_colour_table(thickness_range_nm=(thickness_nm - 5, thickness_nm + 5),
                                theta_range_deg=(0.0, 40.0))
@@ -76,6 +79,11 @@ def colour_image(h, pixel_yx, thickness_nm):
 
 
 def run_one(name, work, thickness_nm):
+    from microfacet.cli import main as cli_main
+    from microfacet.io.images import write_image
+    from microfacet.io.instruments import read_height_map
+    from microfacet.io.results import Results
+
     src = FILES / name
     m = read_height_map(src)
     h = m.height_um.astype(np.float64)
@@ -84,7 +92,8 @@ def run_one(name, work, thickness_nm):
     ours_grad = rms_gradient(h, m.pixel_size_um)
     img, tilt = colour_image(h, m.pixel_size_um, thickness_nm)
     stack = work / name.replace(".", "_")
-    stack.mkdir()
+    shutil.rmtree(stack, ignore_errors=True)
+    stack.mkdir(parents=True)
     shutil.copy(src, stack / name)
     write_image(stack / "image.png", img)
     (stack / "stack.json").write_text(json.dumps({
@@ -93,6 +102,7 @@ def run_one(name, work, thickness_nm):
     facet_um = 10 * float(np.sqrt(np.prod(m.pixel_size_um)))  # facets of ~10 pixels
     t0 = time.perf_counter()
     status = cli_main(["analyze", str(stack), "--out", str(out), "-q", "--no-report",
+                       "--overwrite",
                        "--facet-size-um", f"{facet_um:.3g}"])
     wall = time.perf_counter() - t0
     res = Results(out)
@@ -141,37 +151,28 @@ def figure(rows, path):
     save_figure(fig, path)
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--thickness-nm", type=float, default=70.0)
-    ap.add_argument("--docs", action="store_true", help="write docs/img/real-instruments.png")
-    args = ap.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        rows = [run_one(n, Path(tmp), args.thickness_nm) for n in NAMES]
-        table = []
-        for r in rows:
-            py, px = r["pixel"]
-            table.append([
-                r["name"], f"{r['shape'][0]} × {r['shape'][1]}", f"{py:.5g} × {px:.5g}",
-                f"{r['ours_rms']:.6g} / {r['st_rms']:.6g}",
-                f"{r['ours_grad']:.6g} / {r['st_grad']:.6g}",
-                f"{r['tilt_rms_slope']:.4g}",
-                f"{r['thickness_median']:.1f}",
-                f"{r['plane_tilt']:.3g}",
-                "; ".join(w.split(":")[0] for w in r["warnings"]) or "—",
-                ("identified" if r["ndf"].get("identified") else "not identified: "
-                 + str(r["ndf"].get("reason", "")))[:70],
-                f"{r['wall_s']:.1f}"])
-        print(md_table(
-            ["file", "rows × cols", "pixel y × x (µm)", "RMS height µm (ours / ST)",
-             "RMS gradient (ours / ST)", "RMS slope of the analysis' height tilts",
-             f"thickness median (nm; true {args.thickness_nm:g})", "mean-plane tilt (deg)",
-             "warnings", "NDF", "analyze (s)"],
-            table))
-        if args.docs:
-            figure(rows, DOCS / "img" / "real-instruments.png")
-            print(f"wrote {DOCS / 'img' / 'real-instruments.png'}")
-
-
-if __name__ == "__main__":
-    main()
+def run(*, quick: bool, out: Path, thickness_nm=70.0) -> str:
+    names = NAMES[:1] if quick else NAMES
+    rows = [run_one(n, out / "stacks", thickness_nm) for n in names]
+    table = []
+    for r in rows:
+        py, px = r["pixel"]
+        table.append([
+            r["name"], f"{r['shape'][0]} × {r['shape'][1]}", f"{py:.5g} × {px:.5g}",
+            f"{r['ours_rms']:.6g} / {r['st_rms']:.6g}",
+            f"{r['ours_grad']:.6g} / {r['st_grad']:.6g}",
+            f"{r['tilt_rms_slope']:.4g}",
+            f"{r['thickness_median']:.1f}",
+            f"{r['plane_tilt']:.3g}",
+            "; ".join(w.split(":")[0] for w in r["warnings"]) or "—",
+            ("identified" if r["ndf"].get("identified") else "not identified: "
+             + str(r["ndf"].get("reason", "")))[:70],
+            f"{r['wall_s']:.1f}"])
+        note(" | ".join(table[-1]))
+    figure(rows, out / "real-instruments.png")
+    note(f"wrote {out / 'real-instruments.png'}")
+    return md_table(
+        ["file", "rows × cols", "pixel y × x (µm)", "RMS height µm (ours / ST)",
+         "RMS gradient (ours / ST)", "RMS slope of the analysis' height tilts",
+         f"thickness median (nm; true {thickness_nm:g})", "mean-plane tilt (deg)",
+         "warnings", "NDF", "analyze (s)"], table)

@@ -9,8 +9,8 @@ every oxide thickness d of the analysis range this script computes
 * K(d, θ) = ΔE00 per nm of thickness (central difference ±0.25 nm) and J/K, the thickness
   change that looks like one degree of tilt;
 * σ_tilt = σ_n / J, the linearised 1-σ tilt uncertainty of ``tilt.invert_tilt`` for colour
-  noise σ_n (ΔE00 per Lab component, as ``tilt.estimate_colour_noise`` reports it) of 0.5, 1
-  and 2 ΔE00, capped at the tilt range; and with a thickness uncertainty σ_d:
+  noise σ_n (ΔE00 per Lab component, as ``colour_image.estimate_colour_noise`` reports it)
+  of 0.5, 1 and 2 ΔE00, capped at the tilt range; and with a thickness uncertainty σ_d:
   σ_tilt = sqrt(σ_n² + (K σ_d)²) / J;
 * a Monte-Carlo check: uniform 64 × 64 patches at (θ, d) rendered like ``microfacet.forward.synth``
   (colour table, exposure 1, shot + read noise, 8-bit sRGB), inverted with
@@ -19,28 +19,41 @@ every oxide thickness d of the analysis range this script computes
 * J as the analysis computes it (``invert_tilt``'s central differences of the interpolated
   colour table on its 0.5° grid) against the exact J.
 
-Writes OUT/conditioning.md and OUT/img/conditioning.png.
-
-Run:  python pipelines/conditioning.py            (writes docs/, ~1 min)
-      python pipelines/conditioning.py --quick    (writes out/conditioning-quick/)
+Returns the page (docs/conditioning.md below its title) and writes ``out/img/conditioning.png``
+(``--docs`` copies it to docs/img/).
 """
 
 from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 
 import numpy as np
-from _shared import (
+
+from pipelines import Study
+from pipelines._shared import (
     Doc,
     lab_direct,
     md_table,
     noisy_scene,
-    output_folder,
-    parser,
     pyplot,
     save_figure,
     through_sensor,
+)
+
+STUDY = Study(
+    name="accuracy-conditioning",
+    question="For which films and tilts does colour carry the tilt (ΔE00 per degree and the "
+             "tilt uncertainty it gives)?",
+    doc=("docs/conditioning.md", "accuracy-conditioning"),
+    run_time="1 min",
+    quick_time="10 s",
+    options={"na": (0.8, "numerical aperture"),
+             "d_max": (400.0, "largest thickness, nm (the analysis' default range is 0-400)"),
+             "sigma_d": (0.3, "thickness uncertainty for the combined σ, nm (the synthetic "
+                              "presets' fine thickness variation)")},
+    doc_files={"img/conditioning.png": "docs/img/conditioning.png"},
 )
 
 TILTS = (5.0, 10.0, 20.0)
@@ -61,13 +74,13 @@ def sensitivities(d, tilts, h_deg=0.25, h_nm=0.25):
     return J, K
 
 
-def table_sensitivity(table, d, tilts, max_tilt, step=0.5):
+def table_sensitivity(model, d, tilts, max_tilt, step=0.5):
     """J as invert_tilt computes it: central differences of the table rows on its θ grid."""
     from microfacet.analysis.tilt import model_lab_rows
     from microfacet.colour.difference import delta_e_2000
 
     g = np.arange(0.0, max_tilt + 1e-9, step)
-    rl = model_lab_rows(table, np.asarray(d, float), g, exposure=1.0).astype(np.float32)
+    rl = model_lab_rows(model, np.asarray(d, float), g).astype(np.float32)
     sens = np.empty(rl.shape[:2], np.float32)
     sens[:, 1:-1] = delta_e_2000(rl[:, 2:], rl[:, :-2]) / (2 * step)
     sens[:, 0] = delta_e_2000(rl[:, 1], rl[:, 0]) / step
@@ -85,28 +98,27 @@ def patch_lab(table, theta, d, *, full_well, read_noise, rng, size=64):
     return through_sensor(rgb, p, rng)
 
 
-def monte_carlo(table, max_tilt, thicknesses, tilts, sensors, J_at):
+def monte_carlo(model, max_tilt, thicknesses, tilts, sensors, J_at):
     from microfacet.analysis.colour_image import estimate_colour_noise
     from microfacet.analysis.mask import colour_mask
-    from microfacet.analysis.tilt import invert_tilt, model_lab_rows
+    from microfacet.analysis.options import MaskOptions, TiltOptions
+    from microfacet.analysis.tilt import TiltRows, invert_tilt, model_lab_rows, tilt_grid
 
-    g = np.arange(0.0, max_tilt + 1e-9, 0.5)
-    if g[-1] < max_tilt - 1e-9:
-        g = np.append(g, max_tilt)
+    g = tilt_grid(max_tilt, 0.5)
     rows = []
     for sname, fw, rn in sensors:
         rng = np.random.default_rng(7)
         for d in thicknesses:
-            rl = model_lab_rows(table, np.array([float(d)]), g, exposure=1.0)
+            rl = model_lab_rows(model, np.array([float(d)]), g)
             for th in tilts:
-                lab, enc = patch_lab(table, th, d, full_well=fw, read_noise=rn, rng=rng)
-                cm = colour_mask(enc, shadow_ratio=0.0)
+                lab, enc = patch_lab(model.table, th, d, full_well=fw, read_noise=rn, rng=rng)
+                cm = colour_mask(enc, MaskOptions(shadow_ratio=0.0))
                 ok = ~cm.mask
-                sn = estimate_colour_noise(lab, cm.mask)
+                sn = estimate_colour_noise(lab, cm.mask, delta_e_method=model.delta_e_method)
                 px = lab[ok]
-                inv = invert_tilt(px, rl, np.zeros(px.shape[0], np.intp), g, table=table,
-                                  thickness_px=np.full(px.shape[0], float(d)), exposure=1.0,
-                                  noise_de=sn)
+                inv = invert_tilt(px, np.zeros(px.shape[0], np.intp),
+                                  TiltRows(rl, np.array([float(d)]), sn), g, model,
+                                  TiltOptions())
                 t = inv.tilt_deg.astype(np.float64)
                 j = J_at(th, d)
                 rows.append(dict(sensor=sname, d=d, theta=th, noise=sn, n=px.shape[0],
@@ -175,20 +187,16 @@ def f2(x):
     return f"{x:.2f}" if x < 10 else f"{x:.1f}"
 
 
-def main(argv=None):
+class _Args:
+    def __init__(self, **kw):
+        self.__dict__.update(kw)
+
+
+def run(*, quick: bool, out: Path, na=0.8, d_max=400.0, sigma_d=0.3) -> str:
+    from microfacet.colour.model import FilmColourModel
     from microfacet.colour.table import build_colour_table
 
-    ap = parser(__doc__, quick="2 nm thickness step, fewer patches",
-                out="folder for conditioning.md and img/ (default docs/, or "
-                    "out/conditioning-quick/ with --quick)")
-    ap.add_argument("--na", type=float, default=0.8, help="numerical aperture (default 0.8)")
-    ap.add_argument("--d-max", type=float, default=400.0,
-                    help="largest thickness (nm); the analysis' default range is 0-400")
-    ap.add_argument("--sigma-d", type=float, default=0.3,
-                    help="thickness uncertainty for the combined σ (nm; default 0.3, the "
-                         "synthetic presets' fine thickness variation)")
-    args = ap.parse_args(argv)
-    out = output_folder(args.out, quick=args.quick, name="conditioning")
+    args = _Args(quick=quick, na=na, d_max=d_max, sigma_d=sigma_d)
     t0 = time.perf_counter()
     max_tilt = math.degrees(math.asin(args.na)) / 2.0
     step = 2.0 if args.quick else 1.0
@@ -196,7 +204,8 @@ def main(argv=None):
     J, K = sensitivities(d, TILTS)
     table = build_colour_table(thickness_range_nm=(0.0, args.d_max),
                                theta_range_deg=(0.0, max_tilt + 0.5))
-    Jt = table_sensitivity(table, d, TILTS, max_tilt)
+    model = FilmColourModel(table)
+    Jt = table_sensitivity(model, d, TILTS, max_tilt)
     noise = scene_noise(128 if args.quick else 256)
     sigma_typ = noise["nd"]
 
@@ -207,20 +216,20 @@ def main(argv=None):
     sensors = [("default (8000 e⁻, read 0.002)", 8000.0, 0.002)]
     if not args.quick:
         sensors.append(("noisy preset (150 e⁻, read 0.02)", 150.0, 0.02))
-    mc = monte_carlo(table, max_tilt, mc_d, TILTS, sensors, J_at)
+    mc = monte_carlo(model, max_tilt, mc_d, TILTS, sensors, J_at)
 
-    emit = Doc()
-    cmd = "python pipelines/conditioning.py" + (" --quick" if args.quick else "") + (
-        f" --na {args.na:g}" if args.na != 0.8 else "") + (
-        f" --d-max {args.d_max:g}" if args.d_max != 400 else "")
+    emit = Doc(echo=False)
+    cmd = "python -m pipelines run accuracy-conditioning" + (" --quick" if args.quick else "") + (
+        f" --set na={args.na:g}" if args.na != 0.8 else "") + (
+        f" --set d_max={args.d_max:g}" if args.d_max != 400 else "") + (
+        f" --set sigma_d={args.sigma_d:g}" if args.sigma_d != 0.3 else "")
 
-    emit("# Conditioning: when is tilt from colour meaningful?\n")
     emit(f"Reproduce: `{cmd}`\n")
     emit(f"Under the microscope's coaxial light a facet tilted by θ is seen at incidence θ, "
          f"0 … asin(NA)/2 = {max_tilt:.2f}° for NA {args.na:g} (steeper facets are dark), so "
          f"its colour carries the tilt only through the angle dependence of the thin-film "
          f"colour. `tilt.invert_tilt` reports σ_tilt = σ_n / J, with σ_n the image colour "
-         f"noise (ΔE00 per Lab component, `tilt.estimate_colour_noise`) and J the colour "
+         f"noise (ΔE00 per Lab component, `colour_image.estimate_colour_noise`) and J the colour "
          f"change per degree. This page shows J over the analysis' thickness range "
          f"(0–{args.d_max:g} nm; default film `TiO2_Jolivet2023_amorphous` on "
          f"`Ti_JohnsonChristy1974`, D65) at θ = 5, 10 and 20°, and the resulting σ_tilt, so "
@@ -352,9 +361,4 @@ def main(argv=None):
          f"{max_tilt:.1f}° means the colour said nothing.")
     emit(f"\n---\nMeasured {time.strftime('%Y-%m-%d')} in {time.perf_counter() - t0:.0f} s.")
     plot(out / "img" / "conditioning.png", d, J, K, TILTS, max_tilt, sigma_typ)
-    emit.write(out / "conditioning.md")
-    print(f"\nwrote {out / 'conditioning.md'} and {out / 'img' / 'conditioning.png'}")
-
-
-if __name__ == "__main__":
-    main()
+    return emit.text()

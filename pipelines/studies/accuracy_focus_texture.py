@@ -4,21 +4,28 @@ For the nd preset (160x160 px, 24 slices, noise-free), the fraction of all pixel
 sharpest slice — by an independent focus measure, the 9x9 local grey-level variance — lies
 within 2 slices of the slice nearest their true height. Compared: the default (dark grooves
 at the facet steps, no per-facet thickness offset) and no grooves with per-facet thickness
-offsets of 0.8, 1.5 and 2.5 nm (docs/synthetic-stacks.md).
-
-Run:  python pipelines/focus_texture.py
+offsets of 0.8, 1.5 and 2.5 nm (docs/synthetic-stacks.md quotes the numbers).
 """
 
 from __future__ import annotations
 
-import tempfile
+import shutil
 from pathlib import Path
 
-import cv2
 import numpy as np
-from _shared import md_header, md_row
 
-from microfacet.forward.synth import generate_stack, preset
+from pipelines import Study
+from pipelines._shared import md_table, note
+
+STUDY = Study(
+    name="accuracy-focus-texture",
+    question="Do the synthetic stacks carry enough texture to focus on, with grooves or "
+             "with per-facet thickness offsets?",
+    doc=None,
+    run_time="15 s",
+    quick_time="5 s",
+    options={"size": (160, "image side, px"), "slices": (24, "slices per stack")},
+)
 
 CASES = [
     ("grooves (default), no facet offset", dict()),
@@ -29,6 +36,8 @@ CASES = [
 
 
 def within_two(folder, p, z_um):
+    import cv2
+
     h = np.load(folder / "truth" / "height_um.npy")
     fm = []
     for k in range(p.n_slices):
@@ -41,15 +50,19 @@ def within_two(folder, p, z_um):
     return float(np.mean(np.abs(best - true_k) <= 2))
 
 
-def main():
-    print(md_header(["synthetic image", "pixels whose sharpest slice is within 2 of the truth"]))
-    with tempfile.TemporaryDirectory() as tmp:
-        for i, (name, kw) in enumerate(CASES):
-            p = preset("nd", seed=4, height_px=160, width_px=160, n_slices=24,
-                       full_well_e=None, read_noise=0.0, **kw)
-            r = generate_stack(Path(tmp) / str(i), p)
-            print(md_row([name, f"{within_two(Path(tmp) / str(i), p, r.z_um):.2f}"]), flush=True)
+def run(*, quick: bool, out: Path, size=160, slices=24) -> str:
+    from microfacet.forward.synth import generate_stack, preset
 
-
-if __name__ == "__main__":
-    main()
+    if quick:
+        size, slices = min(size, 64), min(slices, 12)
+    rows = []
+    for i, (name, kw) in enumerate(CASES):
+        folder = out / f"case{i}"
+        p = preset("nd", seed=4, height_px=size, width_px=size, n_slices=slices,
+                   full_well_e=None, read_noise=0.0, **kw)
+        r = generate_stack(folder, p, overwrite=True)
+        rows.append([name, f"{within_two(folder, p, r.z_um):.2f}"])
+        shutil.rmtree(folder, ignore_errors=True)
+        note(" | ".join(rows[-1]))
+    return md_table(["synthetic image", "pixels whose sharpest slice is within 2 of the truth"],
+                    rows)
