@@ -21,22 +21,40 @@ steps, **wrong** (fraction of the reliable pixels off by more than one z step: c
 wrong heights), and **in 2σ** (fraction of the reliable pixels with |error| ≤ 2σ of the
 reported ``height_sigma_um``); the same on the *relief zone* (pixels within 4 px of a step,
 crest, valley or rim). Then the calibration of σ (actual RMS error per bin of reported σ), the
-colour measures on chroma-rich texture, and the Cou & Guennebaud (2023) stacks.
+colour measures on chroma-rich texture, and the Cou & Guennebaud (2023) stacks. The plot of
+coverage against contrast is ``out/coverage.png``.
 
-Run:  python pipelines/focus_coverage.py [--size 128] [--seeds 2] [--plot coverage.png]
+docs/height-from-focus.md quotes the tables (its text between them was edited by hand, so
+no block is regenerated).
 """
 
 from __future__ import annotations
 
-import argparse
+import contextlib
+import io
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
-from _shared import cou_stack, md_header, md_row
 
 from microfacet.focus.height import height_from_focus
 from microfacet.focus.options import EARLIER_DEFAULT, FocusOptions
+from pipelines import Study
+from pipelines._shared import cou_stack, md_header, md_row
+
+STUDY = Study(
+    name="accuracy-focus-coverage",
+    question="How much of a surface does height from focus cover against texture contrast and "
+             "at sharp relief, and is its reported σ calibrated?",
+    doc=None,
+    run_time="2 min",
+    quick_time="15 s",
+    options={"size": (128, "image side, px"),
+             "seeds": (2, "texture and noise draws per case"),
+             "blur": (1.55, "defocus px per z step"),
+             "cou": (True, "also the Cou & Guennebaud stacks")},
+)
 
 N_SLICES = 24
 NOISE = 0.01
@@ -405,30 +423,23 @@ def plot(pools, methods, short, path):
     axes[1].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    print(f"\nwrote {path}")
+    plt.close(fig)
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--size", type=int, default=128, help="image side, px")
-    ap.add_argument("--seeds", type=int, default=2, help="texture and noise draws per case")
-    ap.add_argument("--blur", type=float, default=1.55, help="defocus px per z step")
-    ap.add_argument("--plot", default=None, help="also write coverage vs contrast here (PNG)")
-    ap.add_argument("--no-cou", action="store_true", help="skip the Cou stacks")
-    args = ap.parse_args(argv)
+def run(*, quick: bool, out: Path, size=128, seeds=2, blur=1.55, cou=True) -> str:
+    if quick:
+        size, seeds, cou = min(size, 40), 1, False
     methods = list(METHODS)
-    print(f"{args.size}x{args.size} px, {N_SLICES} slices, defocus {args.blur} px per step, "
-          f"noise SD {NOISE}, {args.seeds} draws per case\n")
-    pools = run_synthetic(args.size, args.seeds, args.blur)
-    short = tables(pools, methods)
-    cut_table(pools, methods[4], methods[0])
-    calibration(pools, methods[4], methods[0])
-    colour_table(args.size, args.blur)
-    if not args.no_cou:
-        cou_table(methods, short)
-    if args.plot:
-        plot(pools, methods, short, args.plot)
-
-
-if __name__ == "__main__":
-    main()
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        print(f"{size}x{size} px, {N_SLICES} slices, defocus {blur} px per step, "
+              f"noise SD {NOISE}, {seeds} draws per case\n")
+        pools = run_synthetic(size, seeds, blur)
+        short = tables(pools, methods)
+        cut_table(pools, methods[4], methods[0])
+        calibration(pools, methods[4], methods[0])
+        colour_table(size, blur)
+        if cou:
+            cou_table(methods, short)
+        plot(pools, methods, short, out / "coverage.png")
+    return buf.getvalue()
