@@ -47,12 +47,15 @@ def results_copy(results, tmp_path):
 
 @pytest.fixture(scope="session")
 def pdf_text():
-    """``pdf_text(path, page)``: text of one PDF page (1-based), as laid out on it, read by
-    pypdf (a test extra: these tests never skip)."""
+    """``pdf_text(path, page)``: text of one PDF page (1-based), read by pypdf (a test extra:
+    these tests never skip): the lines as laid out on the page, then the page's text in
+    every orientation (the layout mode leaves out rotated text, such as the colour bars'
+    labels)."""
     from pypdf import PdfReader
 
     def read(path, page):
-        return PdfReader(path).pages[page - 1].extract_text(extraction_mode="layout")
+        p = PdfReader(path).pages[page - 1]
+        return p.extract_text(extraction_mode="layout") + "\n" + p.extract_text()
     return read
 
 

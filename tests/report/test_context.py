@@ -10,7 +10,9 @@ import pytest
 
 from microfacet.core.errors import InputError
 from microfacet.io.results import write_results_files
+from microfacet.optics.defaults import DEFAULT_FILM, DEFAULT_ILLUMINANT, DEFAULT_SUBSTRATE
 from microfacet.report.context import DRAWN_FILES, Context
+from microfacet.report.page_angular import optics
 
 _PDF_COLUMNS = ["thickness_nm", "density", "mixture_density"]
 
@@ -33,14 +35,21 @@ def test_fits_geometry_and_largest_tilt(tmp_path):
     # not recorded: from the numerical aperture, asin(NA)/2
     assert ctx.max_tilt() == pytest.approx(math.degrees(math.asin(0.8)) / 2)
     assert ctx.missing_files() == [f for f in DRAWN_FILES if f != "mask.npy"]
-    assert Context.open(tmp_path / "a").optics("film") is None
+    # no optics recorded: none read, and the angular page models the defaults
+    assert not Context.open(tmp_path / "a").optics("film")
+    assert optics(ctx) == {"film": DEFAULT_FILM, "substrate": DEFAULT_SUBSTRATE,
+                           "illuminant": DEFAULT_ILLUMINANT}
 
 
 def test_recorded_values_win_and_pixels_without_a_size(tmp_path):
-    ctx = _folder(tmp_path / "a", {"inputs": {"numerical_aperture": 0.8, "film": "F"},
-                                   "film": "G", "ndf": {"max_tilt_deg": 20.0}})
-    assert ctx.max_tilt() == 20.0 and ctx.optics("film") == "G"
+    ctx = _folder(tmp_path / "a", {"summary_version": 2, "inputs": {
+        "numerical_aperture": 0.8, "film": "F"}, "ndf": {"max_tilt_deg": 20.0}})
+    assert ctx.max_tilt() == 20.0 and ctx.optics("film") == "F"
     assert ctx.geom.unit == "pixel" and ctx.thick is None and ctx.mask is None
+    # a version-1 summary recorded the optics at the top level: read as the inputs'
+    old = _folder(tmp_path / "v1", {"inputs": {"numerical_aperture": 0.8}, "film": "G",
+                                    "illuminant": "D50"})
+    assert old.optics("film") == "G" and old.optics("illuminant") == "D50"
 
 
 def test_density_tables(tmp_path):
