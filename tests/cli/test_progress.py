@@ -1,11 +1,16 @@
-"""The progress bar (microfacet.cli.progress): the fraction done follows the measured stage
-weights, and the bar is drawn only on a terminal."""
+"""The progress bar (microfacet.cli.progress): the fraction done follows the stages' measured
+weights (the :class:`~microfacet.analysis.stages.Stage` enum for ``microfacet analyze``),
+skipped stages count for nothing, and the bar is drawn only on a terminal."""
 
 import io
+from types import SimpleNamespace as S
 
 import pytest
 
-from microfacet.cli.progress import ANALYZE_STAGE_WEIGHTS, Progress, StageProgress
+from microfacet.analysis.options import AnalysisOptions
+from microfacet.analysis.stages import JOINT_ONLY, Stage
+from microfacet.cli.progress import Progress, StageProgress
+from microfacet.workflow.analyse import analyse_to_folder
 
 
 class _Tty(io.StringIO):
@@ -13,51 +18,97 @@ class _Tty(io.StringIO):
         return True
 
 
+def _stages(*weights):
+    return [S(label=name, weight=w) for name, w in zip("abcdefgh", weights)]
+
+
 def test_fraction_done_follows_the_stage_weights():
-    weights = [("a", 1.0), ("b", 3.0), ("c", 6.0)]
-    bar = StageProgress("x", weights, stream=_Tty())
+    stages = _stages(1.0, 3.0, 6.0)
+    bar = StageProgress("x", stages, stream=_Tty())
     seen = []
-    for name in ("a", "b", "c"):
-        bar.stage(name)
+    for s in stages:
+        bar.stage(s)
         seen.append(bar.fraction)
     assert seen == pytest.approx([0.0, 0.1, 0.4])      # not the equal steps 0, 1/3, 2/3
+    bar.stage(S(label="other", weight=5.0))            # not one of its stages: no move
+    assert bar.fraction == pytest.approx(0.4)
     bar.finish()
     assert bar.fraction == 1.0
 
 
-def test_analyze_weights_put_the_report_at_about_half_the_time():
-    """The report of the bundled fixture takes about as long as the analysis; with
-    --no-report it counts for nothing."""
-    names = [n for n, _ in ANALYZE_STAGE_WEIGHTS]
-    bar = StageProgress("analyze", ANALYZE_STAGE_WEIGHTS, quiet=True)
-    bar.stage("report")
-    assert 0.4 < bar.fraction < 0.6
-    assert names.index("report") / len(names) > 0.8        # what equal steps would say
-    bar = StageProgress("analyze", ANALYZE_STAGE_WEIGHTS, skip=("report",), quiet=True)
-    bar.stage("write")
-    assert bar.fraction > 0.99
-    bar.stage("report")                                    # skipped: the bar does not move
-    assert bar.fraction > 0.99
+def _expected(stage, skip=()):
+    """Summed weight of the stages before ``stage`` over all, skipped ones left out (computed
+    here from the enum's weights)."""
+    run = [s for s in Stage if s not in skip]
+    return sum(s.weight for s in run[:run.index(stage)]) / sum(s.weight for s in run)
 
 
-def test_the_stage_names_are_those_the_pipeline_announces():
-    import inspect
+def test_analyze_fraction_follows_the_stage_weights():
+    """Every stage of ``microfacet analyze`` starts at the summed weight of those before it,
+    whatever their count says: the report, the costliest stage, starts at 80 % of the
+    work, not at 10/11 of the stages."""
+    assert all(s.weight > 0 for s in Stage) and len({s.key for s in Stage}) == len(Stage)
+    bar = StageProgress("analyze", list(Stage), quiet=True)
+    for s in Stage:
+        bar.stage(s)
+        assert bar.fraction == pytest.approx(_expected(s)), s
+    bar.stage(Stage.REPORT)
+    assert bar.fraction != pytest.approx(list(Stage).index(Stage.REPORT) / len(Stage), abs=0.02)
 
-    from microfacet.analysis import pipeline
-    from microfacet.workflow import batch as runner
 
-    source = inspect.getsource(pipeline.analyze_stack) + inspect.getsource(
-        runner.analyse_to_folder)
-    for name, _ in ANALYZE_STAGE_WEIGHTS:
-        assert f'"{name}"' in source, name
+def test_analyze_without_report_reaches_about_one_at_write():
+    """With ``--no-report`` the report counts for nothing: writing, the last stage, starts
+    near the end of the bar, and announcing the report does not move it."""
+    bar = StageProgress("analyze", list(Stage), skip=(Stage.REPORT,), quiet=True)
+    bar.stage(Stage.WRITE)
+    total = sum(s.weight for s in Stage if s is not Stage.REPORT)
+    assert bar.fraction == pytest.approx(1.0 - Stage.WRITE.weight / total)
+    assert bar.fraction > 0.95
+    bar.stage(Stage.REPORT)                                # skipped: the bar does not move
+    assert bar.fraction == pytest.approx(1.0 - Stage.WRITE.weight / total)
+    bar.finish()
+    assert bar.fraction == 1.0
+
+
+def test_the_seed_mode_skips_the_joint_stages():
+    skip = JOINT_ONLY + (Stage.REPORT,)
+    bar = StageProgress("analyze", list(Stage), skip=skip, quiet=True)
+    for s in JOINT_ONLY:
+        bar.stage(s)
+        assert bar.fraction == 0.0                         # never announced: no move
+    bar.stage(Stage.TILT)
+    assert bar.fraction == pytest.approx(_expected(Stage.TILT, skip))
+    # the joint stages are not counted as done before the tilt
+    assert bar.fraction < _expected(Stage.TILT, (Stage.REPORT,))
+
+
+def test_the_workflow_announces_the_stages_the_bar_expects(batch_drawer, tmp_path):
+    """``analyse_to_folder`` announces every stage that runs, in the enum's order: the bar,
+    told which are skipped, moves forward at each and never past 1."""
+    skip = JOINT_ONLY + (Stage.REPORT,)
+    bar = StageProgress("analyze", list(Stage), skip=skip, quiet=True)
+    seen, fractions = [], []
+
+    def step(stage):
+        seen.append(stage)
+        bar.stage(stage)
+        fractions.append(bar.fraction)
+
+    analyse_to_folder(batch_drawer / "a", tmp_path / "res", options=AnalysisOptions(
+        mode="seed"), report=False, progress=step)
+    assert seen == [s for s in Stage if s not in skip]
+    assert fractions[0] == 0.0 and all(b > a for a, b in zip(fractions, fractions[1:]))
+    assert fractions[-1] == pytest.approx(_expected(Stage.WRITE, skip)) and fractions[-1] < 1
+    assert (tmp_path / "res" / "summary.json").is_file()
 
 
 def test_bar_and_eta_on_a_terminal_only():
     tty = _Tty()
-    with StageProgress("analyze", [("a", 1.0), ("b", 1.0)], stream=tty) as bar:
-        bar.stage("a")
+    a, b = _stages(1.0, 1.0)
+    with StageProgress("analyze", [a, b], stream=tty) as bar:
+        bar.stage(a)
         assert "eta     ?" in tty.getvalue()                # nothing measured: no estimate
-        bar.stage("b")
+        bar.stage(b)
         assert "b (2/2)" in tty.getvalue() and "#" * 15 in tty.getvalue()
     assert tty.getvalue().endswith("\n")
     piped = io.StringIO()
