@@ -399,6 +399,11 @@ def _warn_implausible(jpath: Path, pixel_size_yx_um, z_um: np.ndarray, shape) ->
 
 
 # ------------------------------------------------------------------------------ stack.json
+def _names_files(spec) -> bool:
+    """The key names files (checked after the rules between keys: which files to read)."""
+    return spec.kind in ("path", "paths")
+
+
 def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
                  given: dict | None = None, plain: bool = False) -> dict:
     """Validate the stack.json ``meta`` of the folder ``root`` (``jpath`` names it in
@@ -410,10 +415,11 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
     """
     c = _Check(root, meta, jpath, limits, given or {}, plain)
     _warn_unknown_keys(meta, jpath)
-    values = checked_values(meta, c.where, lambda s: s.required)
+    # the caller's values, the keys on their own, the rules between them, the files named
     _check_given(c.given)
+    values = checked_values(meta, c.where, lambda s: not s.slices_only and not _names_files(s))
     check_rules(meta, c.where)
-    values.update(checked_values(meta, c.where, lambda s: not s.required and not s.slices_only))
+    checked_values(meta, c.where, _names_files)
     export = _export(c)
     files = {"slices": (), "tiff": None}
     tiff_uniform = False
