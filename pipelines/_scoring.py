@@ -1,9 +1,12 @@
-"""Fair scores of an analysis against synthetic truth (used by ``generalization.py``).
+"""Scores of an analysis against synthetic truth: the fair scores of ``accuracy-sweep``
+(and ``accuracy-ndf-limits``) and the per-preset scores of ``accuracy-presets``
+(:func:`preset_scores`).
 
-Not a script. Every function takes plain arrays (or the dicts of ``truth/params.json`` and
-``summary.json``), so it can be checked alone: ``python -m doctest pipelines/_scoring.py``.
+Every function but :func:`preset_scores` takes plain arrays (or the dicts of
+``truth/params.json`` and ``summary.json``), so it can be checked alone:
+``python -m doctest pipelines/_scoring.py``.
 
-What is scored, and why it is fair to the analysis:
+What the sweep scores, and why it is fair to the analysis:
 
 * **Thickness per true region**: the median of the per-pixel estimate over the region's
   interior (pixels at least ``erode_px`` from any other region, so mixed boundary pixels do
@@ -35,6 +38,9 @@ from scipy import ndimage
 
 from microfacet.colour import delta_e_2000, srgb_to_lab
 from microfacet.core.distributions import NDFMixture
+
+#: Fewest used pixels of a ROI for its thickness to be scored (the analysis' ``roi.min_pixels``).
+ROI_MIN_PIXELS = 20
 
 #: Median local SD (8-bit code values) of the truth image above which a scene is textured.
 TEXTURE_MIN_CODES = 2.0
@@ -262,3 +268,66 @@ def summarize(rows):
         "de_excess_ok": fraction(r["de_excess"] <= 1.0 if r.get("de_excess") is not None
                                  and np.isfinite(r["de_excess"]) else False for r in ok),
     }
+
+
+def preset_scores(results, truth_dir, params) -> dict:
+    """Scores of one results folder against its synthetic truth (``accuracy-presets``).
+
+    * ``thickness_mae_nm``: mean |estimated − true| per-pixel thickness (unmasked, finite);
+    * ``roi_mae_nm``: the same for ROI means (the analysis' ROI grid; a seed-mode pixel has
+      its ROI's thickness, so this is the ROI estimate's error), ROIs with ≥ 20 such pixels;
+    * ``tilt_median_err_deg``, ``ndf_w1_deg``: median |error| of the per-pixel tilt and the W1
+      distance of the estimated tilts to the true ones (visible, finite);
+    * ``ndf_rms_err_deg``: fitted NDF rms slope angle − true (signed);
+    * ``components_found`` / ``components_true`` and ``worst_mean_err_nm`` (largest distance
+      from a true thickness-component mean to the nearest fitted mean);
+    * ``delta_e_mean`` / ``delta_e_median``, ``masked_fraction``, ``exposure``,
+      ``colour_noise_de`` from the summary.
+
+    ``results``: a results folder; ``truth_dir``: the stack's ``truth/``; ``params``: its
+    :class:`~microfacet.forward.synth.SynthParams`.
+    """
+    from pathlib import Path
+
+    from microfacet.analysis.roi import nearest_roi_index, roi_grid
+    from microfacet.io.results import Results
+    from pipelines._shared import tilt_scores, worst_mean_error
+
+    truth_dir = Path(truth_dir)
+    res = Results(results)
+    d_true = np.load(truth_dir / "thickness_nm.npy")
+    t_true = np.load(truth_dir / "tilt_deg.npy")
+    vis = np.load(truth_dir / "visible.npy")
+    d_est = res.map("thickness_nm")
+    t_est = res.map("tilt_deg")
+    mask = res.map("mask")
+    used = ~mask & np.isfinite(d_est)
+    out = {"thickness_mae_nm": float(np.mean(np.abs(d_est[used] - d_true[used])))
+           if used.any() else math.nan}
+    rows, cols, size = roi_grid(d_true.shape, size_px=res.parameter("roi.size_px"),
+                                stride_px=res.parameter("roi.stride_px"))
+    ri, ci = nearest_roi_index(d_true.shape, rows, cols, size)
+    idx = (ri[:, None] * len(cols) + ci[None, :])[used]
+    n = np.bincount(idx, minlength=len(rows) * len(cols))
+    ok = n >= ROI_MIN_PIXELS
+    est = np.bincount(idx, d_est[used], minlength=n.size)[ok] / n[ok]
+    tru = np.bincount(idx, d_true[used], minlength=n.size)[ok] / n[ok]
+    out["roi_mae_nm"] = float(np.mean(np.abs(est - tru))) if ok.any() else math.nan
+    out["tilt_median_err_deg"], out["ndf_w1_deg"] = tilt_scores(t_est, t_true, vis)
+    ndf = res.ndf_mixture()
+    true_ndf = NDFMixture([(lb.weight, lb.sd_deg) for lb in params.tilt_lobes])
+    out["ndf_rms_err_deg"] = (ndf.rms_sd_deg - true_ndf.rms_sd_deg if ndf is not None
+                              else math.nan)
+    thick = res.thickness_mixture()
+    fit_means = list(thick.means_nm) if thick is not None else []
+    out["components_true"] = len(params.thickness)
+    out["components_found"] = len(fit_means)
+    out["worst_mean_err_nm"] = worst_mean_error([c.mean_nm for c in params.thickness],
+                                                fit_means)
+    for key, path in (("delta_e_mean", ("delta_e", "mean")),
+                      ("delta_e_median", ("delta_e", "median")),
+                      ("masked_fraction", ("masked_fraction",)), ("exposure", ("exposure",)),
+                      ("colour_noise_de", ("colour_noise_de",))):
+        v = res.get(*path)
+        out[key] = math.nan if v is None else float(v)
+    return out
