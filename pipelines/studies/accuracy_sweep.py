@@ -8,18 +8,17 @@ drift between slices, tilt-dependent brightness, elongated / size-spread / round
 other optical constants, terraces. Always drawn: 1-3 thickness populations (means 20-260 nm,
 across the first two interference orders, ≥ 12 nm and ≥ 4 SD apart), 1-2 NDF lobes of
 2-14°, facet size, waviness, per-facet thickness offsets, exposure and sensor noise. The
-stacks are analysed with ``microfacet.workflow.run_batch`` (``--mode joint``, ``seed`` or
-``both``) and scored with ``_scoring.py`` (its docstring says what and why): thickness per
+stacks are analysed with ``microfacet.workflow.run_batch`` (``mode``: joint, seed or both)
+and scored with :mod:`pipelines._scoring` (its docstring says what and why): thickness per
 true region, number of thickness populations and NDF lobes, NDF W1 where the analysis says
 the NDF is identified, the identified fraction on textured scenes, ΔE00 against the scene's
 colour noise floor. A scene that fails to generate, analyse or score is recorded as failed.
 
-Outputs: ``out/generalization/`` (``generalization.csv``, ``generalization.png``), or with
-``--docs`` ``docs/data/generalization.csv`` and ``docs/img/generalization.png``; the per-scene
-and summary tables are printed (the summary in Markdown, for docs/accuracy.md).
-
-Run:  python pipelines/generalization.py --n 30 --jobs 2 --mode both --docs
-      python pipelines/generalization.py --n 12 --size 256x256 --slices 16 --jobs 2 --mode both
+Outputs under ``out``: ``generalization.csv`` (one row per scene and mode),
+``generalization.png`` (median scores with each variation on and off; ``--docs`` copies both
+into docs/data/ and docs/img/) and ``work/`` (the stacks and results; ``work=DIR`` keeps them
+elsewhere and resumes a sweep there). The table is the targets beside each mode's summary
+scores (docs/accuracy.md); the per-scene table goes to stderr.
 """
 
 from __future__ import annotations
@@ -27,35 +26,35 @@ from __future__ import annotations
 import json
 import math
 import shutil
-import tempfile
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
-from _scoring import (
-    TARGETS,
-    colour_floor_de,
-    ndf_identified,
-    ndf_w1_deg,
-    region_thickness_errors,
-    summarize,
-    texture_codes,
-    true_population_count,
-)
-from _shared import DOCS, ROOT, fmt, md_table, parser, pyplot, save_figure, write_csv
 
-from microfacet.analysis.options import AnalysisOptions
-from microfacet.workflow.batch import run_batch
-from microfacet.forward.synth import (
-    SynthParams,
-    ThicknessComponent,
-    TiltLobe,
-    generate_stack,
-)
-from microfacet.io.images import read_png
-from microfacet.io.results import Results
+from microfacet.forward.synth import SynthParams, ThicknessComponent, TiltLobe
 from microfacet.optics import DEFAULT_FILM, known_sets
+from pipelines import Study
+from pipelines._shared import fmt, md_table, note, pyplot, save_figure, write_csv
+
+STUDY = Study(
+    name="accuracy-sweep",
+    question="How accurate is the analysis on random scenes with imaging variations it was "
+             "not tuned on (the accuracy targets)?",
+    doc=("docs/accuracy.md", "accuracy-sweep"),
+    run_time="5 min",
+    quick_time="15 s",
+    options={"n": (30, "number of scenes"),
+             "seed": (0, "seed of the scene draws"),
+             "size": ("256x256", "HxW in px"),
+             "slices": (16, "slices per stack"),
+             "mode": ("both", "joint, seed or both"),
+             "jobs": (0, "local worker processes (0: the batch's default)"),
+             "scheduler": ("", "Dask scheduler address"),
+             "work": ("", "folder for the stacks and results (default out/work); reused: "
+                          "the sweep resumes")},
+    doc_files={"generalization.csv": "docs/data/generalization.csv",
+               "generalization.png": "docs/img/generalization.png"},
+)
 
 #: Probability that a variation is on in a scene.
 P_ON = 0.35
@@ -153,6 +152,8 @@ def noise_pct(p) -> float:
 def generate(plan, work: Path, modes):
     """Write every stack not already there with the same parameters; returns
     ``{name: (seconds, reason or "")}``. A regenerated stack's old results are removed."""
+    from microfacet.forward.synth import generate_stack
+
     out = {}
     for name, p, _ in plan:
         folder = work / "stacks" / name
@@ -169,12 +170,22 @@ def generate(plan, work: Path, modes):
             out[name] = (time.perf_counter() - t0, "")
         except Exception as exc:  # recorded, the sweep goes on
             out[name] = (time.perf_counter() - t0, f"generation: {type(exc).__name__}: {exc}")
-        print(f"  {name}: generated in {out[name][0]:.1f} s {out[name][1]}", flush=True)
+        note(f"  {name}: generated in {out[name][0]:.1f} s {out[name][1]}")
     return out
 
 
 def score_scene(results: Path, truth: Path) -> dict:
-    """Scores of one results folder against its truth (see _scoring.py)."""
+    """Scores of one results folder against its truth (see :mod:`pipelines._scoring`)."""
+    from microfacet.io.images import read_png
+    from microfacet.io.results import Results
+    from pipelines._scoring import (
+        colour_floor_de,
+        ndf_identified,
+        ndf_w1_deg,
+        region_thickness_errors,
+        true_population_count,
+    )
+
     meta = json.loads((truth / "params.json").read_text())
     res = Results(results)
     est = res.map("thickness_nm")
@@ -202,6 +213,10 @@ def score_scene(results: Path, truth: Path) -> dict:
 
 def scene_row(name, p, on, truth: Path) -> dict:
     """What a scene is, before any analysis (texture from its noise-free truth image)."""
+    import cv2
+
+    from pipelines._scoring import texture_codes
+
     row = {"name": name, "seed": p.seed, "variations": " ".join(on) or "-",
            "noise_pct": noise_pct(p), "film": p.film, "substrate": p.substrate,
            "thickness_means_nm": " ".join(f"{c.mean_nm:.0f}" for c in p.thickness),
@@ -220,12 +235,16 @@ def scene_row(name, p, on, truth: Path) -> dict:
 
 def run_mode(mode, plan, gen, work: Path, jobs, scheduler):
     """Analyse the generated stacks in ``mode`` and score them: one row per scene."""
+    from microfacet.analysis.options import AnalysisOptions
+    from microfacet.workflow.batch import run_batch
+
     todo = [name for name, _, _ in plan if not gen[name][1]]
     stacks = [work / "stacks" / name for name in todo]
     brows = {}
     if stacks:
         try:
-            res = run_batch(stacks, work / "results" / mode, jobs=jobs, scheduler=scheduler,
+            res = run_batch(stacks, work / "results" / mode, jobs=jobs or None,
+                            scheduler=scheduler or None,
                             options=AnalysisOptions(mode=mode), report=False)
             brows = dict(zip(todo, res.rows))
         except Exception as exc:  # the whole batch refused: every scene failed
@@ -274,6 +293,8 @@ def per_scene_table(rows) -> str:
 
 def summary_table(summaries) -> str:
     """Markdown: the issue's targets beside each mode's scores (✓ / ✗ where a target)."""
+    from pipelines._scoring import TARGETS
+
     modes = list(summaries)
     body = [["scenes (failed; textured)", "–"]
             + [f"{s['scenes']} ({s['failed']}; {s['textured']})" for s in summaries.values()]]
@@ -330,54 +351,43 @@ def plot(rows, path: Path) -> None:
     save_figure(fig, path)
 
 
-def main(argv=None):
-    ap = parser(__doc__)
-    ap.add_argument("--n", type=int, default=30, help="number of scenes (default 30)")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the scene draws (default 0)")
-    ap.add_argument("--size", default="256x256", help="HxW in px (default 256x256)")
-    ap.add_argument("--slices", type=int, default=16, help="slices per stack (default 16)")
-    ap.add_argument("--mode", choices=("joint", "seed", "both"), default="joint")
-    ap.add_argument("--jobs", type=int, default=None, help="local worker processes")
-    ap.add_argument("--scheduler", default=None, help="Dask scheduler address")
-    ap.add_argument("--work", default=None, help="folder for the stacks and results (default: a "
-                    "temporary one); reusing it resumes a sweep")
-    ap.add_argument("--docs", action="store_true", help="write the CSV and the plot under docs/")
-    args = ap.parse_args(argv)
-    size = tuple(int(v) for v in args.size.lower().split("x"))
-    modes = ["joint", "seed"] if args.mode == "both" else [args.mode]
-    dest = (DOCS / "data", DOCS / "img") if args.docs else (ROOT / "out" / "generalization",) * 2
-    tmp = tempfile.TemporaryDirectory() if args.work is None else None
-    work = Path(tmp.name if tmp else args.work)
+def sweep(*, n, seed, size, slices, modes, jobs, scheduler, work: Path):
+    """Draw, generate, analyse and score the scenes: ``(rows, summaries, header)``."""
+    from pipelines._scoring import summarize
 
-    plan = [draw_scene(i, seed=args.seed, size=size, slices=args.slices) for i in range(args.n)]
+    plan = [draw_scene(i, seed=seed, size=size, slices=slices) for i in range(n)]
     t0 = time.perf_counter()
     gen = generate(plan, work, modes)
     t_gen = time.perf_counter() - t0
     rows, summaries, t_an = [], {}, {}
     for mode in modes:
         t1 = time.perf_counter()
-        mrows = run_mode(mode, plan, gen, work, args.jobs, args.scheduler)
+        mrows = run_mode(mode, plan, gen, work, jobs, scheduler)
         t_an[mode] = time.perf_counter() - t1
         rows += mrows
         summaries[mode] = summarize(mrows)
-    csv_path = write_csv(dest[0] / "generalization.csv", rows, COLUMNS)
-    plot(rows, dest[1] / "generalization.png")
     per = [r.get("analysis_s") for r in rows if r.get("analysis_s") is not None]
-    header = (f"{args.n} scenes of {size[0]}×{size[1]} px × {args.slices} slices (seed "
-              f"{args.seed}), each variation on with probability {P_ON}; generation "
+    header = (f"{n} scenes of {size[0]}×{size[1]} px × {slices} slices (seed "
+              f"{seed}), each variation on with probability {P_ON}; generation "
               f"{t_gen:.0f} s; analysis "
               + ", ".join(f"{m} {t:.0f} s" for m, t in t_an.items())
-              + f" (batch, jobs={args.jobs or 'auto'}); analysis per scene: median "
+              + f" (batch, jobs={jobs or 'auto'}); analysis per scene: median "
               f"{np.median(per) if per else math.nan:.1f} s, max "
               f"{max(per) if per else math.nan:.1f} s.")
-    print("\n" + per_scene_table(rows) + "\n")
-    cmd = (f"python pipelines/generalization.py --n {args.n} --seed {args.seed} --size "
-           f"{args.size} --slices {args.slices} --mode {args.mode} --docs")
-    print(f"Reproduce: `{cmd}`. {header}\n\n{summary_table(summaries)}\n")
-    print(f"per-scene rows: {csv_path}; plot: {dest[1] / 'generalization.png'}")
-    if tmp is not None:
-        tmp.cleanup()
+    return rows, summaries, header
 
 
-if __name__ == "__main__":
-    main()
+def run(*, quick: bool, out: Path, n=30, seed=0, size="256x256", slices=16, mode="both",
+        jobs=0, scheduler="", work="") -> str:
+    hw = tuple(int(v) for v in size.lower().split("x"))
+    if quick:
+        n, hw, slices, jobs = min(n, 2), (64, 64), min(slices, 6), jobs or 1
+    modes = ["joint", "seed"] if mode == "both" else [mode]
+    work = Path(work) if work else out / "work"
+    rows, summaries, header = sweep(n=n, seed=seed, size=hw, slices=slices, modes=modes,
+                                    jobs=jobs, scheduler=scheduler, work=work)
+    csv_path = write_csv(out / "generalization.csv", rows, COLUMNS)
+    plot(rows, out / "generalization.png")
+    note("\n" + per_scene_table(rows) + "\n")
+    note(f"{header}\nper-scene rows: {csv_path}; plot: {out / 'generalization.png'}")
+    return summary_table(summaries)

@@ -1,8 +1,9 @@
 """Where the NDF error of the generalization sweep comes from (docs/accuracy.md).
 
-For every joint-mode scene of a finished sweep (``generalization.py --work DIR``), three NDFs
-are scored with the sweep's own W1 (``_scoring.ndf_w1_deg``) against the true per-pixel
-tilts, and the plane fits' slopes are compared with the truth:
+For every joint-mode scene of a finished sweep (``accuracy-sweep --set work=DIR``; without
+``work`` a sweep of ``n`` scenes is run into ``out/work`` first), three NDFs are scored with
+the sweep's own W1 (:func:`pipelines._scoring.ndf_w1_deg`) against the true per-pixel tilts,
+and the plane fits' slopes are compared with the truth:
 
 * **fitted**: the analysis's lobes (``summary.json``);
 * **true lobes**: the scene's own lobe parameters (what a perfect fit of the facet lobes
@@ -13,7 +14,7 @@ tilts, and the plane fits' slopes are compared with the truth:
   with the planes' azimuth are not written, so the gain uses tilt magnitudes) against the
   true facet-mean slope magnitudes, on facets with a height plane.
 
-Run:  python pipelines/ndf_limits.py --work DIR   (DIR of a finished generalization sweep)
+The medians over the scenes go to stderr (docs/accuracy.md quotes them).
 """
 
 from __future__ import annotations
@@ -22,13 +23,27 @@ import json
 from pathlib import Path
 
 import numpy as np
-from _scoring import ndf_w1_deg
-from _shared import fmt, md_table, parser
 
-from microfacet.analysis.ndf_fit import fit_ndf_mixture
+from pipelines import Study
+from pipelines._shared import fmt, md_table, note
+
+STUDY = Study(
+    name="accuracy-ndf-limits",
+    question="Where does the NDF error of the generalization sweep come from: the truth, the "
+             "segmentation or the height from focus?",
+    doc=None,
+    run_time="3 min (30 s on a finished sweep)",
+    quick_time="15 s",
+    options={"work": ("", "the work folder of a finished accuracy-sweep (default: run one)"),
+             "n": (30, "scenes of the sweep run without work")},
+)
 
 
 def scene(results: Path, truth: Path) -> dict:
+    from microfacet.analysis.ndf_fit import fit_ndf_mixture
+    from microfacet.analysis.options import FitOptions
+    from pipelines._scoring import ndf_w1_deg
+
     meta = json.loads((truth / "params.json").read_text())
     limit = meta["visibility_limit_deg"]
     tilt_true = np.load(truth / "tilt_deg.npy")
@@ -44,7 +59,8 @@ def scene(results: Path, truth: Path) -> dict:
     sy = np.bincount(lab.ravel(), gy.ravel(), n) / np.maximum(cnt, 1)
     t_facet = np.degrees(np.arctan(np.hypot(sx, sy)))
     ok = (cnt > 8) & (t_facet < limit)
-    seg = fit_ndf_mixture(t_facet[ok], weights=cnt[ok].astype(np.float64), max_components=3)
+    seg = fit_ndf_mixture(t_facet[ok], weights=cnt[ok].astype(np.float64),
+                          options=FitOptions(max_components=3))
     tab = np.genfromtxt(results / "facets.csv", delimiter=",", names=True)
     fit_ok = (tab["height_plane"] == 1) & np.isfinite(tab["tilt_deg"])
     idx = tab["facet"][fit_ok].astype(int)
@@ -58,24 +74,24 @@ def scene(results: Path, truth: Path) -> dict:
             "slope_gain": gain}
 
 
-def main(argv=None):
-    ap = parser(__doc__)
-    ap.add_argument("--work", required=True, help="the --work folder of a finished sweep")
-    args = ap.parse_args(argv)
-    work = Path(args.work)
+def run(*, quick: bool, out: Path, work="", n=30) -> str:
+    if not work:
+        from pipelines.studies.accuracy_sweep import sweep
+
+        work = out / "work"
+        size, slices = ((64, 64), 6) if quick else ((256, 256), 16)
+        sweep(n=2 if quick else n, seed=0, size=size, slices=slices, modes=["joint"],
+              jobs=1 if quick else 0, scheduler="", work=work)
+    work = Path(work)
     rows = []
     for res in sorted((work / "results" / "joint").iterdir()):
         if (res / "summary.json").is_file() and (res / "facets.csv").is_file():
             rows.append({"scene": res.name,
                          **scene(res, work / "stacks" / res.name / "truth")})
     keys = ["fitted", "true_lobes", "true_heights_our_facets", "slope_gain"]
-    print(md_table(["scene", "W1 fitted (°)", "W1 true lobes (°)",
-                    "W1 true heights, our facets (°)", "slope gain"],
-                   [[r["scene"]] + [fmt(r[k]) for k in keys] for r in rows]))
     med = {k: float(np.nanmedian([r[k] for r in rows])) for k in keys}
-    print("\nmedians over " + str(len(rows)) + " scenes: "
-          + ", ".join(f"{k} {fmt(v)}" for k, v in med.items()))
-
-
-if __name__ == "__main__":
-    main()
+    note(f"medians over {len(rows)} scenes: " + ", ".join(f"{k} {fmt(v)}" for k, v in med.items()))
+    return md_table(["scene", "W1 fitted (°)", "W1 true lobes (°)",
+                     "W1 true heights, our facets (°)", "slope gain"],
+                    [[r["scene"]] + [fmt(r[k]) for k in keys] for r in rows]
+                    + [["median"] + [fmt(med[k]) for k in keys]])
