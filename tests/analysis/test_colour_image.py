@@ -30,3 +30,32 @@ def test_quantization_noise_floor_scales_with_the_lsb():
     assert 0.02 < q8 < 0.3
     assert q8 / q16 == pytest.approx(257.0, rel=0.15)
     assert np.isnan(quantization_noise_de(img, np.ones((64, 64), bool), bit_depth=8, **KW))
+
+
+def test_measure_colour_is_the_mask_lab_and_noise_of_the_encoded_image():
+    """The stage on an image given linear: encoded once, masked with the section's
+    thresholds, converted to Lab under the illuminant, its noise never below the
+    quantization floor (a noise-free image has exactly the floor)."""
+    from microfacet.analysis.colour_image import measure_colour
+    from microfacet.analysis.mask import colour_mask
+    from microfacet.analysis.options import MaskOptions
+    from microfacet.colour.srgb import srgb_decode, srgb_encode, srgb_to_lab
+
+    rng = np.random.default_rng(4)
+    enc = np.clip(np.full((64, 64, 3), [0.7, 0.4, 0.2]) + rng.normal(0, 0.01, (64, 64, 3)), 0, 1)
+    enc[:4, :4] = 0.5                                         # grey: masked
+    lin = srgb_decode(enc.astype(np.float32))
+    opts = MaskOptions(saturation_min=20.0)
+    c = measure_colour(lin, opts, color_space="linear-sRGB", bit_depth=8, **KW)
+    np.testing.assert_allclose(c.encoded, srgb_encode(lin, dtype=np.float32), atol=1e-6)
+    np.testing.assert_array_equal(c.mask.mask, colour_mask(c.encoded, opts).mask)
+    assert c.mask.mask[:4, :4].all() and c.mask.fraction < 0.01
+    np.testing.assert_allclose(c.lab, srgb_to_lab(c.encoded, illuminant="D65"), atol=1e-4)
+    noisy = estimate_colour_noise(c.lab, c.mask.mask, delta_e_method="CIEDE2000")
+    floor = quantization_noise_de(c.encoded, c.mask.mask, bit_depth=8, **KW)
+    assert c.noise_de == pytest.approx(max(noisy, floor)) and noisy > floor
+    flat = measure_colour(np.full((32, 32, 3), [0.7, 0.4, 0.2], np.float32), opts,
+                          color_space="sRGB", bit_depth=8, **KW)
+    q = quantization_noise_de(flat.encoded, flat.mask.mask, bit_depth=8, **KW)
+    assert q > 0 and flat.noise_de == pytest.approx(q)
+    assert flat.bit_depth == 8
