@@ -8,40 +8,30 @@ import math
 import textwrap
 from pathlib import Path
 
-from .. import analysis, optics
+from .. import analysis, workflow
 from ..core.errors import InputError
 from ..core.options import option_fields
 from ..core.pixels import pixel_size_value
 from ..io import limits
 from ..io.limits import DEFAULT_MAX_MEGAPIXELS, DEFAULT_MAX_STACK_MEGAPIXELS
-from ..optics.defaults import DEFAULT_FILM, DEFAULT_SUBSTRATE
 
 
 def add_optics_options(p: argparse.ArgumentParser) -> None:
-    """``--film``, ``--substrate``, ``--illuminant``, ``--observer``."""
-    g = p.add_argument_group("optics")
-    g.add_argument("--film", default=None, metavar="NAME",
-                   help=f"optical-constant set of the oxide film (default {DEFAULT_FILM})")
-    g.add_argument("--substrate", default=None, metavar="NAME",
-                   help=f"optical-constant set of the metal (default {DEFAULT_SUBSTRATE})")
-    g.add_argument("--illuminant", default="D65", metavar="NAME",
-                   help="illuminant name (default D65)")
-    g.add_argument("--observer", default="2", choices=["2", "10"],
-                   help="CIE standard observer in degrees (default 2)")
+    """``--film``, ``--substrate``, ``--illuminant``, ``--observer``: the flags of
+    :class:`~microfacet.workflow.simulate.FilmOptics` (``simulate``, ``fit-spectrum``)."""
+    add_option_fields(p, workflow.FilmOptics, title="optics")
+
+
+def optics_options(args):
+    """:class:`~microfacet.workflow.simulate.FilmOptics` from the flags given (None where not
+    given); an unknown set is an InputError naming the option."""
+    return options_from_args(args, workflow.FilmOptics)
 
 
 def optics_kwargs(args) -> dict:
-    """``film``, ``substrate``, ``illuminant``, ``observer`` from the options (the defaults for
-    the sets not given); an unknown set is an InputError naming the option."""
-    film = args.film or DEFAULT_FILM
-    substrate = args.substrate or DEFAULT_SUBSTRATE
-    for param, name in (("film", film), ("substrate", substrate)):
-        try:
-            optics.load_set(name)
-        except ValueError as exc:
-            raise InputError(str(exc), param=param) from None
-    return dict(film=film, substrate=substrate, illuminant=args.illuminant,
-                observer=args.observer)
+    """``film``, ``substrate``, ``illuminant``, ``observer`` from the options, the defaults for
+    those not given (:meth:`~microfacet.workflow.simulate.FilmOptics.resolved`)."""
+    return optics_options(args).resolved()
 
 
 def add_limit_options(p: argparse.ArgumentParser) -> None:
@@ -133,7 +123,7 @@ def pair_type(sep: str, cast, example: str):
     return parse
 
 
-def add_option_fields(p, cls, *, title: str | None = None, skip=()) -> None:
+def add_option_fields(p, cls, *, title: str | None = None, skip=(), only=None) -> None:
     """Add a flag for every command-line option of the options class ``cls``
     (:func:`microfacet.core.options.option_fields` with ``cli=True``): type, choices, help and
     default from the fields' metadata. Unset flags stay None and take the field's default in
@@ -148,10 +138,12 @@ def add_option_fields(p, cls, *, title: str | None = None, skip=()) -> None:
         An argument group to put them in.
     skip : collection of str
         Dotted paths not to add (a command that fixes them).
+    only : collection of str, optional
+        Add only these dotted paths (a command that puts the options in several groups).
     """
     g = p.add_argument_group(title) if title else p
     for f in option_fields(cls):
-        if f.flag is None or f.path in skip:
+        if f.flag is None or f.path in skip or (only is not None and f.path not in only):
             continue
         meta = f.field.metadata
         kw = dict(dest=_dest(f.path), default=None, metavar=meta.get("metavar"))

@@ -243,8 +243,8 @@ class Results:
 
     def _mixture(self, key, cls):
         data = self.get(key, "mixture")
-        if data is None or (isinstance(data, dict) and data.get("components") == []):
-            return None  # no fit (the analysis writes an empty component list)
+        if not data or (isinstance(data, dict) and data.get("components") == []):
+            return None  # no fit: no section, or the analysis' empty component list
         try:
             return cls.from_json(data)
         except (ValueError, TypeError, AttributeError) as exc:
