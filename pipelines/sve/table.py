@@ -3,16 +3,14 @@
 ``build_colour_table`` with fixed steps at the spectral step the library picks for the range:
 max ΔE00 of the interpolated table against direct 1 nm evaluation, build time, lookup time;
 the default (automatic) grid marked.
-
-Run:  python pipelines/sve_table.py [--quick] [--repeat N] [--out DIR]
-      (part of python pipelines/speed_vs_error.py, which writes docs/speed-vs-error.md)
 """
 
 from __future__ import annotations
 
 import numpy as np
-from _shared import fmt, lab_direct, md_table, pareto_front, verdict
-from _sve import RANGES, THETA_RANGE, pareto_plot, section_main, timed
+
+from pipelines._shared import fmt, lab_direct, md_table, pareto_front, verdict
+from pipelines.sve.common import RANGES, THETA_RANGE, pareto_plot, timed
 
 
 def _point(tab, tb_t, lk_t, err, n_lookup, default):
@@ -28,6 +26,7 @@ def run(cfg, doc, img, spectral=None):
     from microfacet.colour.table import build_colour_table, choose_spectral_step
 
     d_steps, t_steps, rep = cfg["d_steps"], cfg["t_steps"], cfg["repeat"]
+    ranges = cfg.get("ranges", RANGES)
     doc("\n## 2. Colour-table resolution\n")
     doc(f"`build_colour_table` with fixed thickness and angle steps at the spectral step the "
         f"library picks for the range; error = max ΔE00 of the interpolated table "
@@ -40,7 +39,7 @@ def run(cfg, doc, img, spectral=None):
         f"and checks is given below the table.\n")
     rng = np.random.default_rng(2)
     rows, panels, result = [], [], {}
-    for rg in RANGES:
+    for rg in ranges:
         s = spectral[rg]["picked"] if spectral else choose_spectral_step(
             thickness_range_nm=rg, theta_range_deg=THETA_RANGE)[0]
         th = rng.uniform(*THETA_RANGE, cfg["n_points"])
@@ -99,7 +98,7 @@ def run(cfg, doc, img, spectral=None):
                   "max ΔE00 vs 1 nm", "p99", "build (ms)", "build × default", "lookup (ns/pt)"],
                  rows))
     doc("")
-    for rg in RANGES:
+    for rg in ranges:
         r = result[rg]
         t = r["table"]
         doc(f"* {rg[0]:g}–{rg[1]:g} nm: default table {t.theta_deg.size} × {t.thickness_nm.size} "
@@ -122,21 +121,22 @@ def reading(doc, result):
         q = [p for p in result[rg]["points"] if p["ts"] == ts and p["ds"] == ds]
         return q[0]["err"] if q else float("nan")
 
-    rg4 = RANGES[1]
-    lk = [p["lookup"] for rg in RANGES for p in result[rg]["points"]]
+    ranges = list(result)
+    rg4 = ranges[1]
+    lk = [p["lookup"] for rg in ranges for p in result[rg]["points"]]
     on_front = all(result[rg]["idef"] in pareto_front(
         [p["build"] for p in result[rg]["points"]], [p["err"] for p in result[rg]["points"]])
-        for rg in RANGES)
+        for rg in ranges)
     cheapest = all(min((p for p in result[rg]["points"] if p["err"] <= 0.1),
                        key=lambda p: p["build"]) is result[rg]["points"][result[rg]["idef"]]
-                   for rg in RANGES)
-    r0 = result[RANGES[0]]
+                   for rg in ranges)
+    r0 = result[ranges[0]]
     doc(f"**Reading.** The thickness step sets the error: at 0–400 nm, d steps of 0.5 / 1 / 2 "
         f"nm give {fmt(err_at(rg4, 2.0, 0.5))} / {fmt(err_at(rg4, 2.0, 1.0))} / "
         f"{fmt(err_at(rg4, 2.0, 2.0))} ΔE00 (θ step 1.93°) — colour turns 1–4 ΔE00 per nm — "
         f"while the angle step matters little up to ~2° (colour moves 0.03–0.3 ΔE00 per "
-        f"degree; the 3.9° step of 0–200 nm costs {fmt(err_at(RANGES[0], 4.0, 0.5))} against "
-        f"{fmt(err_at(RANGES[0], 2.0, 0.5))}). Fine grids bottom out at the spectral step's "
+        f"degree; the 3.9° step of 0–200 nm costs {fmt(err_at(ranges[0], 4.0, 0.5))} against "
+        f"{fmt(err_at(ranges[0], 2.0, 0.5))}). Fine grids bottom out at the spectral step's "
         f"error. The default (automatic) grid is "
         f"{'on the Pareto front in every range' if on_front else 'not always on the front'} "
         f"and is the cheapest grid measured within 0.1 ΔE00 of 1 nm in "
@@ -167,6 +167,3 @@ def summary_rows(result):
                      f"{len(cheaper)} cheaper grid(s) ≤ 0.1"])
     return rows
 
-
-if __name__ == "__main__":
-    section_main(run, "table", __doc__)

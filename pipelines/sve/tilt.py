@@ -1,29 +1,19 @@
 """Speed against error, section 3c: the per-pixel tilt search (tilt grid step, facet-plane
 prior, ΔE formula) of ``microfacet.analysis.tilt.invert_tilt``.
 
-On the noisy synthetic ``nd`` scene of section 3 (``_sve.scene``): random visible unmasked
-pixels at their true facet's mean thickness, without prior (the seed mode) and with a
-simulated facet-plane prior (the joint mode); median error against the truth and against a
-0.05° grid, time as a ratio to the default step.
-
-Run:  python pipelines/sve_tilt.py [--quick] [--repeat N] [--out DIR]
-      (part of python pipelines/speed_vs_error.py, which writes docs/speed-vs-error.md)
+On the noisy synthetic ``nd`` scene of section 3 (:func:`pipelines.sve.common.scene`): random
+visible unmasked pixels at their true facet's mean thickness, without prior (the seed mode)
+and with a simulated facet-plane prior (the joint mode); median error against the truth and
+against a 0.05° grid (:func:`~microfacet.analysis.tilt.tilt_grid`), time as a ratio to the
+default step.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from _shared import fmt, md_table, verdict
-from _sve import (
-    MAX_TILT,
-    defaults,
-    facet_truth,
-    formula_kw,
-    no_hook_note,
-    scene,
-    section_main,
-    timed,
-)
+
+from pipelines._shared import fmt, md_table, verdict
+from pipelines.sve.common import MAX_TILT, defaults, facet_truth, model_of, scene, timed
 
 
 def _row(name, f, t, inv, t_true, ref=None):
@@ -36,7 +26,8 @@ def _row(name, f, t, inv, t_true, ref=None):
 
 def measure(cfg):
     """Every setting with and without the prior; the 'exact d' rows; the baselines."""
-    from microfacet.analysis.tilt import invert_tilt, model_lab_rows
+    from microfacet.analysis.options import TiltOptions
+    from microfacet.analysis.tilt import TiltRows, invert_tilt, model_lab_rows, tilt_grid
 
     rep = cfg["repeat"]
     s = scene(cfg["scene_px"])
@@ -53,24 +44,26 @@ def measure(cfg):
         / np.maximum(cnt_u, 1)
     d_rows = np.where(cnt_u > 0, d_rows, 130.0)
     t_true = sc.tilt_deg[yy, xx].astype(np.float64)
-    prior = np.clip(tilt_f + rng.normal(0.0, 2.0, S), 0, MAX_TILT)[fid]
-    psig = np.full(yy.size, 2.0)
+    prior_f = np.clip(tilt_f + rng.normal(0.0, 2.0, S), 0, MAX_TILT)   # per facet
+    prior = prior_f[fid]
     lab_px = lab[yy, xx]
     d_px = sc.thickness_nm[yy, xx].astype(np.float64)
+    options = TiltOptions()
 
-    def run(step, with_prior, *, exact=False, **fkw):
-        g = np.arange(0.0, MAX_TILT + 1e-9, step)
-        g = g if g[-1] >= MAX_TILT - 1e-9 else np.append(g, MAX_TILT)
-        d = d_px if exact else d_rows
-        rl = model_lab_rows(table, d, g, exposure=1.0)
-        kw = dict(prior_deg=prior, prior_sigma_deg=psig) if with_prior else {}
-        return invert_tilt(lab_px, rl, np.arange(d_px.size) if exact else fid, g, table=table,
-                           thickness_px=d if exact else d_rows[fid], exposure=1.0,
-                           noise_de=noise, **kw, **fkw)
+    def run(step, with_prior, *, exact=False, method="CIEDE2000"):
+        g = tilt_grid(MAX_TILT, step)
+        model = model_of(table, method=method)
+        if exact:   # every pixel its own row, at its own thickness
+            d, ri, pr = d_px, np.arange(d_px.size), prior
+        else:       # one row per facet, at the facet's mean thickness
+            d, ri, pr = d_rows, fid, prior_f
+        rows = TiltRows(model_lab_rows(model, d, g), d, noise,
+                        *((pr, np.full(d.size, 2.0)) if with_prior else ()))
+        return invert_tilt(lab_px, ri, rows, g, model, options)
 
     TS = defaults()["tilt_step"]
     TN = f"{TS:g}°"
-    res_tilt, exact_rows, missing = {}, {}, []
+    res_tilt, exact_rows = {}, {}
     for with_prior in (False, True):
         ref = run(0.05, with_prior).tilt_deg
         out = []
@@ -78,12 +71,7 @@ def measure(cfg):
             t, inv = timed(lambda st=st: run(st, with_prior), rep)
             out.append(_row(f"{st:g}°", "CIEDE2000", t, inv, t_true, ref))
         for f in ("CIE76", "CIE94"):
-            fkw = formula_kw(invert_tilt, f)
-            if fkw is None:
-                if f not in missing:
-                    missing.append(f)
-                continue
-            t, inv = timed(lambda fkw=fkw: run(TS, with_prior, **fkw), rep)
+            t, inv = timed(lambda f=f: run(TS, with_prior, method=f), rep)
             out.append(_row(f"{TN} {f}", f, t, inv, t_true, ref))
         t, inv = timed(lambda: run(TS, with_prior, exact=True), 1)
         exact_rows[with_prior] = dict(_row(f"{TN} exact d", "CIEDE2000", t, inv, t_true),
@@ -92,7 +80,7 @@ def measure(cfg):
     const = float(np.median(np.abs(t_true - np.median(t_true))))
     prior_err = float(np.median(np.abs(prior - t_true)))
     return dict(tilt=res_tilt, tilt_name=TN, tilt_exact=exact_rows,
-                tilt_baselines=(const, prior_err), n_px=yy.size, missing=missing)
+                tilt_baselines=(const, prior_err), n_px=yy.size)
 
 
 def run(cfg, doc, img=None):
@@ -121,8 +109,6 @@ def run(cfg, doc, img=None):
     doc(md_table(["search", "grid step / formula", "median |error| vs truth (°)",
                   "median |Δ| vs 0.05° (°)", "p90 |Δ| vs 0.05° (°)", "median reported σ (°)",
                   "time (s)", "time × default"], tab_rows))
-    if m["missing"]:
-        doc("\n" + no_hook_note("invert_tilt", m["missing"]))
     for with_prior in (False, True):
         out = res_tilt[with_prior]
         idf = [r["name"] for r in out].index(TN)
@@ -150,7 +136,7 @@ def reading(doc, m, p):
         f"reported σ ({fmt(tw[TN]['sig'])}°), and the truth error does not move "
         f"({fmt(tw[TN]['err'])}° → {fmt(tw['2°']['err'])}°), while the time falls to "
         f"{tw['2°']['time'] / tw[TN]['time']:.2f}×. **The default {TN} is on the front but "
-        f"2–4× more work than needed**: `tilt_step_deg=1` ("
+        f"2–4× more work than needed**: `tilt.step_deg=1` ("
         f"{tw['1°']['time'] / tw[TN]['time']:.2f}×, p90 {fmt(tw['1°']['p90'])}°) or 2 is "
         f"enough. What limits the tilt is the conditioning ([conditioning.md]"
         f"(conditioning.md)), not the search: without the prior the colour's answer "
@@ -174,13 +160,10 @@ def summary_rows(result):
         out = {x["name"]: x for x in result["tilt"][wp]}
         d = out[TN]
         rows.append([f"§3c tilt grid, {'with' if wp else 'no'} prior "
-                     f"(`AnalysisOptions.tilt_step_deg={step:g}`)", TN,
+                     f"(`TiltOptions(step_deg={step:g})`)", TN,
                      f"median {fmt(d['err'])}° vs truth, p90 {fmt(d['p90'])}° vs 0.05°",
                      f"2°: {out['2°']['time'] / d['time']:.2f}× time, "
                      f"{fmt(out['2°']['err'])}° vs truth, p90 {fmt(out['2°']['p90'])}°",
                      "over-fine: 1–2°" if step < 1 else "justified"])
     return rows
 
-
-if __name__ == "__main__":
-    section_main(run, "tilt", __doc__)

@@ -1,32 +1,24 @@
 """Speed against error, section 3b: the per-facet thickness search (step, ΔE formula) of
-``microfacet.analysis.facets.facet_thickness``.
+``microfacet.analysis.facet_thickness.facet_thickness``.
 
-On the noisy synthetic ``nd`` scene of section 3 (``_sve.scene``), true facets at their true
-mean tilt, searched within the reference ROI's interference order: median error against the true
-facet thickness and against a 0.02 nm search, time as a ratio to the default.
-
-Run:  python pipelines/sve_facet.py [--quick] [--repeat N] [--out DIR]
-      (part of python pipelines/speed_vs_error.py, which writes docs/speed-vs-error.md)
+On the noisy synthetic ``nd`` scene of section 3 (:func:`pipelines.sve.common.scene`), true
+facets at their true mean tilt, searched within the reference ROI's interference order (the
+``thickness_step_nm`` of :class:`~microfacet.analysis.options.JointOptions`, at most 1 nm):
+median error against the true facet thickness and against a 0.02 nm search, time as a ratio
+to the default.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from _shared import fmt, md_table, verdict
-from _sve import (
-    defaults,
-    facet_truth,
-    formula_kw,
-    no_hook_note,
-    roi_reference,
-    scene,
-    section_main,
-    timed,
-)
+
+from pipelines._shared import fmt, md_table, verdict
+from pipelines.sve.common import defaults, facet_truth, model_of, roi_reference, scene, timed
 
 
 def run(cfg, doc, img=None):
-    from microfacet.analysis.facets import facet_thickness
+    from microfacet.analysis.facet_thickness import FacetImage, facet_thickness
+    from microfacet.analysis.options import JointOptions
     from microfacet.analysis.roi import nearest_roi_index
 
     rep = cfg["repeat"]
@@ -44,22 +36,21 @@ def run(cfg, doc, img=None):
         cnt, 1)
     good = cnt >= 4
     FS = defaults()["facet_step"]
-    fac_settings = [(f"step {st:g} nm" + (" (default)" if st == FS else ""), dict(step_nm=st),
-                     "CIEDE2000") for st in sorted({0.05, 0.1, 0.2, 0.5, 1.0, 2.0, FS})]
+    fac_settings = [(f"step {st:g} nm" + (" (default)" if st == FS else ""),
+                     dict(thickness_step_nm=st), "CIEDE2000")
+                    for st in sorted({0.05, 0.1, 0.2, 0.5, 1.0, FS})]
     fac_settings += [("CIE76", {}, "CIE76"), ("CIE94", {}, "CIE94")]
     exposure = ref_fit.exposure
+    colours = FacetImage(labels=facets, lab=lab, usable=usable, interior=interior,
+                         roi_thickness_px=roi_px).colours()
 
-    def search(**kw):
-        return facet_thickness(facets, lab, usable, tilt_f, roi_px, table, exposure=exposure,
-                               interior=interior, **kw)
-    d_ref = search(step_nm=0.02).thickness_nm
-    res_fac, missing = [], []
+    def search(method="CIEDE2000", **kw):
+        return facet_thickness(colours, tilt_f, model_of(table, exposure=exposure,
+                                                         method=method), JointOptions(**kw))
+    d_ref = search(thickness_step_nm=0.02).thickness_nm
+    res_fac = []
     for name, kw, f in fac_settings:
-        fkw = formula_kw(facet_thickness, f)
-        if fkw is None:
-            missing.append(f)
-            continue
-        t, res = timed(lambda kw=kw, fkw=fkw: search(**kw, **fkw), rep)
+        t, res = timed(lambda kw=kw, f=f: search(f, **kw), rep)
         dd = res.thickness_nm
         ok = good & np.isfinite(dd)
         res_fac.append(dict(name=name, time=t,
@@ -67,7 +58,8 @@ def run(cfg, doc, img=None):
                             dev=float(np.median(np.abs(dd[ok] - d_ref[ok]))),
                             p90=float(np.percentile(np.abs(dd[ok] - d_ref[ok]), 90))))
     idef_f = next(i for i, x in enumerate(res_fac) if "(default)" in x["name"])
-    doc(f"\n### 3b. Thickness per facet (`analysis.facets.facet_thickness`, {int(good.sum())} "
+    doc(f"\n### 3b. Thickness per facet (`analysis.facet_thickness.facet_thickness`, "
+        f"{int(good.sum())} "
         f"true facets with ≥ 4 interior pixels, true facet tilt, search within the ROI's "
         f"interference order)\n")
     doc(f"Reference: step 0.02 nm (median |error| vs truth "
@@ -77,8 +69,6 @@ def run(cfg, doc, img=None):
                   "p90 |Δ| vs reference (nm)", "time (s)", "time × default"],
                  [[r["name"], fmt(r["err"]), fmt(r["dev"]), fmt(r["p90"]), f"{r['time']:.2f}",
                    f"{r['time'] / td:.2f}"] for r in res_fac]))
-    if missing:
-        doc("\n" + no_hook_note("facet_thickness", missing))
     doc("\n" + verdict([r["name"] for r in res_fac], [r["time"] for r in res_fac],
                        [r["err"] for r in res_fac], idef_f, unit=" nm (vs truth)"))
     r = {x["name"].replace(" (default)", ""): x for x in res_fac}
@@ -95,14 +85,15 @@ def run(cfg, doc, img=None):
         f"values already recovers the minimum to {fmt(d5['dev'])} nm (median, p90 "
         f"{fmt(d5['p90'])}) at a 0.5 nm step, {dd['err'] / max(d5['dev'], 1e-12):.0f}× below "
         f"the truth error, for {d5['time'] / dd['time']:.2f}× the time; a 1 nm step starts "
-        f"to show ({fmt(r['step 1 nm']['err'])} nm against truth) and 2 nm is too coarse. "
+        f"to show ({fmt(r['step 1 nm']['err'])} nm against truth; the option stops at 1 nm). "
         + (f"**The default {FS:g} nm is {dd['time'] / d5['time']:.0f}× more work than "
-           f"needed**: `step_nm=0.5` keeps every result within ~0.01 nm. " if FS < 0.5 else
+           f"needed**: `thickness_step_nm=0.5` keeps every result within ~0.01 nm. "
+           if FS < 0.5 else
            f"**The default {FS:g} nm is justified.** ")
-        + "In the analysis this search runs "
-        "once per facet and again for every trial exposure in "
-        "`analysis.facets.refine_exposure_on_facets` (the `facet_fits` stage, the largest of "
-        "the joint mode in docs/benchmarks.md), so the saving carries over. " + formula)
+        + "In the analysis this search runs once per facet and again for every trial exposure "
+        "in `analysis.facet_thickness.refine_exposure_on_facets` (the `facet_fits` stage, "
+        "one of the largest of the joint mode in docs/benchmarks.md), so the saving carries "
+        "over. " + formula)
     return dict(facet=res_fac, facet_default=idef_f)
 
 
@@ -111,12 +102,9 @@ def summary_rows(result):
     FS = defaults()["facet_step"]
     fac = {x["name"].replace(" (default)", ""): x for x in result["facet"]}
     d = fac[f"step {FS:g} nm"]
-    return [[f"§3b facet thickness step (`analysis.facets.facet_thickness(step_nm={FS:g})`)",
+    return [[f"§3b facet thickness step (`JointOptions(thickness_step_nm={FS:g})`)",
              f"{FS:g} nm", f"median {fmt(d['err'])} nm vs truth, {fmt(d['dev'])} nm vs "
              f"0.02 nm", f"0.5 nm: {fac['step 0.5 nm']['time'] / d['time']:.2f}× time, "
              f"{fmt(fac['step 0.5 nm']['dev'])} nm vs 0.02 nm",
              "over-fine: 0.5 nm" if FS < 0.5 else "justified"]]
 
-
-if __name__ == "__main__":
-    section_main(run, "facet", __doc__)

@@ -2,10 +2,7 @@
 thickness-node step) in ``microfacet.forward.angular.simulate_map(model="eq6")``.
 
 ΔE00 of the 90 × 90 angular map against a very dense reference, on an integer and a shifted
-angle grid, time as a ratio to the default step.
-
-Run:  python pipelines/sve_eq6.py [--quick] [--repeat N] [--out DIR]
-      (part of python pipelines/speed_vs_error.py, which writes docs/speed-vs-error.md)
+angle grid, time as a ratio to the default step (a quick run uses a 3° grid).
 """
 
 from __future__ import annotations
@@ -13,8 +10,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from _shared import fmt, md_table, verdict
-from _sve import defaults, pareto_plot, section_main, timed
+
+from pipelines._shared import fmt, md_table, verdict
+from pipelines.sve.common import defaults, pareto_plot, timed
 
 
 def measure(cfg):
@@ -25,7 +23,7 @@ def measure(cfg):
 
     g3 = ThicknessMixture([(0.3, 112.0, 3.0), (0.45, 130.0, 3.0), (0.25, 149.0, 3.0)])
     f2 = NDFMixture([(0.6, 3.0), (0.4, 9.0)])
-    t = np.arange(90.0)
+    t = np.arange(0.0, 90.0, cfg.get("eq6_grid_step", 1.0))
     grids = {"integer": (t, t), "shifted": (t + 0.37, np.minimum(t + 0.11, 89.5))}
 
     def xyz(step, n, grid, thickness=g3, chunk=None):
@@ -188,6 +186,3 @@ def summary_rows(result):
                            if o["step"] in (3.0, 6.0)), "justified (cheap)"])
     return rows
 
-
-if __name__ == "__main__":
-    section_main(run, "eq6", __doc__)

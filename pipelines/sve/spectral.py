@@ -4,16 +4,14 @@ Spectral steps 1, 2, 5, 10 and 20 nm for the thickness ranges users meet (0-200,
 0-800 nm; incidence 0 … asin(NA)/2 + 0.5° for NA 0.8): ΔE00 against direct 1 nm spectral
 evaluation at random (θ, d), time per colour as a ratio to the step the library picks
 (``microfacet.colour.table.choose_spectral_step``).
-
-Run:  python pipelines/sve_spectral.py [--quick] [--repeat N] [--out DIR]
-      (part of python pipelines/speed_vs_error.py, which writes docs/speed-vs-error.md)
 """
 
 from __future__ import annotations
 
 import numpy as np
-from _shared import fmt, lab_direct, md_table, round_robin, verdict
-from _sve import RANGES, SPECTRAL_STEPS, THETA_RANGE, pareto_plot, section_main
+
+from pipelines._shared import fmt, lab_direct, md_table, round_robin, verdict
+from pipelines.sve.common import RANGES, SPECTRAL_STEPS, THETA_RANGE, pareto_plot
 
 
 def run(cfg, doc, img):
@@ -21,6 +19,7 @@ def run(cfg, doc, img):
     from microfacet.colour.table import choose_spectral_step
 
     steps = SPECTRAL_STEPS
+    ranges = cfg.get("ranges", RANGES)
     n_err, n_time = cfg["n_points"], cfg["n_time"]
     doc("\n## 1. Spectral step\n")
     doc(f"ΔE00 against direct 1 nm evaluation at {n_err} random (θ, d) per range (θ uniform in "
@@ -32,7 +31,7 @@ def run(cfg, doc, img):
         f"target.\n")
     rows, panels, result = [], [], {}
     rng = np.random.default_rng(1)
-    for rg in RANGES:
+    for rg in ranges:
         th = rng.uniform(*THETA_RANGE, n_err)
         d = rng.uniform(*rg, n_err)
         ref = lab_direct(th, d, 1.0)
@@ -65,12 +64,12 @@ def run(cfg, doc, img):
     doc(md_table(["d range (nm)", "step (nm)", "max ΔE00", "p99", "mean", "µs / colour",
                   "time × picked", "note"], rows))
     doc("\nReference check: 0.5 nm against 1 nm, max ΔE00 " + ", ".join(
-        f"{fmt(result[rg]['half'])} ({rg[0]:g}–{rg[1]:g} nm)" for rg in RANGES) + ".")
+        f"{fmt(result[rg]['half'])} ({rg[0]:g}–{rg[1]:g} nm)" for rg in ranges) + ".")
     pareto_plot(img / "sve-spectral.png", panels, xlabel="time (× the picked step)",
                 ylabel="max ΔE00 vs 1 nm", suptitle="Spectral step")
     doc("\n![spectral step: error against time](img/sve-spectral.png)\n")
     lines = []
-    for rg in RANGES:
+    for rg in ranges:
         r = result[rg]
         ip = steps.index(r["picked"])
         lines.append(f"* {rg[0]:g}–{rg[1]:g} nm: the library picks **{r['picked']:g} nm** "
@@ -80,16 +79,16 @@ def run(cfg, doc, img):
                      + verdict([f"{s:g} nm" for s in steps], r["times"],
                                [e[0] for e in r["errs"]], ip, target=0.1, unit=" ΔE00"))
     doc("\n".join(lines))
-    r8, r4 = result[RANGES[2]], result[RANGES[1]]
+    r8, r4 = result[ranges[2]], result[ranges[1]]
     i20 = steps.index(20.0)
     est_gap = max(abs(result[rg]["est"] - result[rg]["errs"][steps.index(result[rg]["picked"])][0])
-                  for rg in RANGES)
+                  for rg in ranges)
     doc("\n**Reading.** Thicker films need finer steps (the film's phase 4π n d cos θ₁ / λ "
         "turns faster with λ): the 20 nm step is off by "
-        + " / ".join(f"{fmt(result[rg]['errs'][i20][0])}" for rg in RANGES)
+        + " / ".join(f"{fmt(result[rg]['errs'][i20][0])}" for rg in ranges)
         + " ΔE00 for 0–200 / 0–400 / 0–800 nm. The library's rule (coarsest step within "
         "0.05 ΔE00 of 1 nm at 400 random points of the scene's range) picks "
-        + " / ".join(f"{result[rg]['picked']:g}" for rg in RANGES)
+        + " / ".join(f"{result[rg]['picked']:g}" for rg in ranges)
         + f" nm; its 400-point estimate is within {fmt(est_gap)} ΔE00 of the "
         f"{n_err}-point maximum (the error is smooth in θ and d, so 400 points suffice). "
         f"**The default is justified**: it is the cheapest step within 0.1 ΔE00 for 0–200 and "
@@ -123,6 +122,3 @@ def summary_rows(result):
                      f"room for the interpolation error)"])
     return rows
 
-
-if __name__ == "__main__":
-    section_main(run, "spectral", __doc__)

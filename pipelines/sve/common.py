@@ -1,8 +1,9 @@
-"""What the speed-vs-error experiments (``sve_*.py``, driven by ``speed_vs_error.py``) share:
-the scene ranges, the run sizes, the library defaults, the timer, the Pareto plot, the noisy
-``nd`` scene of section 3 and the standalone runner of one section.
+"""What the speed-vs-error sections share: the scene ranges, the run sizes, the library
+defaults, the timer, the Pareto plot and the noisy ``nd`` scene of section 3.
 
-Not a script (imported by the ``sve_*.py`` scripts, see ``_shared``).
+Another ΔE formula is measured inside a search by giving the search a
+:class:`~microfacet.colour.model.FilmColourModel` with that ``delta_e_method`` (the searches
+take the model; the library is never patched).
 """
 
 from __future__ import annotations
@@ -10,11 +11,10 @@ from __future__ import annotations
 import functools
 import inspect
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
-from _shared import ROOT, Doc, best_of, noisy_scene, pareto_front, parser, pyplot, save_figure
+
+from pipelines._shared import best_of, noisy_scene, pareto_front, pyplot, save_figure
 
 NA = 0.8
 MAX_TILT = math.degrees(math.asin(NA)) / 2.0   # 26.57°: the microscope's tilt range
@@ -22,19 +22,19 @@ THETA_RANGE = (0.0, MAX_TILT + 0.5)            # as microfacet.analysis.pipeline
 RANGES = [(0.0, 200.0), (0.0, 400.0), (0.0, 800.0)]
 SPECTRAL_STEPS = (1.0, 2.0, 5.0, 10.0, 20.0)
 FORMULAS = ("CIE76", "CIE94", "CIEDE2000")
-#: the keyword a search would need to take another ΔE formula (see formula_kw)
-FORMULA_HOOK = "delta_e_method"
 
 
 def config(quick, repeat=None):
-    """Sample sizes and settings of a full run, or of a quick check."""
+    """Sample sizes and settings of a full run, or of a quick check (seconds, not a
+    measurement: small samples, few settings, a cropped focus stack)."""
     if quick:
-        return dict(repeat=repeat or 1, n_points=3000, n_time=500, n_lookup=50_000,
-                    d_steps=(0.5, 1.0, 2.0, 4.0), t_steps=(1.0, 2.0, 4.0, 8.0), scene_px=384,
-                    n_tilt_px=20_000, tilt_steps=(0.1, 0.25, 0.5, 1.0, 2.0, 4.0),
-                    n_formula=200_000, focus_stacks=(1,), focus_px=(5, 7, 9),
-                    eq6_n=(50.0, 5000.0), eq6_steps=(0.25, 0.5, 1.0, 2.0), eq6_ref_step=0.1,
-                    eq6_d_steps=(0.5, "default", 3.0, 6.0))
+        return dict(repeat=repeat or 1, n_points=300, n_time=100, n_lookup=5_000,
+                    d_steps=(0.5, 2.0), t_steps=(2.0, 4.0), scene_px=128,
+                    n_tilt_px=1_000, tilt_steps=(0.5, 1.0, 2.0),
+                    n_formula=20_000, focus_stacks=(1,), focus_px=(7,), focus_crop=80,
+                    eq6_n=(50.0,), eq6_steps=(0.5, 1.0, 2.0), eq6_ref_step=0.25,
+                    eq6_d_steps=("default", 3.0), eq6_grid_step=5.0,
+                    ranges=[(0.0, 100.0), (0.0, 200.0), (0.0, 400.0)])
     return dict(repeat=repeat or 3, n_points=20_000, n_time=2000, n_lookup=200_000,
                 d_steps=(0.25, 0.5, 1.0, 2.0, 4.0), t_steps=(0.5, 1.0, 2.0, 4.0, 8.0),
                 scene_px=1024, n_tilt_px=100_000,
@@ -45,60 +45,43 @@ def config(quick, repeat=None):
 
 
 def timed(fn, repeat):
-    """Best-of timer of these experiments: fast calls repeated for ≥ 0.25 s, slow ones ≤ 8 s."""
+    """Best-of timer of these experiments: fast calls repeated for ≥ 0.25 s, slow ones ≤ 8 s
+    (a quick run, ``repeat`` 1, times each call once)."""
+    if repeat <= 1:
+        return best_of(fn, 1)
     return best_of(fn, repeat, min_total_s=0.25, max_calls=30, max_total_s=8.0)
 
 
 @functools.cache
 def defaults():
     """The defaults as the installed library defines them (labels follow the code)."""
-    from microfacet.analysis.facets import facet_thickness
-    from microfacet.analysis.options import AnalysisOptions
-    from microfacet.analysis.roi import fit_roi_thickness
+    from microfacet.analysis.options import JointOptions, RoiOptions, TiltOptions
     from microfacet.focus.options import FocusOptions
     from microfacet.forward.angular import simulate_map
     from microfacet.forward.brdf import thickness_nodes
+    from pipelines.studies.accuracy_focus import focus_defaults
 
     def dflt(fn, name):
         return inspect.signature(fn).parameters[name].default
 
+    roi = RoiOptions()
     return dict(
-        roi_grid=float(dflt(fit_roi_thickness, "grid_step_nm")),
-        roi_sample=int(dflt(fit_roi_thickness, "sample_px")),
-        roi_refine=int(dflt(fit_roi_thickness, "refine_px")),
-        facet_step=float(dflt(facet_thickness, "step_nm")),
-        tilt_step=float(AnalysisOptions().tilt_step_deg),
+        roi_grid=float(roi.grid_step_nm),
+        roi_sample=int(roi.sample_px),
+        roi_refine=int(roi.refine_px),
+        facet_step=float(JointOptions().thickness_step_nm),
+        tilt_step=float(TiltOptions().step_deg),
         eq6_step=float(dflt(simulate_map, "theta_m_step_deg")),
         dnode_max=float(dflt(thickness_nodes, "max_step_nm")),
         focus=focus_defaults(FocusOptions()),
     )
 
 
-def focus_defaults(options) -> tuple:
-    """``(operator, window, window_px, interpolation, fit_radius)`` of focus options."""
-    return (options.operator, options.window, int(options.window_px), options.interpolation,
-            int(options.fit_radius))
+def model_of(table, *, exposure=1.0, method="CIEDE2000"):
+    """The film model of ``table`` at ``exposure`` with the ΔE formula ``method``."""
+    from microfacet.colour.model import FilmColourModel
 
-
-def formula_kw(fn, method):
-    """Keywords that make the search ``fn`` use the ΔE formula ``method``, or None.
-
-    The searches of :mod:`microfacet.analysis` call ``delta_e_2000`` directly; another formula
-    needs a ``delta_e_method=`` parameter (passed on to
-    :func:`microfacet.colour.difference.delta_e`). Without it the setting is not measured —
-    never by swapping the library's functions.
-    """
-    if method == "CIEDE2000":
-        return {}
-    if FORMULA_HOOK in inspect.signature(fn).parameters:
-        return {FORMULA_HOOK: method}
-    return None
-
-
-def no_hook_note(fn_name, methods):
-    """The sentence for formula settings that could not be measured."""
-    return (f"{' / '.join(methods)} inside the search: **not measured** — `{fn_name}` has no "
-            f"`{FORMULA_HOOK}=` parameter (it calls `delta_e_2000` directly).")
+    return FilmColourModel(table, exposure=exposure, delta_e_method=method)
 
 
 @functools.cache
@@ -108,22 +91,25 @@ def scene(size):
 
     p, sc, lab, mask, noise = noisy_scene("nd", size=size, seed=11)
     table = build_colour_table(thickness_range_nm=(0.0, 400.0), theta_range_deg=THETA_RANGE)
-    return dict(p=p, sc=sc, lab=lab, mask=mask, used=~mask, noise=noise, table=table)
+    return dict(p=p, sc=sc, lab=lab, mask=mask, used=~mask, noise=noise, table=table,
+                model=model_of(table))
 
 
 @functools.cache
 def roi_reference(size):
     """The ROI grid, the true ROI thickness and the reference fit (the finest settings)."""
+    from microfacet.analysis.options import RoiOptions
     from microfacet.analysis.roi import fit_roi_thickness, roi_grid
 
     s = scene(size)
     sc, used = s["sc"], s["used"]
-    rois = roi_grid(s["lab"].shape[:2], size_px=255)
+    rois = roi_grid(s["lab"].shape[:2], size_px=RoiOptions().size_px)
     rows_, cols_, (rh, rw) = rois
     truth = np.array([float(sc.thickness_nm[r0:r0 + rh, c0:c0 + rw][
         used[r0:r0 + rh, c0:c0 + rw]].mean()) for r0 in rows_ for c0 in cols_])
-    ref_kw = dict(grid_step_nm=0.5, sample_px=2048, refine_px=10 ** 7)
-    ref = fit_roi_thickness(s["lab"], sc.tilt_deg, s["mask"], s["table"], rois=rois, **ref_kw)
+    ref_options = RoiOptions(grid_step_nm=0.5, sample_px=2048, refine_px=10 ** 7)
+    ref = fit_roi_thickness(s["lab"], sc.tilt_deg, s["mask"], s["model"], ref_options,
+                            rois=rois)
     return rois, truth, ref
 
 
@@ -211,21 +197,3 @@ def pareto_plot(path, panels, *, xlabel, ylabel, suptitle=None, logx=True, logy=
         fig.suptitle(suptitle + "   (red star = default; grey = Pareto front)", fontsize=8)
     fig.tight_layout()
     save_figure(fig, path)
-
-
-def section_main(run, name, doc_string, argv=None):
-    """Run one section alone: print it, write OUT/sve-<name>.md and OUT/img/sve-*.png.
-
-    OUT is ``--out``, else out/speed-vs-error[-quick]/ (never docs/: the page there is the
-    whole report, ``python pipelines/speed_vs_error.py``).
-    """
-    ap = parser(doc_string, quick="small samples, fewer settings, 1 repeat", repeat=None,
-                out="folder for sve-NAME.md and img/ (default out/speed-vs-error[-quick]/)")
-    args = ap.parse_args(argv)
-    cfg = config(args.quick, args.repeat)
-    out = Path(args.out) if args.out else ROOT / "out" / (
-        "speed-vs-error-quick" if args.quick else "speed-vs-error")
-    doc = Doc()
-    run(cfg, doc, out / "img")
-    path = doc.write(out / f"sve-{name}.md")
-    print(f"\nwrote {path} and {out / 'img'}/", file=sys.stderr)

@@ -3,21 +3,19 @@
 On a synthetic ``nd`` scene with known truth and sensor noise (8-bit sRGB, shot + read noise
 of the preset): the raw speed of CIE76 / CIE94 / CIEDE2000
 (``microfacet.colour.difference.delta_e(method=...)``), then the three searches, each in
-its own script: ROI thickness (``sve_roi.py``), per-facet thickness (``sve_facet.py``),
-per-pixel tilt (``sve_tilt.py``); the formula's effect overall and one Pareto plot.
-
-Run:  python pipelines/sve_inversion.py [--quick] [--repeat N] [--out DIR]
-      (part of python pipelines/speed_vs_error.py, which writes docs/speed-vs-error.md)
+its own module: ROI thickness (:mod:`.roi`), per-facet thickness (:mod:`.facet`), per-pixel
+tilt (:mod:`.tilt`); the formula's effect overall and one Pareto plot.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import sve_facet
-import sve_roi
-import sve_tilt
-from _shared import fmt
-from _sve import FORMULA_HOOK, FORMULAS, THETA_RANGE, pareto_plot, scene, section_main, timed
+
+from pipelines._shared import fmt
+from pipelines.sve import facet as sve_facet
+from pipelines.sve import roi as sve_roi
+from pipelines.sve import tilt as sve_tilt
+from pipelines.sve.common import FORMULAS, THETA_RANGE, pareto_plot, scene, timed
 
 
 def formula_speed(cfg, doc):
@@ -53,8 +51,9 @@ def run(cfg, doc, img):
         f"({mask.mean():.1%} masked); the analysis' colour table (0–400 nm, "
         f"θ 0–{THETA_RANGE[1]:.2f}°). Heights are not involved: the tilt passed to the "
         f"thickness fits is the true one, so only the search knob varies. Another ΔE formula "
-        f"is used inside a search only where the search takes `{FORMULA_HOOK}=` "
-        f"(`colour.difference.delta_e`); the library's searches are never patched. Errors "
+        f"is used inside a search through the film model the search takes "
+        f"(`FilmColourModel(delta_e_method=...)`, the analysis' `optics.delta_e_method`); the "
+        f"library's searches are never patched. Errors "
         f"against the truth and against a reference run of the same search with the finest "
         f"settings; time best of {cfg['repeat']}.\n")
     result = {"noise": noise, "formula_time": formula_speed(cfg, doc)}
@@ -78,9 +77,8 @@ def overall(doc, result):
             f"the searches the ΔE is only part of the work (table lookup, Lab conversion, "
             f"sorting)")
     if share is None or not fac76 or TN + " CIE76" not in tn:
-        doc(head + f". How much of that a search keeps is **not measured** here: the searches "
-            f"(`fit_roi_thickness`, `facet_thickness`, `invert_tilt`) take no `{FORMULA_HOOK}=` "
-            f"parameter. CIEDE2000 (the seed's metric) stays the default.")
+        doc(head + ". How much of that a search keeps was **not measured** in this run. "
+            "CIEDE2000 (the seed's metric) stays the default.")
         return
     fac_t76 = fac76[0]["time"] / res_fac[result["facet_default"]]["time"]
     doc(head + f": CIE76 saves {100 * (1 - share):.0f} % of the ROI fit, "
@@ -135,11 +133,8 @@ def summary_rows(result):
         alt = (f"CIE76: {share:.2f}× ROI time, worse tilt with prior ({fmt(t76['err'])}°)")
     else:
         alt = (f"CIE76: {ft['CIE76'] / ft['CIEDE2000']:.2f}× the time per pair; inside the "
-               f"searches not measured (no `{FORMULA_HOOK}=`)")
-    rows.append(["§3 ΔE formula in the searches (hard-wired `delta_e_2000`)", "CIEDE2000", "—",
+               f"searches not measured")
+    rows.append(["§3 ΔE formula in the searches (`optics.delta_e_method`)", "CIEDE2000", "—",
                  alt, "justified"])
     return rows
 
-
-if __name__ == "__main__":
-    section_main(run, "inversion", __doc__)

@@ -1,19 +1,17 @@
 """Speed against error, section 3a: the ROI thickness search (grid step, pixel samples,
 refinement sample, ΔE formula) of ``microfacet.analysis.roi.fit_roi_thickness``.
 
-On the noisy synthetic ``nd`` scene of section 3 (``_sve.scene``): MAE against the true ROI
-thickness and against a reference fit with the finest settings, time as a ratio to the
-default.
-
-Run:  python pipelines/sve_roi.py [--quick] [--repeat N] [--out DIR]
-      (part of python pipelines/speed_vs_error.py, which writes docs/speed-vs-error.md)
+On the noisy synthetic ``nd`` scene of section 3 (:func:`pipelines.sve.common.scene`): MAE
+against the true ROI thickness and against a reference fit with the finest settings, time as
+a ratio to the default.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from _shared import fmt, md_table, verdict
-from _sve import defaults, formula_kw, no_hook_note, roi_reference, scene, section_main, timed
+
+from pipelines._shared import fmt, md_table, verdict
+from pipelines.sve.common import defaults, model_of, roi_reference, scene, timed
 
 
 def settings():
@@ -58,6 +56,7 @@ def edge_shifts(s, rois, dfit, G):
 
 
 def run(cfg, doc, img=None):
+    from microfacet.analysis.options import RoiOptions
     from microfacet.analysis.roi import fit_roi_thickness
 
     rep = min(cfg["repeat"], 2)
@@ -66,14 +65,11 @@ def run(cfg, doc, img=None):
     rois, truth_roi, ref_fit = roi_reference(cfg["scene_px"])
     rh = rois[2][0]
     G = defaults()["roi_grid"]
-    res_roi, missing = [], []
+    res_roi = []
     for name, kw, f in settings():
-        fkw = formula_kw(fit_roi_thickness, f)
-        if fkw is None:
-            missing.append(f)
-            continue
-        t, fit = timed(lambda kw=kw, fkw=fkw: fit_roi_thickness(
-            lab, sc.tilt_deg, mask, table, rois=rois, **kw, **fkw), rep)
+        model = model_of(table, method=f)
+        t, fit = timed(lambda kw=kw, model=model: fit_roi_thickness(
+            lab, sc.tilt_deg, mask, model, RoiOptions(**kw), rois=rois), rep)
         step = kw.get("grid_step_nm", G)
         edge = np.isclose(np.mod(fit.thickness_nm + 1e-9, step), 0.0, atol=2e-6)
         dev = np.abs(fit.thickness_nm - ref_fit.thickness_nm)
@@ -98,12 +94,11 @@ def run(cfg, doc, img=None):
                  [[r["name"], fmt(r["mae"]), fmt(r["dev"]), f"{r['flips']}/{r['n']}",
                    fmt(r["dev_kept"]), f"{r['exp']:.3f}", f"{r['edge']}/{r['n']}",
                    f"{r['time']:.2f}", f"{r['time'] / td:.2f}"] for r in res_roi]))
-    if missing:
-        doc("\n" + no_hook_note("fit_roi_thickness", missing))
     doc("\nAgainst the reference (the truth error is the estimator's, see below): "
         + verdict([r["name"] for r in res_roi], [r["time"] for r in res_roi],
                   [r["dev"] for r in res_roi], idef, unit=" nm (MAE vs reference)"))
-    dfit = fit_roi_thickness(lab, sc.tilt_deg, mask, table, rois=rois)  # the defaults
+    dfit = fit_roi_thickness(lab, sc.tilt_deg, mask, s["model"], RoiOptions(),
+                             rois=rois)  # the defaults
     shifts = edge_shifts(s, rois, dfit, G)
     reading(doc, res_roi, shifts, rh, p)
     return dict(roi=res_roi, roi_edge_shift=shifts)
@@ -161,14 +156,11 @@ def summary_rows(result):
         alt.append(f"grid 2 nm: {roi['grid 2 nm']['time'] / d['time']:.2f}× time")
     cheaper = [x for x in result["roi"][1:] if x["time"] < 0.8 * d["time"]
                and x["flips"] == 0 and x["dev_kept"] <= 0.5]
-    return [[f"§3a ROI thickness search (`analysis.roi.fit_roi_thickness(grid_step_nm={G:g}, "
-             f"sample_px={SP}, refine_px={RP})`)", f"{G:g} nm / {SP} / {RP}",
+    return [[f"§3a ROI thickness search (`RoiOptions(grid_step_nm={G:g}, sample_px={SP}, "
+             f"refine_px={RP})`)", f"{G:g} nm / {SP} / {RP}",
              f"MAE {fmt(d['mae'])} nm vs truth (the estimator's), "
              f"{fmt(d['dev_kept'])} nm vs reference", "; ".join(alt),
              (f"more than needed: {min(cheaper, key=lambda x: x['time'])['name']} stays "
               f"within 0.5 nm of the reference" if cheaper else "justified")
              + f"; refinement window edge hit in {d['edge']}/{d['n']} ROIs"]]
 
-
-if __name__ == "__main__":
-    section_main(run, "roi", __doc__)
