@@ -133,3 +133,65 @@ def test_simulate_writes_a_complete_folder_and_refuses_to_overwrite(tmp_path, ca
     lab2 = np.load(out / "angular_lab.npy")
     assert (lab2[..., 0] < lab[..., 0]).all()  # darker with lower exposure
     assert [p.name for p in tmp_path.iterdir()] == ["sim"]  # no partial folders left
+
+
+def _results_under(tmp_path, illuminant, *, name="analysis", top_level=False):
+    """A version-2 results folder recorded under ``illuminant`` (in ``inputs``; at the top
+    level of a version-1 summary with ``top_level``)."""
+    folder = tmp_path / name
+    folder.mkdir()
+    summary = {"format": "microfacet-results/1",
+               "thickness": {"mixture": G3.to_json()}, "ndf": {"mixture": F2.to_json()}}
+    if top_level:
+        summary.update(inputs={"stack": "s"}, illuminant=illuminant)
+    else:
+        summary.update(summary_version=2, inputs={"illuminant": illuminant,
+                                                  "film": "TiO2_Jolivet2023_amorphous"})
+    (folder / "summary.json").write_text(json.dumps(summary))
+    return folder
+
+
+def test_an_explicit_d65_wins_over_the_results_folders_illuminant(tmp_path):
+    """``--illuminant D65`` given explicitly is not "not given": with a results folder
+    recorded under D50 the map is simulated under D65; without the option, under D50."""
+    res = _results_under(tmp_path, "D50")
+    base = ["simulate", "--results", str(res), "--exposure", "0.25"] + SMALL
+    assert main(base + ["--out", str(tmp_path / "d65"), "--illuminant", "D65"]) == 0
+    assert main(base + ["--out", str(tmp_path / "rec")]) == 0
+    d65 = json.loads((tmp_path / "d65" / "simulate.json").read_text())
+    rec = json.loads((tmp_path / "rec" / "simulate.json").read_text())
+    assert d65["illuminant"] == "D65" and rec["illuminant"] == "D50"
+    assert load_map(tmp_path / "d65" / "angular_map.npz").illuminant == "D65"
+    grid = np.arange(0, 61, 5.0)
+    for out, ill in (("d65", "D65"), ("rec", "D50")):
+        ref = simulate_map(model="microfacet", thickness=G3, ndf=F2, exposure=0.25,
+                           theta_light_deg=grid, theta_view_deg=grid, illuminant=ill)
+        np.testing.assert_allclose(np.load(tmp_path / out / "angular_lab.npy"), ref.lab,
+                                   atol=1e-4)
+
+
+def test_an_old_summary_records_its_illuminant_at_the_top_level(tmp_path):
+    res = _results_under(tmp_path, "D50", top_level=True)
+    assert main(["simulate", "--results", str(res), "--out", str(tmp_path / "o")] + SMALL) == 0
+    assert json.loads((tmp_path / "o" / "simulate.json").read_text())["illuminant"] == "D50"
+
+
+def test_explicit_distributions_win_over_the_results_folders(tmp_path):
+    res = _results_under(tmp_path, "D65")
+    out = tmp_path / "o"
+    assert main(["simulate", "--results", str(res), "--thickness-mixture", "1:51:2",
+                 "--ndf-lobes", "1:7", "--substrate", "Ti_JohnsonChristy1974",
+                 "--out", str(out)] + SMALL) == 0
+    meta = json.loads((out / "simulate.json").read_text())
+    assert meta["thickness"] == ThicknessMixture([(1.0, 51.0, 2.0)]).to_json()
+    assert meta["ndf"] == NDFMixture([(1.0, 7.0)]).to_json()
+    assert meta["results"] == str(res) and meta["model"] == "microfacet"
+
+
+def test_fit_spectrum_and_simulate_share_one_declaration_of_the_optics():
+    sub = build_parser()._subparsers._group_actions[0].choices
+    for name in ("simulate", "fit-spectrum"):
+        optics = next(g for g in sub[name]._action_groups if g.title == "optics")
+        flags = [a.option_strings[0] for a in optics._group_actions]
+        assert flags == ["--film", "--substrate", "--illuminant", "--observer"]
+        assert sub[name].get_default("opt__illuminant") is None  # "not given", not D65
