@@ -1,8 +1,11 @@
 """The package's module map: lines, imports between modules, private names used across
 modules, import cycles and layer violations.
 
-    python pipelines/module_map.py            # the table and the checks
-    python pipelines/module_map.py --json     # machine-readable
+    python -m pipelines.module_map            # the table and the checks
+    python -m pipelines.module_map --json     # machine-readable
+
+Not a study: the layer lint of the package, imported by tests/test_layout.py (``scan``,
+``cycles``, ``violations``).
 
 Imports are read from the source (``ast``), function-level imports included. A *layer
 violation* is an import of a subpackage that sits above the importer in the one-way order of

@@ -34,10 +34,8 @@ STANDARD_CONSTANTS = {"colour/srgb.py"}
 
 
 def _module_map():
-    path = ROOT / "pipelines" / "studies" / "module_map.py"
-    if not path.is_file():
-        path = ROOT / "pipelines" / "module_map.py"
-    spec = importlib.util.spec_from_file_location("_module_map_study", path)
+    path = ROOT / "pipelines" / "module_map.py"   # the layer lint (not a study)
+    spec = importlib.util.spec_from_file_location("_module_map", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
