@@ -140,6 +140,9 @@ def _check_value(name: str, value, meta: dict, default) -> str | None:
             return f"must be {'>' if meta.get('low_exclusive') else '>='} {low:g}, got {value!r}"
         if high is not None and value > high:
             return f"must be <= {high:g}, got {value!r}"
+        if (isinstance(default, int) and not isinstance(default, bool)
+                and isinstance(value, float) and not value.is_integer()):
+            return f"must be a whole number, got {value!r}"
     check: Callable | None = meta.get("check")
     return check(value) if check is not None else None
 
@@ -157,8 +160,17 @@ class Options:
     def __post_init__(self):
         for f in fields(self):
             value = getattr(self, f.name)
-            if isinstance(value, dict) and isinstance(_default_of(f), Options):
-                object.__setattr__(self, f.name, type(_default_of(f)).from_dict(value))
+            default = _default_of(f)
+            if isinstance(default, Options):
+                if isinstance(value, dict):
+                    try:
+                        value = type(default).from_dict(value)
+                    except InputError as exc:
+                        raise _with_prefix(exc, f"{f.name}.") from None
+                    object.__setattr__(self, f.name, value)
+                elif not isinstance(value, type(default)):
+                    raise InputError(f"must be a section of options (a mapping), got "
+                                     f"{value!r}", param=f.name)
                 continue
             if isinstance(value, list) and f.metadata.get("kind") is tuple:
                 object.__setattr__(self, f.name, value := tuple(value))
@@ -202,10 +214,17 @@ class Options:
         """A copy with ``changes``; a sub-section may be given as a dict of its changes
         (``options.replace(roi={"size_px": 128})``)."""
         kw = {}
+        known = {f.name for f in fields(self)}
         for name, value in changes.items():
+            if name not in known:
+                raise InputError(f"unknown option; known: {', '.join(sorted(known))}",
+                                 param=name)
             cur = getattr(self, name)
-            kw[name] = cur.replace(**value) if isinstance(cur, Options) and isinstance(
-                value, dict) else value
+            try:
+                kw[name] = cur.replace(**value) if isinstance(cur, Options) and isinstance(
+                    value, dict) else value
+            except InputError as exc:
+                raise _with_prefix(exc, f"{name}.") from None
         try:
             return dataclasses.replace(self, **kw)
         except TypeError as exc:

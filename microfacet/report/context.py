@@ -127,9 +127,9 @@ class Context:
         return v
 
     def optics(self, key):
-        """``film``, ``substrate`` or ``illuminant`` as recorded (top level, then
-        ``inputs``), or None."""
-        return self.res.get(key) or self.inputs.get(key)
+        """``film``, ``substrate`` or ``illuminant`` as recorded (``inputs``, or the top
+        level of a version-1 summary), or None."""
+        return self.res.optics().get(key)
 
     def density_table(self, name):
         """``thickness_pdf`` or ``ndf_pdf`` as a dict of columns, or None if the file is
