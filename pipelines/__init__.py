@@ -126,14 +126,17 @@ def block_markers(block: str) -> tuple[str, str]:
 
 
 def replace_block(path, block: str, text: str) -> None:
-    """Replace the text between the block's markers in ``path`` (both must be there, once).
+    r"""Replace the text between the block's markers in ``path`` (both must be there, once).
+
+    The block is written with a blank line after the opening and before the closing marker
+    (a table next to a comment line still renders as a table).
 
     >>> import tempfile
     >>> p = Path(tempfile.mkdtemp()) / "x.md"
-    >>> _ = p.write_text("a\\n<!-- study:t -->\\nold\\n<!-- /study:t -->\\nb\\n")
-    >>> replace_block(p, "t", "new")
+    >>> _ = p.write_text("a\n\n<!-- study:t -->\n\nold\n\n<!-- /study:t -->\n\nb\n")
+    >>> replace_block(p, "t", "| new |")
     >>> p.read_text()
-    'a\\n<!-- study:t -->\\nnew\\n<!-- /study:t -->\\nb\\n'
+    'a\n\n<!-- study:t -->\n\n| new |\n\n<!-- /study:t -->\n\nb\n'
     """
     path = Path(path)
     body = path.read_text(encoding="utf-8")
@@ -141,7 +144,7 @@ def replace_block(path, block: str, text: str) -> None:
     pattern = re.compile(re.escape(start) + r"\n.*?" + re.escape(end), flags=re.S)
     if len(pattern.findall(body)) != 1:
         raise ValueError(f"{path}: needs exactly one {start} … {end} block")
-    body = pattern.sub(lambda m: f"{start}\n{text.strip()}\n{end}", body)
+    body = pattern.sub(lambda m: f"{start}\n\n{text.strip()}\n\n{end}", body)
     path.write_text(body, encoding="utf-8")
 
 
