@@ -69,3 +69,17 @@ def test_columns_option(tmp_path, capfd):
     assert main(["fit-spectrum", str(p)]) == 2
     err = capfd.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "name the two with --columns" in err[0], err
+
+
+def test_optics_options_name_their_flag_and_reach_the_fit(tmp_path, capfd, spectrum_csv):
+    """The optics flags are the ones ``simulate`` has (one declaration): an unknown set is
+    refused naming its flag; a known one is the one fitted with."""
+    csv = spectrum_csv(tmp_path / "s.csv", 80.0)
+    for flag in ("--film", "--substrate"):
+        assert main(["fit-spectrum", str(csv), flag, "Unobtainium"]) == 2
+        err = capfd.readouterr().err
+        assert err.count("\n") == 1 and f"{flag}: unknown optical-constant set" in err
+    assert main(["fit-spectrum", str(csv), "--json", "--substrate",
+                 "Ti_JohnsonChristy1974"]) == 0
+    out = json.loads(capfd.readouterr().out)
+    assert out["substrate"] == "Ti_JohnsonChristy1974" and out["film"] == FILM
