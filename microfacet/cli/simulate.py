@@ -15,9 +15,6 @@ Two paths:
 
 from __future__ import annotations
 
-import logging
-import time
-
 from .. import workflow
 from ..core.errors import InputError
 from .options import (
@@ -121,7 +118,6 @@ def _parse_components(text, n, param, form):
 def run(args) -> int:
     """Parse the options, simulate (:func:`~microfacet.workflow.simulate.simulate_to_folder`)
     and print where the map was written (and the mean ΔE00 of a comparison)."""
-    t0 = time.perf_counter()
     options = options_from_args(args, workflow.SimulateOptions, optics=optics_options(args))
     done = workflow.simulate_to_folder(
         args.out, results=args.results, thickness_nm=args.thickness_nm,
@@ -129,8 +125,6 @@ def run(args) -> int:
                            else parse_thickness_mixture(args.thickness_mixture)),
         ndf_lobes=None if args.ndf_lobes is None else parse_ndf_lobes(args.ndf_lobes),
         compare=args.compare, options=options, overwrite=args.overwrite)
-    logging.getLogger("microfacet.simulate").info("wrote %s in %.2f s", args.out,
-                                                  time.perf_counter() - t0)
     if not args.quiet:
         msg = (f"wrote {args.out}/angular_map.png ({done.shape[0]} x {done.shape[1]} angles, "
                f"{done.model})")
