@@ -73,3 +73,17 @@ def test_quick_run(name, tmp_path):
     lines = [ln for ln in res.stdout.splitlines() if ln.startswith("|")]
     assert len(lines) >= 3 and lines[1].startswith("|---"), res.stdout[-2000:]
     assert _snapshot() == before, "a quick run changed docs/ or fixtures/"
+
+
+@pytest.mark.subprocess
+@pytest.mark.parametrize("args", [
+    ["--quick", "--docs"],                       # docs record full runs only
+    ["--docs", "--set", "tiles=64"],             # ... with the default options
+    ["--out", str(ROOT / "fixtures" / "x")],     # never into an input folder
+])
+def test_run_refuses_to_write_docs_or_inputs_wrongly(args):
+    before = _snapshot()
+    res = _run("run", "speed-memory", *args, timeout=120)
+    assert res.returncode != 0
+    assert _snapshot() == before
+    assert not (ROOT / "fixtures" / "x").exists()

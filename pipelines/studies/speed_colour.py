@@ -21,8 +21,10 @@ scikit-image on ``n`` random Lab pairs (half near each other, ΔLab ~ N(0, 5), h
 independent): ms per 1e6 pairs, pairs/s, time ratio to microfacet float64 and the largest
 |ΔE − colour's ΔE| (float32 rows against colour on the float32-rounded inputs).
 
-To measure another checkout of microfacet (e.g. the implementation before a change), put it
-first on the path: ``PYTHONPATH=/path/to/checkout python -m pipelines run speed-colour``.
+To measure another copy of microfacet (e.g. the implementation before a change), put it first
+on the path and run from outside this checkout (the current folder comes first on the path):
+``cd /tmp && PYTHONPATH=/path/to/other:/path/to/this/checkout python -m pipelines run
+speed-colour``.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ def config(quick, repeat=None):
     """Sample sizes and settings of a full run, or of a quick check (seconds, not a
     measurement: small samples, few settings, a cropped focus stack)."""
     if quick:
-        return dict(repeat=repeat or 1, n_points=300, n_time=100, n_lookup=5_000,
+        return dict(repeat=repeat or 1, n_points=200, n_time=50, rounds=1, n_lookup=5_000,
                     d_steps=(0.5, 2.0), t_steps=(2.0, 4.0), scene_px=128,
                     n_tilt_px=1_000, tilt_steps=(0.5, 1.0, 2.0),
                     n_formula=20_000, focus_stacks=(1,), focus_px=(7,), focus_crop=80,

@@ -20,11 +20,12 @@ def run(cfg, doc, img):
 
     steps = SPECTRAL_STEPS
     ranges = cfg.get("ranges", RANGES)
+    rounds = cfg.get("rounds", max(5, cfg["repeat"]))
     n_err, n_time = cfg["n_points"], cfg["n_time"]
     doc("\n## 1. Spectral step\n")
     doc(f"ΔE00 against direct 1 nm evaluation at {n_err} random (θ, d) per range (θ uniform in "
         f"0–{THETA_RANGE[1]:.2f}°, d uniform in the range); time = direct evaluation of "
-        f"{n_time} colours (best of {max(5, cfg['repeat'])} interleaved rounds), as a ratio "
+        f"{n_time} colours (best of {rounds} interleaved rounds), as a ratio "
         f"to the step the library picks for that range "
         f"(`colour.table.choose_spectral_step`, target 0.05 ΔE00 on 400 samples). "
         f"\"picked\" = the library's choice; \"at 0.1\" = its choice with a 0.1 ΔE00 "
@@ -44,7 +45,7 @@ def run(cfg, doc, img):
             e = delta_e(lab_direct(th, d, s), ref) if s != 1.0 else np.zeros(1)
             errs.append((float(np.max(e)), float(np.percentile(e, 99)), float(np.mean(e))))
         times = round_robin([lambda s=s: lab_direct(th[:n_time], d[:n_time], s) for s in steps],
-                            max(5, cfg["repeat"]))
+                            rounds)
         ip = steps.index(picked)
         for k, s in enumerate(steps):
             note = []
