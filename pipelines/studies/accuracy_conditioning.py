@@ -47,8 +47,8 @@ STUDY = Study(
     question="For which films and tilts does colour carry the tilt (ΔE00 per degree and the "
              "tilt uncertainty it gives)?",
     doc=("docs/conditioning.md", "accuracy-conditioning"),
-    run_time="1 min",
-    quick_time="10 s",
+    run_time="10 s",
+    quick_time="9 s",
     options={"na": (0.8, "numerical aperture"),
              "d_max": (400.0, "largest thickness, nm (the analysis' default range is 0-400)"),
              "sigma_d": (0.3, "thickness uncertainty for the combined σ, nm (the synthetic "

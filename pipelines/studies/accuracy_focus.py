@@ -26,8 +26,8 @@ STUDY = Study(
     question="Which focus operator, window and peak fit read the height most accurately on "
              "ground-truth stacks?",
     doc=("docs/height-from-focus.md", "accuracy-focus"),
-    run_time="30 s",
-    quick_time="5 s",
+    run_time="20 s",
+    quick_time="2 s",
     options={"stacks": ("1,2,3", "Cou & Guennebaud stacks, comma-separated")},
 )
 

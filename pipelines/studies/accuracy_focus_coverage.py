@@ -49,7 +49,7 @@ STUDY = Study(
              "at sharp relief, and is its reported σ calibrated?",
     doc=None,
     run_time="2 min",
-    quick_time="15 s",
+    quick_time="11 s",
     options={"size": (128, "image side, px"),
              "seeds": (2, "texture and noise draws per case"),
              "blur": (1.55, "defocus px per z step"),

@@ -22,7 +22,7 @@ STUDY = Study(
     question="Do the synthetic stacks carry enough texture to focus on, with grooves or "
              "with per-facet thickness offsets?",
     doc=None,
-    run_time="15 s",
+    run_time="5 s",
     quick_time="5 s",
     options={"size": (160, "image side, px"), "slices": (24, "slices per stack")},
 )

@@ -33,7 +33,7 @@ STUDY = Study(
              "segmentation or the height from focus?",
     doc=None,
     run_time="3 min (30 s on a finished sweep)",
-    quick_time="15 s",
+    quick_time="11 s",
     options={"work": ("", "the work folder of a finished accuracy-sweep (default: run one)"),
              "n": (30, "scenes of the sweep run without work")},
 )

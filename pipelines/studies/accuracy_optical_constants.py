@@ -20,7 +20,7 @@ STUDY = Study(
     question="How far do the colours move when another optical-constant set is chosen for "
              "the film or the substrate?",
     doc=("docs/optical-constants.md", "accuracy-optical-constants"),
-    run_time="5 s",
+    run_time="4 s",
     quick_time="5 s",
 )
 

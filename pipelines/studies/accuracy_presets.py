@@ -38,7 +38,7 @@ STUDY = Study(
              "across noise and roughness)?",
     doc=("docs/accuracy.md", "accuracy-presets"),
     run_time="8 min",
-    quick_time="15 s",
+    quick_time="14 s",
     options={"presets": ("", "presets, comma-separated (default: all; sweep: all but noisy "
                              "and overexposed)"),
              "size": (0, "image side, px (default 512; sweep 256)"),

@@ -36,7 +36,7 @@ STUDY = Study(
     question="Do real instrument height maps read as SurfaceTopography reads them, and what "
              "does `microfacet analyze` make of them?",
     doc=("docs/real-data.md", "gallery-instruments"),
-    run_time="1 min",
+    run_time="30 s",
     quick_time="10 s",
     options={"thickness_nm": (70.0, "thickness of the synthetic uniform film, nm")},
     doc_files={"real-instruments.png": "docs/img/real-instruments.png"},

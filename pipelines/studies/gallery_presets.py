@@ -21,8 +21,8 @@ STUDY = Study(
     question="What does each synthetic preset look like, and what does it hold (visible, "
              "clipped, thickness, tilt)?",
     doc=("docs/synthetic-stacks.md", "gallery-presets"),
-    run_time="30 s",
-    quick_time="10 s",
+    run_time="10 s",
+    quick_time="7 s",
     options={"size": (256, "image side, px"), "slices": (16, "slices per stack")},
     doc_files={"presets.jpg": "docs/img/presets.jpg"},
 )

@@ -21,7 +21,7 @@ STUDY = Study(
     question="When do worker processes or a Dask cluster pay off for `microfacet batch`?",
     doc=("docs/benchmarks.md", "speed-batch"),
     run_time="3 min",
-    quick_time="15 s",
+    quick_time="15-25 s",
     options={"sets": ("6x256,8x512", "stack sets NxSIZE, comma-separated"),
              "slices": (16, "slices per stack"),
              "jobs": (2, "workers of the parallel runs")},

@@ -47,7 +47,7 @@ STUDY = Study(
              "(the rule for keeping our own), and CIEDE2000 than scikit-image's?",
     doc=("docs/colour-benchmarks.md", "speed-colour"),
     run_time="5 min",
-    quick_time="15 s",
+    quick_time="5 s",
     options={"part": ("functions", "functions (against colour-science) or ciede2000 "
                                    "(delta_e_2000 against colour-science and scikit-image)"),
              "repeat": (0, "timing repeats, best kept (0: 5, or 1 with --quick)"),

@@ -36,7 +36,7 @@ STUDY = Study(
              "memory, for the default and the earlier options?",
     doc=("docs/benchmarks.md", "speed-focus"),
     run_time="3 min",
-    quick_time="15 s",
+    quick_time="13 s",
     options={"size": (1024, "image side in pixels"),
              "repeat": (3, "timing repeats (the minimum is kept)")},
 )

@@ -26,7 +26,7 @@ STUDY = Study(
              "segmentation's tile size cost in accuracy?",
     doc=None,
     run_time="3 min",
-    quick_time="15 s",
+    quick_time="10 s",
     options={"stack": ("", "stack folder with truth/ (default: generate an nd stack in out)"),
              "size": (992, "side of the generated stack, px"),
              "slices": (40, "slices of the generated stack"),

@@ -31,7 +31,7 @@ STUDY = Study(
              "per-pair evaluation?",
     doc=("docs/benchmarks.md", "speed-simulate"),
     run_time="1 min",
-    quick_time="10 s",
+    quick_time="5 s",
     options={"repeat": (5, "timing repeats (the minimum is kept)"),
              "subset": (180, "pairs timed for the naive baseline")},
 )

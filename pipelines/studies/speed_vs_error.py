@@ -44,7 +44,7 @@ STUDY = Study(
              "its error (spectral step, colour table, ΔE and searches, focus, eq. 6)?",
     doc=("docs/speed-vs-error.md", "speed-vs-error"),
     run_time="8 min",
-    quick_time="20 s",
+    quick_time="20-30 s",
     options={"sections": (",".join(SECTIONS), "sections to run, comma-separated"),
              "repeat": (0, "timing repeats, best kept (0: 3, or 1 with --quick)")},
     doc_files={f"img/sve-{s}.png": f"docs/img/sve-{s}.png" for s in SECTIONS},
