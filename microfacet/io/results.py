@@ -34,7 +34,7 @@ from ..core.errors import InputError, one_line
 from ..core.pixels import pixel_size_yx
 from .images import read_png, write_float_tiff, write_image
 from .jsonfile import json_safe, read_json
-from .summary import FORMAT, Summary
+from .summary import FORMAT, MAX_SUMMARY_BYTES, Summary
 from .x3p import write_x3p
 
 __all__ = ["FORMAT", "IMAGES", "MAPS", "OPTICS_KEYS", "Results", "TABLES", "TIFF_COPIES",
@@ -184,7 +184,7 @@ class Results:
         if not f.is_file():
             raise InputError(f"{one_line(f)}: missing (not a results folder)")
         #: The validated, typed summary (:class:`~microfacet.io.summary.Summary`).
-        raw = read_json(f)
+        raw = read_json(f, max_bytes=MAX_SUMMARY_BYTES)
         #: The ``format`` the file declares (None when it declares none: not written whole).
         self.declared_format = raw.get("format") if isinstance(raw, dict) else None
         self.typed = Summary.from_json(raw, where=one_line(f))

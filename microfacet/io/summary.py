@@ -30,6 +30,7 @@ import math
 import typing
 from dataclasses import dataclass, field
 
+from ..core.distributions import MAX_COMPONENTS
 from ..core.errors import InputError
 
 __all__ = ["DeltaE", "FacetCounts", "Inputs", "NdfSection", "RoiCounts", "Summary",
@@ -39,10 +40,11 @@ FORMAT = "microfacet-results/1"
 #: Version of the summary's layout within the format (2: no repeated keys, structured
 #: reasons, the options tree as ``parameters``).
 SUMMARY_VERSION = 2
-#: Most components a mixture may have (the analysis fits at most 10).
-MAX_COMPONENTS = 10
 #: Most items of any list or mapping in a summary (warnings, timings, versions, ...).
 MAX_ITEMS = 1000
+#: Largest summary.json read (the analysis writes ~10 kB; a file of :data:`MAX_ITEMS` long
+#: warnings stays far below this).
+MAX_SUMMARY_BYTES = 4 << 20
 
 
 @dataclass
@@ -214,8 +216,8 @@ def _upgrade(data: dict) -> dict:
     if isinstance(data.get("parameters"), dict):
         data["parameters"] = _nested_parameters(data["parameters"])
     inputs = data.get("inputs")
-    if isinstance(inputs, dict):
-        inputs = dict(inputs)
+    if isinstance(inputs, dict) or inputs is None:
+        inputs = dict(inputs or {})
         for key in ("film", "substrate", "illuminant"):
             if key in data and key not in inputs:
                 inputs[key] = data[key]

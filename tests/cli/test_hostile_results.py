@@ -82,9 +82,20 @@ def test_a_summary_claiming_a_million_components_is_refused_in_one_line(tmp_path
     status, err, peak_mb, seconds = _run_bounded(
         tmp_path, ["simulate", "--results", str(res), "--out", str(tmp_path / "sim")])
     assert status == 2, err
-    _one_line(err, rf"--results: .*summary\.json: key '{key}\.mixture\.components': "
-                   rf"1000000 components, more than 10$")
+    _one_line(err, r"--results: .*summary\.json: \d+ MB is too large for this file \(limit 4 MB\)$")
     assert peak_mb < RSS_BOUND_MB and seconds < TIME_BOUND_S, (peak_mb, seconds)
+    assert not (tmp_path / "sim").exists()
+
+
+@pytest.mark.parametrize("key", ["thickness", "ndf"])
+def test_a_summary_with_more_components_than_the_analysis_fits_is_refused(tmp_path, capfd, key):
+    res = _results(tmp_path, _summary(
+        **{key: {"mixture": {"components": [COMPONENT[key]] * 11}}}))
+    status = main(["simulate", "--results", str(res), "--out", str(tmp_path / "sim")])
+    err = capfd.readouterr().err
+    assert status == 2, err
+    _one_line(err, rf"--results: .*summary\.json: key '{key}\.mixture\.components': "
+                   rf"11 components, more than 10$")
     assert not (tmp_path / "sim").exists()
 
 

@@ -215,7 +215,10 @@ def test_a_results_folder_with_a_hostile_summary_names_the_file(tmp_path):
                                          r"components\[0\]\.weight': expected a finite") as err:
         Results(d)
     assert str(f) in str(err.value) and "\n" not in str(err.value)
-    f.write_text(json.dumps({"ndf": {"mixture": {"components": [_component()] * 10 ** 5}}}))
+    f.write_text(json.dumps({"ndf": {"mixture": {"components": [_component()] * 10 ** 4}}}))
     with pytest.raises(InputError, match=r"summary\.json: key 'ndf\.mixture\.components': "
-                                         r"100000 components"):
+                                         r"10000 components"):
         Results(d)
+    f.write_text(json.dumps({"ndf": {"mixture": {"components": [_component()] * 10 ** 5}}}))
+    with pytest.raises(InputError, match=r"summary\.json: 5 MB is too large for this file"):
+        Results(d)                                    # refused before it is parsed
