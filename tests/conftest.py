@@ -89,3 +89,37 @@ def batch_drawer(tmp_path_factory):
     (root / "broken").mkdir()
     (root / "broken" / "stack.json").write_text("{}")
     return root
+
+
+#: Fixtures that run a whole analysis or write a report (once per session or module): every
+#: test that uses one is ``slow``, so that ``-m "not slow"`` never pays for them.
+SLOW_FIXTURES = frozenset({"nd_analysis", "results", "report", "results_copy", "nd", "sd",
+                           "clean"})
+#: What a test calls to start a child process (the ``subprocess`` marker).
+_SPAWNS = ("subprocess.", "sys.executable", "_run_bounded(", "lock_holder", "slow_holder")
+
+
+def _spawns(item) -> bool:
+    import inspect
+
+    fn = getattr(item, "function", None)
+    if fn is None or "subprocess" not in vars(inspect.getmodule(fn) or object()):
+        return False
+    try:
+        source = inspect.getsource(fn)
+    except (OSError, TypeError):
+        return False
+    calls_runner = "_run(" in source and "def _run(" in inspect.getsource(
+        inspect.getmodule(fn))
+    return calls_runner or any(s in source for s in _SPAWNS) or bool(
+        {"lock_holder", "slow_holder"} & set(item.fixturenames))
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark tests that use a :data:`SLOW_FIXTURES` fixture ``slow`` and tests that start a
+    child process ``subprocess`` (registered in pyproject.toml)."""
+    for item in items:
+        if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)
+        if _spawns(item):
+            item.add_marker(pytest.mark.subprocess)

@@ -129,6 +129,7 @@ def test_stub_names_are_their_modules_documented_api(package):
             assert listed is not None and attr in listed, f"{package}.{module}.{attr}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("relpath", list(_public_modules()))
 def test_module_all_lists_names_the_module_binds(relpath):
     """Every name of a module's ``__all__`` is bound at its top level, once, and public."""

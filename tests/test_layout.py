@@ -56,6 +56,7 @@ def _n_parameters(node) -> int:
     return len([n for n in names if n not in ("self", "cls")])
 
 
+@pytest.mark.slow
 def test_layers_are_one_way_without_cycles():
     mm = _module_map()
     modules = mm.scan()
@@ -64,12 +65,14 @@ def test_layers_are_one_way_without_cycles():
     assert sum(len(i["private_uses"]) for i in modules.values()) == 0
 
 
+@pytest.mark.slow
 def test_no_function_is_longer_than_a_screenful():
     long = [f"{rel}:{n.lineno} {n.name} ({n.end_lineno - n.lineno + 1} lines)"
             for rel, n in _functions() if n.end_lineno - n.lineno + 1 > MAX_FUNCTION_LINES]
     assert long == []
 
 
+@pytest.mark.slow
 def test_analysis_functions_take_few_parameters():
     many = [f"{rel}:{n.lineno} {n.name} ({_n_parameters(n)})" for rel, n in _functions()
             if rel.startswith("analysis/") and _n_parameters(n) > MAX_ANALYSIS_PARAMETERS]
@@ -95,6 +98,7 @@ def _option_defaults() -> dict:
     return out
 
 
+@pytest.mark.slow
 def test_every_option_default_is_declared_once():
     """No function outside the options modules gives a parameter named after an option the
     option's default as a literal (it takes the option's section, or no default)."""
@@ -115,6 +119,7 @@ def test_every_option_default_is_declared_once():
     assert repeats == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("literal", ["D65"])
 def test_defaults_of_the_optics_are_named_not_repeated(literal):
     """The default illuminant is ``optics.defaults.DEFAULT_ILLUMINANT``: no other module

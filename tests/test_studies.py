@@ -75,6 +75,7 @@ def test_quick_run(name, tmp_path):
     assert _snapshot() == before, "a quick run changed docs/ or fixtures/"
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 @pytest.mark.parametrize("args", [
     ["--quick", "--docs"],                       # docs record full runs only

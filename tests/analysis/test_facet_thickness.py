@@ -61,6 +61,7 @@ def _facet_image(labels, d_facet, t_facet, exposure):
     return color.xyz_to_lab(xyz, white=white).astype(np.float32)
 
 
+@pytest.mark.slow
 def test_the_order_window_is_less_than_half_a_colour_period(model):
     """TiO2 at 560 nm (n ≈ 2.5): the colours repeat every ~110 nm; ±0.45 of that."""
     assert 105 < model.period_nm < 120
@@ -68,6 +69,7 @@ def test_the_order_window_is_less_than_half_a_colour_period(model):
     assert 45 < hw < 55 and hw < model.period_nm / 2
 
 
+@pytest.mark.slow
 def test_facet_thickness_is_recovered_at_the_facet_tilt(model):
     """The ROI's thickness may be up to ±40 nm off (a ROI mixing 112/130/148 nm regions read
     118 nm, and the old ±30 nm window piled 18 % of the pixels at its edge)."""
@@ -94,6 +96,7 @@ def test_facet_thickness_is_recovered_at_the_facet_tilt(model):
     assert np.median(wrong.delta_e[ok]) > np.median(ft.delta_e[ok])
 
 
+@pytest.mark.slow
 def test_thickness_sigma_is_calibrated_against_colour_noise(model):
     """Gaussian Lab noise of 2 per component on 36-pixel facets, its ΔE00 size measured as
     the analysis does: the thickness errors scatter as ``sigma_nm`` says (z within
@@ -112,6 +115,7 @@ def test_thickness_sigma_is_calibrated_against_colour_noise(model):
     assert 0.7 < np.std(z) < 1.4, np.std(z)
 
 
+@pytest.mark.slow
 def test_the_tilt_error_adds_to_the_thickness_error(model):
     labels = _block_labels(8, 4, 4)
     S = int(labels.max()) + 1
@@ -130,6 +134,7 @@ def test_the_tilt_error_adds_to_the_thickness_error(model):
                                * math.radians(5.0), rtol=0.05)
 
 
+@pytest.mark.slow
 def test_interior_pixels_keep_a_dark_rim_out_of_the_facet_colour(model):
     """Each facet's boundary ring is shadowed (half as bright): with ``interior`` (distance
     from the facet boundary ≥ 1.5 px) the thickness is that of the facet; without, the mean
@@ -192,6 +197,7 @@ def test_a_facet_in_another_order_than_its_roi_takes_its_own(model):
     assert np.isnan(stay.delta_e_other_order).all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("truth", [0.8, 1.25])
 def test_the_exposure_is_refined_on_facets(model, truth):
     """Facets of known tilt rendered at an exposure ``truth``; the search starts from 1

@@ -109,6 +109,7 @@ def test_reflectance_matches_tmm_at_grazing_incidence_thick_films_and_extreme_k(
                                            err_msg=f"{pol} n1={n1} n2={n2}")
 
 
+@pytest.mark.slow
 def test_five_micron_lossless_film_matches_tmm_across_the_visible():
     # 5 µm of a k = 0 film: ~60 interference fringes across the visible, phase up to ~400 rad.
     wl = np.arange(380.0, 781.0, 1.0)
@@ -185,6 +186,7 @@ def fit_table():
     return build_colour_table(thickness_range_nm=(0.0, 100.0), theta_range_deg=(0.0, 27.0))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("d_true", [0.5, 2.0, 4.5])
 def test_thickness_fit_of_a_film_thinner_than_5_nm(fit_table, d_true):
     from microfacet.analysis.mixtures import fit_thickness_mixture
@@ -302,6 +304,7 @@ def test_every_pixel_masked_is_a_clear_input_error(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["grey"]  # no results, no .partial
 
 
+@pytest.mark.slow
 def test_too_few_unmasked_pixels_is_a_clear_input_error(tmp_path):
     patch = (slice(30, 33), slice(30, 33))  # 9 coloured pixels, fewer than a ROI needs (20)
     _grey_stack(tmp_path / "grey", patch=patch)
@@ -318,6 +321,7 @@ def test_sixteen_bit_full_scale_is_clipped_everywhere_and_refused(tmp_path):
         analyse_stack(tmp_path / "white")
 
 
+@pytest.mark.slow
 def test_sixteen_bit_partly_clipped_masks_exactly_the_clipped_pixels(tmp_path):
     # the sd film overexposed 2.5 times in 16 bits: about 3/4 of the pixels clip
     p = preset("16bit", height_px=SIZE, width_px=SIZE, n_slices=N_SLICES, seed=4, exposure=2.5,

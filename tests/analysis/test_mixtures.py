@@ -18,6 +18,7 @@ def _k(max_components, **kw):
     return FitOptions(max_components=max_components, **kw)
 
 
+@pytest.mark.slow
 def test_thickness_three_components_recovered(thickness_samples):
     rng = np.random.default_rng(1)
     d = thickness_samples(rng, [(0.3, 112, 3), (0.4, 130, 3), (0.3, 149, 3)], 15000)
@@ -33,6 +34,7 @@ def test_thickness_three_components_recovered(thickness_samples):
     assert fit.degenerate is False
 
 
+@pytest.mark.slow
 def test_thickness_single_gaussian_selects_one():
     rng = np.random.default_rng(2)
     fit = fit_thickness_mixture(rng.normal(125.0, 4.0, 5000), options=_k(4))
@@ -41,6 +43,7 @@ def test_thickness_single_gaussian_selects_one():
     assert abs(fit.mixture.sds_nm[0] - 4.0) < 0.2
 
 
+@pytest.mark.slow
 def test_thickness_reproducible_and_subsampled(thickness_samples):
     rng = np.random.default_rng(3)
     d = thickness_samples(rng, [(0.5, 120, 3), (0.5, 140, 3)], 30000)
@@ -61,6 +64,7 @@ def _grouped(rng, n_groups=8, per_group=3000, within=0.2):
     return x, g
 
 
+@pytest.mark.slow
 def test_thickness_correlated_samples_group_prevents_overfit():
     x, g = _grouped(np.random.default_rng(4))
     naive = fit_thickness_mixture(x)              # pixels taken as independent
@@ -71,6 +75,7 @@ def test_thickness_correlated_samples_group_prevents_overfit():
     assert grouped.n_samples == 24000
 
 
+@pytest.mark.slow
 def test_thickness_group_bic_not_only_the_parameter_cap():
     # 30 groups: the p <= n_eff cap allows K up to 10, so the BIC itself must choose
     x, g = _grouped(np.random.default_rng(5), n_groups=30, per_group=500)
@@ -203,6 +208,7 @@ def _deconvolved_loglik(mix, x, e, a):
     return float(np.sum(a * np.log(dens)))
 
 
+@pytest.mark.slow
 def test_thickness_deconvolves_heteroscedastic_errors():
     # true thickness N(130, 3²), each sample measured with its own error e_i in [1, 5] nm
     rng = np.random.default_rng(20)
@@ -228,6 +234,7 @@ def test_thickness_deconvolves_heteroscedastic_errors():
     _check_choice(fit)
 
 
+@pytest.mark.slow
 def test_thickness_two_populations_deconvolved_with_scalar_sigma(thickness_samples):
     rng = np.random.default_rng(21)
     d = thickness_samples(rng, [(0.4, 118.0, 2.0), (0.6, 136.0, 2.5)], 6000)
@@ -272,6 +279,7 @@ def test_thickness_integer_weights_equal_repeated_samples():
     assert a.n_samples == x.size and b.n_samples == w.sum()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k_true", [1, 2, 3])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_thickness_true_populations_on_a_region_map(k_true, seed):
@@ -294,6 +302,7 @@ def test_thickness_true_populations_on_a_region_map(k_true, seed):
                                     rel=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_thickness_single_broad_gaussian_never_gets_extra_components(seed):
     rng = np.random.default_rng(100 + seed)
@@ -313,6 +322,7 @@ _REGION_MAP_BUG = ("mixtures.fit_thickness_mixture: admissibility counts area-we
                    "regions (w*n_eff = 4.5) with a BIC gain of 5.2 > PARSIMONY_BIC")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.xfail(
     strict=True, reason=_REGION_MAP_BUG)), 2, 3])
 def test_thickness_single_broad_gaussian_region_map_gets_one_component(seed):
@@ -375,6 +385,7 @@ def test_thickness_no_component_at_the_floor_without_errors(seed):
     _check_choice(spikes)
 
 
+@pytest.mark.slow
 def test_thickness_smaller_n_effective_never_more_components():
     x, _, r = _population_map(3, 3)
     ks = [fit_thickness_mixture(x, n_effective=n, options=_k(4)).n_components

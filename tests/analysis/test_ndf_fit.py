@@ -17,6 +17,7 @@ def _k(max_components, **kw):
     return FitOptions(max_components=max_components, **kw)
 
 
+@pytest.mark.slow
 def test_ndf_two_lobes_recovered(tilt_samples):
     rng = np.random.default_rng(7)
     tilt = tilt_samples(rng, [(0.6, 3.0), (0.4, 9.0)], 20000)
@@ -55,6 +56,7 @@ def test_ndf_all_zero_is_degenerate_and_zeros_tolerated(tilt_samples):
     assert math.isfinite(fit.bic) and abs(fit.mixture.sds_deg.max() - 5.0) < 0.5
 
 
+@pytest.mark.slow
 def test_ndf_group(tilt_samples):
     rng = np.random.default_rng(10)
     # 8 facets, each with one tilt (from 2 lobes) plus a little scatter
@@ -104,6 +106,7 @@ def _sd_deg_se(sd_deg, v, a=None):
     return math.degrees(se_s / (1.0 + s2))            # d atan(s) / ds = 1 / (1 + s²)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sd_deg", [5.0, 10.0])
 def test_ndf_deconvolves_heteroscedastic_slope_noise(sd_deg):
     rng = np.random.default_rng(30)
@@ -133,6 +136,7 @@ def test_ndf_single_lobe_is_the_closed_form_mle():
                                                    abs=1e-3)
 
 
+@pytest.mark.slow
 def test_ndf_censoring_recovers_a_wide_lobe():
     # a 22° lobe seen through NA 0.8: 46 % of the facets are past 26.6° (dark, unmeasured)
     rng = np.random.default_rng(32)
@@ -180,6 +184,7 @@ def test_ndf_censored_weight_in_weight_units():
     assert a.info["censored_fraction"] == pytest.approx(b.info["censored_fraction"])
 
 
+@pytest.mark.slow
 def test_ndf_integer_weights_equal_repeated_samples(tilt_samples):
     rng = np.random.default_rng(34)
     tilt = tilt_samples(rng, [(0.6, 3.0), (0.4, 10.0)], 600)

@@ -44,6 +44,7 @@ def test_joint_mode_beats_the_seed_method_on_truth(nd_analysis):
     assert j["d"] < 2.0 and j["w1"] < 2.0 and j["t"] < 6.0
 
 
+@pytest.mark.slow
 def test_exposure_from_stack_json_is_used(tmp_path):
     st = tmp_path / "s"
     shutil.copytree(FIXTURE, st)
@@ -61,6 +62,7 @@ def test_exposure_from_stack_json_is_used(tmp_path):
     assert r.exposure == 0.8 and r.scene.exposure_source == "option"
 
 
+@pytest.mark.slow
 def test_microscope_export_is_analysed_without_slices(tmp_path):
     """A stack of `height_um` + `image` (a microscope export) skips height from focus; with
     the synthetic truth as the export, thickness and height tilts match the truth."""
@@ -86,6 +88,7 @@ def test_microscope_export_is_analysed_without_slices(tmp_path):
     assert np.median(np.abs(t_h[vis] - np.load(truth / "tilt_deg.npy")[vis])) < 2.5
 
 
+@pytest.mark.slow
 def test_non_square_pixels_are_analysed_on_the_sample(tmp_path):
     """The export of the test above with every other column dropped: pixels 0.216 µm high
     and 0.432 µm wide. Height tilts still match the truth (read as square pixels the x slopes
@@ -115,6 +118,7 @@ def test_non_square_pixels_are_analysed_on_the_sample(tmp_path):
     assert (out / "report.pdf").stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_an_instrument_file_export_is_analysed_with_its_own_pixel_size(tmp_path):
     """A real Alicona .al3d as the export's height (no pixel_size_um in stack.json) with the
     colour a 70 nm film shows at its tilts: the pixel size is the file's, the thickness is
@@ -151,6 +155,7 @@ def test_an_instrument_file_export_is_analysed_with_its_own_pixel_size(tmp_path)
     assert any("mean plane is tilted" in w for w in s["warnings"])
 
 
+@pytest.mark.slow
 def test_the_colour_difference_formula_reaches_every_stage(tmp_path):
     """``optics.delta_e_method`` is passed through the pipeline: with CIE76 the per-pixel ΔE
     is CIE76 between each pixel and its model colour, and the ROI fit reports CIE76

@@ -37,6 +37,7 @@ def test_roi_grid_tiles_cover_the_image():
         roi_grid((100, 100), size_px=50, stride_px=60)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("exposure", [0.7, 1.0, 1.4])
 def test_recovers_roi_thickness_and_exposure(table, model, exposure):
     rng = np.random.default_rng(1)
@@ -54,6 +55,7 @@ def test_recovers_roi_thickness_and_exposure(table, model, exposure):
     assert fit.exposure_estimated
 
 
+@pytest.mark.slow
 def test_masked_roi_is_nan_and_given_exposure_is_used(table, model):
     H, W = 32, 64
     lab = _render(table, np.full((H, W), 60.0), np.full((H, W), 5.0), 1.0)

@@ -5,6 +5,8 @@ test_bad_input.py and test_hostile_input.py."""
 
 from pathlib import Path
 
+import pytest
+
 from microfacet.cli import main
 
 FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "stacks" / "nd-fixture"
@@ -23,6 +25,7 @@ def test_bad_inputs_exit_2_and_leave_nothing(tmp_path, capsys):
 FAST = ["--roi-size-px", "48", "--no-report"]
 
 
+@pytest.mark.slow
 def test_summary_on_stdout_logs_on_stderr_and_json(batch_drawer, tmp_path, capsys, caplog):
     import json
 
@@ -49,6 +52,7 @@ def test_summary_on_stdout_logs_on_stderr_and_json(batch_drawer, tmp_path, capsy
     assert isinstance(data["ndf"]["identified"], bool) and "reason" in data["ndf"]
 
 
+@pytest.mark.slow
 def test_plain_folder_of_images_with_pixel_size_and_z_step(batch_drawer, tmp_path, capsys):
     import json
     import shutil

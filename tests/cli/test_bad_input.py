@@ -201,6 +201,7 @@ def _run(argv):
     ("module", "analyze", "nan-z"),
     ("script", "height", "corrupt-slice-data"),
 ])
+@pytest.mark.slow
 def test_broken_stack_in_a_fresh_process(tmp_path, launcher, command, case):
     mutate, pattern = next((m, p) for c, m, p in CASES if c == case)
     stack, parent, before = _broken(tmp_path, mutate)

@@ -16,6 +16,7 @@ def _rows(folder):
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv, msg", [
     (["batch", "--out", "{tmp}/o"], "STACK"),
     (["batch", "{a}", "--out", "{tmp}/o", "--jobs", "0"], "--jobs"),
@@ -33,6 +34,7 @@ def test_bad_batch_arguments_exit_2_with_one_line_and_write_nothing(argv, msg, b
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_stacks_from_file(batch_drawer, tmp_path):
     lst = tmp_path / "list.txt"
     lst.write_text(f"# my batch_drawer\n{batch_drawer / 'a'}\n\n")

@@ -38,6 +38,7 @@ def test_shipped_sample_recovers_its_stated_thickness(capsys):
     assert "semicolon-delimited, decimal comma" in notes and "percent" in notes
 
 
+@pytest.mark.slow
 def test_scaled_export_prints_notes_and_fits_the_scale(tmp_path, capsys, caplog):
     wl = np.arange(0.400, 0.7501, 0.002)                        # µm, as some exports write
     R = 0.8 * reflectance(wl * 1000, 0.0, 80.0, FILM, SUB)

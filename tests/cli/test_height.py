@@ -132,6 +132,7 @@ def test_focus_flags_reach_the_options(small_stack, tmp_path, capsys):
     assert "--fit-radius: must be an integer in 1..10" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_plain_image_folder(tmp_path):
     """A folder of images without stack.json works with --pixel-size-um and --z-step-um."""
     d = tmp_path / "plain"
@@ -145,6 +146,7 @@ def test_plain_image_folder(tmp_path):
     assert meta["n_slices"] == 5 and meta["pixel_size_um"] == 2.0
 
 
+@pytest.mark.slow
 def test_cou_stack_end_to_end(tmp_path):
     """The console script on a ground-truth stack: RMSE of the written map <= 0.25 slices."""
     out = tmp_path / "o"

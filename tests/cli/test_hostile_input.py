@@ -275,6 +275,7 @@ def test_a_results_folder_caught_between_its_two_renames_is_put_back(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["h", "s"]
 
 
+@pytest.mark.slow
 def test_batch_resume_sweeps_what_killed_workers_left(tmp_path):
     from microfacet.analysis.options import AnalysisOptions, RoiOptions
     from microfacet.workflow.batch import run_batch
@@ -291,6 +292,7 @@ def test_batch_resume_sweeps_what_killed_workers_left(tmp_path):
     assert not [p.name for p in out.iterdir() if p.name.startswith(".")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig, status", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 def test_signals_during_writing_leave_nothing(tmp_path, sig, status):
     out = tmp_path / "big"
@@ -311,6 +313,7 @@ def test_signals_during_writing_leave_nothing(tmp_path, sig, status):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_kill_9_leaves_leftovers_that_the_next_run_removes(tmp_path):
     out = tmp_path / "big"
     proc = subprocess.Popen([sys.executable, "-m", "microfacet", "synth", str(out),
@@ -334,6 +337,7 @@ def test_kill_9_leaves_leftovers_that_the_next_run_removes(tmp_path):
     (lambda: _jpeg(40000, 40000), "jpg"),
     (lambda: _tiff(30000, 30000), "tif"),
 ])
+@pytest.mark.slow
 def test_headers_claiming_huge_images_are_refused_before_decoding(tmp_path, make, where):
     s = tmp_path / "s"
     (s / "slices").mkdir(parents=True)
@@ -357,6 +361,7 @@ def test_headers_claiming_huge_images_are_refused_before_decoding(tmp_path, make
     assert not (tmp_path / "out").exists() and _digest(s) == before
 
 
+@pytest.mark.slow
 def test_raising_the_pixel_limit_still_checks_memory_before_decoding(tmp_path):
     s = tmp_path / "s"
     (s / "slices").mkdir(parents=True)
@@ -417,6 +422,7 @@ def test_an_export_height_map_claiming_a_huge_shape_is_refused(tmp_path, capfd):
     (["fit-spectrum", "{csv}", "--thickness-range-nm", "0:1e7"],
      r"--thickness-range-nm: need 0 <= low < high <= 10000"),
 ])
+@pytest.mark.slow
 def test_option_caps_refuse_before_allocating(tmp_path, argv, pattern):
     csv = tmp_path / "r.csv"
     csv.write_text("wavelength_nm,reflectance\n" + "".join(
@@ -431,6 +437,7 @@ def test_option_caps_refuse_before_allocating(tmp_path, argv, pattern):
     assert not (tmp_path / "sim").exists()
 
 
+@pytest.mark.slow
 def test_a_2_million_row_spectrum_is_refused_while_reading(tmp_path):
     csv = tmp_path / "huge.csv"
     with open(csv, "w") as fh:
@@ -442,6 +449,7 @@ def test_a_2_million_row_spectrum_is_refused_while_reading(tmp_path):
     assert peak < RSS_BOUND_MB
 
 
+@pytest.mark.slow
 def test_multi_page_tiff_is_read_in_one_pass(tmp_path, monkeypatch):
     """Reading every page opens the file once (``imread(key=i)`` per page re-walks the page
     chain: quadratic in the number of pages)."""
@@ -496,6 +504,7 @@ def test_full_disk_is_one_line_before_the_work(tmp_path, capfd, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s"]
 
 
+@pytest.mark.slow
 def test_disk_full_while_writing_leaves_nothing(tmp_path, capfd, monkeypatch):
     import microfacet.io.results as results
 

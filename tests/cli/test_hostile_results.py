@@ -73,6 +73,7 @@ def _summary(**sections):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("key", ["thickness", "ndf"])
 def test_a_summary_claiming_a_million_components_is_refused_in_one_line(tmp_path, key):
     """A results folder whose summary.json claims 10**6 components: once 39 s and 5.6 GB and
@@ -151,6 +152,7 @@ def _npz_claiming(path, **shapes):
       "spectra": ((3600, 3600, 4001), "<f8"), "wavelength_nm": ((4001,), "<f8")},
      r"spectra of 3600 x 3600 angles x 4001 wavelengths needs about [\d,]+ MB of memory"),
 ])
+@pytest.mark.slow
 def test_a_measured_map_claiming_gigabytes_is_refused_from_its_headers(tmp_path, shapes,
                                                                        pattern):
     path = _npz_claiming(tmp_path / "measured.npz", **shapes)

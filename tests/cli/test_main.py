@@ -11,6 +11,7 @@ from microfacet.cli import main
 HEAVY = ("colour", "sklearn", "matplotlib", "scipy", "skimage", "cv2")
 
 
+@pytest.mark.slow
 def test_help_does_not_import_heavy_modules():
     code = ("import sys\nfrom microfacet.cli.main import build_parser\nbuild_parser()\n"
             f"print([m for m in {HEAVY!r} if m in sys.modules])")
@@ -50,6 +51,7 @@ def test_user_errors_are_one_line_with_exit_2(tmp_path, capsys, spectrum_csv, ar
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_console_script_runs_as_module():
     out = subprocess.run([sys.executable, "-m", "microfacet", "--version"], capture_output=True,
                          text=True)
@@ -79,6 +81,7 @@ def test_verbose_before_the_command_shows_the_traceback(tmp_path, capsys):
     assert main(["fit-spectrum", str(tmp_path / "s.csv"), "--angle-deg", "95"]) == 2
 
 
+@pytest.mark.slow
 def test_help_imports_no_heavy_module_per_importtime():
     out = subprocess.run([sys.executable, "-X", "importtime", "-m", "microfacet", "--help"],
                          capture_output=True, text=True, check=True)

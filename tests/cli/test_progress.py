@@ -82,6 +82,7 @@ def test_the_seed_mode_skips_the_joint_stages():
     assert bar.fraction < _expected(Stage.TILT, (Stage.REPORT,))
 
 
+@pytest.mark.slow
 def test_the_workflow_announces_the_stages_the_bar_expects(batch_drawer, tmp_path):
     """``analyse_to_folder`` announces every stage that runs, in the enum's order: the bar,
     told which are skipped, moves forward at each and never past 1."""

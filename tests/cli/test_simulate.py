@@ -26,6 +26,7 @@ def _results(tmp_path, **extra):
     return folder
 
 
+@pytest.mark.slow
 def test_from_an_analyze_results_folder(tmp_path):
     res = _results(tmp_path, film="TiO2_Jolivet2023_amorphous")
     out = tmp_path / "sim"
@@ -58,6 +59,7 @@ def test_from_an_analyze_results_folder(tmp_path):
     assert np.percentile(y / white[1], 98) == pytest.approx(0.9, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_explicit_parameters_eq6_and_compare(tmp_path, capsys):
     grid = np.arange(0.0, 61.0, 5.0)
     meas = simulate_map(model="eq6", thickness=G3, ndf=F2, n=25.0, exposure=1.7,
@@ -83,6 +85,7 @@ def test_explicit_parameters_eq6_and_compare(tmp_path, capsys):
     assert fit["exposure"] == pytest.approx(1.7, rel=0.005)
 
 
+@pytest.mark.slow
 def test_half_vector_model_from_a_mixture(tmp_path):
     out = tmp_path / "hv"
     assert main(["simulate", "--thickness-mixture", "1:51:2", "--model", "half-vector",
@@ -117,6 +120,7 @@ def test_help_has_examples_of_every_path():
     assert "example" in text and "--results" in text and "--compare" in text
 
 
+@pytest.mark.slow
 def test_simulate_writes_a_complete_folder_and_refuses_to_overwrite(tmp_path, capsys):
     out = tmp_path / "sim"
     argv = ["simulate", "--thickness-nm", "51", "--out", str(out), "--theta-max-deg", "60",
@@ -151,6 +155,7 @@ def _results_under(tmp_path, illuminant, *, name="analysis", top_level=False):
     return folder
 
 
+@pytest.mark.slow
 def test_an_explicit_d65_wins_over_the_results_folders_illuminant(tmp_path):
     """``--illuminant D65`` given explicitly is not "not given": with a results folder
     recorded under D50 the map is simulated under D65; without the option, under D50."""
@@ -170,12 +175,14 @@ def test_an_explicit_d65_wins_over_the_results_folders_illuminant(tmp_path):
                                    atol=1e-4)
 
 
+@pytest.mark.slow
 def test_an_old_summary_records_its_illuminant_at_the_top_level(tmp_path):
     res = _results_under(tmp_path, "D50", top_level=True)
     assert main(["simulate", "--results", str(res), "--out", str(tmp_path / "o")] + SMALL) == 0
     assert json.loads((tmp_path / "o" / "simulate.json").read_text())["illuminant"] == "D50"
 
 
+@pytest.mark.slow
 def test_explicit_distributions_win_over_the_results_folders(tmp_path):
     res = _results_under(tmp_path, "D65")
     out = tmp_path / "o"

@@ -36,6 +36,7 @@ def _smooth_spectra(rng, n, wl=WL):
     return lambda w=wl: 0.5 + 0.45 * np.sin(w[None, :] / period + phase)
 
 
+@pytest.mark.slow
 def test_importing_the_colour_package_is_light():
     code = (
         "import sys, microfacet.colour, microfacet.colour.colorimetry, microfacet.colour.srgb,"
@@ -232,6 +233,7 @@ def test_white_scale_does_not_matter():
                                atol=1e-12)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(arrays(np.float64, (3,), elements=st.floats(0, 2)), st.sampled_from(["D65", "A"]))
 def test_xyz_lab_round_trip(xyz, illuminant):

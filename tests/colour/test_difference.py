@@ -120,6 +120,7 @@ lab_values = st.tuples(
 ).map(np.array)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(lab_values, lab_values)
 def test_delta_e_2000_properties(x, y):
@@ -135,6 +136,7 @@ def _near_opposite(x, y):
     return abs(abs((h1 - h2 + np.pi) % (2 * np.pi) - np.pi) - np.pi) < 1e-3
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(lab_values, lab_values)
 def test_delta_e_2000_float32_close_to_float64(x, y):

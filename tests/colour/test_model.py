@@ -29,6 +29,7 @@ def points():
     return rng.uniform(0.0, 27.0, 500), rng.uniform(20.0, 300.0, 500)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("exposure", [0.4, 1.0, 1.7])
 def test_lab_is_the_tables_xyz_at_the_exposure_in_cielab(table, points, exposure):
     theta, d = points

@@ -35,6 +35,7 @@ lab_values = st.tuples(st.floats(0, 100), st.floats(-128, 128), st.floats(-128, 
     np.array)
 
 
+@pytest.mark.slow
 @FAST
 @given(th=theta, d=thickness)
 def test_thin_film_colour_has_lightness_in_0_100(th, d):
@@ -60,6 +61,7 @@ def test_lightness_of_any_physical_reflectance_is_in_0_100(R, illuminant, observ
     assert lab[0] <= white[0] + 1e-9
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(lab_values, st.sampled_from(["D65", "A"]))
 def test_lab_xyz_lab_round_trip(lab, illuminant):
@@ -86,6 +88,7 @@ def test_srgb_transfer_is_monotonic(x):
         assert np.all(np.diff(out.astype(np.float64)) >= 0)
 
 
+@pytest.mark.slow
 @FAST
 @given(arrays(np.float64, (5, 3), elements=st.floats(0.0, 1.0)),
        st.sampled_from(["D65", "A", "D50", "FL2"]), st.sampled_from(["2", "10"]))
@@ -98,6 +101,7 @@ def test_linear_srgb_xyz_round_trip_for_adapted_illuminants(rgb, illuminant, obs
     assert float(w[1]) == pytest.approx(1.0, abs=1e-6)
 
 
+@pytest.mark.slow
 @FAST
 @given(arrays(np.float32, (6, 3), elements=st.floats(0.0, 1.0, width=32)),
        st.sampled_from(["D65", "A"]))
@@ -108,6 +112,7 @@ def test_srgb_lab_round_trip_in_float(img, illuminant):
     np.testing.assert_allclose(back, img, rtol=0, atol=2e-4)
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(lab_values, lab_values, lab_values)
 def test_delta_e_76_is_a_metric(x, y, z):
@@ -137,6 +142,7 @@ def test_delta_e_94_is_not_symmetric_when_the_chromas_differ():
     assert d21 == pytest.approx(30.0 / (1 + 0.045 * 10.0))
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(arrays(np.float64, (4, 3), elements=st.floats(-100, 100)),
        arrays(np.float64, (4, 3), elements=st.floats(-100, 100)))
@@ -159,6 +165,7 @@ def test_delta_e_of_empty_arrays_is_empty():
         assert fn(np.zeros((2, 0, 3)), np.zeros(3)).shape == (2, 0)
 
 
+@pytest.mark.slow
 @FAST
 @given(arrays(np.float64, (2, 3, 3), elements=st.floats(-100, 100)), lab_values)
 def test_one_colour_against_an_image_equals_the_pairwise_differences(img, ref):

@@ -52,6 +52,7 @@ def test_d65_primaries_are_the_matrix_columns():
     np.testing.assert_allclose(linear_srgb_to_xyz(np.eye(3)), SRGB_TO_XYZ.T, atol=1e-7)
 
 
+@pytest.mark.slow
 def test_linear_rgb_xyz_round_trip_and_shapes():
     rgb = np.random.default_rng(6).uniform(0, 1, (4, 5, 3))
     for ill in ("D65", "A"):

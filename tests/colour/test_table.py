@@ -47,6 +47,7 @@ def _independent_linear_rgb(colour, theta, d, table):
     return np.linalg.solve(IEC_SRGB_TO_XYZ, adapted)
 
 
+@pytest.mark.slow
 def test_linear_rgb_at_grid_nodes_matches_an_independent_computation(table, colour_science):
     assert table.illuminant == "D65" and table.observer == "2"
     for i, j in ((0, 0), (3, 17), (table.theta_deg.size - 1, table.thickness_nm.size - 1)):

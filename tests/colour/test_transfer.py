@@ -53,6 +53,7 @@ def test_integer_round_trips_are_exact():
     assert np.array_equal(srgb_encode(srgb_decode(u16), dtype=np.uint16), u16)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(arrays(np.float64, (5,), elements=st.floats(0, 1)))
 def test_decode_encode_round_trip(x):

@@ -92,6 +92,7 @@ def test_D_is_the_slope_density_over_cos4(f):
     np.testing.assert_allclose(f.beckmann_alpha, math.sqrt(2) * f.slope_sd)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("f", NDFS)
 def test_tilt_pdf_is_2pi_D_cos_sin_and_the_rayleigh_slope_law(f):
     th = _theta_grid()
@@ -154,6 +155,7 @@ def test_smith_lambda_closed_form_of_one_beckmann_lobe():
     assert np.all(np.diff(lam) >= 0) and np.all(lam >= 0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("f", NDFS[1:])
 @pytest.mark.parametrize("theta_o", [0.0, 40.0, 75.0])
 def test_D_and_lambda_are_consistent(f, theta_o):

@@ -80,6 +80,7 @@ def test_importing_every_subpackage_imports_no_heavy_library():
     ("microfacet.io", "Results", "microfacet.io.results"),
     ("microfacet.core", "NDFMixture", "microfacet.core.distributions"),
 ])
+@pytest.mark.slow
 def test_package_names_load_their_module_on_first_use(package, name, module):
     r = _run(f"""
         import importlib, json, sys

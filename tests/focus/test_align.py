@@ -30,6 +30,7 @@ ALL = FocusOptions(min_reliability_db=-np.inf)
 PCB_SCALES = [0.939, 0.948, 0.965, 0.986, 1.000, 1.015, 1.035, 1.054, 1.068, 1.085]
 
 
+@pytest.mark.slow
 def test_pcb_alignment_scales_and_sharp_composite():
     """The real PCB stack (lens refocus, ~15 % zoom): the estimated magnifications against
     slice 4 match the source README's, and the aligned composite is sharp in every tile."""
@@ -252,6 +253,7 @@ def test_bad_method_and_reference_are_refused(zoom_drift):
 # ------------------------------------------------------------------ through height_from_focus
 
 
+@pytest.mark.slow
 def test_aligned_all_in_focus_is_sharper_than_without_alignment(render_stack):
     """A drifting stage: the composite of aligned slices is close to the sharp texture (in
     the reference's frame); without alignment each pixel comes from a shifted slice."""

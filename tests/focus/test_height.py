@@ -37,6 +37,7 @@ def cou_stacks():
     return {s: read_stack(COU / f"stack{s}") for s in (1, 2, 3)}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stack_no", [1, 2, 3])
 def test_default_method_accuracy_on_ground_truth(cou_stacks, stack_no):
     res = height_from_focus(cou_stacks[stack_no], ALL)
@@ -54,6 +55,7 @@ def test_default_method_accuracy_on_ground_truth(cou_stacks, stack_no):
     assert np.sqrt(np.mean(e ** 2)) <= rmse + 1e-6
 
 
+@pytest.mark.slow
 def test_naive_baseline_is_worse_and_matches_readme(cou_stacks):
     """SML 5x5 box + 3-point Gaussian reproduces the README's naive numbers (0.218 on
     stack 1), which checks the registration; the default beats it by a wide margin."""

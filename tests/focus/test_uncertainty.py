@@ -126,6 +126,7 @@ def terraces():
     return 10.0 + seq[np.minimum((xx // 20).astype(int), 4)] + 0.01 * yy
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("contrast", [0.025, 0.1])
 def test_sigma_is_calibrated_on_known_relief(render_contrast, terraces, contrast):
     """|error| ≤ 2σ for about 95 % of the reliable pixels (90-99.5 %), and σ tracks the

@@ -91,6 +91,7 @@ def test_simulate_map_argument_errors():
         simulate_map(model="half-vector", thickness=100.0, theta_view_deg=[0, 90])
 
 
+@pytest.mark.slow
 def test_a_90x90_map_evaluates_the_film_once_per_distinct_angle(monkeypatch):
     """What keeps a full 90×90 in-plane map fast (its speed is measured by pipelines/, not
     asserted here): the thin-film reflectance, the expensive part, is evaluated on one table

@@ -45,6 +45,7 @@ def _albedo(view, ndf, *, thickness=None, wl=WL5, n_theta=900, n_phi=720):
 
 
 # ---------------------------------------------------------------- energy conservation
+@pytest.mark.slow
 @pytest.mark.parametrize("theta_v", [0.0, 45.0, 75.0])
 @pytest.mark.parametrize("ndf", [F2, NDFMixture([(1.0, 25.0)])], ids=["3+9deg", "25deg"])
 def test_directional_albedo_is_at_most_one(theta_v, ndf):
@@ -58,6 +59,7 @@ def test_directional_albedo_is_at_most_one(theta_v, ndf):
     assert np.all(spectral <= geom_albedo + 1e-9) and np.all(spectral > 0)
 
 
+@pytest.mark.slow
 def test_geometric_albedo_matches_an_integral_over_half_vectors():
     """The same albedo in half-vector coordinates (dω_l = 4 (v·h) dω_h) — independent check
     of the numerical hemisphere integral and of the Jacobian-free BRDF form."""

@@ -57,6 +57,7 @@ def test_delta_e_map_differs_between_models_and_needs_the_same_grid():
         delta_e_map(a, c)
 
 
+@pytest.mark.slow
 def test_fit_recovers_lobe_exponent_and_exposure():
     grid = np.arange(0.0, 86.0, 3.0)
     meas = simulate_map(model="eq6", thickness=G3, ndf=F2, n=37.0, exposure=2.2,

@@ -51,6 +51,7 @@ def _eq6_slow(t_in, t_out, d_grid, g, comps, n, step, wl):
     return total
 
 
+@pytest.mark.slow
 def test_eq6_equals_a_direct_slow_summation():
     comps = [(0.6, 3.0), (0.4, 9.0)]
     d_grid = np.linspace(120.0, 140.0, 11)

@@ -18,6 +18,7 @@ from microfacet.optics.thinfilm import reflectance
 angle = st.floats(-89.0, 89.0)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(tl=angle, tv=angle)
 def test_in_plane_half_angle_equals_half_the_angle_between_the_vectors(tl, tv):
@@ -35,6 +36,7 @@ def test_eq5_specular_and_retro():
     assert half_angle_deg(10.0, 45.0) == 27.5
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(st.lists(st.floats(-1, 1), min_size=6, max_size=6))
 def test_3d_half_angle_is_symmetric_and_matches_the_dot_product(v):

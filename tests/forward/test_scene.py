@@ -13,6 +13,7 @@ from microfacet.forward.scene import render_scene
 from microfacet.forward.synth import preset
 
 
+@pytest.mark.slow
 def test_thickness_regions_follow_the_mixture_and_tilts_the_lobes():
     p = preset("nd", seed=2, height_px=512, width_px=512)
     s = render_scene(p)
@@ -64,6 +65,7 @@ def base_scene():
     return render_scene(preset("nd", seed=3, height_px=128, width_px=128))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_a_variation_changes_what_it_should_and_nothing_else(base_scene, name):
     value, must, may = CASES[name]
@@ -78,6 +80,7 @@ def _pair(**kw):
     return render_scene(base), render_scene(dataclasses.replace(base, **kw)), base
 
 
+@pytest.mark.slow
 def test_vignetting_darkens_the_corners_by_the_given_factor():
     a, b, _ = _pair(vignetting_corner_loss=0.35)
     ratio = b.linear_rgb / a.linear_rgb
@@ -88,12 +91,14 @@ def test_vignetting_darkens_the_corners_by_the_given_factor():
     assert np.all(np.diff(diag) > 0)
 
 
+@pytest.mark.slow
 def test_white_balance_scales_each_channel():
     a, b, _ = _pair(white_balance_gains=(1.2, 1.0, 0.8))
     np.testing.assert_allclose(b.linear_rgb / a.linear_rgb,
                                np.broadcast_to([1.2, 1.0, 0.8], a.linear_rgb.shape), rtol=1e-5)
 
 
+@pytest.mark.slow
 def test_tilt_dependent_brightness_scales_the_film_colour_by_the_pupil_fraction():
     a, b, p = _pair(illumination_fill=1.0)
     f = pupil_fraction(a.tilt_deg, numerical_aperture=p.numerical_aperture, fill=1.0)
@@ -107,6 +112,7 @@ def test_tilt_dependent_brightness_scales_the_film_colour_by_the_pupil_fraction(
     assert np.corrcoef(a.tilt_deg[ok][order], g[order])[0, 1] < -0.9
 
 
+@pytest.mark.slow
 def test_pits_are_in_the_height_truth_with_dark_walls_and_a_visible_floor():
     a, b, p = _pair(pit_density_per_mm2=5000.0, pit_radius_um=2.5)
     pit = b.feature == FEATURE_CODES["pit"]
@@ -127,6 +133,7 @@ def test_pits_are_in_the_height_truth_with_dark_walls_and_a_visible_floor():
     assert 0.5 < depth < 6.0
 
 
+@pytest.mark.slow
 def test_scratches_follow_the_rolling_direction_and_have_dark_walls():
     a, b, p = _pair(scratch_density_per_mm2=4000.0, scratch_spread_deg=0.0,
                     rolling_direction_deg=30.0, scratch_length_um=60.0)
@@ -144,6 +151,7 @@ def test_scratches_follow_the_rolling_direction_and_have_dark_walls():
     assert across == pytest.approx(90 - 30, abs=8)
 
 
+@pytest.mark.slow
 def test_dust_is_grey_on_top_and_not_in_the_height():
     a, b, p = _pair(dust_density_per_mm2=8000.0, dust_radius_um=1.5)
     d = b.dust == 1.0
@@ -171,6 +179,7 @@ def _cell_moments(labels):
     return n, cyy, cxx, cxy
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("angle", [0.0, 60.0])
 def test_elongated_facets_are_longer_along_the_rolling_direction(angle):
     _, b, _ = _pair(facet_aspect=3.0, rolling_direction_deg=angle)
@@ -188,6 +197,7 @@ def test_elongated_facets_are_longer_along_the_rolling_direction(angle):
     assert np.sqrt(w0[1] / w0[0]) < 1.3
 
 
+@pytest.mark.slow
 def test_size_spread_widens_the_facet_size_distribution():
     a, b, _ = _pair(facet_size_spread=0.7)
     na, nb = np.bincount(a.facet_id.ravel()), np.bincount(b.facet_id.ravel())
@@ -195,6 +205,7 @@ def test_size_spread_widens_the_facet_size_distribution():
     assert cv_b > 1.5 * cv_a
 
 
+@pytest.mark.slow
 def test_rounded_facets_vary_in_tilt_inside_a_facet():
     a, b, _ = _pair(facet_dome_deg=6.0)
     n = np.bincount(a.facet_id.ravel())
@@ -210,6 +221,7 @@ def test_rounded_facets_vary_in_tilt_inside_a_facet():
     np.testing.assert_array_equal(a.facet_id, b.facet_id)
 
 
+@pytest.mark.slow
 def test_terraces_raise_whole_facets_by_whole_steps():
     a, b, _ = _pair(terrace_step_um=0.8, terrace_size_um=12.0)
     steps = (b.height_um - a.height_um) / 0.8

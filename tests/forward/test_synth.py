@@ -34,6 +34,7 @@ def _digest(folder):
     return h.hexdigest()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(PRESETS))
 def test_every_preset_generates_a_readable_stack_with_truth(tmp_path, name):
     p = preset(name, seed=5, height_px=64, width_px=80, n_slices=6)
@@ -52,6 +53,7 @@ def test_every_preset_generates_a_readable_stack_with_truth(tmp_path, name):
     assert img.dtype == (np.uint16 if p.bit_depth == 16 else np.uint8)
 
 
+@pytest.mark.slow
 def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path):
     p = preset("nd", seed=11, height_px=48, width_px=48, n_slices=4)
     generate_stack(tmp_path / "a", p)
@@ -61,6 +63,7 @@ def test_same_seed_same_bytes_other_seed_other_bytes(tmp_path):
     assert _digest(tmp_path / "a") != _digest(tmp_path / "c")
 
 
+@pytest.mark.slow
 def test_rendered_colour_is_the_thin_film_colour_of_the_truth(tmp_path):
     p = preset("nd", seed=3, height_px=96, width_px=96, n_slices=3, full_well_e=None,
                read_noise=0.0)
@@ -87,6 +90,7 @@ def test_rendered_colour_is_the_thin_film_colour_of_the_truth(tmp_path):
         assert sharp[dark].max() <= color.srgb_encode(np.float32(p.dark_level * p.exposure)) + 1
 
 
+@pytest.mark.slow
 def test_sharpest_slice_is_at_the_true_height(tmp_path):
     p = preset("nd", seed=4, height_px=160, width_px=160, n_slices=24, full_well_e=None,
                read_noise=0.0)
@@ -156,6 +160,7 @@ def _layout(folder):
     return out
 
 
+@pytest.mark.slow
 def test_bundled_fixture_is_what_its_recorded_parameters_generate(tmp_path):
     """truth/params.json records a preset, a seed and a size; those alone give back every
     recorded parameter, and generating from them writes the same files, shapes and dtypes
@@ -182,6 +187,7 @@ def test_bundled_fixture_is_what_its_recorded_parameters_generate(tmp_path):
         assert json.loads((folder / "truth" / "params.json").read_text())["z_um"] == z
 
 
+@pytest.mark.slow
 def test_bundled_fixture_truth_agrees_with_its_images():
     """The fixture's truth describes its pixels: the sharp image is the thin-film colour of
     the true tilt and thickness (1 nm spectral integration, within one code value), dark
@@ -219,6 +225,7 @@ def test_bundled_fixture_truth_agrees_with_its_images():
         assert abs(np.median(d[region == r]) - regions[r]) < 1.0, r
 
 
+@pytest.mark.slow
 def test_default_variations_regenerate_the_bundled_fixture_truth(tmp_path):
     """With every variation off, the generator reproduces the fixture's truth (arrays to
     float rounding, regions and components exactly, the sharp image within one code)."""
@@ -237,6 +244,7 @@ def test_default_variations_regenerate_the_bundled_fixture_truth(tmp_path):
     assert np.abs(a - b).max() <= 1
 
 
+@pytest.mark.slow
 def test_variations_at_their_off_values_give_the_same_bytes(tmp_path):
     """Every variation set explicitly to its default (off) value: the same stack, byte for
     byte; and a zero-strength variation is the same as off."""
@@ -255,6 +263,7 @@ def test_variations_at_their_off_values_give_the_same_bytes(tmp_path):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "c" / name).read_bytes()
 
 
+@pytest.mark.slow
 def test_truth_records_populations_regions_lobes_and_limit(tmp_path):
     p = preset("nd", seed=5, height_px=128, width_px=128, n_slices=3)
     generate_stack(tmp_path / "s", p)
@@ -282,6 +291,7 @@ def test_truth_records_populations_regions_lobes_and_limit(tmp_path):
     assert meta["variations"] == {}
 
 
+@pytest.mark.slow
 def test_truth_image_has_no_noise(tmp_path):
     kw = dict(seed=2, height_px=64, width_px=64, n_slices=3, vignetting_corner_loss=0.3,
               white_balance_gains=(1.1, 1.0, 0.9), dust_density_per_mm2=3000.0)
@@ -293,6 +303,7 @@ def test_truth_image_has_no_noise(tmp_path):
     assert (a / "slices/001.png").read_bytes() != (b / "slices/001.png").read_bytes()
 
 
+@pytest.mark.slow
 def test_jpeg_slices_decode_close_to_the_png_ones(tmp_path):
     kw = dict(seed=3, height_px=96, width_px=96, n_slices=3, full_well_e=None, read_noise=0.0)
     generate_stack(tmp_path / "png", preset("nd", **kw))
@@ -312,6 +323,7 @@ def test_jpeg_slices_decode_close_to_the_png_ones(tmp_path):
         preset("nd", jpeg_quality=90, bit_depth=16)
 
 
+@pytest.mark.slow
 def test_drift_shifts_each_slice_by_the_recorded_offset(tmp_path):
     """Registration (OpenCV's ECC, independent of the bicubic shift used) of slice k with
     drift onto slice k without finds the offset recorded in truth/params.json."""
@@ -333,6 +345,7 @@ def test_drift_shifts_each_slice_by_the_recorded_offset(tmp_path):
     np.testing.assert_array_equal(still, np.load(tmp_path / "drift/truth/height_um.npy"))
 
 
+@pytest.mark.slow
 def test_other_optical_constants_are_named_in_stack_json(tmp_path):
     kw = dict(seed=1, height_px=48, width_px=48, n_slices=2)
     generate_stack(tmp_path / "a", preset("sd", **kw))

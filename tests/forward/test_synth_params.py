@@ -57,6 +57,7 @@ def test_parse_variation():
             parse_variation(bad)
 
 
+@pytest.mark.slow
 def test_cli_synth_takes_variations(tmp_path, capsys):
     out = tmp_path / "s"
     assert main(["synth", str(out), "--preset", "sd", "--size", "40x48", "--slices", "3",

@@ -137,6 +137,7 @@ def _tell(p, delay_s):
     return timer
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("old_content", ["", '{"pid": 1', "dead"])
 def test_a_lock_read_before_its_holder_wrote_it_names_the_holder(tmp_path, slow_holder,
                                                                  old_content):
@@ -189,6 +190,7 @@ _RACER = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_racing_runs_always_name_the_holder(tmp_path):
     """Processes taking and releasing one lock as fast as they can for half a second (the old
     code printed ``pid None`` for most refusals): every refusal names a pid."""

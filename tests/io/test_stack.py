@@ -152,6 +152,7 @@ def test_write_stack_json_format(good_stack):
     assert meta["slices"] == ["slices/000.png", "slices/001.png", "slices/002.png"]
 
 
+@pytest.mark.slow
 def test_lazy_reading_memory_does_not_grow(tmp_path):
     """Iterating a 40-slice stack holds about one slice, like a 10-slice stack."""
     big = (256, 256)

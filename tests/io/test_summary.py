@@ -204,6 +204,7 @@ def test_not_an_object_is_refused():
             Summary.from_json(data, where="s.json")
 
 
+@pytest.mark.slow
 def test_a_results_folder_with_a_hostile_summary_names_the_file(tmp_path):
     """Through the file: NaN written by a non-strict writer, 10**5 components."""
     d = tmp_path / "res"

@@ -33,6 +33,7 @@ def _random_cases(seed, count):
     return cases
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("pol", ["s", "p"])
 def test_matches_tmm_randomised(pol):
     cases = _random_cases(1 if pol == "s" else 2, 600)
@@ -140,6 +141,7 @@ index_real = st.floats(1.0, 4.0)
 index_imag = st.floats(0.0, 5.0)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(
     wl=st.floats(300, 1000), th=st.floats(0, 89.99), d=st.floats(0, 5000),
@@ -163,6 +165,7 @@ def _textbook_fresnel(theta_deg, n, pol):
     return abs(r) ** 2
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(th=st.floats(0, 89.99), n1r=index_real, n1i=st.floats(0, 1), n2r=st.floats(0.1, 5),
        n2i=index_imag, pol=st.sampled_from(["s", "p"]))
@@ -173,6 +176,7 @@ def test_zero_thickness_is_the_bare_substrate(th, n1r, n1i, n2r, n2i, pol):
     assert R0 == pytest.approx(fresnel_reflectance(th, 1.0, n2, polarization=pol), abs=1e-12)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(wl=st.floats(350, 900), th=st.floats(0, 89), d=st.floats(0, 1000),
        n1=st.floats(1.2, 3.0), n2r=st.floats(0.2, 4), n2i=index_imag,

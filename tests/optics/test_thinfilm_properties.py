@@ -27,6 +27,7 @@ k_metal = st.floats(0.0, 10.0)
 polarization = st.sampled_from(["s", "p", "unpolarized"])
 
 
+@pytest.mark.slow
 @FAST
 @given(wl=wavelength, th=theta, d=thickness, n1r=n_real, n1i=k_film, n2r=n_real, n2i=k_metal,
        n0=st.floats(1.0, 1.6), c=st.floats(0.25, 4.0), pol=polarization)
@@ -39,6 +40,7 @@ def test_scaling_every_index_and_the_wavelength_together_changes_nothing(
     assert b == pytest.approx(a, abs=1e-9)
 
 
+@pytest.mark.slow
 @FAST
 @given(wl=wavelength, th=theta, d=thickness, n1r=n_real, n1i=k_film, n2r=n_real, n2i=k_metal,
        c=st.floats(0.25, 4.0), pol=polarization)
@@ -51,6 +53,7 @@ def test_scaling_thickness_and_wavelength_together_changes_nothing(
     assert b == pytest.approx(a, abs=1e-9)
 
 
+@pytest.mark.slow
 @FAST
 @given(wl=wavelength, d=thickness, n1r=n_real, n1i=k_film, n2r=n_real, n2i=k_metal)
 def test_s_and_p_agree_at_normal_incidence(wl, d, n1r, n1i, n2r, n2i):
@@ -60,6 +63,7 @@ def test_s_and_p_agree_at_normal_incidence(wl, d, n1r, n1i, n2r, n2i):
     assert rs == pytest.approx(rp, abs=1e-12)
 
 
+@pytest.mark.slow
 @FAST
 @given(wl=wavelength, th=theta, d=thickness, n1r=n_real, n1i=k_film, n2r=n_real, n2i=k_metal)
 def test_unpolarized_lies_between_s_and_p(wl, th, d, n1r, n1i, n2r, n2i):
@@ -70,6 +74,7 @@ def test_unpolarized_lies_between_s_and_p(wl, th, d, n1r, n1i, n2r, n2i):
     assert min(rs, rp) - 1e-12 <= ru <= max(rs, rp) + 1e-12
 
 
+@pytest.mark.slow
 @FAST
 @given(n1=st.floats(1.0, 2.0), n2=st.floats(1.05, 4.0))
 def test_p_reflectance_vanishes_at_brewsters_angle(n1, n2):

@@ -88,6 +88,7 @@ def _page():
     return Page(figure.Figure(figsize=PAGE_IN))
 
 
+@pytest.mark.slow
 def test_a_huge_map_is_drawn_at_the_pixels_its_panel_shows():
     """A 3000 × 2250 map on a maps-page panel: at most MAX_MAP_PX a side and at least
     PDF_DPI pixels per inch of the image box; the axes span the full map."""

@@ -15,6 +15,7 @@ PACKAGE = Path(report.__file__).parent
 MODULES = sorted(PACKAGE.glob("*.py"))
 
 
+@pytest.mark.slow
 def test_import_does_not_import_matplotlib_nor_the_modules():
     code = ("import sys, microfacet.report as r; a = 'matplotlib' in sys.modules; "
             "b = 'microfacet.report.writer' in sys.modules; import microfacet.report.writer; "

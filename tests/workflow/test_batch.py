@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from microfacet.workflow.batch import run_batch
 from microfacet.cli import main
 from microfacet.io.results import Results
+from microfacet.workflow.batch import run_batch
 
 FAST = ["--roi-size-px", "48", "--no-report", "-q"]
 
@@ -27,6 +27,7 @@ def _no_partial_folders(folder):
     return not [p for p in Path(folder).iterdir() if p.name.startswith(".")]
 
 
+@pytest.mark.slow
 def test_local_batch_records_failure_finishes_the_rest_and_resumes(batch_drawer, tmp_path,
                                                                    capsys):
     out = tmp_path / "res"
@@ -71,6 +72,7 @@ def test_local_batch_records_failure_finishes_the_rest_and_resumes(batch_drawer,
         (batch_drawer / "broken" / "stack.json").write_text("{}")
 
 
+@pytest.mark.slow
 def test_results_made_with_other_parameters_are_not_mixed_in(batch_drawer, tmp_path):
     out = tmp_path / "res"
     a = str(batch_drawer / "a")
@@ -91,6 +93,7 @@ def test_results_made_with_other_parameters_are_not_mixed_in(batch_drawer, tmp_p
     assert not ok and "summary.json" in why
 
 
+@pytest.mark.slow
 def test_batch_through_a_dask_local_cluster(batch_drawer, tmp_path):
     distributed = pytest.importorskip("distributed")
     out = tmp_path / "res"
@@ -110,6 +113,7 @@ def test_batch_through_a_dask_local_cluster(batch_drawer, tmp_path):
         assert [r["status"] for r in _rows(out)] == ["skipped", "skipped"]
 
 
+@pytest.mark.slow
 def test_batch_api_and_local_results_match_the_single_stack_command(batch_drawer, tmp_path):
     """The batch row and results folder are those of `microfacet analyze` on the stack."""
     from microfacet.analysis.options import AnalysisOptions, RoiOptions
@@ -128,6 +132,7 @@ def test_batch_api_and_local_results_match_the_single_stack_command(batch_drawer
             assert a == pytest.approx(b, rel=1e-4)  # threaded float32 sums differ in order
 
 
+@pytest.mark.slow
 def test_unreachable_scheduler_is_an_argument_error(batch_drawer, tmp_path):
     pytest.importorskip("distributed")   # without it the error is "needs dask.distributed"
     with pytest.raises(ValueError, match="scheduler: cannot connect"):
@@ -136,6 +141,7 @@ def test_unreachable_scheduler_is_an_argument_error(batch_drawer, tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_scheduler_local_starts_and_closes_a_local_cluster(batch_drawer, tmp_path):
     pytest.importorskip("distributed")
     out = tmp_path / "res"
@@ -198,6 +204,7 @@ def test_mistyped_scheduler_fails_fast_without_a_client(batch_drawer, tmp_path, 
             executors.check_scheduler(bad)
 
 
+@pytest.mark.slow
 def test_ctrl_c_during_a_dask_run_says_how_far_it_got_and_exits_130(batch_drawer, tmp_path,
                                                                     capfd, monkeypatch):
     from microfacet.workflow import batch as runner

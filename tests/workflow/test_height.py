@@ -67,6 +67,7 @@ def test_writes_the_height_folder(stack, tmp_path):
     assert meta["timings_s"] == res.timings_s and res.timings_s["total"] > 0
 
 
+@pytest.mark.slow
 def test_plain_folder_as_a_stack_source(tmp_path):
     d = tmp_path / "plain"
     d.mkdir()

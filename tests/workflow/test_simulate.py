@@ -43,6 +43,7 @@ def test_exported_from_the_package_and_the_workflow():
     assert workflow.SimulateOptions is SimulateOptions
 
 
+@pytest.mark.slow
 def test_one_thickness_is_the_half_vector_map_at_exposure_1(tmp_path):
     done = simulate_to_folder(tmp_path / "o", thickness_nm=51.0, options=SMALL)
     assert (done.model, done.exposure, done.shape, done.compare) == ("half-vector", 1.0,
@@ -56,6 +57,7 @@ def test_one_thickness_is_the_half_vector_map_at_exposure_1(tmp_path):
     assert (done.out / "figure.pdf").is_file()
 
 
+@pytest.mark.slow
 def test_a_mixture_given_as_components_or_as_a_mixture_is_the_same_map(tmp_path):
     a = simulate_to_folder(tmp_path / "a", thickness_mixture=G3, ndf_lobes=F2, options=SMALL)
     b = simulate_to_folder(tmp_path / "b", thickness_mixture=[(0.3, 112, 3), (0.45, 130, 3),
@@ -71,6 +73,7 @@ def test_a_mixture_given_as_components_or_as_a_mixture_is_the_same_map(tmp_path)
     (FilmOptics(illuminant=DEFAULT_ILLUMINANT), "D65"),  # the default, given: it wins
     (FilmOptics(illuminant="A"), "A"),
 ])
+@pytest.mark.slow
 def test_explicit_optics_win_over_the_results_folders(tmp_path, given, expected):
     res = _results(tmp_path, illuminant="D50")
     done = simulate_to_folder(tmp_path / "o", results=res, options=SMALL.replace(
@@ -80,6 +83,7 @@ def test_explicit_optics_win_over_the_results_folders(tmp_path, given, expected)
     assert done.meta["results"] == str(res)
 
 
+@pytest.mark.slow
 def test_explicit_distributions_win_over_the_results_folders(tmp_path):
     res = _results(tmp_path)
     one = ThicknessMixture([(1.0, 51.0, 2.0)])
@@ -89,12 +93,14 @@ def test_explicit_distributions_win_over_the_results_folders(tmp_path):
     assert done.meta["ndf"]["components"][0]["sd_deg"] == 7.0
 
 
+@pytest.mark.slow
 def test_a_results_folder_without_ndf_gives_the_half_vector_map(tmp_path):
     done = simulate_to_folder(tmp_path / "o", results=_results(tmp_path, ndf=False),
                               options=SMALL)
     assert done.model == "half-vector" and done.meta["ndf"] is None
 
 
+@pytest.mark.slow
 def test_compare_and_fit_on_the_measured_grid(tmp_path):
     meas = simulate_map(model="eq6", thickness=G3, ndf=F2, n=25.0, exposure=1.7,
                         theta_light_deg=GRID, theta_view_deg=GRID[:5])
@@ -150,6 +156,7 @@ def test_inputs_are_checked_before_any_work(tmp_path, kwargs, param, pattern):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_a_second_writer_on_the_same_out_is_refused_and_overwrite_replaces(tmp_path):
     out = tmp_path / "o"
     simulate_to_folder(out, thickness_nm=51.0, options=SMALL)
