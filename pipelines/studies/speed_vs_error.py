@@ -43,7 +43,7 @@ STUDY = Study(
     question="Where does each default that trades time for accuracy sit between its time and "
              "its error (spectral step, colour table, ΔE and searches, focus, eq. 6)?",
     doc=("docs/speed-vs-error.md", "speed-vs-error"),
-    run_time="8 min",
+    run_time="9 min",
     quick_time="20-30 s",
     options={"sections": (",".join(SECTIONS), "sections to run, comma-separated"),
              "repeat": (0, "timing repeats, best kept (0: 3, or 1 with --quick)")},
