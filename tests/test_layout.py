@@ -2,7 +2,7 @@
 functions short enough to read at once, few parameters in the analysis, and every default of
 an option declared once (docs/architecture.md, "Rules a module follows").
 
-The import graph comes from the module-map study (``python -m pipelines run module_map``),
+The import graph comes from the module-map study (``python -m pipelines.module_map``),
 loaded here from its file so that both read the package the same way.
 """
 

@@ -182,8 +182,8 @@ def _precise_slopes(height_um, height_sigma_um, pixel_size_um):
 #: Side of the tiles Felzenszwalb runs on (pixels): its graph costs a few hundred bytes per
 #: pixel, so a tile bounds that memory whatever the image size. The tile edges are blob edges
 #: too; the statistical merging that follows joins blobs across them like any other pair.
-#: On the 1-megapixel nd stack of pipelines/bench_analyze.py, 512-px tiles against one
-#: whole-image tile (``python pipelines/analysis_memory.py STACK --tiles 1024,512``): peak
+#: On the 1-megapixel nd stack of the speed-analyze study, 512-px tiles against one
+#: whole-image tile (``python -m pipelines run speed-memory``): peak
 #: memory of the analysis 518 vs 739 MB, 0.2 % more facets, thickness MAE 0.652 vs 0.661 nm,
 #: tilt W1 1.637° vs 1.639° against the truth.
 FELZENSZWALB_TILE_PX = 512

@@ -10,7 +10,7 @@ interpolation, no grid) at the final θ.
 Uncertainty
 -----------
 For which films and tilts colour carries tilt information at all, per thickness:
-docs/conditioning.md (``python pipelines/conditioning.py``).
+docs/conditioning.md (``python -m pipelines run accuracy-conditioning``).
 Colour is a weak function of tilt (0.03-0.3 ΔE00 per degree), so the 1-σ uncertainty is
 reported per pixel: with image colour noise σ_n (ΔE00 per Lab component) and the local
 sensitivity J = |dLab/dθ| (ΔE00 per degree, from the model at the solution),

@@ -16,7 +16,7 @@ The spectral integration is colour-science's (``colour.msds_to_XYZ``, method
 "Integration", CIE 15 summation): :func:`spectral_weights` are the tristimulus values it
 gives unit-impulse spectra, and :func:`white_xyz` is its ``sd_to_XYZ`` of the perfect
 reflector; the datasets are its too (:mod:`microfacet.colour.datasets`). Kept, with the
-measurements in ``docs/colour-benchmarks.md`` (``python pipelines/bench_colour_science.py``):
+measurements in ``docs/colour-benchmarks.md`` (``python -m pipelines run speed-colour``):
 applying the weights (:func:`spectrum_to_xyz`, one matrix product) and XYZ ↔ Lab
 (:func:`xyz_to_lab`, :func:`lab_to_xyz`), which colour-science computes in float64 only.
 

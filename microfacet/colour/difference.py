@@ -2,7 +2,7 @@
 
 :func:`delta_e_2000` is the project's own implementation (Sharma et al. 2005 conventions):
 it is 4.5× faster than scikit-image's and 6× faster than colour-science's and computes in
-float32 when given float32 (``python pipelines/bench_color.py``, docs/benchmarks.md), and
+float32 when given float32 (``python -m pipelines run speed-colour``, docs/benchmarks.md), and
 the analysis evaluates it billions of times. :func:`delta_e` selects a formula by name, for
 experiments that compare formulas (docs/speed-vs-error.md).
 

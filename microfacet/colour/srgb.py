@@ -17,7 +17,7 @@ The transfer functions (:func:`srgb_decode`, :func:`srgb_encode`) are in
 :mod:`microfacet.colour.transfer` and the Bradford adaptation (:func:`bradford_matrix`,
 colour-science's) in :mod:`microfacet.colour.adaptation`; both are re-exported here. The
 per-pixel passes are kept ours, each measured against colour-science on a 12 MP image
-(``python pipelines/bench_colour_science.py``, docs/colour-benchmarks.md): colour-science
+(``python -m pipelines run speed-colour``, docs/colour-benchmarks.md): colour-science
 computes in float64 only and forms several full-size temporaries, so its uint8 image -> Lab
 chain peaks at 1957 MB against 675 MB here (the analysis must fit a 12 MP image in 3 GB)
 and takes 6.4× longer.

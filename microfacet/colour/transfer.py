@@ -3,7 +3,7 @@
 Kept ours rather than colour-science's ``colour.cctf_decoding`` / ``cctf_encoding(...,
 "sRGB")``, which compute in float64 only: integer images decode through a float32 look-up
 table and float32 stays float32, which on a 12 MP image is 2.6-7× faster with 2.6-14× less
-memory (docs/colour-benchmarks.md, ``python pipelines/bench_colour_science.py``); the
+memory (docs/colour-benchmarks.md, ``python -m pipelines run speed-colour``); the
 integer output of :func:`srgb_encode` (rounded, NaN -> 0) has no colour-science equivalent.
 
 References

@@ -9,7 +9,7 @@ The options are one :class:`~microfacet.focus.options.FocusOptions` (their defau
 values and the measurements behind them are declared there). Method (defaults chosen from the
 measurements of ``docs/height-from-focus.md``: the RMSE on the Cou & Guennebaud (2023)
 ground-truth stacks and the coverage on rendered stacks of known relief and texture contrast,
-``pipelines/focus_coverage.py``):
+``python -m pipelines run accuracy-focus-coverage``):
 
 1. Focus measure per slice (:mod:`microfacet.focus.measures`) in the main window
    (``window_px``, default 7) and a coarse one (``coarse_window_px``, default 15, on a grid

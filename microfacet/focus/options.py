@@ -8,9 +8,9 @@ carries its default, valid values and help (:mod:`microfacet.core.options`); con
 section validates it and an :class:`~microfacet.core.errors.InputError` names the field.
 
 The defaults were chosen from the accuracy table and the coverage measurements in
-docs/height-from-focus.md (``python pipelines/focus_accuracy.py``,
-``python pipelines/focus_coverage.py``); their cost against the alternatives:
-docs/speed-vs-error.md and ``python pipelines/bench_focus.py``.
+docs/height-from-focus.md (``python -m pipelines run accuracy-focus``,
+``python -m pipelines run accuracy-focus-coverage``); their cost against the alternatives:
+docs/speed-vs-error.md and ``python -m pipelines run speed-focus``.
 
 What stays a module constant, and why: the valid values (``OPERATORS``, ``WINDOWS``, ...:
 what the code implements, not a setting) and :data:`RELIABILITY_CUTS_DB`, the measured cut of
@@ -64,8 +64,8 @@ ALIGN_METHODS = ("ecc", "phase")
 #:
 #: * ``"sigma"``: 4 dB ⇔ σ ≤ 0.63 z step, the same for every operator: the lowest cut whose
 #:   RMSE and share of heights off by more than one step, on all pixels and at sharp relief,
-#:   are at most those of the earlier default (``pipelines/focus_coverage.py``, table "Choice
-#:   of the cut"; docs/height-from-focus.md).
+#:   are at most those of the earlier default (``python -m pipelines run
+#:   accuracy-focus-coverage``, table "Choice of the cut"; docs/height-from-focus.md).
 #: * ``"pertuz"``: above the 99.9th percentile of pure-noise (textureless) pixels and below
 #:   the 1st percentile of textured ones in the synthetic check of tests/focus.
 RELIABILITY_CUTS_DB = {

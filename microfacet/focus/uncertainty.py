@@ -52,7 +52,7 @@ __all__ = ["WindowFit", "combine", "fit_window"]
 #: (:class:`~microfacet.focus.options.FocusOptions` ``min_reliability_db``) is the knob.
 DETECTION_ALPHA = 1e-5
 #: Terms of the height uncertainty, in z steps (module notes; docs/height-from-focus.md,
-#: calibrated with pipelines/focus_coverage.py so that |error| <= 2σ for 96-99 % of the
+#: calibrated with the accuracy-focus-coverage study so that |error| <= 2σ for 96-99 % of the
 #: reliable pixels): σ² = σ_fit² + (slope·s·σ_w)² + (curv·c·σ_w²)²
 #: + (broad·√(w² − (broad_ratio·w_med)²))² + floor², σ_w the window's spread; ``prior_dof``
 #: weighs the image-wide residual variance in σ_fit; ``prefer`` < 1 would favour the main

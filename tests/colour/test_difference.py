@@ -1,4 +1,4 @@
-"""microfacet.colour.difference (kept ours: docs/benchmarks.md, pipelines/bench_color.py).
+"""microfacet.colour.difference (kept ours: docs/benchmarks.md, the speed-colour study).
 
 References: Sharma, Wu & Dalal (2005) Table 1 (fixtures/ciede2000_sharma2005.csv), and
 colour-science and scikit-image as independent implementations of the same formulas.

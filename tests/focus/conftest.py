@@ -1,5 +1,5 @@
 """Fixtures of the focus tests: focus stacks of analytic surfaces with a controlled texture
-contrast (the renderer of pipelines/focus_coverage.py, independent of microfacet)."""
+contrast (the renderer of the accuracy-focus-coverage study, independent of microfacet)."""
 
 from __future__ import annotations
 
