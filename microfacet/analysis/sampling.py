@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.lazy import load
+from .segmentation import merge_adjacent, neighbour_pairs
 
 stats = load("scipy.stats")
 
@@ -103,7 +104,6 @@ def thickness_regions(labels, value, sigma, *, alpha=0.01) -> Regions:
     >>> r.count, r.patch_region.tolist(), [round(float(v), 2) for v in r.value]
     (2, [0, 0, 0, 1, 1, 1], [1.0, 5.0])
     """
-    from .segmentation import merge_adjacent, neighbour_pairs
 
     threshold = float(stats.chi2.isf(alpha, 1))
     labels = np.asarray(labels)

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 from ..core.distributions import MAX_COMPONENTS
 from ..core.errors import InputError
+from .jsonfile import json_safe
 
 __all__ = ["DeltaE", "FacetCounts", "Inputs", "NdfSection", "RoiCounts", "Summary",
            "ThicknessSection"]
@@ -152,7 +153,6 @@ class Summary:
     def to_json(self) -> dict:
         """The JSON object (NaN and ±inf as None; keys not known to this version, read from
         a newer writer's file, kept as they were)."""
-        from .jsonfile import json_safe
 
         out = {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self)
                if f.name != "extra"}
