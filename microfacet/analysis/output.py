@@ -17,6 +17,7 @@ import numpy as np
 
 from .. import __version__
 from ..core.densities import cell_edges, pdf_table
+from ..core.pixels import pixel_size_yx
 from ..io.outdir import atomic_output_dir
 from ..io.results import write_results_files
 from ..io.summary import (
@@ -233,13 +234,22 @@ def build_summary(r) -> Summary:
                        noise_floor_median=MEDIAN_NOISE_FLOOR_FACTOR * noise),
         masked_fraction=r.colour.mask.fraction, mask=r.colour.mask.fractions(),
         colour_noise_de=noise, tilt_information=_tilt_information(r.pixels),
-        height={"unreliable_fraction": float(np.mean(~np.isfinite(r.focus.height_um)))},
+        height=_height_section(r),
         colour_table={"spectral_step_nm": table.spectral_step_nm,
                       "spectral_error_de00": table.spectral_error_de00,
                       "interp_error_de00": table.interp_error_de00,
                       "theta_step_deg": table.theta_step_deg,
                       "thickness_step_nm": table.thickness_step_nm},
         warnings=[w.plain() for w in r.warnings], timings_s=dict(r.timings_s))
+
+
+def _height_section(r) -> dict:
+    """Unreliable fraction; the σ (µm, ``[y, x]``) by which the slopes were smoothed before
+    the normals (0 for an instrument's height map)."""
+    sigma_px = r.options.focus.slope_sigma_px if r.scene.from_focus else 0.0
+    return {"unreliable_fraction": float(np.mean(~np.isfinite(r.focus.height_um))),
+            "normals_slope_sigma_um": [sigma_px * p for p in pixel_size_yx(
+                r.scene.pixel_size_um)]}
 
 
 def _facet_summary(joint) -> FacetCounts | None:

@@ -175,7 +175,9 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
     with timer.stage(Stage.HEIGHT):
         focus = measure_height(st, options.focus)
     with timer.stage(Stage.NORMALS):
-        surface = surface_normals(focus, pixel_size_um=scene.pixel_size_um, where=str(st.path))
+        surface = surface_normals(
+            focus, pixel_size_um=scene.pixel_size_um, where=str(st.path),
+            smooth_sigma_px=options.focus.slope_sigma_px if scene.from_focus else 0.0)
     with timer.stage(Stage.COLOUR):
         colour = _colour(st, focus, options, scene)
     with timer.stage(Stage.COLOUR_TABLE):

@@ -63,7 +63,7 @@ class Surface:
     focus : FocusResult
         Height (NaN where unreliable), the unmasked fit, reliability, composite image.
     normals : ndarray (H, W, 3)
-        From the height map with its holes filled (smoothed 1 px).
+        From the height map with its holes filled (slopes smoothed by ``smooth_sigma_px``).
     tilt_deg : ndarray (H, W)
         Tilt of those normals, degrees.
     no_focus : bool
@@ -76,8 +76,12 @@ class Surface:
     no_focus: bool
 
 
-def surface_normals(focus: FocusResult, *, pixel_size_um, where="") -> Surface:
-    """Normals and tilt from the height map, its unreliable pixels filled smoothly.
+def surface_normals(focus: FocusResult, *, pixel_size_um, smooth_sigma_px: float = 0.0,
+                    where="") -> Surface:
+    """Normals and tilt from the height map, its unreliable pixels filled smoothly, its
+    slopes smoothed by ``smooth_sigma_px`` (the focus options' ``slope_sigma_px`` for a
+    height from focus; 0 for an instrument's map, whose slopes are then its central
+    differences).
 
     With no reliable pixel at all (identical or featureless slices) the fitted height is
     rounding noise: the surface is taken as flat (tilt 0) and a warning is logged; the
@@ -94,6 +98,7 @@ def surface_normals(focus: FocusResult, *, pixel_size_um, where="") -> Surface:
         filled = fill_missing(focus.height_um, method="smooth")
     else:
         filled = focus.height_um
-    normals = normals_from_height(filled, pixel_size_um=pixel_size_um, smooth_sigma_px=1.0)
+    normals = normals_from_height(filled, pixel_size_um=pixel_size_um,
+                                  smooth_sigma_px=smooth_sigma_px)
     tilt, _ = tilt_azimuth_deg(normals)
     return Surface(focus, normals, tilt, no_focus)

@@ -218,6 +218,9 @@ class FocusOptions(Options):
     reliability: str = option(
         "sigma", help="reliability measure: the height's precision (sigma) or Pertuz et al. "
                       "(2013)", choices=RELIABILITIES)
+    slope_sigma_px: float = option(
+        1.0, help="σ of the smoothing of a focus height map's slopes before its normals (an "
+                  "instrument's height map is used as measured, unsmoothed)", unit="px", low=0)
 
     @property
     def reliability_cut_db(self) -> float:
