@@ -172,6 +172,10 @@ class FocusOptions(Options):
         What ``reliability_db`` means: ``"sigma"``, the precision of the height,
         −20·log10(σ / z step) dB, on pixels whose focus peak is significant; ``"pertuz"``,
         the ratio of Pertuz et al. (2013), the earlier default.
+    slope_sigma_px : float
+        σ (px) of the NaN-aware smoothing of the height's slopes before the analysis takes
+        normals (1 px: pixel noise of a height from focus); an instrument's height map is
+        used as measured (:func:`~microfacet.analysis.surface.surface_normals`).
     """
 
     CLI_PREFIX = ""
