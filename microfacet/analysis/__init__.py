@@ -19,6 +19,7 @@ module               stage / concern
 ``mixtures``         thickness mixture (deconvolved), components by BIC with honest n
 ``ndf_fit``          NDF lobes (deconvolved, censored Rayleigh EM)
 ``distributions``    the distributions stage (both modes)
+``self_check``       the NDF's injection-recovery on the stack itself (joint mode)
 ``identification``   whether the data determine them: structured reasons, warnings
 ``pipeline``         :func:`analyse_stack`: the stages in order
 ``output``           :func:`write_results`: the results folder

@@ -35,7 +35,8 @@ from ..core.errors import plain_params, render_params
 from .options import FitOptions
 
 __all__ = ["Judgement", "Reason", "analysis_warnings", "colour_tilt_contrast",
-           "mean_plane_tilt_deg", "ndf_judgement", "seed_ndf_judgement", "thickness_judgement"]
+           "mean_plane_tilt_deg", "ndf_judgement", "seed_ndf_judgement", "self_check_judgement",
+           "thickness_judgement"]
 
 #: Mean ΔE00 of pure noise of σ per Lab component, E|N(0, σ²I₃)| = 2·sqrt(2/π)·σ: the
 #: image's noise floor of the mean ΔE00 is this × ``noise_de``.
@@ -187,6 +188,24 @@ class NdfEvidence:
     colour_contrast_de: float
     colour_error_de: float
     thickness_nm: float
+
+
+def self_check_judgement(judgement: Judgement, check, options: FitOptions) -> Judgement:
+    """The NDF's judgement after its self-check (:mod:`.self_check`): an NDF the stack
+    cannot resolve — recovered/injected RMS slope outside ``fits.self_check_range``, or not
+    measurable — is not identified, whatever its other evidence says."""
+    if not judgement.identified or check is None:
+        return judgement
+    low, high = options.self_check_range
+    t = check.transfer
+    if math.isfinite(t) and low <= t <= high:
+        return judgement
+    said = (f"recovers {t:.2f}× the injected RMS slope" if math.isfinite(t)
+            else "could not recover injected slopes")
+    return Judgement(False, Reason(
+        "self_check", f"the self-check on this stack {said} (identified only within "
+        f"{low:g}-{high:g}, `fits.self_check_range`): its heights do not resolve the facets' "
+        f"slopes (ndf.self_check in summary.json)", "fits.self_check_range"))
 
 
 def ndf_judgement(e: NdfEvidence, options: FitOptions) -> Judgement:

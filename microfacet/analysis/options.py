@@ -219,6 +219,14 @@ class FitOptions(Options):
     max_width_error: float = option(
         0.25, help="largest relative 1-σ error of the lobe width for an identified NDF",
         low=0, low_exclusive=True)
+    self_check: bool = option(
+        False, help="measure the NDF's slope transfer on the stack itself (injection-recovery, "
+                    "joint mode with a height from focus) and refuse an NDF it says the stack "
+                    "cannot resolve (experimental: off until validated on the sweep)")
+    self_check_range: tuple = option(
+        (0.8, 1.25), help="recovered/injected RMS slope outside this range: the NDF is not "
+                          "identified", kind=tuple, check=lambda v: None if (
+                              len(v) == 2 and 0 < v[0] < 1 < v[1]) else "need 0 < low < 1 < high")
     max_censored_fraction: float = option(
         0.5, help="largest share of the surface past the acceptance for an identified NDF",
         low=0, high=1)

@@ -209,7 +209,8 @@ def _ndf_section(r) -> NdfSection:
     return NdfSection(**dist.ndf_judgement.to_json(), mixture=mix,
                       max_tilt_deg=r.scene.max_tilt_deg,
                       mean_plane_tilt_deg=mean_plane_tilt_deg(r.joint),
-                      histogram="per-pixel tilt of unmasked pixels (projected-area density)")
+                      histogram="per-pixel tilt of unmasked pixels (projected-area density)",
+                      self_check=None if r.self_check is None else r.self_check.to_json())
 
 
 def _tilt_information(px) -> dict:

@@ -28,10 +28,11 @@ from ..io.limits import check_memory
 from ..io.stack import Stack, read_stack
 from .colour_image import measure_colour, no_colour_message
 from .distributions import Distributions, fit_joint_distributions, fit_seed_distributions
-from .identification import analysis_warnings, mean_plane_tilt_deg
+from .identification import analysis_warnings, mean_plane_tilt_deg, self_check_judgement
 from .joint import facet_labels, joint_facets, joint_pixel_tilts
 from .options import AnalysisOptions, Scene, scene_of
 from .roi import thickness_per_roi
+from .self_check import Conditions, SelfCheck, measured_rms_slope, self_check_ndf, slice_noise_sd
 from .stages import Stage
 from .surface import measure_height, surface_normals
 from .tilt import seed_tilts, tilt_grid
@@ -101,6 +102,7 @@ class AnalysisResult:
     joint: object
     distributions: Distributions
     timings_s: dict = field(default_factory=dict)
+    self_check: SelfCheck | None = None
 
     @property
     def thickness_fit(self):
@@ -186,7 +188,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         roi = _roi(st, colour, surface, model, options, scene)
     model = model.with_exposure(roi.exposure)
     grid = tilt_grid(scene.max_tilt_deg, options.tilt.step_deg)
-    joint = None
+    joint = check = None
     if options.mode == "seed":
         with timer.stage(Stage.TILT):
             pixels = seed_tilts(colour, roi, model, grid, options.tilt)
@@ -203,9 +205,26 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
             pixels = joint.pixels = joint_pixel_tilts(joint, colour, model, grid, options.tilt)
         with timer.stage(Stage.MIXTURES):
             dist = fit_joint_distributions(joint, roi, model, scene, options.fits)
+        with timer.stage(Stage.SELF_CHECK):
+            check = _self_check(st, focus, joint, scene, options)
+            dist.ndf_judgement = self_check_judgement(dist.ndf_judgement, check, options.fits)
     timer.total()
     return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
-                          dist, dict(timer.timings))
+                          dist, dict(timer.timings), check)
+
+
+def _self_check(st, focus, joint, scene, options) -> SelfCheck | None:
+    """The NDF's injection-recovery (:mod:`.self_check`) where the heights come from focus
+    and at least 3 facets have planes; None otherwise or when switched off."""
+    if not (options.fits.self_check and scene.from_focus and st.has_slices):
+        return None
+    rms = measured_rms_slope(joint, scene.max_tilt_deg)
+    if rms is None:
+        return None
+    cond = Conditions(np.asarray(st.z_um, np.float64), scene.pixel_size_um,
+                      scene.numerical_aperture, slice_noise_sd(st, focus), scene.seed)
+    return self_check_ndf(focus, joint.facets, conditions=cond, rms_slope=rms,
+                          focus_options=options.focus, joint=options.joint)
 
 
 def analyse_stack(stack, options: AnalysisOptions | None = None, *, progress=None

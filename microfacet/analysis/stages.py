@@ -53,6 +53,11 @@ class Stage(enum.Enum):
                          "fit_seed_distributions",
                          "`Distributions`: thickness mixture and NDF, each judged identified "
                          "or not")
+    SELF_CHECK = StageInfo("self_check", "self-check", 0.5,
+                           "analysis.self_check.self_check_ndf",
+                           "`SelfCheck`: recovered/injected RMS slope of known facet slopes "
+                           "rendered in the scene's own conditions; the NDF's judgement "
+                           "(joint mode)")
     WRITE = StageInfo("write", "write", 0.3, "analysis.output.save_results",
                       "the results folder (`io.results`, `io.summary.Summary`)")
     REPORT = StageInfo("report", "report", 3.3, "report.write_report", "report.pdf and its PNGs")
@@ -71,7 +76,7 @@ class Stage(enum.Enum):
 
 
 #: The stages the seed mode skips.
-JOINT_ONLY = (Stage.SEGMENTATION, Stage.FACET_FITS)
+JOINT_ONLY = (Stage.SEGMENTATION, Stage.FACET_FITS, Stage.SELF_CHECK)
 
 
 def stage_table() -> str:

@@ -98,6 +98,7 @@ class NdfSection:
     max_tilt_deg: float | None = None
     mean_plane_tilt_deg: float | None = None
     histogram: str = ""
+    self_check: dict | None = None
 
 
 @dataclass

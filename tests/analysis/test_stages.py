@@ -67,7 +67,8 @@ def test_stages_have_unique_keys_labels_and_positive_weights():
     assert order[0] is Stage.HEIGHT and order[-2:] == [Stage.WRITE, Stage.REPORT]
     assert order.index(Stage.ROI) < order.index(Stage.SEGMENTATION) < order.index(
         Stage.FACET_FITS) < order.index(Stage.TILT) < order.index(Stage.MIXTURES)
-    assert JOINT_ONLY == (Stage.SEGMENTATION, Stage.FACET_FITS)
+    assert JOINT_ONLY == (Stage.SEGMENTATION, Stage.FACET_FITS, Stage.SELF_CHECK)
+    assert order.index(Stage.MIXTURES) < order.index(Stage.SELF_CHECK) < order.index(Stage.WRITE)
 
 
 def _functions(spec):

@@ -1,0 +1,297 @@
+"""The NDF's self-check: inject known facet slopes into the scene's own conditions and recover
+them (injection–recovery).
+
+Where the truth is unknown, the analysis measures its own slope transfer on the stack it
+analyses: on the scene's own facets (the joint mode's segmentation) it builds a surface of
+planes whose slopes are drawn from a lobe of known width, renders a focus stack of it through
+the scene's own all-in-focus image (its texture, sparse or not), z grid, numerical aperture
+and slice noise, runs the same height-from-focus and plane fits, and compares the recovered
+RMS slope with the injected one. A ratio (the *transfer*) far from 1 says the heights
+flatten or steepen the facets here — for example where a facet has no texture of its own and
+its heights are borrowed from a pit or scratch micrometres away — and the NDF is then not
+identified (:func:`~.identification.self_check_judgement`).
+
+What it cannot see: a facet that the segmentation got wrong (two true facets in one segment)
+is one plane in the injected surface, so segmentation errors are not part of the transfer.
+
+References
+----------
+.. [1] Nagata et al., "Simulation Technology for Titanium Oxide Layer Interference Color",
+   Technical Report (the seed paper), §3.3.3.
+.. [2] S. Pertuz, D. Puig, M. A. Garcia, "Analysis of focus measure operators for
+   shape-from-focus", Pattern Recognition 46 (2013) 1415–1432,
+   doi:10.1016/j.patcog.2012.11.011.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.lazy import load
+from ..core.pixels import pixel_size_yx
+from ..focus.height import height_from_focus
+from ..focus.options import FocusOptions
+from .options import JointOptions
+from .planes import fit_facet_planes
+
+__all__ = ["Conditions", "SelfCheck", "measured_rms_slope", "render_focus_stack", "self_check_ndf",
+           "slice_noise_sd"]
+
+cv2 = load("cv2")
+
+#: Largest side (px) of the part of the scene the self-check renders (bounds its time and
+#: memory: ~14 blurred copies of this crop).
+MAX_SIDE_PX = 512
+#: Injected lobe widths, as multiples of the scene's own measured RMS slope.
+WIDTH_FACTORS = (0.5, 1.0, 2.0)
+#: Planes whose slope noise (per axis) exceeds this carry no slope information (slivers along
+#: an edge); they are left out, as their weight in the NDF's deconvolving fit is nil.
+MAX_SLOPE_SIGMA = 0.3
+#: Blur of an in-focus pixel (px) and the blur levels the renderer interpolates between.
+_BASE_BLUR_PX = 0.5
+_LEVELS_PX = np.array([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0])
+
+
+@dataclass
+class SelfCheck:
+    """What the injection–recovery measured.
+
+    Attributes
+    ----------
+    injected_rms_slope, recovered_rms_slope, ratio : list of float
+        Per injected width: the area-weighted RMS of |∇h| of the injected planes, of the
+        recovered planes (their own slope noise removed in quadrature), and their ratio.
+    transfer : float
+        Median ratio (1: slopes recovered without bias). NaN when nothing was measured.
+    spread : float
+        Half the range of the ratios.
+    facets : int
+        Facets with a recovered plane.
+    """
+
+    injected_rms_slope: list
+    recovered_rms_slope: list
+    ratio: list
+    transfer: float
+    spread: float
+    facets: int
+
+    def to_json(self) -> dict:
+        """For ``ndf.self_check`` in summary.json."""
+        def num(v):
+            return float(v) if math.isfinite(v) else None
+        return {"transfer": num(self.transfer), "spread": num(self.spread),
+                "facets": int(self.facets),
+                "injected_rms_slope": [num(v) for v in self.injected_rms_slope],
+                "recovered_rms_slope": [num(v) for v in self.recovered_rms_slope],
+                "ratio": [num(v) for v in self.ratio]}
+
+
+def measured_rms_slope(joint, max_tilt_deg) -> float | None:
+    """Area-weighted RMS |∇h| of the scene's facet planes below the acceptance, their slope
+    noise removed in quadrature (None with fewer than 3 planes)."""
+    pl = joint.planes
+    ok = (pl.fitted & np.isfinite(pl.tilt_deg) & (pl.tilt_deg < max_tilt_deg)
+          & (pl.slope_sigma < MAX_SLOPE_SIGMA))
+    if ok.sum() < 3:
+        return None
+    w = joint.area_px[ok].astype(np.float64)
+    g = np.tan(np.radians(pl.tilt_deg[ok]))
+    noise2 = float(np.sum(w * 2 * pl.slope_sigma[ok] ** 2) / np.sum(w))
+    return math.sqrt(max(_rms(g, w) ** 2 - noise2, 0.0))
+
+
+def slice_noise_sd(stack, focus) -> float:
+    """Pixel noise SD of the stack's most defocused slice (grey, [0, 1]): the robust SD of its
+    Laplacian over √20 (the Laplacian's gain on white noise); defocus leaves noise only."""
+    z = np.asarray(stack.z_um, np.float64)
+    h = np.asarray(focus.height_fit_um, np.float64)
+    mid = float(np.median(h[np.isfinite(h)])) if np.isfinite(h).any() else float(np.median(z))
+    img = np.asarray(stack.read_slice(int(np.argmax(np.abs(z - mid)))), np.float32)
+    if img.ndim == 3:
+        img = img[..., :3] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    lap = (4 * img[1:-1, 1:-1] - img[:-2, 1:-1] - img[2:, 1:-1] - img[1:-1, :-2]
+           - img[1:-1, 2:])
+    return float(1.4826 * np.median(np.abs(lap - np.median(lap))) / math.sqrt(20.0))
+
+
+def render_focus_stack(texture, height_um, z_um, *, blur_px_per_um, noise_sd, rng):
+    """Slices of a surface ``height_um`` textured by ``texture`` (grey, [0, 1]) at heights
+    ``z_um``: Gaussian defocus σ = 0.5 px + ``blur_px_per_um`` · |z − h| per pixel
+    (interpolated between precomputed blur levels), plus white noise of SD ``noise_sd``.
+
+    Returns
+    -------
+    list of ndarray float32 (H, W)
+    """
+    tex = np.asarray(texture, np.float32)
+    blurred = np.stack([tex if s == 0 else cv2.GaussianBlur(tex, (0, 0), float(s))
+                        for s in _LEVELS_PX])
+    idx = np.arange(_LEVELS_PX.size, dtype=np.float32)
+    rows, cols = np.indices(tex.shape)
+    out = []
+    for z in np.asarray(z_um, dtype=np.float64):
+        sigma = _BASE_BLUR_PX + blur_px_per_um * np.abs(z - height_um)
+        f = np.interp(sigma, _LEVELS_PX, idx).astype(np.float32)
+        lo = np.minimum(f.astype(np.int32), _LEVELS_PX.size - 2)
+        t = f - lo
+        img = (1 - t) * blurred[lo, rows, cols] + t * blurred[lo + 1, rows, cols]
+        out.append((img + rng.normal(0.0, noise_sd, img.shape)).astype(np.float32))
+    return out
+
+
+def _crop(shape):
+    h, w = shape
+    r0, c0 = max(0, (h - MAX_SIDE_PX) // 2), max(0, (w - MAX_SIDE_PX) // 2)
+    return slice(r0, r0 + min(h, MAX_SIDE_PX)), slice(c0, c0 + min(w, MAX_SIDE_PX))
+
+
+def _planes(labels, centre_um, rms_slope, pixel_yx, rng):
+    """Heights of planes through each facet's centroid at ``centre_um``, slopes N(0, s²) per
+    axis with 2 s² = ``rms_slope``²; returns the height map and |∇h| per facet."""
+    S = int(labels.max()) + 1
+    yy, xx = np.indices(labels.shape, dtype=np.float64)
+    y_um, x_um = yy * pixel_yx[0], xx * pixel_yx[1]
+    n = np.maximum(np.bincount(labels.ravel(), minlength=S), 1)
+    cy = np.bincount(labels.ravel(), y_um.ravel(), S) / n
+    cx = np.bincount(labels.ravel(), x_um.ravel(), S) / n
+    s = rms_slope / math.sqrt(2.0)
+    a, b = rng.normal(0, s, S), rng.normal(0, s, S)
+    plane = a[labels] * (x_um - cx[labels]) + b[labels] * (y_um - cy[labels])
+    offset = _joined_offsets(labels, plane, centre_um)
+    return offset[labels] + plane, np.hypot(a, b)
+
+
+def _joined_offsets(labels, plane, centre_um, *, pull=1e-3):
+    """Facet offsets that join the planes as well as they can (least squares of the height
+    steps across every facet edge, weakly pulled towards the measured centres): a faceted
+    surface, not a field of independent steps."""
+    sparse, linalg = load("scipy.sparse"), load("scipy.sparse.linalg")
+    S = centre_um.size
+    rows_f, rows_g, resid = [], [], []
+    for axis in (0, 1):
+        la, lb = (labels[1:], labels[:-1]) if axis == 0 else (labels[:, 1:], labels[:, :-1])
+        pa, pb = (plane[1:], plane[:-1]) if axis == 0 else (plane[:, 1:], plane[:, :-1])
+        edge = la != lb
+        rows_f.append(la[edge])
+        rows_g.append(lb[edge])
+        resid.append((pa - pb)[edge])
+    f, g, r = np.concatenate(rows_f), np.concatenate(rows_g), np.concatenate(resid)
+    m = f.size
+    eq = np.arange(m)
+    A = sparse.csr_matrix((np.r_[np.ones(m), -np.ones(m), np.full(S, pull)],
+                           (np.r_[eq, eq, m + np.arange(S)], np.r_[f, g, np.arange(S)])),
+                          shape=(m + S, S))
+    rhs = np.r_[-r, pull * centre_um]
+    return linalg.lsqr(A, rhs, atol=1e-10, btol=1e-10, iter_lim=2000)[0]
+
+
+def _rms(values, weights):
+    return math.sqrt(float(np.sum(weights * values ** 2) / max(float(np.sum(weights)), 1e-30)))
+
+
+@dataclass
+class _Scene:
+    """The scene's conditions the injection reuses (one crop)."""
+
+    labels: np.ndarray
+    texture: np.ndarray
+    centre_um: np.ndarray
+    z_um: np.ndarray
+    pixel_yx: tuple
+    blur_px_per_um: float
+    noise_sd: float
+
+
+def _scene(focus, labels, *, z_um, pixel_size_um, numerical_aperture, noise_sd) -> _Scene:
+    rs, cs = _crop(labels.shape)
+    _, lab = np.unique(labels[rs, cs], return_inverse=True)
+    lab = lab.reshape(labels[rs, cs].shape).astype(np.int32)
+    img = np.asarray(focus.all_in_focus, np.float32)[rs, cs]
+    tex = img @ np.array([0.2126, 0.7152, 0.0722], np.float32) if img.ndim == 3 else img
+    h = np.asarray(focus.height_fit_um, np.float64)[rs, cs]
+    S = int(lab.max()) + 1
+    ok = np.isfinite(h)
+    med = float(np.median(h[ok])) if ok.any() else float(np.median(z_um))
+    cnt = np.bincount(lab[ok], minlength=S)
+    centre = np.where(cnt > 0, np.bincount(lab[ok], h[ok], S) / np.maximum(cnt, 1), med)
+    z = np.asarray(z_um, np.float64)
+    centre = np.clip(centre, z.min(), z.max())
+    pyx = pixel_size_yx(pixel_size_um)
+    na = min(max(float(numerical_aperture), 0.05), 0.95)
+    # Gaussian σ ≈ half the geometric blur radius |Δz|·tan(asin NA)
+    blur = 0.5 * na / math.sqrt(1.0 - na * na) / math.sqrt(pyx[0] * pyx[1])
+    return _Scene(lab, tex, centre, z, pyx, blur, float(noise_sd))
+
+
+@dataclass(frozen=True)
+class Conditions:
+    """The scene's imaging conditions the injection reuses: slice heights ``z_um`` (µm),
+    ``pixel_size_um``, ``numerical_aperture``, the slices' pixel noise ``noise_sd`` (grey,
+    [0, 1]) and the random ``seed``."""
+
+    z_um: np.ndarray
+    pixel_size_um: object
+    numerical_aperture: float
+    noise_sd: float
+    seed: int = 0
+
+
+def self_check_ndf(focus, labels, *, conditions: Conditions, rms_slope,
+                   focus_options: FocusOptions, joint: JointOptions) -> SelfCheck:
+    """Injection–recovery of facet slopes in the scene's own conditions.
+
+    Parameters
+    ----------
+    focus : FocusResult
+        The scene's height from focus (its all-in-focus image and heights are reused).
+    labels : ndarray of int (H, W)
+        The scene's facets.
+    conditions : Conditions
+        The stack's z grid, pixel size, aperture, noise, and the seed.
+    rms_slope : float
+        The scene's measured RMS facet slope (|∇h|); the injected widths are
+        :data:`WIDTH_FACTORS` times it (at least 0.02, at most 0.6).
+    focus_options, joint : FocusOptions, JointOptions
+        The options the analysis used (alignment is not repeated).
+
+    Returns
+    -------
+    SelfCheck
+    """
+    c = conditions
+    sc = _scene(focus, labels, z_um=c.z_um, pixel_size_um=c.pixel_size_um,
+                numerical_aperture=c.numerical_aperture, noise_sd=c.noise_sd)
+    fo = focus_options.replace(align=None, fill=None)
+    rng = np.random.default_rng(c.seed)
+    inj, rec, n_fac = [], [], 0
+    for factor in WIDTH_FACTORS:
+        width = min(max(factor * rms_slope, 0.02), 0.6)
+        h_true, g_true = _planes(sc.labels, sc.centre_um, width, sc.pixel_yx, rng)
+        slices = render_focus_stack(sc.texture, h_true, sc.z_um, blur_px_per_um=sc.blur_px_per_um,
+                                    noise_sd=sc.noise_sd, rng=rng)
+        got = height_from_focus(slices, fo, z_um=sc.z_um, prefetch=False)
+        corr = joint.focus_error_correlation * float(got.params.get("window_px", 1)) ** 2
+        fit = fit_facet_planes(sc.labels, got.height_fit_um, height_sigma_um=got.height_sigma_um,
+                               reliable=got.reliable, pixel_size_um=sc.pixel_yx,
+                               min_pixels=joint.min_plane_pixels, correlation_px=corr)
+        ok = (fit.fitted & np.isfinite(fit.slope_x) & np.isfinite(fit.slope_y)
+              & (fit.slope_sigma < MAX_SLOPE_SIGMA))
+        n_fac = max(n_fac, int(ok.sum()))
+        if ok.sum() < 3:
+            inj.append(math.nan)
+            rec.append(math.nan)
+            continue
+        w = fit.n_pixels[ok].astype(np.float64)
+        g_rec = np.hypot(fit.slope_x[ok], fit.slope_y[ok])
+        noise2 = float(np.sum(w * 2 * fit.slope_sigma[ok] ** 2) / np.sum(w))
+        inj.append(_rms(g_true[ok], w))
+        rec.append(math.sqrt(max(_rms(g_rec, w) ** 2 - noise2, 0.0)))
+    ratio = [r / i if i > 0 else math.nan for r, i in zip(rec, inj)]
+    good = [v for v in ratio if math.isfinite(v)]
+    transfer = float(np.median(good)) if good else math.nan
+    spread = 0.5 * (max(good) - min(good)) if good else math.nan
+    return SelfCheck(inj, rec, ratio, transfer, spread, n_fac)

@@ -1,0 +1,120 @@
+"""The NDF's self-check (microfacet.analysis.self_check): the renderer's defocus follows
+|z − h|; injected slopes come back where the stack has texture in every facet and do not
+where facets have no texture of their own; the judgement refuses an NDF outside the range."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from microfacet.analysis.identification import Judgement, self_check_judgement
+from microfacet.analysis.options import FitOptions, JointOptions
+from microfacet.analysis.self_check import (
+    Conditions,
+    SelfCheck,
+    render_focus_stack,
+    self_check_ndf,
+)
+from microfacet.focus.height import FocusResult
+from microfacet.focus.options import FocusOptions
+
+
+def _sharpness(img):
+    gy, gx = np.gradient(img.astype(np.float64))
+    return float(np.mean(gx * gx + gy * gy))
+
+
+def test_defocus_grows_with_the_distance_from_the_surface():
+    rng = np.random.default_rng(0)
+    tex = rng.random((64, 64)).astype(np.float32)
+    z = np.linspace(-2.0, 2.0, 9)
+    sl = render_focus_stack(tex, np.full(tex.shape, 0.5), z, blur_px_per_um=2.0, noise_sd=0.0,
+                            rng=rng)
+    s = [_sharpness(x) for x in sl]
+    k = int(np.argmin(np.abs(z - 0.5)))
+    assert int(np.argmax(s)) == k
+    assert all(s[i] > s[i - 1] for i in range(1, k)) and all(
+        s[i] < s[i - 1] for i in range(k + 1, len(s)))
+    # |z − h| alone sets the blur: 0.5 ± 1 µm give the same image
+    np.testing.assert_allclose(sl[k - 2], sl[k + 2], atol=1e-6)
+
+
+def _voronoi(shape, n, rng):
+    pts = rng.uniform(0, 1, (n, 2)) * np.array(shape)
+    yy, xx = np.indices(shape)
+    d = (yy[..., None] - pts[:, 0]) ** 2 + (xx[..., None] - pts[:, 1]) ** 2
+    return np.argmin(d, axis=-1).astype(np.int32)
+
+
+def _scene(texture, labels):
+    shape = labels.shape
+    zero = np.zeros(shape, np.float32)
+    return FocusResult(height_um=zero, height_fit_um=zero, reliability_db=zero,
+                       reliable=np.ones(shape, bool), best_index=np.zeros(shape, np.int32),
+                       focus_max=zero, all_in_focus=texture, z_um=np.zeros(0), params={},
+                       timings_s={})
+
+
+def _check(texture, labels):
+    cond = Conditions(np.linspace(-4, 4, 21), 0.25, 0.5, 0.002)
+    return self_check_ndf(_scene(texture, labels), labels, conditions=cond, rms_slope=0.2,
+                          focus_options=FocusOptions(), joint=JointOptions())
+
+
+@pytest.mark.slow
+def test_slopes_come_back_where_every_facet_has_texture_and_not_where_none_has():
+    rng = np.random.default_rng(3)
+    labels = _voronoi((160, 160), 15, np.random.default_rng(4))      # facets of ~40 px
+    rich = rng.random(labels.shape).astype(np.float32)
+    good = _check(rich, labels)
+    assert 0.8 <= good.transfer <= 1.25, good.to_json()
+    # smaller facets (~20 px) whose only texture is sparse dark pits (1 % of the pixels): most
+    # facets have no focus evidence of their own, and their heights are borrowed
+    small = _voronoi((160, 160), 60, rng)
+    sparse = np.full(small.shape, 0.6, np.float32)
+    sparse[rng.random(small.shape) < 0.01] = 0.1
+    bad = _check(sparse, small)
+    assert not (0.8 <= bad.transfer <= 1.25), bad.to_json()
+
+
+def test_the_judgement_follows_the_self_check():
+    ok = Judgement(True)
+    opts = FitOptions()
+
+    def check(t):
+        return SelfCheck([0.1], [0.1 * t], [t], t, 0.0, 50)
+
+    assert self_check_judgement(ok, check(1.0), opts) is ok
+    assert self_check_judgement(ok, None, opts) is ok              # no check: no change
+    bad = self_check_judgement(ok, check(0.4), opts)
+    assert not bad.identified and bad.reason.code == "self_check"
+    assert bad.reason.parameter == "fits.self_check_range" and "0.40" in bad.reason.plain()
+    assert not self_check_judgement(ok, check(math.nan), opts).identified
+    assert not self_check_judgement(ok, check(1.4), opts).identified
+    wide = FitOptions(self_check_range=(0.3, 1.5))
+    assert self_check_judgement(ok, check(0.4), wide).identified
+    already = Judgement(False)
+    assert self_check_judgement(already, check(1.0), opts) is already
+
+
+@pytest.mark.slow
+def test_the_analysis_records_the_self_check_when_asked(tmp_path):
+    """``fits.self_check``: the joint analysis of the fixture runs it, records it in
+    summary.json (``ndf.self_check``) and judges the NDF by it; off, nothing is recorded."""
+    from pathlib import Path
+
+    from microfacet.analysis import AnalysisOptions, analyse_stack
+    from microfacet.analysis.output import build_summary
+
+    stack = Path(__file__).resolve().parents[2] / "fixtures" / "stacks" / "nd-fixture"
+    r = analyse_stack(stack, AnalysisOptions(fits=FitOptions(self_check=True)))
+    c = r.self_check
+    assert c is not None and c.facets >= 20 and len(c.ratio) == 3
+    assert np.all(np.diff(c.injected_rms_slope) > 0)
+    s = build_summary(r).to_json()
+    assert s["ndf"]["self_check"]["transfer"] == pytest.approx(c.transfer)
+    low, high = r.options.fits.self_check_range
+    assert r.distributions.ndf_judgement.identified <= (low <= c.transfer <= high)
+    assert analyse_stack(stack).self_check is None
