@@ -1,0 +1,40 @@
+"""Self-check against truth on a folder of synthetic stacks (issue 22 work in progress; not yet
+a registered study): per scene, the measured/true RMS facet slope and the self-check's
+transfer (``analysis.self_check``).
+
+    python -m pipelines.self_check_sweep STACKS_DIR
+
+STACKS_DIR holds stacks with ``truth/tilt_deg.npy`` (e.g. the stacks folder of
+``python -m pipelines run accuracy-sweep``). Prints one JSON line per scene.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from microfacet.analysis import AnalysisOptions, analyse_stack
+from microfacet.analysis import self_check as sc
+from microfacet.analysis.options import FitOptions
+
+
+def main(folder: str) -> None:
+    for d in sorted(p for p in Path(folder).iterdir() if (p / "truth").is_dir()):
+        r = analyse_stack(d, AnalysisOptions(fits=FitOptions(self_check=True)))
+        t = np.load(d / "truth" / "tilt_deg.npy")
+        vis = np.isfinite(t) & (t < r.scene.max_tilt_deg)
+        true_rms = float(np.sqrt(np.mean(np.tan(np.radians(t[vis])) ** 2)))
+        meas = sc.measured_rms_slope(r.joint, r.scene.max_tilt_deg)
+        c = r.self_check
+        print(json.dumps({
+            "scene": d.name, "true_rms_slope": true_rms, "measured_rms_slope": meas,
+            "actual_ratio": None if meas is None else meas / true_rms,
+            "self_check": None if c is None else c.to_json(),
+            "identified": r.distributions.ndf_judgement.identified}), flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
