@@ -19,6 +19,24 @@ import numpy as np
 from microfacet.analysis import AnalysisOptions, analyse_stack
 from microfacet.analysis import self_check as sc
 from microfacet.analysis.options import FitOptions
+from microfacet.analysis.planes import fit_facet_planes
+
+
+def _actual_gain(r, true_height_um) -> float | None:
+    """Gain of the analysis' facet-plane slopes projected on the planes fitted to the true
+    heights over the same facets (area-weighted, facets below the acceptance)."""
+    pl = r.joint.planes
+    true = fit_facet_planes(r.joint.facets, true_height_um, height_sigma_um=1.0,
+                            reliable=np.isfinite(true_height_um),
+                            pixel_size_um=r.scene.pixel_size_um, min_pixels=5)
+    ok = (pl.fitted & true.fitted & (pl.tilt_deg < r.scene.max_tilt_deg)
+          & (pl.slope_sigma < sc.MAX_SLOPE_SIGMA))
+    if ok.sum() < 3:
+        return None
+    w = r.joint.area_px[ok].astype(np.float64)
+    a, b = true.slope_x[ok], true.slope_y[ok]
+    return float(np.sum(w * (pl.slope_x[ok] * a + pl.slope_y[ok] * b))
+                 / np.sum(w * (a * a + b * b)))
 
 
 def main(folder: str) -> None:
@@ -30,6 +48,7 @@ def main(folder: str) -> None:
         meas = sc.measured_rms_slope(r.joint, r.scene.max_tilt_deg)
         c = r.self_check
         print(json.dumps({
+            "actual_gain": _actual_gain(r, np.load(d / "truth" / "height_um.npy")),
             "scene": d.name, "true_rms_slope": true_rms, "measured_rms_slope": meas,
             "actual_ratio": None if meas is None else meas / true_rms,
             "self_check": None if c is None else c.to_json(),

@@ -220,9 +220,9 @@ class FitOptions(Options):
         0.25, help="largest relative 1-σ error of the lobe width for an identified NDF",
         low=0, low_exclusive=True)
     self_check: bool = option(
-        False, help="measure the NDF's slope transfer on the stack itself (injection-recovery, "
-                    "joint mode with a height from focus) and refuse an NDF it says the stack "
-                    "cannot resolve (experimental: off until validated on the sweep)")
+        True, help="measure the NDF's slope transfer on the stack itself (injection-recovery, "
+                   "joint mode with a height from focus) and refuse an NDF it says the stack "
+                   "cannot resolve")
     self_check_range: tuple = option(
         (0.8, 1.25), help="recovered/injected RMS slope outside this range: the NDF is not "
                           "identified", kind=tuple, check=lambda v: None if (

@@ -101,8 +101,9 @@ def test_the_judgement_follows_the_self_check():
 
 @pytest.mark.slow
 def test_the_analysis_records_the_self_check_when_asked(tmp_path):
-    """``fits.self_check``: the joint analysis of the fixture runs it, records it in
-    summary.json (``ndf.self_check``) and judges the NDF by it; off, nothing is recorded."""
+    """``fits.self_check`` (on by default): the joint analysis of the fixture runs it, records
+    it in summary.json (``ndf.self_check``) and judges the NDF by it; off, nothing is
+    recorded."""
     from pathlib import Path
 
     from microfacet.analysis import AnalysisOptions, analyse_stack
@@ -117,4 +118,5 @@ def test_the_analysis_records_the_self_check_when_asked(tmp_path):
     assert s["ndf"]["self_check"]["transfer"] == pytest.approx(c.transfer)
     low, high = r.options.fits.self_check_range
     assert r.distributions.ndf_judgement.identified <= (low <= c.transfer <= high)
-    assert analyse_stack(stack).self_check is None
+    off = AnalysisOptions(fits=FitOptions(self_check=False))
+    assert analyse_stack(stack, off).self_check is None
