@@ -55,9 +55,21 @@ def draw(pg, ctx):
     x, dens = _tilt_panel(ax_n, ctx)
     ndf_ok, ndf_why = ctx.identification("ndf")
     _ndf_panel(ax_d, x, dens, ctx.ndf if ndf_ok else None, hi=float(ax_n.get_xlim()[1]))
+    _self_check_note(ax_d, ctx.res.get("ndf", "self_check"))
     if not ndf_ok:
         _not_identified(ax_d, ndf_why)
     _delta_e_panel(ax_e, ctx)
+
+
+def _self_check_note(ax, check):
+    """The NDF's self-check (``ndf.self_check``) in the panel's lower left corner: the
+    recovered/injected slope gain, per injected width."""
+    if not isinstance(check, dict) or check.get("transfer") is None:
+        return
+    per = ", ".join("–" if v is None else f"{v:.2f}" for v in check.get("ratio") or [])
+    ax.text(0.01, 0.02, f"self-check: injected slopes recovered at {check['transfer']:.2f}×\n"
+            f"({per} at 0.5, 1, 2× the width; ndf.self_check)", transform=ax.transAxes,
+            ha="left", va="bottom", fontsize=6.5, color="0.25")
 
 
 def _hist_axes(pg, cell):

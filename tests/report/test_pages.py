@@ -36,6 +36,8 @@ def test_header_and_units_are_on_the_pages(results, report, pdf_text):
                   f"weight {w:.2f}, mean {m:.1f} nm, SD {s:.2f} nm",
                   f"weight {wn:.2f}, slope SD {sn:.2f}°"):
         assert label in p3, label
+    check = res.get("ndf", "self_check")
+    assert f"self-check: injected slopes recovered at {check['transfer']:.2f}×" in p3
     p5 = pdf_text(out, 5)
     assert "microfacet thin-film BRDF" in p5 and "light zenith" in p5
     assert "half-vector model" in p5
