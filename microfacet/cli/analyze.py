@@ -80,6 +80,8 @@ def _text_summary(result, out: Path, elapsed_s: float) -> str:
         if dist.ndf else "none"
     if fit is not None and not dist.thickness_judgement.identified:
         comps += " -- NOT IDENTIFIED"
+    if result.self_check is not None and dist.ndf:
+        lobes += f", self-check {result.self_check.transfer:.2f}x"
     if not dist.ndf_judgement.identified:
         lobes += " -- NOT IDENTIFIED, not a measurement"
     de = result.delta_e_stats
