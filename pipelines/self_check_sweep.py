@@ -33,10 +33,8 @@ def _actual_gain(r, true_height_um) -> float | None:
           & (pl.slope_sigma < sc.MAX_SLOPE_SIGMA))
     if ok.sum() < 3:
         return None
-    w = r.joint.area_px[ok].astype(np.float64)
-    a, b = true.slope_x[ok], true.slope_y[ok]
-    return float(np.sum(w * (pl.slope_x[ok] * a + pl.slope_y[ok] * b))
-                 / np.sum(w * (a * a + b * b)))
+    return sc.slope_gain(pl.slope_x[ok], pl.slope_y[ok], true.slope_x[ok], true.slope_y[ok],
+                         r.joint.area_px[ok].astype(np.float64))
 
 
 def main(folder: str) -> None:

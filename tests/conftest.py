@@ -7,6 +7,9 @@ they share is here, as fixtures.
 
 from __future__ import annotations
 
+import functools
+import inspect
+
 import numpy as np
 import pytest
 
@@ -99,20 +102,24 @@ SLOW_FIXTURES = frozenset({"nd_analysis", "results", "report", "results_copy", "
 _SPAWNS = ("subprocess.", "sys.executable", "_run_bounded(", "lock_holder", "slow_holder")
 
 
-def _spawns(item) -> bool:
-    import inspect
+@functools.cache
+def _defines_runner(module) -> bool:
+    """The test module imports subprocess and defines a ``_run`` helper (read once)."""
+    return "subprocess" in vars(module) and "def _run(" in inspect.getsource(module)
 
+
+def _spawns(item) -> bool:
     fn = getattr(item, "function", None)
-    if fn is None or "subprocess" not in vars(inspect.getmodule(fn) or object()):
+    module = inspect.getmodule(fn) if fn is not None else None
+    if module is None or "subprocess" not in vars(module):
         return False
     try:
         source = inspect.getsource(fn)
     except (OSError, TypeError):
         return False
-    calls_runner = "_run(" in source and "def _run(" in inspect.getsource(
-        inspect.getmodule(fn))
-    return calls_runner or any(s in source for s in _SPAWNS) or bool(
-        {"lock_holder", "slow_holder"} & set(item.fixturenames))
+    return (("_run(" in source and _defines_runner(module))
+            or any(s in source for s in _SPAWNS)
+            or bool({"lock_holder", "slow_holder"} & set(item.fixturenames)))
 
 
 def pytest_collection_modifyitems(config, items):

@@ -42,23 +42,13 @@ from ..colour.difference import METHODS
 from ..core.errors import InputError
 from ..core.options import Options, option
 from ..focus.options import FocusOptions
-from ..optics.constants import known_sets, load_set
+from ..optics.constants import known_sets, unknown_set_reason
 from ..optics.defaults import DEFAULT_FILM, DEFAULT_ILLUMINANT, DEFAULT_SUBSTRATE
 
 __all__ = ["AnalysisOptions", "FitOptions", "JointOptions", "MaskOptions", "OpticsOptions",
            "RoiOptions", "Scene", "TiltOptions", "scene_of"]
 
 MODES = ("joint", "seed")
-
-
-def _known_set(name):
-    if name is None:
-        return None
-    try:
-        load_set(name)
-    except ValueError as exc:
-        return str(exc)
-    return None
 
 
 def _thickness_range(value):
@@ -251,12 +241,12 @@ class FitOptions(Options):
 class OpticsOptions(Options):
     """What the film model assumes; None takes the stack's value, then the default."""
 
-    film: str | None = option(None, help=f"optical-constant set of the oxide film (stack.json's, "
-                                         f"else {DEFAULT_FILM})", kind=str, check=_known_set,
-                              cli=True)
+    film: str | None = option(
+        None, help=f"optical-constant set of the oxide film (stack.json's, else {DEFAULT_FILM})",
+        kind=str, check=unknown_set_reason, cli=True)
     substrate: str | None = option(
         None, help=f"optical-constant set of the metal (stack.json's, else {DEFAULT_SUBSTRATE})",
-        kind=str, check=_known_set, cli=True)
+        kind=str, check=unknown_set_reason, cli=True)
     illuminant: str | None = option(
         None, help=f"light the images are white-balanced to (stack.json's, else "
                    f"{DEFAULT_ILLUMINANT})", kind=str, cli=True)
@@ -335,7 +325,7 @@ def scene_of(stack, options: AnalysisOptions) -> Scene:
     substrate = o.substrate or stack.substrate or DEFAULT_SUBSTRATE
     for key, name in (("optics.film", film), ("optics.substrate", substrate)):
         if name not in known_sets():
-            raise InputError(_known_set(name), param=key)
+            raise InputError(unknown_set_reason(name), param=key)
     na = float(stack.numerical_aperture)
     exposure = o.exposure if o.exposure is not None else stack.exposure
     source = ("option" if o.exposure is not None else

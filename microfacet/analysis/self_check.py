@@ -43,7 +43,7 @@ from .options import JointOptions
 from .planes import fit_facet_planes
 
 __all__ = ["Conditions", "SelfCheck", "measured_rms_slope", "render_focus_stack", "self_check_ndf",
-           "slice_noise_sd"]
+           "slice_noise_sd", "slope_gain"]
 
 cv2 = load("cv2")
 
@@ -156,7 +156,7 @@ def _crop(shape):
     return slice(r0, r0 + min(h, MAX_SIDE_PX)), slice(c0, c0 + min(w, MAX_SIDE_PX))
 
 
-def _planes(labels, centre_um, rms_slope, pixel_yx, rng, pattern=None):
+def _planes(labels, rms_slope, pixel_yx, rng, pattern=None):
     """Heights of planes joined at the facets' edges, with the slopes ``pattern`` (∂h/∂x,
     ∂h/∂y per facet, rows down) scaled to the RMS |∇h| ``rms_slope`` — or, where the pattern
     is flat or not given, slopes N(0, s²) per axis with 2 s² = ``rms_slope``²; returns the
@@ -175,16 +175,16 @@ def _planes(labels, centre_um, rms_slope, pixel_yx, rng, pattern=None):
         k = rms_slope / math.sqrt(float(np.mean(a * a + b * b)))
         a, b = k * a, k * b
     plane = a[labels] * (x_um - cx[labels]) + b[labels] * (y_um - cy[labels])
-    offset = _joined_offsets(labels, plane, centre_um)
+    offset = _joined_offsets(labels, plane)
     return offset[labels] + plane, a, b
 
 
-def _joined_offsets(labels, plane, centre_um, *, pull=1e-3):
+def _joined_offsets(labels, plane, *, pull=1e-3):
     """Facet offsets that join the planes as well as they can (least squares of the height
-    steps across every facet edge, weakly pulled towards the measured centres): a faceted
-    surface, not a field of independent steps."""
+    steps across every facet edge, weakly pulled towards 0): a faceted surface, not a field
+    of independent steps."""
     sparse, linalg = load("scipy.sparse"), load("scipy.sparse.linalg")
-    S = centre_um.size
+    S = int(labels.max()) + 1
     rows_f, rows_g, resid = [], [], []
     for axis in (0, 1):
         la, lb = (labels[1:], labels[:-1]) if axis == 0 else (labels[:, 1:], labels[:, :-1])
@@ -199,8 +199,20 @@ def _joined_offsets(labels, plane, centre_um, *, pull=1e-3):
     A = sparse.csr_matrix((np.r_[np.ones(m), -np.ones(m), np.full(S, pull)],
                            (np.r_[eq, eq, m + np.arange(S)], np.r_[f, g, np.arange(S)])),
                           shape=(m + S, S))
-    rhs = np.r_[-r, pull * centre_um]
+    rhs = np.r_[-r, np.zeros(S)]
     return linalg.lsqr(A, rhs, atol=1e-10, btol=1e-10, iter_lim=2000)[0]
+
+
+def slope_gain(got_x, got_y, true_x, true_y, weights) -> float:
+    """Area-weighted regression through 0 of slope vectors ``got`` on ``true`` (per facet):
+    the part of the truth that came back, unbiased by noise independent of it.
+
+    >>> slope_gain(np.array([0.5, -0.1]), np.array([0.0, 0.2]), np.array([1.0, 0.0]),
+    ...            np.array([0.0, 0.4]), np.ones(2))
+    0.5
+    """
+    num = np.sum(weights * (got_x * true_x + got_y * true_y))
+    return float(num / np.sum(weights * (true_x * true_x + true_y * true_y)))
 
 
 def _rms(values, weights):
@@ -213,7 +225,6 @@ class _Scene:
 
     labels: np.ndarray
     texture: np.ndarray
-    centre_um: np.ndarray
     base_um: np.ndarray
     z_um: np.ndarray
     pixel_yx: tuple
@@ -242,7 +253,7 @@ def _scene(focus, labels, *, z_um, pixel_size_um, numerical_aperture, noise_sd) 
     # the scene's own measured surface (holes: their facet's mean height) carries the
     # injected planes: the relief, its range in z and its creases stay the scene's
     base = np.clip(np.where(ok, h, centre[lab]), z.min(), z.max())
-    return _Scene(lab, tex, centre, base, z, pyx, blur, float(noise_sd))
+    return _Scene(lab, tex, base, z, pyx, blur, float(noise_sd))
 
 
 @dataclass(frozen=True)
@@ -310,8 +321,7 @@ def self_check_ndf(focus, labels, *, conditions: Conditions, rms_slope,
     inj, rec, n_fac = [], [], 0
     for factor in WIDTH_FACTORS:
         width = min(max(factor * rms_slope, 0.02), 0.6)
-        delta, a_true, b_true = _planes(sc.labels, np.zeros_like(sc.centre_um), width,
-                                        sc.pixel_yx, rng, pattern=pattern)
+        delta, a_true, b_true = _planes(sc.labels, width, sc.pixel_yx, rng, pattern=pattern)
         fit = _recovered_planes(sc, sc.base_um + delta, fo, joint, rng)
         ok = _usable(fit) & _usable(base)
         n_fac = max(n_fac, int(ok.sum()))
@@ -323,8 +333,8 @@ def self_check_ndf(focus, labels, *, conditions: Conditions, rms_slope,
         # what the injection changed in the recovered slopes, projected on what was injected:
         # a gain unbiased by slope noise independent of the injection
         a, b = a_true[ok], b_true[ok]
-        dx, dy = fit.slope_x[ok] - base.slope_x[ok], fit.slope_y[ok] - base.slope_y[ok]
-        gain = float(np.sum(w * (dx * a + dy * b)) / np.sum(w * (a * a + b * b)))
+        gain = slope_gain(fit.slope_x[ok] - base.slope_x[ok],
+                          fit.slope_y[ok] - base.slope_y[ok], a, b, w)
         inj.append(_rms(np.hypot(a, b), w))
         rec.append(gain * inj[-1])
     ratio = [r / i if i > 0 else math.nan for r, i in zip(rec, inj)]

@@ -40,7 +40,7 @@ import numpy as np
 from .defaults import DEFAULT_FILM, DEFAULT_SUBSTRATE
 
 __all__ = ["DEFAULT_FILM", "DEFAULT_SUBSTRATE", "OpticalConstantSet", "known_sets", "load_set",
-           "optical_constants", "resolve_index"]
+           "optical_constants", "resolve_index", "unknown_set_reason"]
 
 
 _DATA_PACKAGE = "microfacet.data"
@@ -86,6 +86,22 @@ def known_sets() -> tuple[str, ...]:
             if p.name.endswith(".csv")
         )
     )
+
+
+def unknown_set_reason(name) -> str | None:
+    """Why ``name`` is not a bundled set (None when it is, or when no set is named): the
+    check of every option that names one.
+
+    >>> unknown_set_reason(None) is None, unknown_set_reason("nope").startswith("unknown")
+    (True, True)
+    """
+    if name is None:
+        return None
+    try:
+        load_set(name)
+    except ValueError as exc:
+        return str(exc)
+    return None
 
 
 @functools.cache

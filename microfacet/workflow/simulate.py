@@ -44,7 +44,7 @@ from ..io.limits import check_memory
 from ..io.outdir import OutputFolder, check_output
 from ..io.results import Results
 from ..io.simulation import Simulation, write_simulation
-from ..optics.constants import load_set
+from ..optics.constants import unknown_set_reason
 from ..optics.defaults import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from ..report.figures import plot_maps
 
@@ -64,16 +64,6 @@ MAX_THICKNESS_SD_NM = 1000.0
 DEFAULT_LOBE_EXPONENT = 100.0
 #: The visible range the spectra cover, nm.
 SPECTRAL_RANGE_NM = (380.0, 780.0)
-
-
-def _known_set(name):
-    if name is None:
-        return None
-    try:
-        load_set(name)
-    except ValueError as exc:
-        return str(exc)
-    return None
 
 
 def _within(low, high, *, closed=True):
@@ -98,10 +88,10 @@ class FilmOptics(Options):
 
     film: str | None = option(
         None, help=f"optical-constant set of the oxide film (default {DEFAULT_FILM})",
-        kind=str, check=_known_set, cli=True)
+        kind=str, check=unknown_set_reason, cli=True)
     substrate: str | None = option(
         None, help=f"optical-constant set of the metal (default {DEFAULT_SUBSTRATE})",
-        kind=str, check=_known_set, cli=True)
+        kind=str, check=unknown_set_reason, cli=True)
     illuminant: str | None = option(
         None, help=f"illuminant name (default {DEFAULT_ILLUMINANT})", kind=str, cli=True)
     observer: str = option(DEFAULT_OBSERVER, help="CIE standard observer in degrees",
@@ -300,7 +290,7 @@ def _read_results(folder) -> dict:
                     "optics": res.optics(), "summary": res.path / "summary.json"}
     except InputError as exc:
         raise InputError(exc.raw_reason, param="results") from None
-    reasons = {f"inputs.{key}": _known_set(recorded["optics"].get(key))
+    reasons = {f"inputs.{key}": unknown_set_reason(recorded["optics"].get(key))
                for key in ("film", "substrate")}
     for key, n in (("thickness", 3), ("ndf", 2)):
         if recorded[key] is not None:

@@ -17,7 +17,6 @@ from microfacet.analysis.self_check import (
     render_focus_stack,
     self_check_ndf,
 )
-from microfacet.focus.height import FocusResult
 from microfacet.focus.options import FocusOptions
 
 
@@ -48,34 +47,26 @@ def _voronoi(shape, n, rng):
     return np.argmin(d, axis=-1).astype(np.int32)
 
 
-def _scene(texture, labels):
-    shape = labels.shape
-    zero = np.zeros(shape, np.float32)
-    return FocusResult(height_um=zero, height_fit_um=zero, reliability_db=zero,
-                       reliable=np.ones(shape, bool), best_index=np.zeros(shape, np.int32),
-                       focus_max=zero, all_in_focus=texture, z_um=np.zeros(0), params={},
-                       timings_s={})
-
-
-def _check(texture, labels):
+def _check(focus_result, texture, labels):
     cond = Conditions(np.linspace(-4, 4, 21), 0.25, 0.5, 0.002)
-    return self_check_ndf(_scene(texture, labels), labels, conditions=cond, rms_slope=0.2,
+    focus = focus_result(np.zeros(labels.shape), texture)
+    return self_check_ndf(focus, labels, conditions=cond, rms_slope=0.2,
                           focus_options=FocusOptions(), joint=JointOptions())
 
 
 @pytest.mark.slow
-def test_slopes_come_back_where_every_facet_has_texture_and_not_where_none_has():
+def test_slopes_come_back_where_every_facet_has_texture_and_not_where_none_has(focus_result):
     rng = np.random.default_rng(3)
     labels = _voronoi((160, 160), 15, np.random.default_rng(4))      # facets of ~40 px
     rich = rng.random(labels.shape).astype(np.float32)
-    good = _check(rich, labels)
+    good = _check(focus_result, rich, labels)
     assert 0.8 <= good.transfer <= 1.25, good.to_json()
     # smaller facets (~20 px) whose only texture is sparse dark pits (1 % of the pixels): most
     # facets have no focus evidence of their own, and their heights are borrowed
     small = _voronoi((160, 160), 60, rng)
     sparse = np.full(small.shape, 0.6, np.float32)
     sparse[rng.random(small.shape) < 0.01] = 0.1
-    bad = _check(sparse, small)
+    bad = _check(focus_result, sparse, small)
     assert not (0.8 <= bad.transfer <= 1.25), bad.to_json()
 
 

@@ -11,7 +11,6 @@ import pytest
 
 from microfacet.analysis import analyse_stack
 from microfacet.analysis.surface import surface_normals
-from microfacet.focus.height import FocusResult
 from microfacet.io.stack import read_stack
 
 X3P = Path(__file__).resolve().parents[2] / "fixtures" / "exports" / "nd-x3p"
@@ -28,15 +27,7 @@ def _rms_central(h, py, px):
     return float(np.sqrt(np.mean(gx[1:-1, 1:-1] ** 2 + gy[1:-1, 1:-1] ** 2)))
 
 
-def _focus(h):
-    shape = h.shape
-    return FocusResult(height_um=h, height_fit_um=h, reliability_db=np.zeros(shape, np.float32),
-                       reliable=np.ones(shape, bool), best_index=np.zeros(shape, np.int32),
-                       focus_max=np.zeros(shape, np.float32), all_in_focus=np.zeros(shape),
-                       z_um=np.zeros(0), params={}, timings_s={})
-
-
-def test_unsmoothed_normals_are_the_central_differences_on_non_square_pixels():
+def test_unsmoothed_normals_are_the_central_differences_on_non_square_pixels(focus_result):
     """A rough analytic surface on 0.31 × 0.13 µm pixels: without smoothing the RMS slope is
     that of central differences with each axis' own spacing; a 1-px σ lowers it, more along
     the axis whose pixels are larger (σ in px is not isotropic in µm)."""
@@ -44,9 +35,9 @@ def test_unsmoothed_normals_are_the_central_differences_on_non_square_pixels():
     py, px = 0.31, 0.13
     h = 0.05 * np.sin(y * py * 2.1) * np.cos(x * px * 3.7) + 0.02 * np.sin(x * px * 9.0)
     ref = _rms_central(h, py, px)
-    got = _rms_slope(surface_normals(_focus(h), pixel_size_um=(py, px)).normals)
+    got = _rms_slope(surface_normals(focus_result(h), pixel_size_um=(py, px)).normals)
     assert got == pytest.approx(ref, rel=1e-4)
-    smoothed = _rms_slope(surface_normals(_focus(h), pixel_size_um=(py, px),
+    smoothed = _rms_slope(surface_normals(focus_result(h), pixel_size_um=(py, px),
                                           smooth_sigma_px=1.0).normals)
     assert smoothed < 0.97 * ref
 
