@@ -50,7 +50,8 @@ def main(folder: str) -> None:
             "scene": d.name, "true_rms_slope": true_rms, "measured_rms_slope": meas,
             "actual_ratio": None if meas is None else meas / true_rms,
             "self_check": None if c is None else c.to_json(),
-            "identified": r.distributions.ndf_judgement.identified}), flush=True)
+            "identified": r.distributions.ndf_judgement.identified,
+            "reason_code": r.distributions.ndf_judgement.to_json()["reason_code"]}), flush=True)
 
 
 if __name__ == "__main__":
