@@ -1,5 +1,7 @@
 """Relief of a synthetic surface beyond planar Voronoi facets: elongated and wide-size-spread
-facet cells, rounded (dome) facets, terraces, etch pits, scratches — and dust lying on top.
+facet cells, rounded (dome) facets, terraces, etch pits, scratches, a measured height map in
+place of the facets (:func:`measured_relief`) — and, on top, stains that darken the film and
+dust.
 
 Each function draws from the ``numpy.random.Generator`` it is given (the scene gives every
 variation its own stream, so switching one on does not move the others) and works on
@@ -9,8 +11,10 @@ their area, not with the image. Docs: docs/synthetic-stacks.md.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -18,12 +22,14 @@ from ..core.lazy import load
 
 cv2 = load("cv2")
 spatial = load("scipy.spatial")
+ndimage = load("scipy.ndimage")
+instruments = load("microfacet.io.instruments")
 
 __all__ = ["Carving", "FEATURE_CODES", "carve_pits", "carve_scratches", "dome_relief", "dust_layer",
-           "shaped_cells", "terrace_offsets_um"]
+           "measured_relief", "shaped_cells", "stain_layer", "terrace_offsets_um"]
 
 #: Codes of ``truth/feature.npy``.
-FEATURE_CODES = {"facet": 0, "pit": 1, "scratch": 2, "dust": 3}
+FEATURE_CODES = {"facet": 0, "pit": 1, "scratch": 2, "dust": 3, "stain": 4}
 
 
 def smooth_field(rng, shape, scale_px):
@@ -215,6 +221,41 @@ def carve_scratches(rng, shape, p, carving):
     return n
 
 
+def _ellipse_layer(shape, px, cy, cx, ra, rb, phi, value):
+    """Anti-aliased elliptical coverage of particles and the value of the topmost one.
+
+    Parameters
+    ----------
+    shape : (int, int)
+    px : float
+        Pixel size (µm).
+    cy, cx, ra, rb, phi, value : ndarray (n,)
+        Centres (µm), semi-axes (µm), orientation (rad) and a value per particle.
+
+    Returns
+    -------
+    coverage, level : ndarray of float32 (H, W)
+        Coverage 0-1 (a one-pixel linear ramp across each outline; where particles
+        overlap, the larger coverage) and the value of the particle that gives it.
+    """
+    cov = np.zeros(shape, dtype=np.float32)
+    level = np.zeros(shape, dtype=np.float32)
+    for y0, x0, a, b, f, g in zip(cy, cx, ra, rb, phi, value):
+        box = _box(shape, (y0 - a) / px - 1, (y0 + a) / px + 1, (x0 - a) / px - 1,
+                   (x0 + a) / px + 1)
+        if box is None:
+            continue
+        ys, xs = _grid_um(box, px)
+        u = (xs - x0) * math.cos(f) + (ys - y0) * math.sin(f)
+        v = -(xs - x0) * math.sin(f) + (ys - y0) * math.cos(f)
+        rho = np.sqrt((u / a) ** 2 + (v / b) ** 2)
+        c = np.clip((1.0 - rho) * b / px + 0.5, 0.0, 1.0).astype(np.float32)
+        more = c > cov[box]
+        cov[box] = np.where(more, c, cov[box])
+        level[box] = np.where(more, np.float32(g), level[box])
+    return cov, level
+
+
 def dust_layer(rng, shape, p):
     """Dust flakes: coverage (0-1, anti-aliased ellipses) and their grey linear reflectance.
 
@@ -232,19 +273,144 @@ def dust_layer(rng, shape, p):
     phi = rng.uniform(0, math.pi, n)
     bright = rng.random(n) < p.dust_bright_fraction
     grey = np.where(bright, rng.uniform(0.5, 0.9, n), rng.uniform(0.02, 0.08, n))
-    cov = np.zeros(shape, dtype=np.float32)
-    level = np.zeros(shape, dtype=np.float32)
-    for y0, x0, a, b, f, g in zip(cy, cx, ra, rb, phi, grey):
-        box = _box(shape, (y0 - a) / px - 1, (y0 + a) / px + 1, (x0 - a) / px - 1,
-                   (x0 + a) / px + 1)
-        if box is None:
-            continue
-        ys, xs = _grid_um(box, px)
-        u = (xs - x0) * math.cos(f) + (ys - y0) * math.sin(f)
-        v = -(xs - x0) * math.sin(f) + (ys - y0) * math.cos(f)
-        rho = np.sqrt((u / a) ** 2 + (v / b) ** 2)
-        c = np.clip((1.0 - rho) * b / px + 0.5, 0.0, 1.0).astype(np.float32)
-        more = c > cov[box]
-        cov[box] = np.where(more, c, cov[box])
-        level[box] = np.where(more, np.float32(g), level[box])
+    cov, level = _ellipse_layer(shape, px, cy, cx, ra, rb, phi, grey)
     return cov, level, n
+
+
+def stain_layer(rng, shape, p):
+    """Stains: patches of the film that reflect less (contamination, residue, a locally
+    altered oxide surface) without changing its height.
+
+    Anti-aliased ellipses like dust (radius log-normal around ``stain_radius_um``, SD 0.4 in
+    log, aspect 0.5-1), each with a reflectance factor uniform in
+    [``stain_reflectance_min``, ``stain_reflectance_max``] that multiplies the film's linear
+    RGB (dark, keeping its hue).
+
+    Returns
+    -------
+    coverage, factor : ndarray of float32 (H, W)
+        Coverage 0-1 and the factor of the stain covering each pixel (0 where none).
+    n : int
+        Number of stains.
+    """
+    px = p.pixel_size_um
+    n = _count(rng, p.stain_density_per_mm2, shape, p)
+    cy, cx = rng.uniform(0, shape[0], n) * px, rng.uniform(0, shape[1], n) * px
+    ra = p.stain_radius_um * np.exp(0.4 * rng.standard_normal(n))
+    rb = ra * rng.uniform(0.5, 1.0, n)
+    phi = rng.uniform(0, math.pi, n)
+    factor = rng.uniform(p.stain_reflectance_min, p.stain_reflectance_max, n)
+    cov, level = _ellipse_layer(shape, px, cy, cx, ra, rb, phi, factor)
+    return cov, level, n
+
+
+#: Largest fraction of undefined (NaN) points of a measured height map that is filled in.
+MAX_RELIEF_NAN_FRACTION = 0.2
+#: Fewest points per axis of a measured height map.
+MIN_RELIEF_PX = 8
+
+
+def _relief_error(path, why):
+    return ValueError(f"relief_file: {Path(path).name}: {why}")
+
+
+def measured_relief(rng, shape, p):
+    """The height of a measured surface (``p.relief_file``), resampled to the scene's pixels
+    with every slope preserved.
+
+    The map (any format of :func:`microfacet.io.instruments.read_height_map`; it must give
+    its pixel size) is turned by a random multiple of 90° and optionally mirrored, then a
+    random window of it is resampled (cubic spline) to H × W. The lateral magnification f (one µm
+    of the source becomes f µm of the scene) is the smallest that makes every source pixel at
+    least one scene pixel and lets the window fit in the map:
+    ``f = max(p/min(sy, sx), H p/((h−1) sy), W p/((w−1) sx))`` (``p`` the scene's, ``sy``,
+    ``sx`` the source's pixel size, h × w its points); heights are multiplied by f too, so
+    every slope dh/dx (µm/µm) is the source's. Undefined points (NaN, at most
+    :data:`MAX_RELIEF_NAN_FRACTION`) take the nearest defined height.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Draws the orientation and the window.
+    shape : (int, int)
+    p : SynthParams
+
+    Returns
+    -------
+    height_um : ndarray of float64 (H, W)
+        Zero median.
+    info : dict
+        What ``truth/params.json`` records (key ``relief``): ``file`` (the name, no folder),
+        ``sha256`` (first 16 hex digits of the file's bytes), ``source`` (format and
+        instrument), ``source_shape_px`` and ``source_pixel_size_um`` ((y, x) as read),
+        ``rot90`` (k of ``numpy.rot90``, applied after ``flip_lr``), ``flip_lr``,
+        ``magnification`` (f), ``zoom_px`` (scene pixels per source pixel, (y, x)),
+        ``window_origin_px`` and ``window_shape_px`` (in the turned map, (y, x), source
+        pixels), ``nan_filled_fraction``.
+
+    Raises
+    ------
+    ValueError
+        Naming ``relief_file``: unreadable, without a pixel size, too small, or with too
+        many undefined points.
+    """
+    path = Path(p.relief_file)
+    try:
+        m = instruments.read_height_map(path)
+    except ValueError as exc:
+        raise ValueError(f"relief_file: {exc}") from None
+    if m.pixel_size_um is None:
+        raise _relief_error(path, "the file gives no pixel size (a measured map needs one)")
+    h = np.asarray(m.height_um, dtype=np.float64)
+    if min(h.shape) < MIN_RELIEF_PX:
+        raise _relief_error(path, f"a height map of {h.shape[0]}x{h.shape[1]} points is too "
+                                  f"small (at least {MIN_RELIEF_PX} per axis)")
+    bad = ~np.isfinite(h)
+    nan_frac = float(bad.mean())
+    if nan_frac > MAX_RELIEF_NAN_FRACTION:
+        raise _relief_error(path, f"{100 * nan_frac:.0f} % of the points are undefined (at "
+                                  f"most {100 * MAX_RELIEF_NAN_FRACTION:.0f} % are filled in)")
+    if bad.any():
+        _, (iy, ix) = ndimage.distance_transform_edt(bad, return_indices=True)
+        h = h[iy, ix]
+    sy, sx = m.pixel_size_um
+    flip = bool(rng.integers(0, 2))
+    k = int(rng.integers(0, 4))
+    if flip:
+        h = h[:, ::-1]
+    h = np.rot90(h, k)
+    if k % 2:
+        sy, sx = sx, sy
+    H, W = shape
+    px = p.pixel_size_um
+    f = max(px / min(sy, sx), H * px / ((h.shape[0] - 1) * sy),
+            W * px / ((h.shape[1] - 1) * sx))
+    # Scene pixel (i, j) is source point (y0 + i·zy⁻¹, x0 + j·zx⁻¹), zy = f sy / p.
+    zy, zx = f * sy / px, f * sx / px
+    ext_y, ext_x = (H - 1) / zy, (W - 1) / zx
+    y0 = float(rng.uniform(0.0, max(h.shape[0] - 1 - ext_y, 0.0)))
+    x0 = float(rng.uniform(0.0, max(h.shape[1] - 1 - ext_x, 0.0)))
+    r0, c0 = int(math.floor(y0)), int(math.floor(x0))
+    r1 = min(h.shape[0], int(math.ceil(y0 + ext_y)) + 3)
+    c1 = min(h.shape[1], int(math.ceil(x0 + ext_x)) + 3)
+    r0, c0 = max(0, r0 - 2), max(0, c0 - 2)
+    crop = h[r0:r1, c0:c1]
+    crop = crop - float(np.median(crop))
+    yy = (y0 - r0) + np.arange(H, dtype=np.float64) / zy
+    xx = (x0 - c0) + np.arange(W, dtype=np.float64) / zx
+    # Cubic spline at exact positions (OpenCV's warps round them to 1/32 px, which shows in
+    # the slopes of a magnified map).
+    spline = ndimage.spline_filter(crop, order=3, mode="nearest")
+    out = ndimage.map_coordinates(spline, np.stack(np.meshgrid(yy, xx, indexing="ij")),
+                                  order=3, mode="nearest", prefilter=False)
+    out = out * f
+    out -= float(np.median(out))
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    info = {"file": path.name, "sha256": digest, "source": m.source,
+            "source_shape_px": [int(v) for v in m.height_um.shape],
+            "source_pixel_size_um": [float(v) for v in m.pixel_size_um],
+            "flip_lr": flip, "rot90": k, "magnification": float(f),
+            "zoom_px": [float(zy), float(zx)], "window_origin_px": [y0, x0],
+            "window_shape_px": [float(ext_y + 1), float(ext_x + 1)],
+            "nan_filled_fraction": nan_frac}
+    return out, info

@@ -3,8 +3,9 @@ noise-free image the microscope would see (:func:`render_scene`).
 
 The facets are planar Voronoi cells by default; the variations of
 :class:`~microfacet.forward.synth_params.SynthParams` add other cell shapes, rounded facets,
-terraces, pits and scratches (:mod:`microfacet.forward.relief`), dust, tilt-dependent
-brightness, vignetting and white balance (:mod:`microfacet.forward.imaging`). See
+terraces, pits and scratches, or replace the facets by a measured height map
+(:mod:`microfacet.forward.relief`), stains, dust, tilt-dependent brightness, vignetting and
+white balance (:mod:`microfacet.forward.imaging`). See
 :mod:`microfacet.forward.synth` for the stack written from a scene.
 """
 
@@ -25,8 +26,10 @@ from .relief import (
     carve_scratches,
     dome_relief,
     dust_layer,
+    measured_relief,
     shaped_cells,
     smooth_field,
+    stain_layer,
     terrace_offsets_um,
 )
 
@@ -35,7 +38,8 @@ ndimage = load("scipy.ndimage")
 __all__ = ["Scene", "render_scene"]
 
 #: Random streams ``[seed, k]`` of the variations (k = 1 is the sensor noise's).
-STREAMS = {"facets": 2, "terraces": 3, "pits": 4, "scratches": 5, "dust": 6, "drift": 7}
+STREAMS = {"facets": 2, "terraces": 3, "pits": 4, "scratches": 5, "dust": 6, "drift": 7,
+           "stains": 8, "relief": 9}
 
 
 @dataclass
@@ -55,8 +59,10 @@ class Scene:
     linear_rgb: np.ndarray           # H×W×3 sharp image, linear, every deterministic imaging
     #                                  effect applied (exposure, brightness, dust, vignetting,
     #                                  white balance), unclipped, float32
-    feature: np.ndarray | None = None  # uint8 FEATURE_CODES: facet, pit, scratch, dust
+    feature: np.ndarray | None = None  # uint8 FEATURE_CODES: facet, pit, scratch, dust, stain
     dust: np.ndarray | None = None     # dust coverage 0-1 (float32)
+    stain: np.ndarray | None = None    # stain coverage 0-1 (float32)
+    relief: dict | None = None         # the measured map's record (relief_file), else None
 
 
 def _voronoi(rng, shape, cell_px):
@@ -138,7 +144,18 @@ def render_scene(p, *, table=None) -> Scene:
     sy = frng.standard_normal(nf) * slope_sd + mgy[fy, fx]
     sx = frng.standard_normal(nf) * slope_sd + mgx[fy, fx]
     cy, cx = fy * px, fx * px
-    height = macro[fy, fx][facet] + sy[facet] * (yy - cy[facet]) + sx[facet] * (xx - cx[facet])
+    relief = None
+    if p.measured:
+        # A measured surface replaces facets and waviness (their draws are still made, so
+        # the regions below are those of the same seed without it); its slopes are central
+        # differences of the resampled map, the facet cells only label it.
+        height, relief = measured_relief(np.random.default_rng([p.seed, STREAMS["relief"]]),
+                                         shape, p)
+        mgy, mgx = np.gradient(height, px)
+        sy = sx = None
+    else:
+        height = (macro[fy, fx][facet] + sy[facet] * (yy - cy[facet])
+                  + sx[facet] * (xx - cx[facet]))
     if p.terrace_step_um > 0:
         trng = np.random.default_rng([p.seed, STREAMS["terraces"]])
         height += terrace_offsets_um(trng, shape, fy, fx, p)[facet]
@@ -159,7 +176,12 @@ def render_scene(p, *, table=None) -> Scene:
         dgy = carving.dgy if dgy is None else dgy + carving.dgy
         dgx = carving.dgx if dgx is None else dgx + carving.dgx
         feature = carving.feature
-    if dgy is None:
+    if p.measured:
+        gy = mgy if dgy is None else mgy + dgy
+        gx = mgx if dgx is None else mgx + dgx
+        tilt = np.rad2deg(np.arctan(np.hypot(gy, gx)))
+        azimuth = np.rad2deg(np.arctan2(-gy, -gx)) % 360.0
+    elif dgy is None:
         tilt = np.rad2deg(np.arctan(np.hypot(sy, sx)))[facet]
         # Azimuth of the normal's horizontal component (the surface rises toward +slope,
         # the normal leans the other way): normal ∝ (−sx, −sy, 1).
@@ -194,8 +216,15 @@ def render_scene(p, *, table=None) -> Scene:
         lit = frac[..., 0] > 0
         rgb = table.linear_rgb_at(np.where(lit, tilt, 0.0), thickness).astype(np.float64)
         rgb = (rgb * frac + (1.0 - frac) * p.dark_level) * p.exposure
-    groove = _groove_coverage(facet, groove_height, p)
+    groove = (np.zeros(shape) if p.measured  # a continuous surface: no steps between cells
+              else _groove_coverage(facet, groove_height, p))
     rgb = rgb * (1.0 - groove[..., None]) + groove[..., None] * p.dark_level * p.exposure
+    stain = np.zeros(shape, dtype=np.float32)
+    if p.stain_density_per_mm2 > 0:
+        stain, factor, _ = stain_layer(np.random.default_rng([p.seed, STREAMS["stains"]]),
+                                       shape, p)
+        rgb = rgb * (1.0 - stain * (1.0 - factor))[..., None]
+        feature = np.where(stain >= 0.5, np.uint8(FEATURE_CODES["stain"]), feature)
     dust = np.zeros(shape, dtype=np.float32)
     if p.dust_density_per_mm2 > 0:
         dust, grey, _ = dust_layer(np.random.default_rng([p.seed, STREAMS["dust"]]), shape, p)
@@ -209,7 +238,7 @@ def render_scene(p, *, table=None) -> Scene:
     return Scene(height.astype(np.float32), tilt.astype(np.float32), azimuth.astype(np.float32),
                  thickness.astype(np.float32), visible, facet.astype(np.int32),
                  region.astype(np.int32), region_d, comp, groove.astype(np.float32),
-                 rgb, feature, dust)
+                 rgb, feature, dust, stain, relief)
 
 
 def _skip_default_facets(rng, shape, cell_px, lobe_weights):

@@ -28,10 +28,11 @@ Scene (seed §3.2-3.3, Fig. 13)
   read noise, clipping, sRGB encoding, 8- or 16-bit PNG slices.
 
 Imaging variations (:class:`~microfacet.forward.synth_params.SynthParams`, all off by
-default): other facet shapes, rounded facets, terraces, pits, scratches, dust
-(:mod:`~microfacet.forward.relief`), tilt-dependent brightness, vignetting, white balance,
-drift between slices (:mod:`~microfacet.forward.imaging`), JPEG slices, other optical
-constants. docs/synthetic-stacks.md lists them.
+default): other facet shapes, rounded facets, terraces, pits, scratches, a measured height
+map instead of facets, stains, dust (:mod:`~microfacet.forward.relief`), tilt-dependent
+brightness, vignetting, white balance, drift between slices
+(:mod:`~microfacet.forward.imaging`), JPEG slices, other optical constants.
+docs/synthetic-stacks.md lists them.
 
 The default scene is drawn from one ``numpy.random.Generator`` seeded with ``seed``, the
 noise and each variation from their own (``[seed, k]``); the same parameters and seed give
@@ -215,7 +216,7 @@ def generate_stack(out, params: SynthParams, *, overwrite=False, progress=None) 
     ``truth/thickness_nm.npy``, ``truth/visible.npy``, ``truth/clipped.npy``,
     ``truth/region_id.npy``, ``truth/groove.npy`` (fraction of each pixel covered by a dark
     step wall), ``truth/facet_id.npy`` (int32 facet cell), ``truth/feature.npy`` (uint8:
-    0 facet, 1 pit, 2 scratch, 3 dust), ``truth/all_in_focus.png`` (the noise-free sharp
+    0 facet, 1 pit, 2 scratch, 3 dust, 4 stain), ``truth/all_in_focus.png`` (the noise-free sharp
     image with every deterministic imaging effect: brightness, grooves, dust, vignetting,
     white balance, clipping; no noise, blur, drift or JPEG) and ``truth/params.json``
     (:func:`_truth_summary`). With drift, the truth is in the frame of the slices' mean
@@ -311,7 +312,9 @@ def _truth_summary(scene, p, *, clipped) -> dict:
     ``visibility_limit_deg`` (asin(NA)/2), ``visible_fraction``, ``clipped_fraction``,
     ``groove_fraction`` (pixels with a groove wall), ``feature_codes`` and
     ``feature_fractions``, ``variations`` (the imaging variations switched on) and
-    ``slice_format``.
+    ``slice_format``. With ``relief_file``: ``lobes`` is empty (the tilts are the measured
+    surface's, ``tilt_deg.npy``) and ``relief`` records the map
+    (:func:`~microfacet.forward.relief.measured_relief`).
     """
     rid = scene.region_id.ravel()
     nr = scene.region_thickness_nm.size
@@ -334,17 +337,22 @@ def _truth_summary(scene, p, *, clipped) -> dict:
     wsum = sum(lb.weight for lb in p.tilt_lobes)
     feature = scene.feature if scene.feature is not None else np.zeros(rid.size, np.uint8)
     counts = np.bincount(feature.ravel(), minlength=len(FEATURE_CODES)) / rid.size
-    return {"regions": regions, "populations": pops,
-            "lobes": [{"weight": lb.weight / wsum, "sd_deg": lb.sd_deg} for lb in p.tilt_lobes],
+    lobes = [] if p.measured else [{"weight": lb.weight / wsum, "sd_deg": lb.sd_deg}
+                                   for lb in p.tilt_lobes]
+    variations = {k: list(v) if isinstance(v, tuple) else v
+                  for k, v in p.variations_on().items()}
+    extra = {}
+    if p.measured:
+        variations["relief_file"] = Path(p.relief_file).name
+        extra["relief"] = scene.relief
+    return {"regions": regions, "populations": pops, "lobes": lobes,
             "visibility_limit_deg": p.max_tilt_deg,
             "visible_fraction": float(scene.visible.mean()),
             "clipped_fraction": float(clipped.mean()),
             "groove_fraction": float(np.mean(scene.groove > 0)),
             "feature_codes": dict(FEATURE_CODES),
             "feature_fractions": {n: float(counts[c]) for n, c in FEATURE_CODES.items()},
-            "variations": {k: list(v) if isinstance(v, tuple) else v
-                           for k, v in p.variations_on().items()},
-            "slice_format": p.slice_suffix[1:]}
+            "variations": variations, "slice_format": p.slice_suffix[1:], **extra}
 
 
 def apply_sensor(img, p, rng):

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 from ..core.defaults import DEFAULT_ILLUMINANT
 from ..core.lazy import load
@@ -186,6 +187,29 @@ class SynthParams:
         ``truth/params.json`` key ``drift_px`` lists (dy, dx) per slice. 0 = none.
     jpeg_quality : int or None
         Write the slices as JPEG of this quality (1-100; 8-bit only); None = PNG (default).
+    stain_density_per_mm2 : float
+        Stains per mm²: patches where the film reflects less (residue, contamination, a
+        locally altered oxide) but the surface is where it was: **not in the height map**,
+        the same height and tilt as around them. Each multiplies the film's linear RGB by a
+        factor uniform in [``stain_reflectance_min``, ``stain_reflectance_max``] (dark, the
+        film's hue kept), with anti-aliased elliptical coverage like dust;
+        ``truth/feature.npy`` marks them (code 4). 0 = none (default).
+    stain_radius_um : float
+        Mean stain radius (log-normal, SD 0.4 in log; aspect ratio 0.5-1).
+    stain_reflectance_min, stain_reflectance_max : float
+        Range of the stains' reflectance factors (0-1).
+    relief_file : str or None
+        A measured height map (any format of
+        :func:`microfacet.io.instruments.read_height_map` that gives a pixel size: .npy with
+        no pixel size is refused) that **replaces** the facets and the waviness: turned by a
+        random multiple of 90°, mirrored or not, and a random window resampled to the
+        scene's pixels with every slope preserved (:func:`~microfacet.forward.relief.
+        measured_relief`). The truth tilt is that of the resampled map (central
+        differences). The Voronoi facets still label ``truth/facet_id.npy`` and carry the
+        per-facet thickness offsets; there are no grooves, and terraces and rounded facets
+        cannot be combined with it. ``truth/params.json`` records the file's name (never its
+        folder) with a SHA-256 prefix, the orientation and the window (key ``relief``).
+        None = the synthetic facets (default).
     """
 
     height_px: int = 256
@@ -238,6 +262,11 @@ class SynthParams:
     white_balance_gains: tuple = (1.0, 1.0, 1.0)
     drift_px_per_slice: float = 0.0
     jpeg_quality: int | None = None
+    stain_density_per_mm2: float = 0.0
+    stain_radius_um: float = 1.5
+    stain_reflectance_min: float = 0.05
+    stain_reflectance_max: float = 0.35
+    relief_file: str | None = None
 
     @property
     def max_tilt_deg(self) -> float:
@@ -253,6 +282,11 @@ class SynthParams:
     def default_facets(self) -> bool:
         """True for the original isotropic planar Voronoi facets."""
         return self.facet_aspect == 1.0 and self.facet_size_spread == 0.0
+
+    @property
+    def measured(self) -> bool:
+        """True when the height is a measured map (``relief_file``), not facets."""
+        return self.relief_file is not None
 
     def variations_on(self) -> dict:
         """The variation fields that differ from their (off) defaults: ``{name: value}``."""
@@ -307,15 +341,38 @@ class SynthParams:
             ("jpeg_quality", self.jpeg_quality is None
              or (isinstance(self.jpeg_quality, int) and 1 <= self.jpeg_quality <= 100
                  and self.bit_depth == 8)),
+            ("stain_density_per_mm2", self.stain_density_per_mm2 >= 0),
+            ("stain_radius_um", self.stain_radius_um > 0),
+            ("stain_reflectance_min", 0 <= self.stain_reflectance_min <= 1),
+            ("stain_reflectance_max", self.stain_reflectance_min <= self.stain_reflectance_max
+             <= 1),
         ]
         for name, ok in checks:
             if not ok:
                 extra = " (JPEG slices are 8-bit)" if name == "jpeg_quality" else ""
                 raise ValueError(f"{name}: out of range ({getattr(self, name)!r}){extra}")
+        self._validate_relief()
+
+    def _validate_relief(self) -> None:
+        if self.relief_file is None:
+            return
+        if not isinstance(self.relief_file, str) or not self.relief_file.strip():
+            raise ValueError(f"relief_file: expected the path of a height map, got "
+                             f"{self.relief_file!r}")
+        if not Path(self.relief_file).is_file():
+            raise ValueError(f"relief_file: {self.relief_file}: file not found")
+        for name in ("terrace_step_um", "facet_dome_deg"):
+            if getattr(self, name) != 0:
+                raise ValueError(f"relief_file: a measured surface cannot be combined with "
+                                 f"{name} (set it to 0)")
 
     def to_json(self) -> dict:
+        """Every field, JSON-ready; ``relief_file`` as its name only (no folder of the
+        machine that wrote it), so :meth:`from_json` gives a name to resolve again."""
         d = dataclasses.asdict(self)
         d["white_balance_gains"] = list(self.white_balance_gains)
+        if self.relief_file is not None:
+            d["relief_file"] = Path(self.relief_file).name
         d["max_tilt_deg"] = self.max_tilt_deg
         return d
 
@@ -357,15 +414,16 @@ VARIATIONS: dict[str, type] = {
     "illumination_fill": float, "vignetting_corner_loss": float,
     "white_balance_gains": tuple, "drift_px_per_slice": float, "jpeg_quality": int,
     "film": str, "substrate": str, "exposure": float, "full_well_e": float,
-    "read_noise": float,
+    "read_noise": float, "stain_density_per_mm2": float, "stain_radius_um": float,
+    "stain_reflectance_min": float, "stain_reflectance_max": float, "relief_file": str,
 }
 
 
 def parse_variation(text: str) -> tuple[str, object]:
     """``"NAME=VALUE"`` → ``(name, value)`` of a :data:`VARIATIONS` field.
 
-    Gains are three comma-separated numbers; ``none`` clears ``jpeg_quality`` and
-    ``full_well_e``.
+    Gains are three comma-separated numbers; ``none`` clears ``jpeg_quality``,
+    ``full_well_e`` and ``relief_file``.
 
     Raises
     ------
@@ -387,7 +445,7 @@ def parse_variation(text: str) -> tuple[str, object]:
         raise ValueError(f"variation: expected NAME=VALUE with NAME one of "
                          f"{', '.join(VARIATIONS)}; got {text!r}")
     kind = VARIATIONS[name]
-    if value.lower() == "none" and name in ("jpeg_quality", "full_well_e"):
+    if value.lower() == "none" and name in ("jpeg_quality", "full_well_e", "relief_file"):
         return name, None
     try:
         if kind is tuple:

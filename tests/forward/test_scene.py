@@ -1,16 +1,22 @@
 """The synthetic scene (microfacet.forward.scene): thickness regions follow the mixture,
 facet tilts the lobes and the acceptance angle; each imaging variation changes what it
-should and nothing else."""
+should and nothing else; stains; measured geometry (``relief_file``); the textureless
+facets world."""
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from microfacet.forward.imaging import pupil_fraction
 from microfacet.forward.relief import FEATURE_CODES
 from microfacet.forward.scene import render_scene
 from microfacet.forward.synth import preset
+from microfacet.io.x3p import write_x3p
+
+HEIGHTS = Path(__file__).resolve().parents[2] / "fixtures" / "instrument-heights"
 
 
 @pytest.mark.slow
@@ -31,7 +37,7 @@ def test_thickness_regions_follow_the_mixture_and_tilts_the_lobes():
 
 FIELDS = ("height_um", "tilt_deg", "azimuth_deg", "thickness_nm", "visible", "facet_id",
           "region_id", "region_thickness_nm", "region_component", "groove", "linear_rgb",
-          "feature", "dust")
+          "feature", "dust", "stain")
 SURFACE = {"height_um", "tilt_deg", "azimuth_deg", "visible"}
 
 # variation -> (fields that must change, fields that may change as a consequence)
@@ -49,6 +55,7 @@ CASES = {
     "scratch_density_per_mm2": (3000.0, {"height_um", "tilt_deg", "feature", "linear_rgb"},
                                 SURFACE),
     "dust_density_per_mm2": (6000.0, {"dust", "feature", "linear_rgb"}, set()),
+    "stain_density_per_mm2": (6000.0, {"stain", "feature", "linear_rgb"}, set()),
     "illumination_fill": (0.8, {"linear_rgb"}, set()),
     "vignetting_corner_loss": (0.4, {"linear_rgb"}, set()),
     "white_balance_gains": ((1.1, 1.0, 0.9), {"linear_rgb"}, set()),
@@ -233,3 +240,147 @@ def test_terraces_raise_whole_facets_by_whole_steps():
     assert np.all(np.bincount(lab, per) == per[np.unique(lab, return_index=True)[1]]
                   * np.bincount(lab))           # one level per facet
     assert b.groove.sum() > a.groove.sum()      # the terrace edges are dark walls
+
+
+# ------------------------------------------------------------------------------------ stains
+
+
+def test_stains_darken_the_film_keep_its_hue_and_leave_the_surface():
+    base = preset("nd", seed=6, height_px=64, width_px=64)
+    a = render_scene(base)
+    b = render_scene(dataclasses.replace(base, stain_density_per_mm2=8000.0,
+                                         stain_radius_um=1.5))
+    full = b.stain == 1.0
+    assert full.sum() > 30
+    assert np.all(b.feature[full] == FEATURE_CODES["stain"])
+    ratio = b.linear_rgb[full] / a.linear_rgb[full]
+    # one factor per pixel for all three channels (the hue kept), in the drawn range
+    np.testing.assert_allclose(ratio, ratio[:, :1].repeat(3, axis=1), rtol=1e-5)
+    assert ratio.min() >= 0.05 - 1e-6 and ratio.max() <= 0.35 + 1e-6
+    untouched = b.stain == 0
+    np.testing.assert_array_equal(b.linear_rgb[untouched], a.linear_rgb[untouched])
+    partial = (b.stain > 0) & (b.stain < 1)
+    assert partial.any()                                  # anti-aliased outlines
+    for name in ("height_um", "tilt_deg", "azimuth_deg", "thickness_nm", "visible", "groove"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+# ----------------------------------------------------------------- measured geometry (relief)
+
+
+def _source_window_rms_slope(relief, height_um, pixel_size_um):
+    """RMS |∇h| of the source map (computed here, numpy central differences) over the
+    window the scene shows, in the orientation the scene recorded."""
+    h = np.asarray(height_um, dtype=np.float64)
+    sy, sx = pixel_size_um
+    if relief["flip_lr"]:
+        h = h[:, ::-1]
+    h = np.rot90(h, relief["rot90"])
+    if relief["rot90"] % 2:
+        sy, sx = sx, sy
+    gy, gx = np.gradient(h, sy, sx)
+    (y0, x0), (ny, nx) = relief["window_origin_px"], relief["window_shape_px"]
+    win = (slice(int(np.ceil(y0)), int(y0 + ny)), slice(int(np.ceil(x0)), int(x0 + nx)))
+    return float(np.sqrt(np.mean(gy[win] ** 2 + gx[win] ** 2)))
+
+
+def _rms_truth_slope(scene):
+    return float(np.sqrt(np.mean(np.tan(np.radians(scene.tilt_deg.astype(np.float64))) ** 2)))
+
+
+def _smooth_map(shape, seed):
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
+    h = np.zeros(shape)
+    for _ in range(6):
+        ky, kx = rng.uniform(0.05, 0.25, 2) * rng.choice([-1, 1], 2)
+        h += rng.uniform(0.5, 2.0) * np.sin(ky * yy + kx * xx + rng.uniform(0, 6.3))
+    return h
+
+
+def test_measured_relief_keeps_the_slopes_of_the_map(tmp_path):
+    """An x3p map with anisotropic pixels: the truth's RMS slope (tan of the tilt) equals
+    the source's RMS gradient over the window shown, heights are the map's scaled by the
+    recorded magnification, there are no grooves and the Voronoi cells still label it."""
+    h = _smooth_map((90, 110), 1)
+    write_x3p(tmp_path / "m.x3p", h, (0.5, 0.7))
+    p = preset("nd", seed=2, height_px=64, width_px=64, relief_file=str(tmp_path / "m.x3p"))
+    s = render_scene(p)
+    r = s.relief
+    assert r["file"] == "m.x3p" and len(r["sha256"]) == 16
+    assert min(r["zoom_px"]) >= 1.0 - 1e-12
+    want = _source_window_rms_slope(r, h, (0.5, 0.7))
+    assert _rms_truth_slope(s) == pytest.approx(want, rel=0.03)
+    assert np.all(s.groove == 0) and s.facet_id.max() > 10
+    np.testing.assert_array_equal(s.visible, s.tilt_deg <= p.max_tilt_deg)
+    # the tilt is the central-difference gradient of the truth height
+    gy, gx = np.gradient(s.height_um.astype(np.float64), p.pixel_size_um)
+    np.testing.assert_allclose(np.tan(np.radians(s.tilt_deg)), np.hypot(gy, gx),
+                               rtol=1e-4, atol=1e-5)
+    # same seed, same scene; the thickness regions are those of the synthetic scene
+    t = render_scene(p)
+    np.testing.assert_array_equal(s.height_um, t.height_um)
+    np.testing.assert_array_equal(s.region_id, render_scene(
+        preset("nd", seed=2, height_px=64, width_px=64)).region_id)
+
+
+@pytest.mark.slow
+def test_measured_relief_from_an_alicona_file_keeps_its_rms_slope():
+    pytest.importorskip("SurfaceTopography")
+    from microfacet.io.instruments import read_height_map
+
+    m = read_height_map(HEIGHTS / "al3d-1.al3d")
+    for seed in (1, 2):
+        p = preset("nd", seed=seed, height_px=96, width_px=128,
+                   relief_file=str(HEIGHTS / "al3d-1.al3d"))
+        s = render_scene(p)
+        want = _source_window_rms_slope(s.relief, m.height_um, m.pixel_size_um)
+        assert 0.15 < want < 0.4
+        assert _rms_truth_slope(s) == pytest.approx(want, rel=0.03)
+
+
+def test_measured_relief_errors_name_relief_file(tmp_path):
+    np.save(tmp_path / "h.npy", _smooth_map((40, 40), 2))          # no pixel size
+    write_x3p(tmp_path / "tiny.x3p", _smooth_map((5, 40), 3), 0.5)
+    holes = _smooth_map((40, 40), 4)
+    holes[:, :20] = np.nan
+    write_x3p(tmp_path / "holes.x3p", holes, 0.5)
+    kw = dict(seed=1, height_px=32, width_px=32)
+    for name, why in (("h.npy", "pixel size"), ("tiny.x3p", "too small"),
+                      ("holes.x3p", "undefined"), ("nope.x3p", "not found")):
+        with pytest.raises(ValueError, match=f"^relief_file: .*{why}"):
+            render_scene(preset("nd", **kw, relief_file=str(tmp_path / name)))
+    with pytest.raises(ValueError, match="^relief_file: .*terrace_step_um"):
+        preset("nd", **kw, relief_file=str(tmp_path / "holes.x3p"), terrace_step_um=1.0)
+
+
+def test_measured_relief_fills_a_few_undefined_points(tmp_path):
+    h = _smooth_map((60, 60), 5)
+    h[10:14, 20:25] = np.nan
+    write_x3p(tmp_path / "m.x3p", h, 0.3)
+    s = render_scene(preset("nd", seed=1, height_px=32, width_px=32,
+                            relief_file=str(tmp_path / "m.x3p")))
+    assert np.isfinite(s.height_um).all() and np.isfinite(s.tilt_deg).all()
+    assert s.relief["nan_filled_fraction"] == pytest.approx(20 / 3600)
+
+
+# ------------------------------------------------------------ the textureless facets world
+
+
+def test_facets_without_grooves_have_contrast_only_at_the_sparse_defects():
+    """groove_wall_deg = 0, no per-facet thickness offsets, pits: inside a facet and away
+    from the defects the image is flat; the contrast lives at the pits."""
+    p = preset("nd", seed=3, height_px=128, width_px=128, groove_wall_deg=0.0,
+               thickness_facet_sd_nm=0.0, pit_density_per_mm2=1500.0, pit_radius_um=1.5)
+    s = render_scene(p)
+    assert np.all(s.groove == 0)
+    lum = s.linear_rgb.mean(axis=-1).astype(np.float64)
+    near = ndimage.binary_dilation(s.feature > 0, iterations=2)
+    step = np.abs(np.diff(lum, axis=1))
+    same = (s.facet_id[:, 1:] == s.facet_id[:, :-1]) & ~near[:, 1:] & ~near[:, :-1]
+    across = (s.facet_id[:, 1:] != s.facet_id[:, :-1]) & ~near[:, 1:] & ~near[:, :-1]
+    at_pits = (s.feature[:, 1:] > 0) | (s.feature[:, :-1] > 0)
+    assert same.sum() > 5000 and at_pits.sum() > 100
+    assert np.percentile(step[same], 99) < 0.002       # facet interiors: no texture
+    assert np.median(step[across]) < 0.02               # facet edges: weak (tilt only)
+    assert np.percentile(step[at_pits], 90) > 0.1       # the pits carry the contrast

@@ -358,3 +358,28 @@ def test_other_optical_constants_are_named_in_stack_json(tmp_path):
     assert np.abs(a - b).mean() > 3
     with pytest.raises(ValueError, match="film"):
         preset("sd", film="TiO2_nonexistent")
+
+
+@pytest.mark.slow
+def test_measured_stained_stack_records_its_relief_by_name(tmp_path):
+    from microfacet.io.x3p import write_x3p
+
+    yy, xx = np.mgrid[0:80, 0:90].astype(float)
+    write_x3p(tmp_path / "surface.x3p", np.sin(0.2 * yy) + np.cos(0.15 * xx), 0.4)
+    p = preset("nd", seed=2, height_px=48, width_px=48, n_slices=3,
+               relief_file=str(tmp_path / "surface.x3p"), stain_density_per_mm2=40000.0)
+    generate_stack(tmp_path / "s", p)
+    t = tmp_path / "s" / "truth"
+    meta = json.loads((t / "params.json").read_text())
+    assert meta["params"]["relief_file"] == "surface.x3p"
+    assert meta["variations"]["relief_file"] == "surface.x3p"
+    assert str(tmp_path) not in (t / "params.json").read_text()
+    r = meta["relief"]
+    assert r["file"] == "surface.x3p" and r["sha256"] == hashlib.sha256(
+        (tmp_path / "surface.x3p").read_bytes()).hexdigest()[:16]
+    assert {"rot90", "flip_lr", "window_origin_px", "magnification"} <= set(r)
+    assert meta["lobes"] == [] and meta["groove_fraction"] == 0.0
+    assert meta["feature_codes"]["stain"] == 4
+    feature = np.load(t / "feature.npy")
+    assert np.mean(feature == 4) > 0
+    assert meta["feature_fractions"]["stain"] == pytest.approx(np.mean(feature == 4))

@@ -22,7 +22,9 @@ from microfacet.forward.synth_params import (
     dict(scratch_width_um=0.0), dict(scratch_spread_deg=120.0), dict(dust_bright_fraction=2.0),
     dict(illumination_fill=1.5), dict(vignetting_corner_loss=1.0),
     dict(white_balance_gains=(1.0, 0.0, 1.0)), dict(drift_px_per_slice=-0.1),
-    dict(jpeg_quality=0), dict(film="nope"), dict(substrate="nope")])
+    dict(jpeg_quality=0), dict(film="nope"), dict(substrate="nope"),
+    dict(stain_density_per_mm2=-1.0), dict(stain_radius_um=0.0),
+    dict(stain_reflectance_max=1.5), dict(relief_file=""), dict(relief_file="/no/such.x3p")])
 def test_out_of_range_variations_name_the_parameter(kw):
     (name,) = kw
     with pytest.raises(ValueError, match=f"^{name}:"):
@@ -46,11 +48,23 @@ def test_json_round_trip_and_older_files():
         p, scratch_density_per_mm2=0.0, white_balance_gains=(1.0, 1.0, 1.0), jpeg_quality=None)
 
 
+def test_relief_file_is_recorded_by_name_only(tmp_path):
+    f = tmp_path / "deep" / "m.x3p"
+    f.parent.mkdir()
+    f.write_bytes(b"x")
+    p = SynthParams(relief_file=str(f))
+    assert p.measured and p.to_json()["relief_file"] == "m.x3p"
+    assert "relief_file" in p.variations_on()
+    assert not SynthParams().measured
+
+
 def test_parse_variation():
     assert parse_variation("facet_aspect=2.5") == ("facet_aspect", 2.5)
     assert parse_variation(" jpeg_quality = 85 ") == ("jpeg_quality", 85)
     assert parse_variation("film=TiO2_Jolivet2023_anatase") == ("film",
                                                                 "TiO2_Jolivet2023_anatase")
+    assert parse_variation("relief_file=none") == ("relief_file", None)
+    assert parse_variation("stain_density_per_mm2=900") == ("stain_density_per_mm2", 900.0)
     for bad, name in (("facet_aspect", "variation"), ("nope=1", "variation"),
                       ("facet_aspect=big", "facet_aspect")):
         with pytest.raises(ValueError, match=f"^{name}:"):
