@@ -1,6 +1,8 @@
 """Self-check against truth on a folder of synthetic stacks (issue 22 work in progress; not yet
 a registered study): per scene, the measured/true RMS facet slope and the self-check's
-transfer (``analysis.self_check``).
+transfer (``analysis.self_check``), the scene's world (faceted, sparse, measured: see
+``pipelines.studies.accuracy_sweep``), and the censored fraction against the truly-past-limit
+area.
 
     python -m pipelines.self_check_sweep STACKS_DIR
 
@@ -20,6 +22,7 @@ from microfacet.analysis import AnalysisOptions, analyse_stack
 from microfacet.analysis import self_check as sc
 from microfacet.analysis.options import FitOptions
 from microfacet.analysis.planes import fit_facet_planes
+from pipelines.studies.accuracy_sweep import world_of
 
 
 def _actual_gain(r, true_height_um) -> float | None:
@@ -37,6 +40,30 @@ def _actual_gain(r, true_height_um) -> float | None:
                          r.joint.area_px[ok].astype(np.float64))
 
 
+def past_limit_fraction(truth: Path) -> float:
+    """Fraction of the surface truly tilted past the acceptance, asin(NA)/2: pixels of the
+    truth whose tilt exceeds it, among those that are facet (not pit, scratch, dust or
+    stain: ``feature.npy`` code 0; all pixels of stacks without it)."""
+    meta = json.loads((truth / "params.json").read_text())
+    t = np.load(truth / "tilt_deg.npy")
+    f = truth / "feature.npy"
+    facet = np.load(f) == 0 if f.is_file() else np.ones(t.shape, bool)
+    if not facet.any():
+        return float("nan")
+    return float(np.mean(t[facet] > meta["visibility_limit_deg"]))
+
+
+def censored_fractions(r) -> dict:
+    """The analysis' censored share: the NDF fit's censored weight fraction
+    (``MixtureFit.info["censored_fraction"]``) and the fraction of pixels it marked
+    censored (``joint.censored``); None where the result has neither."""
+    ndf = getattr(r.distributions, "ndf", None)
+    info = getattr(ndf, "info", None) or {}
+    cens = getattr(getattr(r, "joint", None), "censored", None)
+    return {"censored_fraction": info.get("censored_fraction"),
+            "censored_pixel_fraction": None if cens is None else float(np.mean(cens))}
+
+
 def main(folder: str) -> None:
     for d in sorted(p for p in Path(folder).iterdir() if (p / "truth").is_dir()):
         r = analyse_stack(d, AnalysisOptions(fits=FitOptions(self_check=True)))
@@ -45,7 +72,10 @@ def main(folder: str) -> None:
         true_rms = float(np.sqrt(np.mean(np.tan(np.radians(t[vis])) ** 2)))
         meas = sc.measured_rms_slope(r.joint, r.scene.max_tilt_deg)
         c = r.self_check
+        params = json.loads((d / "truth" / "params.json").read_text())["params"]
         print(json.dumps({
+            "world": world_of(params), "relief_file": params.get("relief_file"),
+            "past_limit_fraction": past_limit_fraction(d / "truth"), **censored_fractions(r),
             "actual_gain": _actual_gain(r, np.load(d / "truth" / "height_um.npy")),
             "scene": d.name, "true_rms_slope": true_rms, "measured_rms_slope": meas,
             "actual_ratio": None if meas is None else meas / true_rms,

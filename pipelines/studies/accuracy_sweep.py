@@ -1,11 +1,19 @@
 """Generalization sweep: the analysis on synthetic scenes drawn across independent imaging
 variations it was not tuned on, scored fairly against their truth.
 
-Every scene draws each variation of ``microfacet.forward.synth_params`` on or off
+Every scene first draws its *world* (:data:`WORLDS`): ``faceted`` (planar facets with dark
+grooves, the generator's own scenes), ``sparse`` (facets with no grooves and no per-facet
+thickness offsets, so their interiors carry no texture: the contrast lives only at a few
+pits and/or scratches) or ``measured`` (the geometry of a real instrument height map of
+``fixtures/instrument-heights/``, :data:`MEASURED_FILES`, resampled with its slopes kept; no
+grooves). Then it draws each variation of ``microfacet.forward.synth_params`` on or off
 independently (probability ``P_ON``) with a strength log-uniform in a realistic range: no
 grooves between facets, pits, scratches, dust, vignetting, JPEG slices, white-balance error,
 drift between slices, tilt-dependent brightness, elongated / size-spread / rounded facets,
-other optical constants, terraces. Always drawn: 1-3 thickness populations (means 20-260 nm,
+other optical constants, terraces, stains (dark patches of the film, not in the height).
+The world, the stains and the sparse world's defects come from their own stream
+(``[seed, i, 1]``), so the other draws of scene ``i`` are those of the sweep before worlds
+existed. Always drawn: 1-3 thickness populations (means 20-260 nm,
 across the first two interference orders, ≥ 12 nm and ≥ 4 SD apart), 1-2 NDF lobes of
 2-14°, facet size, waviness, per-facet thickness offsets, exposure and sensor noise. The
 stacks are analysed with ``microfacet.workflow.run_batch`` (``mode``: joint, seed or both)
@@ -18,7 +26,8 @@ Outputs under ``out``: ``generalization.csv`` (one row per scene and mode),
 ``generalization.png`` (median scores with each variation on and off; ``--docs`` copies both
 into docs/data/ and docs/img/) and ``work/`` (the stacks and results; ``work=DIR`` keeps them
 elsewhere and resumes a sweep there). The table is the targets beside each mode's summary
-scores (docs/accuracy.md); the per-scene table goes to stderr.
+scores, over all scenes and per world (docs/accuracy.md); the per-scene table goes to
+stderr.
 """
 
 from __future__ import annotations
@@ -34,7 +43,7 @@ import numpy as np
 from microfacet.forward.synth import SynthParams, ThicknessComponent, TiltLobe
 from microfacet.optics import DEFAULT_FILM, known_sets
 from pipelines import Study
-from pipelines._shared import fmt, md_table, note, pyplot, save_figure, write_csv
+from pipelines._shared import ROOT, fmt, md_table, note, pyplot, save_figure, write_csv
 
 STUDY = Study(
     name="accuracy-sweep",
@@ -91,7 +100,66 @@ VARIATIONS = {
         film=str(r.choice([s for s in known_sets() if s.startswith("TiO2") and s != DEFAULT_FILM])),
         substrate=str(r.choice([s for s in known_sets() if s.startswith("Ti_")]))),
     "terraces": lambda r: dict(terrace_step_um=_lu(r, 0.3, 1.5), terrace_size_um=_lu(r, 10, 30)),
+    "stains": lambda r: dict(stain_density_per_mm2=_lu(r, 300, 3000),
+                             stain_radius_um=_lu(r, 0.5, 3.0)),
 }
+#: Variations drawn from the world's stream (added after the sweep's first version).
+WORLD_STREAM_VARIATIONS = ("stains",)
+
+#: The worlds of a scene and their probabilities.
+WORLDS = {"faceted": 0.5, "sparse": 0.25, "measured": 0.25}
+#: Folder of the instrument height maps of the ``measured`` world.
+HEIGHTS = ROOT / "fixtures" / "instrument-heights"
+#: Their files and probabilities (al3d: rough, RMS gradient 0.24; plu and mnt: nearly flat).
+MEASURED_FILES = {"al3d-1.al3d": 0.6, "plu-1.plu": 0.2, "mnt-1.mnt": 0.2}
+#: Variations a measured surface replaces (the generator refuses them with ``relief_file``).
+NOT_MEASURED = ("terraces", "rounded", "no_grooves")
+
+
+def draw_world(rng) -> tuple[str, dict]:
+    """A world and the parameters it sets (over the scene's other draws).
+
+    >>> world, kw = draw_world(np.random.default_rng([0, 0, 1]))
+    >>> world in WORLDS
+    True
+    """
+    world = str(rng.choice(list(WORLDS), p=list(WORLDS.values())))
+    if world == "sparse":
+        kw = dict(groove_wall_deg=0.0, thickness_facet_sd_nm=0.0)
+        u = rng.random()
+        if u < 2 / 3:   # pits (alone or with scratches), sparse
+            kw.update(pit_density_per_mm2=_lu(rng, 300, 1500), pit_radius_um=_lu(rng, 1, 3),
+                      pit_wall_deg=float(rng.uniform(50, 75)))
+        if u >= 1 / 3:  # scratches (alone or with pits), sparse
+            kw.update(scratch_density_per_mm2=_lu(rng, 150, 600),
+                      scratch_length_um=_lu(rng, 20, 100), scratch_width_um=_lu(rng, 0.5, 1.5),
+                      scratch_wall_deg=float(rng.uniform(35, 60)),
+                      scratch_spread_deg=5.0 if rng.random() < 0.5 else 90.0)
+        return world, kw
+    if world == "measured":
+        name = str(rng.choice(list(MEASURED_FILES), p=list(MEASURED_FILES.values())))
+        return world, dict(relief_file=str(HEIGHTS / name), groove_wall_deg=0.0,
+                           terrace_step_um=0.0, facet_dome_deg=0.0)
+    return world, {}
+
+
+def world_of(params: dict) -> str:
+    """The world of a scene from its parameters (``truth/params.json`` key ``params``): the
+    sweep's scenes name it in their preset (``generalization-WORLD``); others are
+    ``measured`` with a ``relief_file``, ``sparse`` without grooves, else ``faceted`` (a
+    faceted scene with the ``no_grooves`` variation is then also ``sparse``).
+
+    >>> world_of({"preset": "generalization-faceted", "groove_wall_deg": 0.0})
+    'faceted'
+    >>> world_of({"relief_file": "al3d-1.al3d"}), world_of({"groove_wall_deg": 0.0})
+    ('measured', 'sparse')
+    """
+    head, _, world = str(params.get("preset", "")).partition("generalization-")
+    if not head and world in WORLDS:
+        return world
+    if params.get("relief_file"):
+        return "measured"
+    return "sparse" if params.get("groove_wall_deg", 45.0) == 0 else "faceted"
 
 
 def draw_thickness(rng):
@@ -120,9 +188,11 @@ def draw_lobes(rng):
 
 
 def draw_scene(i, *, seed, size, slices):
-    """Scene ``i``: its name, parameters and the variations switched on."""
+    """Scene ``i``: its name, parameters and the variations switched on (the world is
+    :func:`world_of` the parameters)."""
     rng = np.random.default_rng([seed, i])
-    on = [name for name in VARIATIONS if rng.random() < P_ON]
+    on = [name for name in VARIATIONS if name not in WORLD_STREAM_VARIATIONS
+          and rng.random() < P_ON]
     kw = dict(height_px=size[0], width_px=size[1], n_slices=slices, seed=seed * 1000 + i,
               facet_size_um=_lu(rng, 1.2, 3.5), tilt_lobes=draw_lobes(rng),
               waviness_amplitude_um=_lu(rng, 0.2, 1.5),
@@ -136,6 +206,20 @@ def draw_scene(i, *, seed, size, slices):
               bit_depth=16 if rng.random() < 0.15 else 8, preset="generalization")
     for name in on:
         kw.update(VARIATIONS[name](rng))
+    wrng = np.random.default_rng([seed, i, 1])
+    world, wkw = draw_world(wrng)
+    for name in WORLD_STREAM_VARIATIONS:
+        if wrng.random() < P_ON:
+            on.append(name)
+            kw.update(VARIATIONS[name](wrng))
+    kw.update(wkw, preset=f"generalization-{world}")
+    if world == "measured":
+        on = [v for v in on if v not in NOT_MEASURED]
+    if world == "sparse":
+        on = [v for v in on if v != "no_grooves"]
+        on += [v for v, key in (("pits", "pit_density_per_mm2"),
+                                ("scratches", "scratch_density_per_mm2"))
+               if key in wkw and v not in on]
     if "jpeg" in on:
         kw["bit_depth"] = 8
     p = SynthParams(**kw)
@@ -217,7 +301,9 @@ def scene_row(name, p, on, truth: Path) -> dict:
 
     from pipelines._scoring import texture_codes
 
-    row = {"name": name, "seed": p.seed, "variations": " ".join(on) or "-",
+    row = {"name": name, "seed": p.seed, "world": world_of(p.to_json()),
+           "relief_file": p.to_json()["relief_file"] or "",
+           "variations": " ".join(on) or "-",
            "noise_pct": noise_pct(p), "film": p.film, "substrate": p.substrate,
            "thickness_means_nm": " ".join(f"{c.mean_nm:.0f}" for c in p.thickness),
            "thickness_span_nm": max(c.mean_nm for c in p.thickness)
@@ -265,7 +351,8 @@ def run_mode(mode, plan, gen, work: Path, jobs, scheduler):
     return rows
 
 
-COLUMNS = ["name", "mode", "seed", "status", "reason", "gen_s", "analysis_s", "variations",
+COLUMNS = ["name", "mode", "seed", "world", "relief_file", "status", "reason", "gen_s",
+           "analysis_s", "variations",
            "textured", "texture_codes", "groove_fraction", "noise_pct", "film", "substrate",
            "thickness_means_nm", "thickness_span_nm", "lobes_deg", "region_mae_nm",
            "region_median_ae_nm", "regions_scored", "regions_true", "pops_found", "pops_true",
@@ -279,10 +366,11 @@ def per_scene_table(rows) -> str:
         return "–" if v is None else fmt(v) if isinstance(v, float) else str(v)
 
     return md_table(
-        ["scene", "mode", "variations", "textured", "status", "time (s)", "region MAE (nm)",
-         "populations found/true", "lobes found/true", "identified", "NDF W1 (°)", "ΔE00",
-         "floor", "ΔE00 − floor"],
-        [[r["name"], r["mode"], r["variations"], "yes" if r.get("textured") else "no",
+        ["scene", "mode", "world", "variations", "textured", "status", "time (s)",
+         "region MAE (nm)", "populations found/true", "lobes found/true", "identified",
+         "NDF W1 (°)", "ΔE00", "floor", "ΔE00 − floor"],
+        [[r["name"], r["mode"], r.get("world", "–"), r["variations"],
+          "yes" if r.get("textured") else "no",
           r["status"] if r["status"] == "done" else f"failed: {r['reason'][:60]}",
           f(r, "analysis_s"), f(r, "region_mae_nm"),
           f"{f(r, 'pops_found')}/{f(r, 'pops_true')}",
@@ -366,9 +454,15 @@ def sweep(*, n, seed, size, slices, modes, jobs, scheduler, work: Path):
         t_an[mode] = time.perf_counter() - t1
         rows += mrows
         summaries[mode] = summarize(mrows)
+        for world in WORLDS:
+            wrows = [r for r in mrows if r.get("world") == world]
+            if wrows:
+                summaries[f"{mode} · {world}"] = summarize(wrows)
     per = [r.get("analysis_s") for r in rows if r.get("analysis_s") is not None]
+    worlds = [world_of(p.to_json()) for _, p, _ in plan]
     header = (f"{n} scenes of {size[0]}×{size[1]} px × {slices} slices (seed "
-              f"{seed}), each variation on with probability {P_ON}; generation "
+              f"{seed}; worlds: " + ", ".join(f"{w} {worlds.count(w)}" for w in WORLDS)
+              + f"), each variation on with probability {P_ON}; generation "
               f"{t_gen:.0f} s; analysis "
               + ", ".join(f"{m} {t:.0f} s" for m, t in t_an.items())
               + f" (batch, jobs={jobs or 'auto'}); analysis per scene: median "
