@@ -177,19 +177,12 @@ def render_scene(p, *, table=None) -> Scene:
         dgx = carving.dgx if dgx is None else dgx + carving.dgx
         feature = carving.feature
     if p.measured:
-        gy = mgy if dgy is None else mgy + dgy
-        gx = mgx if dgx is None else mgx + dgx
-        tilt = np.rad2deg(np.arctan(np.hypot(gy, gx)))
-        azimuth = np.rad2deg(np.arctan2(-gy, -gx)) % 360.0
+        tilt, azimuth = _tilt_azimuth(mgy if dgy is None else mgy + dgy,
+                                      mgx if dgx is None else mgx + dgx)
     elif dgy is None:
-        tilt = np.rad2deg(np.arctan(np.hypot(sy, sx)))[facet]
-        # Azimuth of the normal's horizontal component (the surface rises toward +slope,
-        # the normal leans the other way): normal ∝ (−sx, −sy, 1).
-        azimuth = np.rad2deg(np.arctan2(-sy, -sx))[facet] % 360.0
+        tilt, azimuth = (a[facet] for a in _tilt_azimuth(sy, sx))
     else:
-        gy, gx = sy[facet] + dgy, sx[facet] + dgx
-        tilt = np.rad2deg(np.arctan(np.hypot(gy, gx)))
-        azimuth = np.rad2deg(np.arctan2(-gy, -gx)) % 360.0
+        tilt, azimuth = _tilt_azimuth(sy[facet] + dgy, sx[facet] + dgx)
 
     # Thickness regions from the mixture, plus smooth fine variation.
     region, _, _ = _voronoi(rng, shape, p.region_size_um / px)
@@ -219,6 +212,29 @@ def render_scene(p, *, table=None) -> Scene:
     groove = (np.zeros(shape) if p.measured  # a continuous surface: no steps between cells
               else _groove_coverage(facet, groove_height, p))
     rgb = rgb * (1.0 - groove[..., None]) + groove[..., None] * p.dark_level * p.exposure
+    rgb, feature, stain, dust = _on_the_film(rgb, feature, p)
+    rgb = rgb.astype(np.float32)
+    if p.vignetting_corner_loss > 0:
+        rgb *= vignetting_factor(shape, corner_loss=p.vignetting_corner_loss)[..., None]
+    if tuple(p.white_balance_gains) != (1.0, 1.0, 1.0):
+        rgb = apply_white_balance(rgb, p.white_balance_gains)
+    return Scene(height.astype(np.float32), tilt.astype(np.float32), azimuth.astype(np.float32),
+                 thickness.astype(np.float32), visible, facet.astype(np.int32),
+                 region.astype(np.int32), region_d, comp, groove.astype(np.float32),
+                 rgb, feature, dust, stain, relief)
+
+
+def _tilt_azimuth(gy, gx):
+    """Tilt (degrees from the axis) and azimuth of the normal's horizontal component (the
+    surface rises toward +slope, the normal leans the other way: normal ∝ (−gx, −gy, 1))."""
+    return (np.rad2deg(np.arctan(np.hypot(gy, gx))),
+            np.rad2deg(np.arctan2(-gy, -gx)) % 360.0)
+
+
+def _on_the_film(rgb, feature, p):
+    """Stains (the film's reflectance × a factor) and dust (grey flakes on top) over the
+    linear image: ``(rgb, feature, stain coverage, dust coverage)``."""
+    shape = feature.shape
     stain = np.zeros(shape, dtype=np.float32)
     if p.stain_density_per_mm2 > 0:
         stain, factor, _ = stain_layer(np.random.default_rng([p.seed, STREAMS["stains"]]),
@@ -230,15 +246,7 @@ def render_scene(p, *, table=None) -> Scene:
         dust, grey, _ = dust_layer(np.random.default_rng([p.seed, STREAMS["dust"]]), shape, p)
         rgb = rgb * (1.0 - dust[..., None]) + (dust * grey * p.exposure)[..., None]
         feature = np.where(dust >= 0.5, np.uint8(FEATURE_CODES["dust"]), feature)
-    rgb = rgb.astype(np.float32)
-    if p.vignetting_corner_loss > 0:
-        rgb *= vignetting_factor(shape, corner_loss=p.vignetting_corner_loss)[..., None]
-    if tuple(p.white_balance_gains) != (1.0, 1.0, 1.0):
-        rgb = apply_white_balance(rgb, p.white_balance_gains)
-    return Scene(height.astype(np.float32), tilt.astype(np.float32), azimuth.astype(np.float32),
-                 thickness.astype(np.float32), visible, facet.astype(np.int32),
-                 region.astype(np.int32), region_d, comp, groove.astype(np.float32),
-                 rgb, feature, dust, stain, relief)
+    return rgb, feature, stain, dust
 
 
 def _skip_default_facets(rng, shape, cell_px, lobe_weights):
