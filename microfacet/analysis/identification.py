@@ -192,16 +192,22 @@ class NdfEvidence:
 
 def self_check_judgement(judgement: Judgement, check, options: FitOptions) -> Judgement:
     """The NDF's judgement after its self-check (:mod:`.self_check`): an NDF the stack
-    cannot resolve — recovered/injected RMS slope outside ``fits.self_check_range``, or not
-    measurable — is not identified, whatever its other evidence says."""
+    cannot resolve — the recovered/injected slope gain (``transfer``) or the width the NDF
+    would see over the true width (``width_transfer``) outside ``fits.self_check_range``, or
+    not measurable — is not identified, whatever its other evidence says."""
     if not judgement.identified or check is None:
         return judgement
     low, high = options.self_check_range
-    t = check.transfer
-    if math.isfinite(t) and low <= t <= high:
+    t, wt = check.transfer, getattr(check, "width_transfer", 1.0)
+    if math.isfinite(t) and low <= t <= high and math.isfinite(wt) and low <= wt <= high:
         return judgement
-    said = (f"recovers {t:.2f}× the injected RMS slope" if math.isfinite(t)
-            else "could not recover injected slopes")
+    if not math.isfinite(t):
+        said = "could not recover injected slopes"
+    elif low <= t <= high:
+        said = (f"recovers the injected slopes ({t:.2f}×) but the NDF would see "
+                f"{wt:.2f}× their RMS once their noise is removed")
+    else:
+        said = f"recovers {t:.2f}× the injected RMS slope"
     return Judgement(False, Reason(
         "self_check", f"the self-check on this stack {said} (identified only within "
         f"{low:g}-{high:g}, `fits.self_check_range`): its heights do not resolve the facets' "

@@ -31,7 +31,7 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -40,7 +40,7 @@ from ..core.pixels import pixel_size_yx
 from ..focus.height import height_from_focus
 from ..focus.options import FocusOptions
 from .options import JointOptions
-from .planes import fit_facet_planes
+from .planes import facet_edge_distance, fit_facet_planes
 
 __all__ = ["Conditions", "SelfCheck", "measured_rms_slope", "render_focus_stack", "self_check_ndf",
            "slice_noise_sd", "slope_gain"]
@@ -77,6 +77,14 @@ class SelfCheck:
         Half the range of the ratios.
     facets : int
         Facets with a recovered plane.
+    width_ratio : list of float
+        Per injected width: the RMS slope the NDF would see — the recovered planes' RMS |∇h|
+        with their modelled slope noise removed in quadrature, as :func:`measured_rms_slope`
+        does — over the true RMS of the injected surface's planes (its own plus the
+        injection). It checks the whole width chain, noise model included, where ``ratio``
+        checks the slopes' gain only.
+    width_transfer : float
+        Median ``width_ratio`` (NaN when nothing was measured).
     """
 
     injected_rms_slope: list
@@ -85,13 +93,16 @@ class SelfCheck:
     transfer: float
     spread: float
     facets: int
+    width_ratio: list = field(default_factory=list)
+    width_transfer: float = math.nan
 
     def to_json(self) -> dict:
         """For ``ndf.self_check`` in summary.json."""
         def num(v):
             return float(v) if math.isfinite(v) else None
         return {"transfer": num(self.transfer), "spread": num(self.spread),
-                "facets": int(self.facets),
+                "width_transfer": num(self.width_transfer), "facets": int(self.facets),
+                "width_ratio": [num(v) for v in self.width_ratio],
                 "injected_rms_slope": [num(v) for v in self.injected_rms_slope],
                 "recovered_rms_slope": [num(v) for v in self.recovered_rms_slope],
                 "ratio": [num(v) for v in self.ratio]}
@@ -105,9 +116,13 @@ def measured_rms_slope(joint, max_tilt_deg) -> float | None:
           & (pl.slope_sigma < MAX_SLOPE_SIGMA))
     if ok.sum() < 3:
         return None
-    w = joint.area_px[ok].astype(np.float64)
-    g = np.tan(np.radians(pl.tilt_deg[ok]))
-    noise2 = float(np.sum(w * 2 * pl.slope_sigma[ok] ** 2) / np.sum(w))
+    return _deconvolved_rms(pl, ok, joint.area_px[ok].astype(np.float64))
+
+
+def _deconvolved_rms(planes, ok, w) -> float:
+    """RMS |∇h| of ``planes[ok]`` (weights ``w``) with their slope noise removed."""
+    g = np.tan(np.radians(planes.tilt_deg[ok]))
+    noise2 = float(np.sum(w * 2 * planes.slope_sigma[ok] ** 2) / np.sum(w))
     return math.sqrt(max(_rms(g, w) ** 2 - noise2, 0.0))
 
 
@@ -276,8 +291,9 @@ def _recovered_planes(sc, height_um, focus_options, joint, rng):
                                 noise_sd=sc.noise_sd, rng=rng)
     got = height_from_focus(slices, focus_options, z_um=sc.z_um, prefetch=False)
     corr = joint.focus_error_correlation * float(got.params.get("window_px", 1)) ** 2
+    interior = facet_edge_distance(sc.labels) >= joint.plane_edge_px
     return fit_facet_planes(sc.labels, got.height_fit_um, height_sigma_um=got.height_sigma_um,
-                            reliable=got.reliable, pixel_size_um=sc.pixel_yx,
+                            reliable=got.reliable & interior, pixel_size_um=sc.pixel_yx,
                             min_pixels=joint.min_plane_pixels, correlation_px=corr)
 
 
@@ -318,7 +334,7 @@ def self_check_ndf(focus, labels, *, conditions: Conditions, rms_slope,
                            reliable=np.ones(sc.labels.shape, bool), pixel_size_um=sc.pixel_yx,
                            min_pixels=3)
     pattern = (np.nan_to_num(own.slope_x), np.nan_to_num(own.slope_y))
-    inj, rec, n_fac = [], [], 0
+    inj, rec, widths, n_fac = [], [], [], 0
     for factor in WIDTH_FACTORS:
         width = min(max(factor * rms_slope, 0.02), 0.6)
         delta, a_true, b_true = _planes(sc.labels, width, sc.pixel_yx, rng, pattern=pattern)
@@ -328,6 +344,7 @@ def self_check_ndf(focus, labels, *, conditions: Conditions, rms_slope,
         if ok.sum() < 3:
             inj.append(math.nan)
             rec.append(math.nan)
+            widths.append(math.nan)
             continue
         w = fit.n_pixels[ok].astype(np.float64)
         # what the injection changed in the recovered slopes, projected on what was injected:
@@ -337,8 +354,13 @@ def self_check_ndf(focus, labels, *, conditions: Conditions, rms_slope,
                           fit.slope_y[ok] - base.slope_y[ok], a, b, w)
         inj.append(_rms(np.hypot(a, b), w))
         rec.append(gain * inj[-1])
+        # the width the NDF would report against the true planes of the rendered surface
+        true = _rms(np.hypot(pattern[0][ok] + a, pattern[1][ok] + b), w)
+        widths.append(_deconvolved_rms(fit, ok, w) / true if true > 0 else math.nan)
     ratio = [r / i if i > 0 else math.nan for r, i in zip(rec, inj)]
     good = [v for v in ratio if math.isfinite(v)]
     transfer = float(np.median(good)) if good else math.nan
     spread = 0.5 * (max(good) - min(good)) if good else math.nan
-    return SelfCheck(inj, rec, ratio, transfer, spread, n_fac)
+    wgood = [v for v in widths if math.isfinite(v)]
+    return SelfCheck(inj, rec, ratio, transfer, spread, n_fac, widths,
+                     float(np.median(wgood)) if wgood else math.nan)

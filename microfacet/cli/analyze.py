@@ -81,7 +81,8 @@ def _text_summary(result, out: Path, elapsed_s: float) -> str:
     if fit is not None and not dist.thickness_judgement.identified:
         comps += " -- NOT IDENTIFIED"
     if result.self_check is not None and dist.ndf:
-        lobes += f", self-check {result.self_check.transfer:.2f}x"
+        c = result.self_check
+        lobes += f", self-check {c.transfer:.2f}x slopes, {c.width_transfer:.2f}x width"
     if not dist.ndf_judgement.identified:
         lobes += " -- NOT IDENTIFIED, not a measurement"
     de = result.delta_e_stats

@@ -63,12 +63,14 @@ def draw(pg, ctx):
 
 def _self_check_note(ax, check):
     """The NDF's self-check (``ndf.self_check``) in the panel's lower left corner: the
-    recovered/injected slope gain, per injected width."""
+    recovered/injected slope gain, per injected width, and the width the NDF would see."""
     if not isinstance(check, dict) or check.get("transfer") is None:
         return
     per = ", ".join("–" if v is None else f"{v:.2f}" for v in check.get("ratio") or [])
-    ax.text(0.01, 0.02, f"self-check: injected slopes recovered at {check['transfer']:.2f}×\n"
-            f"({per} at 0.5, 1, 2× the width; ndf.self_check)", transform=ax.transAxes,
+    wt = check.get("width_transfer")
+    width = "" if wt is None else f"; width after noise removal {wt:.2f}×"
+    ax.text(0.01, 0.02, f"self-check: injected slopes recovered at {check['transfer']:.2f}×"
+            f"{width}\n({per} at 0.5, 1, 2× the width; ndf.self_check)", transform=ax.transAxes,
             ha="left", va="bottom", fontsize=6.5, color="0.25")
 
 

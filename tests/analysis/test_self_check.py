@@ -74,8 +74,9 @@ def test_the_judgement_follows_the_self_check():
     ok = Judgement(True)
     opts = FitOptions()
 
-    def check(t):
-        return SelfCheck([0.1], [0.1 * t], [t], t, 0.0, 50)
+    def check(t, width=None):
+        width = t if width is None else width
+        return SelfCheck([0.1], [0.1 * t], [t], t, 0.0, 50, [width], width)
 
     assert self_check_judgement(ok, check(1.0), opts) is ok
     assert self_check_judgement(ok, None, opts) is ok              # no check: no change
@@ -86,6 +87,10 @@ def test_the_judgement_follows_the_self_check():
     assert not self_check_judgement(ok, check(1.4), opts).identified
     wide = FitOptions(self_check_range=(0.3, 1.5))
     assert self_check_judgement(ok, check(0.4), wide).identified
+    # slopes recovered without bias, but the width the NDF would see (noise removed) is not
+    noisy = self_check_judgement(ok, check(1.0, width=0.3), opts)
+    assert not noisy.identified and "0.30" in noisy.reason.plain()
+    assert not self_check_judgement(ok, check(1.0, width=math.nan), opts).identified
     already = Judgement(False)
     assert self_check_judgement(already, check(1.0), opts) is already
 
