@@ -13,6 +13,7 @@ STACKS_DIR holds stacks with ``truth/tilt_deg.npy`` (e.g. the stacks folder of
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -20,8 +21,9 @@ import numpy as np
 
 from microfacet.analysis import AnalysisOptions, analyse_stack
 from microfacet.analysis import self_check as sc
-from microfacet.analysis.options import FitOptions
+from microfacet.analysis.options import FitOptions, JointOptions
 from microfacet.analysis.planes import fit_facet_planes
+from microfacet.focus.options import FocusOptions
 from pipelines.studies.accuracy_sweep import world_of
 
 
@@ -64,10 +66,39 @@ def censored_fractions(r) -> dict:
             "censored_pixel_fraction": None if cens is None else float(np.mean(cens))}
 
 
-def main(folder: str) -> None:
+def lobe_scores(r, tilt_deg) -> dict:
+    """The fitted NDF lobes against the true tilts of the facet pixels below the acceptance:
+    their RMS slope (the lobes' tilt density truncated at the limit, E[tan² θ]^½) over the
+    truth's, and W1 (°, :func:`pipelines._scoring.ndf_w1_deg`)."""
+    from pipelines._scoring import ndf_w1_deg
+
+    ndf = getattr(r.distributions, "ndf", None)
+    lim = r.scene.max_tilt_deg
+    t = tilt_deg[np.isfinite(tilt_deg) & (tilt_deg < lim)]
+    if ndf is None or t.size == 0:
+        return {"lobe_ratio": None, "w1_deg": None}
+    lobes = [(float(w), float(s)) for w, s in ndf.mixture.components]
+    grid = np.linspace(0.0, lim, 2001)
+    from microfacet.core.distributions import NDFMixture
+    pdf = NDFMixture(lobes).tilt_pdf(grid)
+    tan2 = np.tan(np.radians(grid)) ** 2
+    lobe_rms = math.sqrt(float(np.trapezoid(pdf * tan2, grid) / np.trapezoid(pdf, grid)))
+    true_rms = math.sqrt(float(np.mean(np.tan(np.radians(t)) ** 2)))
+    return {"lobe_ratio": lobe_rms / true_rms if true_rms > 0 else None,
+            "w1_deg": float(ndf_w1_deg(lobes, t, lim)), "lobes": lobes}
+
+
+def main(folder: str, overrides: dict | None = None) -> None:
+    o = overrides or {}
+    options = AnalysisOptions(fits=FitOptions(**{"self_check": True, **o.get("fits", {})}),
+                              focus=FocusOptions(**o.get("focus", {})),
+                              joint=JointOptions(**o.get("joint", {})))
     for d in sorted(p for p in Path(folder).iterdir() if (p / "truth").is_dir()):
-        r = analyse_stack(d, AnalysisOptions(fits=FitOptions(self_check=True)))
+        r = analyse_stack(d, options)
         t = np.load(d / "truth" / "tilt_deg.npy")
+        feat = d / "truth" / "feature.npy"
+        facet = np.load(feat) == 0 if feat.is_file() else np.ones(t.shape, bool)
+        t = np.where(facet, t, np.nan)
         vis = np.isfinite(t) & (t < r.scene.max_tilt_deg)
         true_rms = float(np.sqrt(np.mean(np.tan(np.radians(t[vis])) ** 2)))
         meas = sc.measured_rms_slope(r.joint, r.scene.max_tilt_deg)
@@ -80,9 +111,10 @@ def main(folder: str) -> None:
             "scene": d.name, "true_rms_slope": true_rms, "measured_rms_slope": meas,
             "actual_ratio": None if meas is None else meas / true_rms,
             "self_check": None if c is None else c.to_json(),
+            **lobe_scores(r, t),
             "identified": r.distributions.ndf_judgement.identified,
             "reason_code": r.distributions.ndf_judgement.to_json()["reason_code"]}), flush=True)
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    main(sys.argv[1], json.loads(sys.argv[2]) if len(sys.argv) > 2 else None)

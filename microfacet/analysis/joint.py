@@ -102,11 +102,12 @@ class JointResult:
 def height_inputs(surface, options: JointOptions, *, from_focus) -> HeightInputs:
     """The heights the planes may use.
 
-    From focus: the focus stage's reliable pixels and its per-pixel error
-    (``height_sigma_um``; a quarter of the slice spacing where the focus stage gives none),
-    correlated over about the focus window (``options.focus_error_correlation`` × window²,
-    measured). From an export: every finite height, with an error left to the plane fits'
-    residuals (``options.export_sigma_um``).
+    From focus (:func:`focus_heights`): the evidence window's heights and errors, or the
+    focus stage's reliable pixels and its per-pixel error (``height_sigma_um``; a quarter of
+    the slice spacing where the focus stage gives none), correlated over about the window
+    (``options.focus_error_correlation`` × window², measured). From an export: every
+    finite height, with an error left to the plane fits' residuals
+    (``options.export_sigma_um``).
     """
     foc = surface.focus
     h = np.asarray(foc.height_fit_um, dtype=np.float64)
@@ -114,6 +115,20 @@ def height_inputs(surface, options: JointOptions, *, from_focus) -> HeightInputs
         return HeightInputs(h, np.full(h.shape, np.nan), np.zeros(h.shape, bool), 1.0)
     if not from_focus:
         return HeightInputs(h, np.full(h.shape, options.export_sigma_um), np.isfinite(h), 1.0)
+    return focus_heights(foc, options)
+
+
+def focus_heights(foc, options: JointOptions) -> HeightInputs:
+    """The heights a :class:`~microfacet.focus.height.FocusResult` gives the planes: its
+    evidence window's (each from the focus evidence at the pixel itself) where the focus
+    stage measured one, else its combined height; errors correlated over about that window."""
+    if getattr(foc, "evidence_height_um", None) is not None:
+        h = np.asarray(foc.evidence_height_um, dtype=np.float64)
+        sig = np.asarray(foc.evidence_sigma_um, dtype=np.float64)
+        ok = np.isfinite(h) & np.isfinite(sig) & (sig > 0)
+        win = float(foc.params.get("evidence_window_px", 1))
+        return HeightInputs(h, sig, ok, options.focus_error_correlation * win ** 2)
+    h = np.asarray(foc.height_fit_um, dtype=np.float64)
     rel = np.asarray(foc.reliable, bool) & np.isfinite(h)
     sig = getattr(foc, "height_sigma_um", None)
     if sig is None:
@@ -179,12 +194,19 @@ class Segmented:
     heights: HeightInputs
 
 
-def facet_labels(colour, surface, scene, options: JointOptions) -> Segmented:
+def facet_labels(colour, surface, scene, options: JointOptions, *, renoise=None
+                 ) -> Segmented:
     """Step 1: facets from colour and height edges (:func:`~.segmentation.segment_facets`),
-    the facet size in pixels from ``options.facet_size_um`` and the pixel size."""
+    the facet size in pixels from ``options.facet_size_um`` and the pixel size. With
+    ``renoise`` (a ``numpy.random.Generator``) the Lab image first gets fresh noise of its
+    own measured level: a second segmentation as likely as the first (a parametric
+    bootstrap), which differs from it wherever the image does not fix the facets' edges."""
     hi = height_inputs(surface, options, from_focus=scene.from_focus)
     facet_px = options.facet_size_um / pixel_area_side(scene.pixel_size_um)
-    labels = segment_facets(colour.lab, facet_px=facet_px, noise_de=colour.noise_de,
+    lab = colour.lab
+    if renoise is not None:
+        lab = lab + renoise.normal(0.0, colour.noise_de, lab.shape).astype(np.float32)
+    labels = segment_facets(lab, facet_px=facet_px, noise_de=colour.noise_de,
                             height_um=np.where(hi.reliable, hi.height_um, np.nan),
                             height_sigma_um=hi.sigma_um, pixel_size_um=scene.pixel_size_um,
                             options=options)

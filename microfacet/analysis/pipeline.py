@@ -206,16 +206,20 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         with timer.stage(Stage.MIXTURES):
             dist = fit_joint_distributions(joint, roi, model, scene, options.fits)
         with timer.stage(Stage.SELF_CHECK):
-            check = _self_check(st, focus, joint, scene, options)
+            check = _self_check(st, focus, joint, scene, options,
+                                cells=lambda: facet_labels(
+                                    colour, surface, scene, options.joint,
+                                    renoise=np.random.default_rng([scene.seed, 22])).labels)
             dist.ndf_judgement = self_check_judgement(dist.ndf_judgement, check, options.fits)
     timer.total()
     return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
                           dist, dict(timer.timings), check)
 
 
-def _self_check(st, focus, joint, scene, options) -> SelfCheck | None:
+def _self_check(st, focus, joint, scene, options, *, cells) -> SelfCheck | None:
     """The NDF's injection-recovery (:mod:`.self_check`) where the heights come from focus
-    and at least 3 facets have planes; None otherwise or when switched off."""
+    and at least 3 facets have planes; None otherwise or when switched off. ``cells()``
+    gives the facets the injection follows (a second, re-noised segmentation)."""
     if not (options.fits.self_check and scene.from_focus and st.has_slices):
         return None
     rms = measured_rms_slope(joint, scene.max_tilt_deg)
@@ -223,7 +227,7 @@ def _self_check(st, focus, joint, scene, options) -> SelfCheck | None:
         return None
     cond = Conditions(np.asarray(st.z_um, np.float64), scene.pixel_size_um,
                       scene.numerical_aperture, slice_noise_sd(st, focus), scene.seed)
-    return self_check_ndf(focus, joint.facets, conditions=cond, rms_slope=rms,
+    return self_check_ndf(focus, joint.facets, cells=cells(), conditions=cond, rms_slope=rms,
                           focus_options=options.focus, joint=options.joint)
 
 

@@ -39,6 +39,7 @@ from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
 from ..focus.height import height_from_focus
 from ..focus.options import FocusOptions
+from .joint import focus_heights
 from .options import JointOptions
 from .planes import facet_edge_distance, fit_facet_planes
 
@@ -239,6 +240,7 @@ class _Scene:
     """The scene's conditions the injection reuses (one crop)."""
 
     labels: np.ndarray
+    cells: np.ndarray
     texture: np.ndarray
     base_um: np.ndarray
     z_um: np.ndarray
@@ -247,10 +249,15 @@ class _Scene:
     noise_sd: float
 
 
-def _scene(focus, labels, *, z_um, pixel_size_um, numerical_aperture, noise_sd) -> _Scene:
+def _relabelled(labels):
+    _, lab = np.unique(labels, return_inverse=True)
+    return lab.reshape(labels.shape).astype(np.int32)
+
+
+def _scene(focus, labels, cells, *, z_um, pixel_size_um, numerical_aperture, noise_sd
+           ) -> _Scene:
     rs, cs = _crop(labels.shape)
-    _, lab = np.unique(labels[rs, cs], return_inverse=True)
-    lab = lab.reshape(labels[rs, cs].shape).astype(np.int32)
+    lab = _relabelled(labels[rs, cs])
     img = np.asarray(focus.all_in_focus, np.float32)[rs, cs]
     tex = img @ np.array([0.2126, 0.7152, 0.0722], np.float32) if img.ndim == 3 else img
     h = np.asarray(focus.height_fit_um, np.float64)[rs, cs]
@@ -268,7 +275,7 @@ def _scene(focus, labels, *, z_um, pixel_size_um, numerical_aperture, noise_sd) 
     # the scene's own measured surface (holes: their facet's mean height) carries the
     # injected planes: the relief, its range in z and its creases stay the scene's
     base = np.clip(np.where(ok, h, centre[lab]), z.min(), z.max())
-    return _Scene(lab, tex, base, z, pyx, blur, float(noise_sd))
+    return _Scene(lab, _relabelled(cells[rs, cs]), tex, base, z, pyx, blur, float(noise_sd))
 
 
 @dataclass(frozen=True)
@@ -289,12 +296,13 @@ def _recovered_planes(sc, height_um, focus_options, joint, rng):
     focus, fitted as the analysis fits them."""
     slices = render_focus_stack(sc.texture, height_um, sc.z_um, blur_px_per_um=sc.blur_px_per_um,
                                 noise_sd=sc.noise_sd, rng=rng)
-    got = height_from_focus(slices, focus_options, z_um=sc.z_um, prefetch=False)
-    corr = joint.focus_error_correlation * float(got.params.get("window_px", 1)) ** 2
+    got = focus_heights(height_from_focus(slices, focus_options, z_um=sc.z_um,
+                                          prefetch=False), joint)
     interior = facet_edge_distance(sc.labels) >= joint.plane_edge_px
-    return fit_facet_planes(sc.labels, got.height_fit_um, height_sigma_um=got.height_sigma_um,
+    return fit_facet_planes(sc.labels, got.height_um, height_sigma_um=got.sigma_um,
                             reliable=got.reliable & interior, pixel_size_um=sc.pixel_yx,
-                            min_pixels=joint.min_plane_pixels, correlation_px=corr)
+                            min_pixels=joint.min_plane_pixels,
+                            correlation_px=got.correlation_px)
 
 
 def _usable(fit):
@@ -302,7 +310,7 @@ def _usable(fit):
             & (fit.slope_sigma < MAX_SLOPE_SIGMA))
 
 
-def self_check_ndf(focus, labels, *, conditions: Conditions, rms_slope,
+def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slope,
                    focus_options: FocusOptions, joint: JointOptions) -> SelfCheck:
     """Injection–recovery of facet slopes in the scene's own conditions.
 
@@ -311,7 +319,12 @@ def self_check_ndf(focus, labels, *, conditions: Conditions, rms_slope,
     focus : FocusResult
         The scene's height from focus (its all-in-focus image and heights are reused).
     labels : ndarray of int (H, W)
-        The scene's facets.
+        The scene's facets (the segments whose planes the NDF is made of).
+    cells : ndarray of int (H, W), optional
+        The facets the injected planes follow; default ``labels``. The analysis passes a
+        second segmentation of the colour image re-noised with its own noise: where the image
+        does not fix the facets' edges the two disagree, as the true facets and the segments
+        do, and the recovered widths pay for it.
     conditions : Conditions
         The stack's z grid, pixel size, aperture, noise, and the seed.
     rms_slope : float
@@ -325,19 +338,21 @@ def self_check_ndf(focus, labels, *, conditions: Conditions, rms_slope,
     SelfCheck
     """
     c = conditions
-    sc = _scene(focus, labels, z_um=c.z_um, pixel_size_um=c.pixel_size_um,
-                numerical_aperture=c.numerical_aperture, noise_sd=c.noise_sd)
+    sc = _scene(focus, labels, labels if cells is None else cells, z_um=c.z_um,
+                pixel_size_um=c.pixel_size_um, numerical_aperture=c.numerical_aperture,
+                noise_sd=c.noise_sd)
     fo = focus_options.replace(align=None, fill=None)
     rng = np.random.default_rng(c.seed)
     base = _recovered_planes(sc, sc.base_um, fo, joint, rng)
-    own = fit_facet_planes(sc.labels, sc.base_um, height_sigma_um=1.0,
-                           reliable=np.ones(sc.labels.shape, bool), pixel_size_um=sc.pixel_yx,
-                           min_pixels=3)
+    everywhere = np.ones(sc.labels.shape, bool)
+    own = fit_facet_planes(sc.cells, sc.base_um, height_sigma_um=1.0, reliable=everywhere,
+                           pixel_size_um=sc.pixel_yx, min_pixels=3, robust_rounds=0)
     pattern = (np.nan_to_num(own.slope_x), np.nan_to_num(own.slope_y))
+    area = np.bincount(sc.labels.ravel()).astype(np.float64)
     inj, rec, widths, n_fac = [], [], [], 0
     for factor in WIDTH_FACTORS:
         width = min(max(factor * rms_slope, 0.02), 0.6)
-        delta, a_true, b_true = _planes(sc.labels, width, sc.pixel_yx, rng, pattern=pattern)
+        delta, a_cell, b_cell = _planes(sc.cells, width, sc.pixel_yx, rng, pattern=pattern)
         fit = _recovered_planes(sc, sc.base_um + delta, fo, joint, rng)
         ok = _usable(fit) & _usable(base)
         n_fac = max(n_fac, int(ok.sum()))
@@ -346,16 +361,24 @@ def self_check_ndf(focus, labels, *, conditions: Conditions, rms_slope,
             rec.append(math.nan)
             widths.append(math.nan)
             continue
-        w = fit.n_pixels[ok].astype(np.float64)
+        # the injection as each segment holds it (its plane through the exact heights)
+        seg = fit_facet_planes(sc.labels, delta, height_sigma_um=1.0, reliable=everywhere,
+                               pixel_size_um=sc.pixel_yx, min_pixels=3, robust_rounds=0)
+        ok &= seg.fitted
+        w = area[ok]
         # what the injection changed in the recovered slopes, projected on what was injected:
         # a gain unbiased by slope noise independent of the injection
-        a, b = a_true[ok], b_true[ok]
+        a, b = seg.slope_x[ok], seg.slope_y[ok]
         gain = slope_gain(fit.slope_x[ok] - base.slope_x[ok],
                           fit.slope_y[ok] - base.slope_y[ok], a, b, w)
         inj.append(_rms(np.hypot(a, b), w))
         rec.append(gain * inj[-1])
-        # the width the NDF would report against the true planes of the rendered surface
-        true = _rms(np.hypot(pattern[0][ok] + a, pattern[1][ok] + b), w)
+        # the width the NDF would report against the true slopes of the rendered surface,
+        # pixel by pixel over the segments it is made of
+        px = ok[sc.labels]
+        cell = sc.cells[px]
+        true = _rms(np.hypot(pattern[0][cell] + a_cell[cell], pattern[1][cell] + b_cell[cell]),
+                    np.ones(cell.size))
         widths.append(_deconvolved_rms(fit, ok, w) / true if true > 0 else math.nan)
     ratio = [r / i if i > 0 else math.nan for r, i in zip(rec, inj)]
     good = [v for v in ratio if math.isfinite(v)]

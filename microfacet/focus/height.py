@@ -134,6 +134,11 @@ class FocusResult:
         has none: it gets no height, whatever the cut).
     window_px_map : ndarray of uint8, shape (H, W)
         The focus window (px) whose height each pixel took.
+    evidence_height_um, evidence_sigma_um : ndarray of float32, shape (H, W), or None
+        Height and 1-σ error (µm) of the evidence window (``options.evidence_window_px``),
+        NaN where its focus peak is not significant or is below the reliability cut: a
+        height from the focus evidence at the pixel itself, for the facet planes. None with
+        the window off.
     """
 
     height_um: np.ndarray
@@ -149,6 +154,8 @@ class FocusResult:
     height_sigma_um: np.ndarray | None = None
     detected: np.ndarray | None = None
     window_px_map: np.ndarray | None = None
+    evidence_height_um: np.ndarray | None = None
+    evidence_sigma_um: np.ndarray | None = None
 
     @property
     def unreliable_fraction(self) -> float:
@@ -220,6 +227,7 @@ def height_from_focus(source, options: FocusOptions | None = None, *,
     best_main = scan.trackers[plan.main].best
     best_rank = scan.trackers[plan.main].best_rank
     scan.trackers = None                      # free the streaming buffers before the choice
+    evidence = _evidence(plan, fits, step)
     choice = _choose(plan, fits, step)
     fits = None
     t3 = time.perf_counter()
@@ -242,7 +250,25 @@ def height_from_focus(source, options: FocusOptions | None = None, *,
                        all_in_focus=scan.all_in_focus, z_um=plan.slices.z_um,
                        params=_params(plan, alignment), timings_s=timings,
                        height_sigma_um=choice.sigma_um.astype(np.float32),
-                       detected=choice.detected, window_px_map=choice.window_px_map)
+                       detected=choice.detected, window_px_map=choice.window_px_map,
+                       evidence_height_um=evidence[0], evidence_sigma_um=evidence[1])
+
+
+def _evidence(plan: _Plan, fits: list[WindowFit], step):
+    """Height and σ (µm, float32) of the evidence window where its peak is significant and
+    passes the reliability cut (NaN elsewhere); (None, None) without the window."""
+    if plan.evidence is None:
+        return None, None
+    f = fits[plan.evidence]
+    sigma = f.sigma.astype(np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        db = -20.0 * np.log10(np.clip(sigma, 1e-3, 1e6))
+    ok = f.detected & np.isfinite(sigma)
+    if plan.options.reliability == "sigma":
+        ok &= db >= plan.options.reliability_cut_db
+    nan = np.float32(np.nan)
+    return (np.where(ok, f.height_um, nan).astype(np.float32),
+            np.where(ok, sigma * abs(step), nan).astype(np.float32))
 
 
 def _checked(options) -> FocusOptions:
@@ -260,8 +286,9 @@ class _Plan:
 
     slices: SliceSource
     order: np.ndarray           # z rank -> file index
-    windows: list               # (window_px, window, downsample), sorted by size
-    main: int                   # index of the main window in ``windows``
+    windows: list               # (window_px, window, downsample): the combined ones sorted
+    main: int                   # by size, then the evidence window (if any); index of the main
+    evidence: int | None        # index of the evidence window (not combined), or None
     options: FocusOptions
 
     @property
@@ -275,7 +302,11 @@ def _plan(slices: SliceSource, options: FocusOptions) -> _Plan:
         raise InputError(f"a focus stack needs at least 3 slices, got {slices.n}")
     order = np.argsort(slices.z_um, kind="stable")
     windows, main = _windows(slices.shape, options)
-    return _Plan(slices, order, windows, main, options)
+    evidence = None
+    if options.evidence_window_px:
+        evidence = len(windows)
+        windows.append((int(options.evidence_window_px), options.window, 1))
+    return _Plan(slices, order, windows, main, evidence, options)
 
 
 def _windows(shape, o: FocusOptions):
@@ -409,6 +440,8 @@ def _choose(plan: _Plan, fits: list[WindowFit], step) -> _Choice:
     its reliability and whether it passes the cut."""
     o = plan.options
     cut = o.reliability_cut_db
+    if plan.evidence is not None:
+        fits = fits[:plan.evidence]
     idx, sigma, detected = combine(fits, plan.main, step, prefer=SIGMA_MODEL["prefer"])
     pick = idx[None].astype(np.intp)
     height = np.take_along_axis(np.stack([f.height_um for f in fits]), pick, 0)[0]
@@ -431,7 +464,8 @@ def _params(plan: _Plan, alignment: dict | None) -> dict:
     H, W = src.shape
     params = {
         "operator": o.operator, "window_px": int(o.window_px), "window": o.window,
-        "windows_px": [int(w[0]) for w in plan.windows], "colour": o.colour,
+        "windows_px": [int(w[0]) for w in plan.windows[:plan.evidence]],
+        "evidence_window_px": int(o.evidence_window_px), "colour": o.colour,
         "interpolation": o.interpolation,
         "fit_radius": o.fit_radius_used if o.interpolation in ("lsq", "lorentz") else None,
         "reliability": o.reliability, "min_reliability_db": o.reliability_cut_db,

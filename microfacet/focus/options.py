@@ -168,6 +168,12 @@ class FocusOptions(Options):
         A smaller window for sharp relief (coverage of the relief zone 86-91 % instead of
         76-82 % with 3 px), off (0) by default: it raises the Cou RMSE to 0.116 / 0.126 /
         0.147. Ignored unless smaller than ``window_px``.
+    evidence_window_px : int
+        A small window measured beside the others but not combined with them: its height
+        (``FocusResult.evidence_height_um``) comes from the focus evidence within about a
+        pixel, never from texture several pixels away, which is what a facet's plane needs
+        (a 7-15 px window lends a textureless facet the height of its neighbours' edges and
+        flattens it: docs/accuracy.md). 0: off (the planes use the combined height).
     reliability : {"sigma", "pertuz"}
         What ``reliability_db`` means: ``"sigma"``, the precision of the height,
         −20·log10(σ / z step) dB, on pixels whose focus peak is significant; ``"pertuz"``,
@@ -219,6 +225,10 @@ class FocusOptions(Options):
     fine_window_px: int = option(
         0, help="a finer window for sharp relief (0: none; 3 px covers more of it at a "
                 "higher RMSE on smooth stacks)", unit="px", check=_optional_window)
+    evidence_window_px: int = option(
+        3, help="a small window whose heights the facet planes use: each from the focus "
+                "evidence within about a pixel (0: the planes use the combined height)",
+        unit="px", check=_optional_window)
     reliability: str = option(
         "sigma", help="reliability measure: the height's precision (sigma) or Pertuz et al. "
                       "(2013)", choices=RELIABILITIES)

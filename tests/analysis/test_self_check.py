@@ -47,10 +47,10 @@ def _voronoi(shape, n, rng):
     return np.argmin(d, axis=-1).astype(np.int32)
 
 
-def _check(focus_result, texture, labels):
+def _check(focus_result, texture, labels, cells=None):
     cond = Conditions(np.linspace(-4, 4, 21), 0.25, 0.5, 0.002)
     focus = focus_result(np.zeros(labels.shape), texture)
-    return self_check_ndf(focus, labels, conditions=cond, rms_slope=0.2,
+    return self_check_ndf(focus, labels, cells=cells, conditions=cond, rms_slope=0.2,
                           focus_options=FocusOptions(), joint=JointOptions())
 
 
@@ -68,6 +68,22 @@ def test_slopes_come_back_where_every_facet_has_texture_and_not_where_none_has(f
     sparse[rng.random(small.shape) < 0.01] = 0.1
     bad = _check(focus_result, sparse, small)
     assert not (0.8 <= bad.transfer <= 1.25), bad.to_json()
+
+
+@pytest.mark.slow
+def test_segments_that_are_not_the_facets_cost_width_not_gain(focus_result):
+    """Planes injected on facets independent of the segments: every segment straddles
+    several, its plane averages theirs, so the width the NDF would see drops well below 1
+    while the gain against what each segment holds stays near 1 (the heights are fine)."""
+    rng = np.random.default_rng(8)
+    labels = _voronoi((160, 160), 15, rng)
+    cells = _voronoi((160, 160), 60, np.random.default_rng(9))   # ~4 per segment
+    rich = rng.random(labels.shape).astype(np.float32)
+    same = _check(focus_result, rich, labels)
+    other = _check(focus_result, rich, labels, cells=cells)
+    assert 0.8 <= same.width_transfer <= 1.25, same.to_json()
+    assert other.width_transfer < 0.75 and other.width_transfer < same.width_transfer - 0.15
+    assert 0.8 <= other.transfer <= 1.25, other.to_json()
 
 
 def test_the_judgement_follows_the_self_check():

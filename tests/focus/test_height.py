@@ -231,3 +231,34 @@ def test_memory_does_not_grow_with_slices(tmp_path):
         peaks[n] = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
     assert peaks[40] < 1.1 * peaks[10]
+
+
+def test_evidence_heights_come_from_the_pixel_itself(render_stack):
+    """Two tilted textured strips with a textureless gap at a different height between them:
+    the combined height lends the gap's edge the strips' heights (windows of 7-15 px); the
+    evidence window (3 px) gives the gap no height and the strips their own, so a plane
+    through the evidence heights of a strip has the strip's slope. Switched off, there are
+    no evidence maps and the combined height is unchanged."""
+    H, W = 64, 96
+    flat = np.zeros((H, W), bool)
+    flat[:, 32:64] = True
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    h = np.where(flat, 8.0, 2.0 + 0.05 * xx).astype(np.float32)
+    z = np.arange(0.0, 12.0, 1.0)
+    imgs = render_stack(h, z, noise=0.01, flat_mask=flat, seed=7)
+    res = height_from_focus(imgs, z_um=z)
+    ev, sig = res.evidence_height_um, res.evidence_sigma_um
+    assert ev is not None and ev.dtype == np.float32 and res.params["evidence_window_px"] == 3
+    assert np.isnan(ev[:, 36:60]).mean() > 0.95                    # no evidence, no height
+    assert np.isfinite(res.height_fit_um[:, 33:36]).all()            # borrowed there
+    assert np.all(np.isfinite(sig) == np.isfinite(ev))
+    strip = (slice(4, -4), slice(4, 28))
+    ok = np.isfinite(ev[strip])
+    assert ok.mean() > 0.9
+    slope = np.polyfit(xx[strip][ok], ev[strip][ok], 1)[0]
+    assert slope == pytest.approx(0.05, rel=0.1)
+    err = (ev[strip] - h[strip])[ok]
+    assert np.mean(np.abs(err) <= 2 * sig[strip][ok]) > 0.85       # σ covers the errors
+    off = height_from_focus(imgs, FocusOptions(evidence_window_px=0), z_um=z)
+    assert off.evidence_height_um is None
+    np.testing.assert_array_equal(off.height_fit_um, res.height_fit_um)
