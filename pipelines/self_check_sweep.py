@@ -30,7 +30,7 @@ from pipelines.studies.accuracy_sweep import world_of
 def _actual_gain(r, true_height_um) -> float | None:
     """Gain of the analysis' facet-plane slopes projected on the planes fitted to the true
     heights over the same facets (area-weighted, facets below the acceptance)."""
-    pl = r.joint.planes
+    pl = r.joint.slope_planes
     true = fit_facet_planes(r.joint.facets, true_height_um, height_sigma_um=1.0,
                             reliable=np.isfinite(true_height_um),
                             pixel_size_um=r.scene.pixel_size_um, min_pixels=5)

@@ -115,7 +115,7 @@ def _joint_thickness(joint, roi, cens_frac, options, seed):
 
 def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed):
     """The NDF of the facet planes (censored), and its judgement."""
-    th, pl = joint.thickness, joint.planes
+    th, pl = joint.thickness, joint.slope_planes
     area = joint.area_px.astype(np.float64)
     use = pl.fitted & np.isfinite(pl.tilt_deg) & (cens_frac < CENSORED_FACET_FRACTION)
     # Only what is dark is censored. A bright facet whose plane reads steeper than the

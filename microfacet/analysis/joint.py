@@ -3,7 +3,11 @@ per pixel (:func:`joint_pixel_tilts`).
 
 1. Facets from colour and height edges (:func:`~.segmentation.segment_facets`).
 2. A plane per facet through its reliable heights only (:func:`~.planes.fit_facet_planes`);
-   a facet without enough of them has no height tilt (it is marked, not guessed).
+   a facet without enough of them has no height tilt (it is marked, not guessed). Two sets
+   from focus: through the combined height (dense, smoothed by its 7-15 px windows: the
+   colour's tilt prior, where a flattened tilt moves the colour by little) and through the
+   evidence window's heights (each from the focus evidence at the pixel itself: the NDF's
+   samples, which the windows' smoothing would flatten).
 3. The exposure refined on facets with a height tilt, then each facet's thickness from its
    colour at its tilt, within its interference order
    (:func:`~.facet_thickness.facet_thickness`). Facets without a height tilt use the
@@ -70,6 +74,12 @@ class JointResult:
     facets : ndarray of int32 (H, W)
         Facet labels 0..S-1.
     planes : FacetFit
+        Through the segmentation's heights (dense, smoothed): the colour's tilt prior and
+        the facets' thickness.
+    evidence_planes : FacetFit or None
+        Through the evidence window's heights (each from the focus evidence at the pixel
+        itself, unbiased but sparser): the NDF's samples (:attr:`slope_planes`). None where
+        the heights are not from focus.
     thickness : FacetThickness
     area_px : ndarray of int, shape (S,)
         Pixels per facet.
@@ -97,9 +107,16 @@ class JointResult:
     prior_deg: np.ndarray
     prior_sigma_deg: np.ndarray
     usable: np.ndarray
+    evidence_planes: FacetFit | None = None
+
+    @property
+    def slope_planes(self) -> FacetFit:
+        """The planes the NDF is made of: ``evidence_planes``, else ``planes``."""
+        return self.planes if self.evidence_planes is None else self.evidence_planes
 
 
-def height_inputs(surface, options: JointOptions, *, from_focus) -> HeightInputs:
+def height_inputs(surface, options: JointOptions, *, from_focus, evidence=True
+                  ) -> HeightInputs:
     """The heights the planes may use.
 
     From focus (:func:`focus_heights`): the evidence window's heights and errors, or the
@@ -115,14 +132,15 @@ def height_inputs(surface, options: JointOptions, *, from_focus) -> HeightInputs
         return HeightInputs(h, np.full(h.shape, np.nan), np.zeros(h.shape, bool), 1.0)
     if not from_focus:
         return HeightInputs(h, np.full(h.shape, options.export_sigma_um), np.isfinite(h), 1.0)
-    return focus_heights(foc, options)
+    return focus_heights(foc, options, evidence=evidence)
 
 
-def focus_heights(foc, options: JointOptions) -> HeightInputs:
-    """The heights a :class:`~microfacet.focus.height.FocusResult` gives the planes: its
-    evidence window's (each from the focus evidence at the pixel itself) where the focus
-    stage measured one, else its combined height; errors correlated over about that window."""
-    if getattr(foc, "evidence_height_um", None) is not None:
+def focus_heights(foc, options: JointOptions, *, evidence=True) -> HeightInputs:
+    """The heights a :class:`~microfacet.focus.height.FocusResult` gives the joint mode:
+    with ``evidence`` (the planes) its evidence window's, each from the focus evidence at the
+    pixel itself, where the focus stage measured them; else (the segmentation: denser,
+    smoother) its combined height; errors correlated over about that window."""
+    if evidence and getattr(foc, "evidence_height_um", None) is not None:
         h = np.asarray(foc.evidence_height_um, dtype=np.float64)
         sig = np.asarray(foc.evidence_sigma_um, dtype=np.float64)
         ok = np.isfinite(h) & np.isfinite(sig) & (sig > 0)
@@ -188,10 +206,13 @@ def _colour_sigma(image: FacetImage, ft: FacetThickness, tilt_f, model, noise_de
 
 @dataclass
 class Segmented:
-    """Facet labels and the heights they were drawn with."""
+    """Facet labels, the heights they were drawn with (the focus stage's combined height,
+    dense and smooth: the planes that are the colour's tilt prior) and the evidence window's
+    heights (each from the focus evidence at the pixel itself: the planes of the NDF)."""
 
     labels: np.ndarray
     heights: HeightInputs
+    evidence: HeightInputs | None = None
 
 
 def facet_labels(colour, surface, scene, options: JointOptions, *, renoise=None
@@ -201,7 +222,7 @@ def facet_labels(colour, surface, scene, options: JointOptions, *, renoise=None
     ``renoise`` (a ``numpy.random.Generator``) the Lab image first gets fresh noise of its
     own measured level: a second segmentation as likely as the first (a parametric
     bootstrap), which differs from it wherever the image does not fix the facets' edges."""
-    hi = height_inputs(surface, options, from_focus=scene.from_focus)
+    hi = height_inputs(surface, options, from_focus=scene.from_focus, evidence=False)
     facet_px = options.facet_size_um / pixel_area_side(scene.pixel_size_um)
     lab = colour.lab
     if renoise is not None:
@@ -210,7 +231,10 @@ def facet_labels(colour, surface, scene, options: JointOptions, *, renoise=None
                             height_um=np.where(hi.reliable, hi.height_um, np.nan),
                             height_sigma_um=hi.sigma_um, pixel_size_um=scene.pixel_size_um,
                             options=options)
-    return Segmented(labels, hi)
+    has_evidence = (scene.from_focus and not surface.no_focus
+                    and getattr(surface.focus, "evidence_height_um", None) is not None)
+    return Segmented(labels, hi, focus_heights(surface.focus, options) if has_evidence
+                     else None)
 
 
 def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOptions
@@ -241,11 +265,11 @@ def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOption
     S = int(facets.max()) + 1
     area = np.bincount(facets.ravel(), minlength=S)
     dist = facet_edge_distance(facets)
-    planes = fit_facet_planes(facets, hi.height_um, height_sigma_um=hi.sigma_um,
-                              reliable=hi.reliable & (dist >= options.plane_edge_px),
-                              pixel_size_um=scene.pixel_size_um,
-                              min_pixels=options.min_plane_pixels,
-                              correlation_px=hi.correlation_px)
+    planes, ev_planes = (None if h is None else fit_facet_planes(
+        facets, h.height_um, height_sigma_um=h.sigma_um,
+        reliable=h.reliable & (dist >= options.plane_edge_px),
+        pixel_size_um=scene.pixel_size_um, min_pixels=options.min_plane_pixels,
+        correlation_px=h.correlation_px) for h in (hi, seg.evidence))
     fitted = planes.fitted
     t_in, s_in = _stand_in_tilt(planes, area)
     log.info("facets: %d, %d with a height tilt (%.0f%% of the area); stand-in tilt %.1f ± "
@@ -265,7 +289,7 @@ def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOption
     dark = np.bincount(facets.ravel(), weights=colour.mask.steep.ravel(), minlength=S)
     censored = (dark > 0.5 * area)[facets]
     return JointResult(None, facets, planes, ft, area, censored, c_sig, float(model.exposure),
-                       tilt_f, tsig_f, usable)
+                       tilt_f, tsig_f, usable, ev_planes)
 
 
 def joint_pixel_tilts(joint: JointResult, colour, model, theta_grid_deg,

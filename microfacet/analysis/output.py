@@ -131,7 +131,8 @@ def save_results(result, folder) -> None:
     maps = {
         "height_um": r.focus.height_um,
         "normals": np.where(rel[..., None], r.surface.normals, np.nan),
-        "reliability_db": r.focus.reliability_db, "tilt_height_deg": r.surface.tilt_deg,
+        "reliability_db": r.focus.reliability_db, "height_sigma_um": height_sigma_um(r),
+        "tilt_height_deg": r.surface.tilt_deg,
         "thickness_nm": px.thickness_nm, "tilt_deg": px.tilt_deg,
         "tilt_sigma_deg": px.tilt_sigma_deg, "delta_e": px.delta_e,
         "colour_weight": px.colour_weight, "mask": r.colour.mask.mask,
@@ -244,13 +245,37 @@ def build_summary(r) -> Summary:
         warnings=[w.plain() for w in r.warnings], timings_s=dict(r.timings_s))
 
 
+def sigma_scale(r) -> float | None:
+    """The factor the self-check measured for the focus stage's height σ (None without)."""
+    c = r.self_check
+    s = None if c is None else getattr(c, "height_sigma_scale", None)
+    return float(s) if s is not None and np.isfinite(s) else None
+
+
+def height_sigma_um(r) -> np.ndarray | None:
+    """``height_sigma_um.npy``: the focus stage's 1-σ height error where the height is
+    reliable, times the self-check's :func:`sigma_scale` (None for an export)."""
+    sig = getattr(r.focus, "height_sigma_um", None)
+    if sig is None or not r.scene.from_focus:
+        return None
+    k = sigma_scale(r) or 1.0
+    return np.where(np.isfinite(r.focus.height_um), sig * np.float32(k),
+                    np.float32(np.nan)).astype(np.float32)
+
+
 def _height_section(r) -> dict:
     """Unreliable fraction; the σ (µm, ``[y, x]``) by which the slopes were smoothed before
-    the normals (0 for an instrument's height map)."""
+    the normals (0 for an instrument's height map); the self-check's scale of the height σ
+    and the 2σ coverage of its heights before it."""
     sigma_px = r.options.focus.slope_sigma_px if r.scene.from_focus else 0.0
+    c = r.self_check
+    cov = None if c is None else getattr(c, "height_coverage", None)
     return {"unreliable_fraction": float(np.mean(~np.isfinite(r.focus.height_um))),
             "normals_slope_sigma_um": [sigma_px * p for p in pixel_size_yx(
-                r.scene.pixel_size_um)]}
+                r.scene.pixel_size_um)],
+            "sigma_scale": sigma_scale(r),
+            "self_check_coverage": float(cov) if cov is not None and np.isfinite(cov)
+            else None}
 
 
 def _facet_summary(joint) -> FacetCounts | None:

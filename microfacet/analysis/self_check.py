@@ -51,6 +51,10 @@ cv2 = load("cv2")
 #: Largest side (px) of the part of the scene the self-check renders (bounds its time and
 #: memory: ~14 blurred copies of this crop).
 MAX_SIDE_PX = 512
+#: Share of the self-check's height errors its scaled 2σ covers (a margin over the 90 % asked
+#: of the analysis' heights, for the difference between the injected and the real scene).
+SIGMA_COVERAGE = 0.95
+
 #: Injected lobe widths, as multiples of the scene's own measured RMS slope.
 WIDTH_FACTORS = (0.5, 1.0, 2.0)
 #: Planes whose slope noise (per axis) exceeds this carry no slope information (slivers along
@@ -86,6 +90,14 @@ class SelfCheck:
         checks the slopes' gain only.
     width_transfer : float
         Median ``width_ratio`` (NaN when nothing was measured).
+    height_sigma_scale : float
+        The factor (≥ 1) by which the focus stage's height σ must grow for 2σ to cover
+        :data:`SIGMA_COVERAGE` of the errors of the recovered heights against the rendered
+        surfaces: the errors the σ model does not see (a window's borrowed heights, blur
+        and sampling of this stack) measured on the stack itself. The analysis reports its
+        height σ times this factor.
+    height_coverage : float
+        The share of those errors within the focus stage's own 2σ.
     """
 
     injected_rms_slope: list
@@ -96,6 +108,8 @@ class SelfCheck:
     facets: int
     width_ratio: list = field(default_factory=list)
     width_transfer: float = math.nan
+    height_sigma_scale: float = math.nan
+    height_coverage: float = math.nan
 
     def to_json(self) -> dict:
         """For ``ndf.self_check`` in summary.json."""
@@ -103,6 +117,8 @@ class SelfCheck:
             return float(v) if math.isfinite(v) else None
         return {"transfer": num(self.transfer), "spread": num(self.spread),
                 "width_transfer": num(self.width_transfer), "facets": int(self.facets),
+                "height_sigma_scale": num(self.height_sigma_scale),
+                "height_coverage": num(self.height_coverage),
                 "width_ratio": [num(v) for v in self.width_ratio],
                 "injected_rms_slope": [num(v) for v in self.injected_rms_slope],
                 "recovered_rms_slope": [num(v) for v in self.recovered_rms_slope],
@@ -112,7 +128,7 @@ class SelfCheck:
 def measured_rms_slope(joint, max_tilt_deg) -> float | None:
     """Area-weighted RMS |∇h| of the scene's facet planes below the acceptance, their slope
     noise removed in quadrature (None with fewer than 3 planes)."""
-    pl = joint.planes
+    pl = joint.slope_planes
     ok = (pl.fitted & np.isfinite(pl.tilt_deg) & (pl.tilt_deg < max_tilt_deg)
           & (pl.slope_sigma < MAX_SLOPE_SIGMA))
     if ok.sum() < 3:
@@ -291,13 +307,18 @@ class Conditions:
     seed: int = 0
 
 
-def _recovered_planes(sc, height_um, focus_options, joint, rng):
+def _recovered_planes(sc, height_um, focus_options, joint, rng, z_scores=None):
     """Render ``height_um`` in the scene's conditions; the facet planes of its height from
-    focus, fitted as the analysis fits them."""
+    focus, fitted as the analysis fits them. With a list ``z_scores``, the errors of the
+    focus stage's reliable heights in units of their σ are appended to it."""
     slices = render_focus_stack(sc.texture, height_um, sc.z_um, blur_px_per_um=sc.blur_px_per_um,
                                 noise_sd=sc.noise_sd, rng=rng)
-    got = focus_heights(height_from_focus(slices, focus_options, z_um=sc.z_um,
-                                          prefetch=False), joint)
+    foc = height_from_focus(slices, focus_options, z_um=sc.z_um, prefetch=False)
+    if z_scores is not None:
+        rel = foc.reliable & np.isfinite(foc.height_sigma_um) & (foc.height_sigma_um > 0)
+        z_scores.append(np.abs(foc.height_fit_um[rel] - height_um[rel])
+                        / foc.height_sigma_um[rel])
+    got = focus_heights(foc, joint)
     interior = facet_edge_distance(sc.labels) >= joint.plane_edge_px
     return fit_facet_planes(sc.labels, got.height_um, height_sigma_um=got.sigma_um,
                             reliable=got.reliable & interior, pixel_size_um=sc.pixel_yx,
@@ -349,11 +370,11 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
                            pixel_size_um=sc.pixel_yx, min_pixels=3, robust_rounds=0)
     pattern = (np.nan_to_num(own.slope_x), np.nan_to_num(own.slope_y))
     area = np.bincount(sc.labels.ravel()).astype(np.float64)
-    inj, rec, widths, n_fac = [], [], [], 0
+    inj, rec, widths, n_fac, z_scores = [], [], [], 0, []
     for factor in WIDTH_FACTORS:
         width = min(max(factor * rms_slope, 0.02), 0.6)
         delta, a_cell, b_cell = _planes(sc.cells, width, sc.pixel_yx, rng, pattern=pattern)
-        fit = _recovered_planes(sc, sc.base_um + delta, fo, joint, rng)
+        fit = _recovered_planes(sc, sc.base_um + delta, fo, joint, rng, z_scores)
         ok = _usable(fit) & _usable(base)
         n_fac = max(n_fac, int(ok.sum()))
         if ok.sum() < 3:
@@ -386,4 +407,16 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
     spread = 0.5 * (max(good) - min(good)) if good else math.nan
     wgood = [v for v in widths if math.isfinite(v)]
     return SelfCheck(inj, rec, ratio, transfer, spread, n_fac, widths,
-                     float(np.median(wgood)) if wgood else math.nan)
+                     float(np.median(wgood)) if wgood else math.nan,
+                     *_sigma_scale(np.concatenate(z_scores) if z_scores else np.empty(0)))
+
+
+def _sigma_scale(z) -> tuple[float, float]:
+    """The factor (≥ 1) that makes 2σ cover :data:`SIGMA_COVERAGE` of the recovered heights'
+    errors ``z`` (in units of their σ), and the 2σ coverage before it (NaN, NaN without
+    errors)."""
+    z = z[np.isfinite(z)]
+    if z.size < 100:
+        return math.nan, math.nan
+    return (max(1.0, float(np.quantile(z, SIGMA_COVERAGE)) / 2.0),
+            float(np.mean(z <= 2.0)))

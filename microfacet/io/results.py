@@ -46,6 +46,8 @@ MAPS = {
     "height_um": ("height_um.npy", "height from focus, µm (NaN where unreliable)"),
     "normals": ("normals.npy", "unit normals (x right, y up, z up), H×W×3"),
     "reliability_db": ("reliability_db.npy", "focus reliability, dB"),
+    "height_sigma_um": ("height_sigma_um.npy", "1-σ error of height_um, µm, scaled by the "
+                        "self-check's measured errors"),
     "tilt_height_deg": ("tilt_height_deg.npy", "tilt of the (filled) height map, degrees"),
     "thickness_nm": ("thickness_nm.npy", "oxide thickness, nm (NaN where masked)"),
     "tilt_deg": ("tilt_deg.npy", "facet tilt, degrees from the optical axis"),
