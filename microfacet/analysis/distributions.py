@@ -38,6 +38,7 @@ from .identification import (
     NdfEvidence,
     ambiguous_order,
     colour_tilt_contrast,
+    dome_judgement,
     ndf_judgement,
     seed_ndf_judgement,
     thickness_judgement,
@@ -46,6 +47,7 @@ from .identification import (
 from .mixtures import MixtureFit, fit_thickness_mixture
 from .ndf_fit import fit_ndf_mixture, width_relative_error
 from .options import FitOptions
+from .planes import deconvolved_rms_slope
 from .sampling import thickness_regions
 
 __all__ = ["Distributions", "fit_joint_distributions", "fit_seed_distributions"]
@@ -152,7 +154,20 @@ def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed):
     evidence = NdfEvidence(int(use.sum()), int(area.size),
                            float(area[pl.fitted].sum() / max(area.sum(), 1)), rel,
                            C / max(seen, 1.0), contrast, c_err, d_med)
-    return fit, ndf_judgement(evidence, options)
+    share = _dome_share(joint.dome_ms_slope, pl, use, area)
+    fit.info["dome_share"] = share
+    return fit, dome_judgement(ndf_judgement(evidence, options), share, options)
+
+
+def _dome_share(dome, pl, use, area) -> float | None:
+    """The upper end (+2 standard errors) of the mean square slope inside the facets over
+    the planes' own: how much wider the per-pixel NDF may be than the planes'. None where
+    either is not measured."""
+    if dome is None or not use.any():
+        return None
+    rms = deconvolved_rms_slope(pl, use, area[use])
+    ms, se = dome
+    return float(max(ms + 2.0 * se, 0.0) / rms ** 2) if rms > 0 else None
 
 
 def fit_joint_distributions(joint, roi, model, scene, options: FitOptions) -> Distributions:

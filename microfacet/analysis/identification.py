@@ -214,6 +214,22 @@ def self_check_judgement(judgement: Judgement, check, options: FitOptions) -> Ju
         f"slopes (ndf.self_check in summary.json)", "fits.self_check_range"))
 
 
+def dome_judgement(judgement: Judgement, dome_share, options: FitOptions) -> Judgement:
+    """An NDF of facet planes is a sample of the normals only where the facets are planar:
+    where the mean square slope inside them may exceed ``fits.max_dome_share`` of the planes'
+    own (``dome_share``: the upper end, +2 standard errors, of
+    :func:`~.planes.dome_mean_square_slope` over the planes' deconvolved mean square), the
+    planes' NDF may be too narrow and is not identified (rounded grains, or facets too small
+    for their heights to show whether they are)."""
+    if not judgement.identified or dome_share is None or dome_share <= options.max_dome_share:
+        return judgement
+    return Judgement(False, Reason(
+        "curved_facets", f"the facets may not be planar: the slopes inside them may add up to "
+        f"{100 * dome_share:.0f} % to the mean square slope of their planes (identified up "
+        f"to {100 * options.max_dome_share:.0f} %, `fits.max_dome_share`), so an NDF of the "
+        f"planes may be too narrow", "fits.max_dome_share"))
+
+
 def ndf_judgement(e: NdfEvidence, options: FitOptions) -> Judgement:
     """Whether the joint mode's NDF (facet planes) is identified, and if not why and what
     would identify it."""

@@ -40,7 +40,7 @@ from .facet_thickness import (
     refine_exposure_on_facets,
 )
 from .options import JointOptions, TiltOptions
-from .planes import FacetFit, facet_edge_distance, fit_facet_planes
+from .planes import FacetFit, dome_mean_square_slope, facet_edge_distance, fit_facet_planes
 from .segmentation import segment_facets
 from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
 
@@ -80,6 +80,10 @@ class JointResult:
         Through the evidence window's heights (each from the focus evidence at the pixel
         itself, unbiased but sparser): the NDF's samples (:attr:`slope_planes`). None where
         the heights are not from focus.
+    dome_ms_slope : (float, float) or None
+        Mean square of the slope inside the facets that the planes miss (a dome term per
+        facet, :func:`~.planes.dome_mean_square_slope`) and its standard error, from the
+        same heights as :attr:`slope_planes`.
     thickness : FacetThickness
     area_px : ndarray of int, shape (S,)
         Pixels per facet.
@@ -108,6 +112,7 @@ class JointResult:
     prior_sigma_deg: np.ndarray
     usable: np.ndarray
     evidence_planes: FacetFit | None = None
+    dome_ms_slope: tuple | None = None
 
     @property
     def slope_planes(self) -> FacetFit:
@@ -288,8 +293,13 @@ def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOption
     # facets tilted past the acceptance: more than half their pixels far darker than film
     dark = np.bincount(facets.ravel(), weights=colour.mask.steep.ravel(), minlength=S)
     censored = (dark > 0.5 * area)[facets]
+    h = hi if seg.evidence is None else seg.evidence
+    dome = dome_mean_square_slope(facets, h.height_um, height_sigma_um=h.sigma_um,
+                                  reliable=h.reliable & (dist >= options.plane_edge_px),
+                                  pixel_size_um=scene.pixel_size_um,
+                                  correlation_px=h.correlation_px)
     return JointResult(None, facets, planes, ft, area, censored, c_sig, float(model.exposure),
-                       tilt_f, tsig_f, usable, ev_planes)
+                       tilt_f, tsig_f, usable, ev_planes, dome)
 
 
 def joint_pixel_tilts(joint: JointResult, colour, model, theta_grid_deg,

@@ -217,6 +217,10 @@ class FitOptions(Options):
         (0.8, 1.25), help="recovered/injected RMS slope outside this range: the NDF is not "
                           "identified", kind=tuple, check=lambda v: None if (
                               len(v) == 2 and 0 < v[0] < 1 < v[1]) else "need 0 < low < 1 < high")
+    max_dome_share: float = option(
+        0.3, help="largest mean square slope inside the facets (which planes miss) as a share "
+                  "of the planes' own, for an identified NDF (0.3: the planes' RMS slope at "
+                  "most 12 % below the per-pixel one)", low=0)
     max_censored_fraction: float = option(
         0.5, help="largest share of the surface past the acceptance for an identified NDF",
         low=0, high=1)

@@ -16,6 +16,7 @@ References
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -211,3 +212,80 @@ def facet_edge_distance(labels) -> np.ndarray:
     if not edge.any():
         return np.full(labels.shape, np.inf)
     return ndimage.distance_transform_edt(~edge)
+
+
+def deconvolved_rms_slope(planes: FacetFit, ok, weights) -> float:
+    """Weighted RMS |∇h| of ``planes[ok]`` with their slope noise (2 ``slope_sigma``² per
+    facet) removed in quadrature: the facets' own RMS slope."""
+    w = np.asarray(weights, dtype=np.float64)
+    g2 = np.tan(np.radians(planes.tilt_deg[ok])) ** 2
+    noise2 = 2.0 * planes.slope_sigma[ok] ** 2
+    return math.sqrt(max(float(np.sum(w * (g2 - noise2)) / max(float(np.sum(w)), 1e-300)),
+                         0.0))
+
+
+def dome_mean_square_slope(labels, height_um, *, height_sigma_um, reliable, pixel_size_um,
+                           correlation_px=1.0, min_pixels=12) -> tuple[float, float] | None:
+    """How curved the facets are: the area-weighted mean square of the slope that a dome
+    term adds inside a facet, from a weighted fit of ``z = a x + b y + c + d r²`` per facet
+    (r from the centroid of its heights), the noise of ``d`` removed (µm/µm squared), and its
+    standard error.
+
+    Planes read a rounded facet (a grain top, a dome) as its mean slope: the NDF of the
+    planes then lacks the slopes inside the facets. This measures them; None with fewer than
+    3 facets of ``min_pixels`` heights. The noise of ``d`` is inflated by the reduced χ² and
+    by the correlation of the height errors (``correlation_px``) as in
+    :func:`fit_facet_planes`.
+
+    Examples
+    --------
+    >>> yy, xx = np.mgrid[0:40, 0:40] * 0.5
+    >>> labels = (xx >= 10).astype(np.int32) + 2 * (yy >= 10)
+    >>> cy, cx = np.where(yy >= 10, 14.75, 4.75), np.where(xx >= 10, 14.75, 4.75)
+    >>> h = -0.05 * ((xx - cx) ** 2 + (yy - cy) ** 2)          # domes: slope 0.1 × r
+    >>> ms, se = dome_mean_square_slope(labels, h, height_sigma_um=0.001,
+    ...                             reliable=np.ones(h.shape, bool), pixel_size_um=0.5)
+    >>> round(ms / float(np.mean(0.01 * ((xx - cx) ** 2 + (yy - cy) ** 2))), 3)
+    1.0
+    """
+    S = int(labels.max()) + 1
+    sig = np.broadcast_to(np.asarray(height_sigma_um, dtype=np.float64), labels.shape)
+    z = np.asarray(height_um, dtype=np.float64)
+    use = np.asarray(reliable, bool) & np.isfinite(z) & np.isfinite(sig) & (sig > 0)
+    lab = labels.ravel()
+    w = np.where(use, 1.0 / np.where(use, sig, 1.0) ** 2, 0.0).ravel()
+    zz = np.where(use, z, 0.0).ravel()
+    py, px = pixel_size_yx(pixel_size_um)
+    yy, xx = np.indices(labels.shape)
+    x, y = (xx * px).ravel(), (yy * py).ravel()
+    sw = np.bincount(lab, w, S)
+    n = np.bincount(lab, use.ravel(), S)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cx, cy = np.bincount(lab, w * x, S) / sw, np.bincount(lab, w * y, S) / sw
+    x, y = x - np.nan_to_num(cx)[lab], y - np.nan_to_num(cy)[lab]
+    basis = (x, y, np.ones_like(x), x * x + y * y)
+    A = np.empty((S, 4, 4))
+    rhs = np.empty((S, 4))
+    for i in range(4):
+        rhs[:, i] = np.bincount(lab, w * basis[i] * zz, S)
+        for j in range(i, 4):
+            A[:, i, j] = A[:, j, i] = np.bincount(lab, w * basis[i] * basis[j], S)
+    ok = n >= max(min_pixels, 5)
+    ok[ok] &= np.abs(np.linalg.det(A[ok])) > 1e-12 * np.prod(np.diagonal(A[ok], axis1=1,
+                                                                         axis2=2), axis=1)
+    if ok.sum() < 3:
+        return None
+    inv = np.linalg.inv(A[ok])
+    coef = np.einsum("sij,sj->si", inv, rhs[ok])
+    rss = np.bincount(lab, w * zz * zz, S)[ok] - np.einsum("si,si->s", coef, rhs[ok])
+    chi2 = np.maximum(rss / np.maximum(n[ok] - 4, 1), 1.0)
+    A_c = max(float(correlation_px), 1.0)
+    corr = np.maximum(n[ok] * A_c / (n[ok] + 5.0 * A_c), 1.0) if A_c > 1.0 else 1.0
+    d, var_d = coef[:, 3], inv[:, 3, 3] * chi2 * corr
+    # the dome's slope 2 d r, its mean square over the facet's pixels (all of them)
+    r2 = np.bincount(lab, x * x + y * y, S)[ok] / np.bincount(lab, minlength=S)[ok]
+    area = np.bincount(lab, minlength=S)[ok].astype(np.float64)
+    ms = float(np.sum(area * 4.0 * (d * d - var_d) * r2) / np.sum(area))
+    # Var(d̂²) = 4 d² v + 2 v² for d̂ ~ N(d, v), with d² estimated by max(d̂² − v, 0)
+    var_t = (4.0 * r2) ** 2 * (4.0 * np.maximum(d * d - var_d, 0.0) * var_d + 2.0 * var_d ** 2)
+    return ms, float(np.sqrt(np.sum(area ** 2 * var_t)) / np.sum(area))

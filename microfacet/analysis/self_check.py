@@ -41,7 +41,7 @@ from ..focus.height import height_from_focus
 from ..focus.options import FocusOptions
 from .joint import focus_heights
 from .options import JointOptions
-from .planes import facet_edge_distance, fit_facet_planes
+from .planes import deconvolved_rms_slope, facet_edge_distance, fit_facet_planes
 
 __all__ = ["Conditions", "SelfCheck", "measured_rms_slope", "render_focus_stack", "self_check_ndf",
            "slice_noise_sd", "slope_gain"]
@@ -133,14 +133,7 @@ def measured_rms_slope(joint, max_tilt_deg) -> float | None:
           & (pl.slope_sigma < MAX_SLOPE_SIGMA))
     if ok.sum() < 3:
         return None
-    return _deconvolved_rms(pl, ok, joint.area_px[ok].astype(np.float64))
-
-
-def _deconvolved_rms(planes, ok, w) -> float:
-    """RMS |∇h| of ``planes[ok]`` (weights ``w``) with their slope noise removed."""
-    g = np.tan(np.radians(planes.tilt_deg[ok]))
-    noise2 = float(np.sum(w * 2 * planes.slope_sigma[ok] ** 2) / np.sum(w))
-    return math.sqrt(max(_rms(g, w) ** 2 - noise2, 0.0))
+    return deconvolved_rms_slope(pl, ok, joint.area_px[ok])
 
 
 def slice_noise_sd(stack, focus) -> float:
@@ -400,7 +393,7 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
         cell = sc.cells[px]
         true = _rms(np.hypot(pattern[0][cell] + a_cell[cell], pattern[1][cell] + b_cell[cell]),
                     np.ones(cell.size))
-        widths.append(_deconvolved_rms(fit, ok, w) / true if true > 0 else math.nan)
+        widths.append(deconvolved_rms_slope(fit, ok, w) / true if true > 0 else math.nan)
     ratio = [r / i if i > 0 else math.nan for r, i in zip(rec, inj)]
     good = [v for v in ratio if math.isfinite(v)]
     transfer = float(np.median(good)) if good else math.nan

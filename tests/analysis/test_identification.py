@@ -331,3 +331,20 @@ def test_unexplained_facets_are_robust_outliers():
     assert not out[3] and out[4]
     assert not unexplained_facets(de, 6.0)[4]
     assert not unexplained_facets(np.array([1.0, 9.0, 1.0, np.nan]), 5.0).any()   # < 5 facets
+
+
+def test_an_ndf_of_planes_is_refused_where_the_facets_may_be_curved():
+    """``dome_share`` (upper end of the slope inside the facets over the planes' own) above
+    ``fits.max_dome_share``: not identified, the reason names the option; at or below it, or
+    unmeasured, the judgement is unchanged."""
+    from microfacet.analysis.identification import dome_judgement
+
+    ok, opts = Judgement(True), FitOptions()
+    assert dome_judgement(ok, None, opts) is ok
+    assert dome_judgement(ok, opts.max_dome_share, opts) is ok
+    bad = dome_judgement(ok, 0.8, opts)
+    assert not bad.identified and bad.reason.code == "curved_facets"
+    assert bad.reason.parameter == "fits.max_dome_share" and "80 %" in bad.reason.plain()
+    assert dome_judgement(ok, 0.8, FitOptions(max_dome_share=1.0)) is ok
+    already = Judgement(False)
+    assert dome_judgement(already, 5.0, opts) is already

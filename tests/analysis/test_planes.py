@@ -189,3 +189,26 @@ def test_a_pit_inside_a_facet_does_not_tilt_its_plane():
     assert good.mean() >= 0.9 and np.median(err_robust) < 0.05
     assert np.median(robust.chi2_dof) == pytest.approx(1.0, abs=0.3)
     assert (robust.n_pixels[good] == 300).all()
+
+
+@pytest.mark.parametrize("dome", [0.0, 0.08])
+def test_the_slope_inside_facets_is_measured_with_its_error(dome):
+    """Facets that are planes plus a dome ``−dome/2 · r²`` (slope ``dome · r``) with height
+    noise: the dome's mean square slope comes back within 2.5 standard errors, and planar
+    facets read 0 within them."""
+    from microfacet.analysis.planes import dome_mean_square_slope
+
+    rng = np.random.default_rng(11)
+    labels = _block_labels(16, 8, 8)
+    a, b, h = _planes(labels, rng, slope=(-0.2, 0.2))
+    yy, xx = np.mgrid[0:labels.shape[0], 0:labels.shape[1]] * PX
+    cy = np.bincount(labels.ravel(), yy.ravel()) / np.bincount(labels.ravel())
+    cx = np.bincount(labels.ravel(), xx.ravel()) / np.bincount(labels.ravel())
+    r2 = (yy - cy[labels]) ** 2 + (xx - cx[labels]) ** 2
+    h = h - 0.5 * dome * r2 + rng.normal(0, 0.02, h.shape)
+    ms, se = dome_mean_square_slope(labels, h, height_sigma_um=0.02,
+                                    reliable=np.ones(h.shape, bool), pixel_size_um=PX)
+    truth = float(np.mean(dome ** 2 * r2))
+    assert se > 0 and abs(ms - truth) < 2.5 * se
+    if dome:
+        assert ms > 5 * se                                   # a dome of this size is seen
