@@ -88,6 +88,23 @@ def lobe_scores(r, tilt_deg) -> dict:
             "w1_deg": float(ndf_w1_deg(lobes, t, lim)), "lobes": lobes}
 
 
+def height_coverage(r, truth: Path) -> float | None:
+    """Share of the reported height's errors against the truth within 2 reported σ
+    (``height_sigma_um.npy``), over the facet pixels (``feature.npy`` code 0) with a height."""
+    from microfacet.analysis.output import height_sigma_um
+
+    sig = height_sigma_um(r)
+    if sig is None:
+        return None
+    ht = np.load(truth / "height_um.npy")
+    f = truth / "feature.npy"
+    facet = np.load(f) == 0 if f.is_file() else np.ones(ht.shape, bool)
+    ok = np.isfinite(r.focus.height_um) & np.isfinite(sig) & facet
+    if not ok.any():
+        return None
+    return float(np.mean(np.abs(r.focus.height_um[ok] - ht[ok]) <= 2.0 * sig[ok]))
+
+
 def main(folder: str, overrides: dict | None = None) -> None:
     o = overrides or {}
     options = AnalysisOptions(fits=FitOptions(**{"self_check": True, **o.get("fits", {})}),
@@ -111,7 +128,7 @@ def main(folder: str, overrides: dict | None = None) -> None:
             "scene": d.name, "true_rms_slope": true_rms, "measured_rms_slope": meas,
             "actual_ratio": None if meas is None else meas / true_rms,
             "self_check": None if c is None else c.to_json(),
-            **lobe_scores(r, t),
+            **lobe_scores(r, t), "height_coverage": height_coverage(r, d / "truth"),
             "identified": r.distributions.ndf_judgement.identified,
             "reason_code": r.distributions.ndf_judgement.to_json()["reason_code"]}), flush=True)
 

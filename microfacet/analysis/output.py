@@ -18,6 +18,7 @@ import numpy as np
 from .. import __version__
 from ..core.densities import cell_edges, pdf_table
 from ..core.pixels import pixel_size_yx
+from ..focus.uncertainty import height_sigma_with_bias
 from ..io.outdir import atomic_output_dir
 from ..io.results import write_results_files
 from ..io.summary import (
@@ -254,10 +255,12 @@ def sigma_scale(r) -> float | None:
 
 def height_sigma_um(r) -> np.ndarray | None:
     """``height_sigma_um.npy``: the focus stage's 1-σ height error where the height is
-    reliable, times the self-check's :func:`sigma_scale` (None for an export)."""
-    sig = getattr(r.focus, "height_sigma_um", None)
-    if sig is None or not r.scene.from_focus:
+    reliable, with the variance of its unexplained disagreement with the evidence window
+    (:func:`~microfacet.focus.uncertainty.height_sigma_with_bias`), times the self-check's
+    :func:`sigma_scale` (None for an export)."""
+    if getattr(r.focus, "height_sigma_um", None) is None or not r.scene.from_focus:
         return None
+    sig = height_sigma_with_bias(r.focus)
     k = sigma_scale(r) or 1.0
     return np.where(np.isfinite(r.focus.height_um), sig * np.float32(k),
                     np.float32(np.nan)).astype(np.float32)

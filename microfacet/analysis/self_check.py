@@ -39,6 +39,7 @@ from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
 from ..focus.height import height_from_focus
 from ..focus.options import FocusOptions
+from ..focus.uncertainty import height_sigma_with_bias
 from .joint import focus_heights
 from .options import JointOptions
 from .planes import deconvolved_rms_slope, facet_edge_distance, fit_facet_planes
@@ -91,7 +92,8 @@ class SelfCheck:
     width_transfer : float
         Median ``width_ratio`` (NaN when nothing was measured).
     height_sigma_scale : float
-        The factor (≥ 1) by which the focus stage's height σ must grow for 2σ to cover
+        The factor (≥ 1) by which the focus stage's height σ (with its disagreement term,
+        :func:`~microfacet.focus.uncertainty.height_sigma_with_bias`) must grow for 2σ to cover
         :data:`SIGMA_COVERAGE` of the errors of the recovered heights against the rendered
         surfaces: the errors the σ model does not see (a window's borrowed heights, blur
         and sampling of this stack) measured on the stack itself. The analysis reports its
@@ -308,9 +310,9 @@ def _recovered_planes(sc, height_um, focus_options, joint, rng, z_scores=None):
                                 noise_sd=sc.noise_sd, rng=rng)
     foc = height_from_focus(slices, focus_options, z_um=sc.z_um, prefetch=False)
     if z_scores is not None:
-        rel = foc.reliable & np.isfinite(foc.height_sigma_um) & (foc.height_sigma_um > 0)
-        z_scores.append(np.abs(foc.height_fit_um[rel] - height_um[rel])
-                        / foc.height_sigma_um[rel])
+        sig = height_sigma_with_bias(foc)
+        rel = foc.reliable & np.isfinite(sig) & (sig > 0)
+        z_scores.append(np.abs(foc.height_fit_um[rel] - height_um[rel]) / sig[rel])
     got = focus_heights(foc, joint)
     interior = facet_edge_distance(sc.labels) >= joint.plane_edge_px
     return fit_facet_planes(sc.labels, got.height_um, height_sigma_um=got.sigma_um,

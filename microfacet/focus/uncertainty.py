@@ -44,7 +44,8 @@ from .peaks import detection_threshold, fit_peak, pertuz_db
 
 cv2 = load("cv2")
 
-__all__ = ["WindowFit", "combine", "fit_window"]
+__all__ = ["WindowFit", "combine", "disagreement_variance", "fit_window",
+           "height_sigma_with_bias"]
 
 #: Nominal false-peak rate per pixel and window of the detection test (the measured rate on
 #: pure noise is 1e-4 to 4e-4: the tails' mean and spread are estimated from few slices). A
@@ -327,3 +328,65 @@ def combine(fits: list[WindowFit], primary: int, step, *, prefer: float = 1.0):
     idx = np.argmin(score, axis=0).astype(np.int8)
     sigma = np.take_along_axis(raw, idx[None].astype(np.intp), 0)[0]
     return idx, sigma.astype(np.float32), det.any(0)
+
+
+#: σ (px) of the neighbourhood over which :func:`disagreement_variance` pools.
+DISAGREEMENT_POOL_PX = 7.0
+
+
+def disagreement_variance(height, sigma, evidence_height, evidence_sigma, *,
+                          pool_px=DISAGREEMENT_POOL_PX):
+    """The variance of a height's bias that its σ does not hold: where the combined height
+    and the evidence window's (each from the focus evidence at the pixel itself) both exist,
+    their squared difference less what their σ explain, pooled over a Gaussian
+    neighbourhood of ``pool_px`` (then clipped at 0: pooling first keeps it unbiased where
+    the σ are right) so that a pixel without evidence of its own (whose height is borrowed
+    from its neighbours) takes its neighbourhood's, and the image's mean where no neighbour
+    has both.
+
+    Parameters
+    ----------
+    height, sigma, evidence_height, evidence_sigma : ndarray (H, W)
+        The combined height and its σ, the evidence window's and its σ (same units; NaN
+        where absent).
+    pool_px : float
+
+    Returns
+    -------
+    ndarray of float32 (H, W)
+        Variance to add to ``sigma``² (≥ 0).
+
+    Examples
+    --------
+    >>> h = np.zeros((20, 20)); s = np.full((20, 20), 0.1)
+    >>> he = h + 0.5; he[:, 10:] = np.nan                  # biased by 0.5 where measured
+    >>> v = disagreement_variance(h, s, he, s)
+    >>> round(float(v[5, 2]), 2), round(float(v[5, 18]), 2)
+    (0.23, 0.23)
+    """
+    h, s = np.asarray(height, np.float64), np.asarray(sigma, np.float64)
+    he, se = np.asarray(evidence_height, np.float64), np.asarray(evidence_sigma, np.float64)
+    both = np.isfinite(h) & np.isfinite(s) & np.isfinite(he) & np.isfinite(se)
+    with np.errstate(invalid="ignore"):
+        excess = np.where(both, (h - he) ** 2 - s ** 2 - se ** 2, 0.0)   # unbiased, ± noise
+    if not both.any():
+        return np.zeros(h.shape, np.float32)
+    num = cv2.GaussianBlur(excess.astype(np.float32), (0, 0), pool_px,
+                           borderType=cv2.BORDER_REFLECT)
+    den = cv2.GaussianBlur(both.astype(np.float32), (0, 0), pool_px,
+                           borderType=cv2.BORDER_REFLECT)
+    fallback = np.float32(max(float(np.mean(excess[both])), 0.0))
+    pooled = np.where(den > 1e-3, num / np.maximum(den, np.float32(1e-3)), fallback)
+    return np.maximum(pooled, 0.0).astype(np.float32)              # clipped once pooled
+
+
+def height_sigma_with_bias(focus):
+    """σ of a :class:`~microfacet.focus.height.FocusResult`'s combined height with the
+    variance of its unexplained disagreement with the evidence window added
+    (:func:`disagreement_variance`); its own σ without an evidence window."""
+    s = np.asarray(focus.height_sigma_um, np.float32)
+    if getattr(focus, "evidence_height_um", None) is None:
+        return s
+    v = disagreement_variance(focus.height_fit_um, s, focus.evidence_height_um,
+                              focus.evidence_sigma_um)
+    return np.sqrt(s * s + v).astype(np.float32)

@@ -205,3 +205,23 @@ def test_textured_vs_blank_detection(render_contrast):
     assert res.detected[8:-8, 8:40].mean() > 0.98
     assert res.detected[8:-8, 48 + 12:-8].mean() < 0.02
     assert cv2.countNonZero(res.reliable[8:-8, 8:40].astype(np.uint8)) > 0.95 * 48 * 32
+
+
+def test_the_unexplained_disagreement_with_the_evidence_becomes_sigma():
+    """A combined height biased by 0.3 (a borrowed height) against evidence heights that are
+    right: the added variance makes 2σ cover the bias, also on the pixels without evidence
+    of their own; heights that agree within their σ add nothing."""
+    from microfacet.focus.uncertainty import disagreement_variance
+
+    rng = np.random.default_rng(2)
+    truth = np.zeros((60, 60))
+    s = np.full(truth.shape, 0.05)
+    ev = truth + rng.normal(0, 0.05, truth.shape)
+    ev[:, 30:] = np.nan                                    # no evidence on the right half
+    biased = truth + 0.3
+    v = disagreement_variance(biased, s, ev, s)
+    total = np.sqrt(s ** 2 + v)
+    assert np.mean(np.abs(biased - truth) <= 2 * total) > 0.95
+    assert np.mean(np.abs(biased - truth)[:, 40:] <= 2 * total[:, 40:]) > 0.95
+    fine = disagreement_variance(truth + rng.normal(0, 0.05, truth.shape), s, ev, s)
+    assert float(np.median(fine)) < 0.1 * 0.05 ** 2
