@@ -159,6 +159,53 @@ def ndf_w1_deg(lobes, true_tilt_deg, limit_deg, *, step_deg=0.02):
     return truncated_w1(grid, pdf, np.ravel(true_tilt_deg), limit_deg)
 
 
+def lobe_rms_ratio(lobes, true_tilt_deg, limit_deg, *, n_grid=2001):
+    """RMS slope (E[tan² θ]^½) of the fitted lobes' tilt density truncated at ``limit_deg``
+    over that of the true tilts below it; NaN without lobes or truth.
+
+    >>> rng = np.random.default_rng(0)
+    >>> s = np.tan(np.deg2rad(6.0))
+    >>> tilt = np.rad2deg(np.arctan(np.hypot(*rng.normal(0, s, (2, 200000)))))
+    >>> [round(lobe_rms_ratio([(1.0, sd)], tilt, 26.57), 2) for sd in (6.0, 4.8)]
+    [1.0, 0.8]
+    """
+    t = np.ravel(true_tilt_deg)
+    t = t[np.isfinite(t) & (t < limit_deg)]
+    if not lobes or t.size == 0:
+        return math.nan
+    grid = np.linspace(0.0, limit_deg, n_grid)
+    pdf = NDFMixture(lobes).tilt_pdf(grid)
+    tan2 = np.tan(np.radians(grid)) ** 2
+    fit = float(np.trapezoid(pdf * tan2, grid) / np.trapezoid(pdf, grid))
+    true = float(np.mean(np.tan(np.radians(t)) ** 2))
+    return math.sqrt(fit / true) if true > 0 else math.nan
+
+
+def facet_tilts(truth):
+    """The true per-pixel tilts of the surface's facets: NaN on pits, scratches, dust and
+    stains (``truth/feature.npy`` ≠ 0), which are not facets."""
+    t = np.load(truth / "tilt_deg.npy").astype(np.float64)
+    f = truth / "feature.npy"
+    return np.where(np.load(f) == 0, t, np.nan) if f.is_file() else t
+
+
+def past_limit_fraction(truth, limit_deg):
+    """Share of the facet pixels truly tilted past the acceptance ``limit_deg``."""
+    t = facet_tilts(truth)
+    t = t[np.isfinite(t)]
+    return float(np.mean(t > limit_deg)) if t.size else math.nan
+
+
+def height_coverage(height_um, sigma_um, truth):
+    """Share of the facet pixels with a height and a σ whose error against the true height
+    is within 2σ (NaN without any)."""
+    ht = np.load(truth / "height_um.npy")
+    ok = np.isfinite(height_um) & np.isfinite(sigma_um) & np.isfinite(facet_tilts(truth))
+    if not ok.any():
+        return math.nan
+    return float(np.mean(np.abs(height_um[ok] - ht[ok]) <= 2.0 * sigma_um[ok]))
+
+
 def texture_codes(truth_rgb8, window_px=5):
     """Median over pixels of the local SD (``window_px``², reflected borders) of the grey
     level (mean of R, G, B) of an 8-bit image, in code values.
@@ -230,9 +277,17 @@ TARGETS = (
      lambda v: v >= 0.9),
     ("scenes with the true number of NDF lobes", "lobes_ok", "–", None),
     ("NDF identified, all scenes", "identified_all", "–", None),
-    ("NDF identified, textured scenes", "identified_textured", "≥ 80 %", lambda v: v >= 0.8),
+    ("identified NDFs with an RMS slope off by > 25 % (scenes)", "identified_wrong", "0",
+     lambda v: v == 0),
+    ("NDF identified, textured scenes", "identified_textured", "≥ 50 %", lambda v: v >= 0.5),
     ("NDF W1, identified textured scenes, median (°)", "w1_identified_textured_deg", "≤ 1.5",
      lambda v: v <= 1.5),
+    ("identified NDFs with the RMS slope within ±15 %", "rms_ok_identified", "100 %",
+     lambda v: v >= 1.0),
+    ("censored − truly past the limit, median |·|", "censored_error_median", "≤ 0.03",
+     lambda v: v <= 0.03),
+    ("height 2σ coverage, median over scenes", "height_coverage_median", "≥ 90 %",
+     lambda v: v >= 0.9),
     ("NDF W1, all scenes, median (°)", "w1_all_deg", "–", None),
     ("mean ΔE00 − noise floor, median over scenes", "de_excess_median", "≤ 1.0",
      lambda v: v <= 1.0),
@@ -263,6 +318,15 @@ def summarize(rows):
         "identified_all": fraction(r.get("identified") for r in ok),
         "identified_textured": fraction(r.get("identified") for r in tex),
         "w1_identified_textured_deg": finite_median(r.get("ndf_w1_deg") for r in good),
+        "identified_wrong": sum(1 for r in ok if r.get("identified") and not (
+            abs(r.get("lobe_rms_ratio", math.nan) - 1.0) <= 0.25)),
+        "rms_ok_identified": fraction(abs(r.get("lobe_rms_ratio", math.nan) - 1.0) <= 0.15
+                                      for r in ok if r.get("identified")),
+        "censored_error_median": finite_median(
+            abs(r["censored_fraction"] - r["past_limit_fraction"]) for r in ok
+            if r.get("censored_fraction") is not None
+            and r.get("past_limit_fraction") is not None),
+        "height_coverage_median": finite_median(r.get("height_coverage") for r in ok),
         "w1_all_deg": finite_median(r.get("ndf_w1_deg") for r in ok),
         "de_excess_median": finite_median(r.get("de_excess") for r in ok),
         "de_excess_ok": fraction(r["de_excess"] <= 1.0 if r.get("de_excess") is not None

@@ -13,7 +13,6 @@ STACKS_DIR holds stacks with ``truth/tilt_deg.npy`` (e.g. the stacks folder of
 from __future__ import annotations
 
 import json
-import math
 import sys
 from pathlib import Path
 
@@ -22,8 +21,16 @@ import numpy as np
 from microfacet.analysis import AnalysisOptions, analyse_stack
 from microfacet.analysis import self_check as sc
 from microfacet.analysis.options import FitOptions, JointOptions
+from microfacet.analysis.output import height_sigma_um
 from microfacet.analysis.planes import fit_facet_planes
 from microfacet.focus.options import FocusOptions
+from pipelines._scoring import (
+    facet_tilts,
+    height_coverage,
+    lobe_rms_ratio,
+    ndf_w1_deg,
+    past_limit_fraction,
+)
 from pipelines.studies.accuracy_sweep import world_of
 
 
@@ -42,19 +49,6 @@ def _actual_gain(r, true_height_um) -> float | None:
                          r.joint.area_px[ok].astype(np.float64))
 
 
-def past_limit_fraction(truth: Path) -> float:
-    """Fraction of the surface truly tilted past the acceptance, asin(NA)/2: pixels of the
-    truth whose tilt exceeds it, among those that are facet (not pit, scratch, dust or
-    stain: ``feature.npy`` code 0; all pixels of stacks without it)."""
-    meta = json.loads((truth / "params.json").read_text())
-    t = np.load(truth / "tilt_deg.npy")
-    f = truth / "feature.npy"
-    facet = np.load(f) == 0 if f.is_file() else np.ones(t.shape, bool)
-    if not facet.any():
-        return float("nan")
-    return float(np.mean(t[facet] > meta["visibility_limit_deg"]))
-
-
 def censored_fractions(r) -> dict:
     """The analysis' censored share: the NDF fit's censored weight fraction
     (``MixtureFit.info["censored_fraction"]``) and the fraction of pixels it marked
@@ -67,42 +61,14 @@ def censored_fractions(r) -> dict:
 
 
 def lobe_scores(r, tilt_deg) -> dict:
-    """The fitted NDF lobes against the true tilts of the facet pixels below the acceptance:
-    their RMS slope (the lobes' tilt density truncated at the limit, E[tan² θ]^½) over the
-    truth's, and W1 (°, :func:`pipelines._scoring.ndf_w1_deg`)."""
-    from pipelines._scoring import ndf_w1_deg
-
+    """The fitted NDF lobes against the true facet tilts: RMS slope ratio and W1 (°)."""
     ndf = getattr(r.distributions, "ndf", None)
-    lim = r.scene.max_tilt_deg
-    t = tilt_deg[np.isfinite(tilt_deg) & (tilt_deg < lim)]
-    if ndf is None or t.size == 0:
+    if ndf is None:
         return {"lobe_ratio": None, "w1_deg": None}
     lobes = [(float(w), float(s)) for w, s in ndf.mixture.components]
-    grid = np.linspace(0.0, lim, 2001)
-    from microfacet.core.distributions import NDFMixture
-    pdf = NDFMixture(lobes).tilt_pdf(grid)
-    tan2 = np.tan(np.radians(grid)) ** 2
-    lobe_rms = math.sqrt(float(np.trapezoid(pdf * tan2, grid) / np.trapezoid(pdf, grid)))
-    true_rms = math.sqrt(float(np.mean(np.tan(np.radians(t)) ** 2)))
-    return {"lobe_ratio": lobe_rms / true_rms if true_rms > 0 else None,
-            "w1_deg": float(ndf_w1_deg(lobes, t, lim)), "lobes": lobes}
-
-
-def height_coverage(r, truth: Path) -> float | None:
-    """Share of the reported height's errors against the truth within 2 reported σ
-    (``height_sigma_um.npy``), over the facet pixels (``feature.npy`` code 0) with a height."""
-    from microfacet.analysis.output import height_sigma_um
-
-    sig = height_sigma_um(r)
-    if sig is None:
-        return None
-    ht = np.load(truth / "height_um.npy")
-    f = truth / "feature.npy"
-    facet = np.load(f) == 0 if f.is_file() else np.ones(ht.shape, bool)
-    ok = np.isfinite(r.focus.height_um) & np.isfinite(sig) & facet
-    if not ok.any():
-        return None
-    return float(np.mean(np.abs(r.focus.height_um[ok] - ht[ok]) <= 2.0 * sig[ok]))
+    lim = r.scene.max_tilt_deg
+    return {"lobe_ratio": lobe_rms_ratio(lobes, tilt_deg, lim),
+            "w1_deg": ndf_w1_deg(lobes, tilt_deg[np.isfinite(tilt_deg)], lim), "lobes": lobes}
 
 
 def main(folder: str, overrides: dict | None = None) -> None:
@@ -112,10 +78,7 @@ def main(folder: str, overrides: dict | None = None) -> None:
                               joint=JointOptions(**o.get("joint", {})))
     for d in sorted(p for p in Path(folder).iterdir() if (p / "truth").is_dir()):
         r = analyse_stack(d, options)
-        t = np.load(d / "truth" / "tilt_deg.npy")
-        feat = d / "truth" / "feature.npy"
-        facet = np.load(feat) == 0 if feat.is_file() else np.ones(t.shape, bool)
-        t = np.where(facet, t, np.nan)
+        t = facet_tilts(d / "truth")
         vis = np.isfinite(t) & (t < r.scene.max_tilt_deg)
         true_rms = float(np.sqrt(np.mean(np.tan(np.radians(t[vis])) ** 2)))
         meas = sc.measured_rms_slope(r.joint, r.scene.max_tilt_deg)
@@ -123,12 +86,15 @@ def main(folder: str, overrides: dict | None = None) -> None:
         params = json.loads((d / "truth" / "params.json").read_text())["params"]
         print(json.dumps({
             "world": world_of(params), "relief_file": params.get("relief_file"),
-            "past_limit_fraction": past_limit_fraction(d / "truth"), **censored_fractions(r),
+            "past_limit_fraction": past_limit_fraction(d / "truth", r.scene.max_tilt_deg),
+            **censored_fractions(r),
             "actual_gain": _actual_gain(r, np.load(d / "truth" / "height_um.npy")),
             "scene": d.name, "true_rms_slope": true_rms, "measured_rms_slope": meas,
             "actual_ratio": None if meas is None else meas / true_rms,
             "self_check": None if c is None else c.to_json(),
-            **lobe_scores(r, t), "height_coverage": height_coverage(r, d / "truth"),
+            **lobe_scores(r, t),
+            "height_coverage": height_coverage(r.focus.height_um, height_sigma_um(r), d / "truth")
+            if r.scene.from_focus else None,
             "identified": r.distributions.ndf_judgement.identified,
             "reason_code": r.distributions.ndf_judgement.to_json()["reason_code"]}), flush=True)
 

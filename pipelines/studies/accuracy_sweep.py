@@ -264,8 +264,12 @@ def score_scene(results: Path, truth: Path) -> dict:
     from microfacet.io.results import Results
     from pipelines._scoring import (
         colour_floor_de,
+        facet_tilts,
+        height_coverage,
+        lobe_rms_ratio,
         ndf_identified,
         ndf_w1_deg,
+        past_limit_fraction,
         region_thickness_errors,
         true_population_count,
     )
@@ -290,6 +294,14 @@ def score_scene(results: Path, truth: Path) -> dict:
             "identified": ndf_identified(res.summary),
             "ndf_w1_deg": ndf_w1_deg(lobes, np.load(truth / "tilt_deg.npy"),
                                      meta["visibility_limit_deg"]),
+            "lobe_rms_ratio": lobe_rms_ratio(lobes, facet_tilts(truth),
+                                             meta["visibility_limit_deg"]),
+            "censored_fraction": (res.summary.get("ndf") or {}).get("mixture", {}).get(
+                "censored_fraction") if ndf else None,
+            "past_limit_fraction": past_limit_fraction(truth, meta["visibility_limit_deg"]),
+            "height_coverage": height_coverage(res.map("height_um"), res.map("height_sigma_um"),
+                                               truth) if res.map("height_sigma_um") is not None
+            else None,
             "de_mean": de, "de_floor": floor,
             "de_excess": de - floor if de is not None else math.nan,
             "masked_fraction": res.get("masked_fraction")}
@@ -356,7 +368,8 @@ COLUMNS = ["name", "mode", "seed", "world", "relief_file", "status", "reason", "
            "textured", "texture_codes", "groove_fraction", "noise_pct", "film", "substrate",
            "thickness_means_nm", "thickness_span_nm", "lobes_deg", "region_mae_nm",
            "region_median_ae_nm", "regions_scored", "regions_true", "pops_found", "pops_true",
-           "lobes_found", "lobes_true", "identified", "ndf_w1_deg", "de_mean", "de_floor",
+           "lobes_found", "lobes_true", "identified", "ndf_w1_deg", "lobe_rms_ratio",
+           "censored_fraction", "past_limit_fraction", "height_coverage", "de_mean", "de_floor",
            "de_excess", "masked_fraction"] + [f"v_{v}" for v in VARIATIONS]
 
 
