@@ -127,8 +127,11 @@ class FocusResult:
         One-standard-deviation uncertainty of ``height_fit_um`` in µm, NaN where no focus
         peak is significant. Calibrated on rendered stacks of known relief (steps, crater
         rims, ridges, smooth) and texture contrast and on the Cou & Guennebaud stacks:
-        |error| ≤ 2σ for 96-99 % of the reliable pixels (slightly conservative;
-        docs/height-from-focus.md).
+        |error| ≤ 2σ for 96-99 % of the reliable pixels there (docs/height-from-focus.md).
+        It does not hold off that calibration set: on the randomized synthetic sweep of
+        docs/accuracy.md 2σ covers 43-95 % (median 80 %); heights borrowed from texture
+        a window away carry a bias σ does not hold (the analysis' ``height_sigma_um.npy``
+        adds :func:`~microfacet.focus.uncertainty.height_sigma_with_bias`).
     detected : ndarray of bool, shape (H, W)
         True where at least one window has a significant focus peak (a textureless pixel
         has none: it gets no height, whatever the cut).
