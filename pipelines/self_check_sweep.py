@@ -4,7 +4,7 @@ transfer (``analysis.self_check``), the scene's world (faceted, sparse, measured
 ``pipelines.studies.accuracy_sweep``), and the censored fraction against the truly-past-limit
 area.
 
-    python -m pipelines.self_check_sweep STACKS_DIR
+    python -m pipelines.self_check_sweep STACKS_DIR ['{"focus": {...}, "truth_facets": true}']
 
 STACKS_DIR holds stacks with ``truth/tilt_deg.npy`` (e.g. the stacks folder of
 ``python -m pipelines run accuracy-sweep``). Prints one JSON line per scene.
@@ -71,12 +71,32 @@ def lobe_scores(r, tilt_deg) -> dict:
             "w1_deg": ndf_w1_deg(lobes, tilt_deg[np.isfinite(tilt_deg)], lim), "lobes": lobes}
 
 
+def _use_truth_facets(stack_dir: Path) -> None:
+    """Diagnostic: the analysis' segmentation replaced by the truth's facets
+    (``truth/facet_id.npy``) for the next analysis; its heights and self-check unchanged."""
+    import microfacet.analysis.pipeline as pipeline
+    from microfacet.analysis.joint import Segmented, facet_labels
+
+    fid = np.load(stack_dir / "truth" / "facet_id.npy").astype(np.int32)
+
+    def labels(colour, surface, scene, options, *, renoise=None):
+        seg = facet_labels(colour, surface, scene, options, renoise=renoise)
+        return seg if renoise is not None else Segmented(fid, seg.heights, seg.evidence)
+
+    pipeline.facet_labels = labels
+
+
 def main(folder: str, overrides: dict | None = None) -> None:
-    o = overrides or {}
+    """``overrides``: ``{"focus": {...}, "joint": {...}, "fits": {...}}`` option values, and
+    ``"truth_facets": true`` to analyse on the true facets (a diagnostic)."""
+    o = dict(overrides or {})
+    truth_facets = bool(o.pop("truth_facets", False))
     options = AnalysisOptions(fits=FitOptions(**{"self_check": True, **o.get("fits", {})}),
                               focus=FocusOptions(**o.get("focus", {})),
                               joint=JointOptions(**o.get("joint", {})))
     for d in sorted(p for p in Path(folder).iterdir() if (p / "truth").is_dir()):
+        if truth_facets:
+            _use_truth_facets(d)
         r = analyse_stack(d, options)
         t = facet_tilts(d / "truth")
         vis = np.isfinite(t) & (t < r.scene.max_tilt_deg)
