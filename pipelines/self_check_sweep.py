@@ -79,9 +79,9 @@ def _use_truth_facets(stack_dir: Path) -> None:
 
     fid = np.load(stack_dir / "truth" / "facet_id.npy").astype(np.int32)
 
-    def labels(colour, surface, scene, options, *, renoise=None):
-        seg = facet_labels(colour, surface, scene, options, renoise=renoise)
-        return seg if renoise is not None else Segmented(fid, seg.heights, seg.evidence)
+    def labels(colour, surface, scene, options):
+        seg = facet_labels(colour, surface, scene, options)
+        return Segmented(fid, seg.heights, seg.evidence)
 
     pipeline.facet_labels = labels
 

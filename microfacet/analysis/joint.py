@@ -44,7 +44,8 @@ from .planes import FacetFit, dome_mean_square_slope, facet_edge_distance, fit_f
 from .segmentation import segment_facets
 from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
 
-__all__ = ["JointResult", "Segmented", "facet_labels", "joint_facets", "joint_pixel_tilts"]
+__all__ = ["JointResult", "Segmented", "bootstrap_labels", "facet_labels", "joint_facets",
+           "joint_pixel_tilts"]
 
 log = logging.getLogger(__name__)
 
@@ -220,26 +221,36 @@ class Segmented:
     evidence: HeightInputs | None = None
 
 
-def facet_labels(colour, surface, scene, options: JointOptions, *, renoise=None
-                 ) -> Segmented:
+def facet_labels(colour, surface, scene, options: JointOptions) -> Segmented:
     """Step 1: facets from colour and height edges (:func:`~.segmentation.segment_facets`),
-    the facet size in pixels from ``options.facet_size_um`` and the pixel size. With
-    ``renoise`` (a ``numpy.random.Generator``) the Lab image first gets fresh noise of its
-    own measured level: a second segmentation as likely as the first (a parametric
-    bootstrap), which differs from it wherever the image does not fix the facets' edges."""
+    the facet size in pixels from ``options.facet_size_um`` and the pixel size."""
     hi = height_inputs(surface, options, from_focus=scene.from_focus, evidence=False)
-    facet_px = options.facet_size_um / pixel_area_side(scene.pixel_size_um)
-    lab = colour.lab
-    if renoise is not None:
-        lab = lab + renoise.normal(0.0, colour.noise_de, lab.shape).astype(np.float32)
-    labels = segment_facets(lab, facet_px=facet_px, noise_de=colour.noise_de,
-                            height_um=np.where(hi.reliable, hi.height_um, np.nan),
-                            height_sigma_um=hi.sigma_um, pixel_size_um=scene.pixel_size_um,
-                            options=options)
+    labels = _segment(colour.lab, hi, colour.noise_de, scene, options)
     has_evidence = (scene.from_focus and not surface.no_focus
                     and getattr(surface.focus, "evidence_height_um", None) is not None)
     return Segmented(labels, hi, focus_heights(surface.focus, options) if has_evidence
                      else None)
+
+
+def bootstrap_labels(colour, surface, scene, options: JointOptions, *, rng, crop):
+    """Facets of the ``crop`` (a pair of slices) segmented as :func:`facet_labels` does,
+    after fresh noise of the image's own measured level is added to its Lab values: a
+    second segmentation as likely as the first (a parametric bootstrap), which differs from
+    it wherever the image does not fix the facets' edges."""
+    hi = height_inputs(surface, options, from_focus=scene.from_focus, evidence=False)
+    lab = colour.lab[crop]
+    lab = lab + rng.normal(0.0, colour.noise_de, lab.shape).astype(np.float32)
+    part = HeightInputs(hi.height_um[crop], hi.sigma_um[crop], hi.reliable[crop],
+                        hi.correlation_px)
+    return _segment(lab, part, colour.noise_de, scene, options)
+
+
+def _segment(lab, hi: HeightInputs, noise_de, scene, options: JointOptions):
+    facet_px = options.facet_size_um / pixel_area_side(scene.pixel_size_um)
+    return segment_facets(lab, facet_px=facet_px, noise_de=noise_de,
+                          height_um=np.where(hi.reliable, hi.height_um, np.nan),
+                          height_sigma_um=hi.sigma_um, pixel_size_um=scene.pixel_size_um,
+                          options=options)
 
 
 def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOptions

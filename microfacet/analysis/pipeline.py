@@ -29,7 +29,7 @@ from ..io.stack import Stack, read_stack
 from .colour_image import measure_colour, no_colour_message
 from .distributions import Distributions, fit_joint_distributions, fit_seed_distributions
 from .identification import analysis_warnings, mean_plane_tilt_deg, self_check_judgement
-from .joint import facet_labels, joint_facets, joint_pixel_tilts
+from .joint import bootstrap_labels, facet_labels, joint_facets, joint_pixel_tilts
 from .options import AnalysisOptions, Scene, scene_of
 from .roi import thickness_per_roi
 from .self_check import Conditions, SelfCheck, measured_rms_slope, self_check_ndf, slice_noise_sd
@@ -207,9 +207,9 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
             dist = fit_joint_distributions(joint, roi, model, scene, options.fits)
         with timer.stage(Stage.SELF_CHECK):
             check = _self_check(st, focus, joint, scene, options,
-                                cells=lambda: facet_labels(
+                                cells=lambda crop: bootstrap_labels(
                                     colour, surface, scene, options.joint,
-                                    renoise=np.random.default_rng([scene.seed, 22])).labels)
+                                    rng=np.random.default_rng([scene.seed, 22]), crop=crop))
             dist.ndf_judgement = self_check_judgement(dist.ndf_judgement, check, options.fits)
     timer.total()
     return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
@@ -218,8 +218,9 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
 
 def _self_check(st, focus, joint, scene, options, *, cells) -> SelfCheck | None:
     """The NDF's injection-recovery (:mod:`.self_check`) where the heights come from focus
-    and at least 3 facets have planes; None otherwise or when switched off. ``cells()``
-    gives the facets the injection follows (a second, re-noised segmentation)."""
+    and at least 3 facets have planes; None otherwise or when switched off. ``cells(crop)``
+    gives the facets the injection follows on the self-check's crop (a second segmentation
+    of the re-noised image, :func:`~.joint.bootstrap_labels`)."""
     if not (options.fits.self_check and scene.from_focus and st.has_slices):
         return None
     rms = measured_rms_slope(joint, scene.max_tilt_deg)
@@ -227,7 +228,7 @@ def _self_check(st, focus, joint, scene, options, *, cells) -> SelfCheck | None:
         return None
     cond = Conditions(np.asarray(st.z_um, np.float64), scene.pixel_size_um,
                       scene.numerical_aperture, slice_noise_sd(st, focus), scene.seed)
-    return self_check_ndf(focus, joint.facets, cells=cells(), conditions=cond, rms_slope=rms,
+    return self_check_ndf(focus, joint.facets, cells=cells, conditions=cond, rms_slope=rms,
                           focus_options=options.focus, joint=options.joint)
 
 

@@ -93,7 +93,7 @@ def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size
     min_pixels : int
         Fewest reliable pixels for a plane (:attr:`~.options.JointOptions.min_plane_pixels`).
     robust_rounds : int
-        Rounds of robust refitting (:func:`_biweight`): :data:`HALF_ROUNDS` refits to the
+        Rounds of robust refitting (:func:`_robust_weights`): :data:`HALF_ROUNDS` refits to the
         half of the heights nearest the last plane, then Tukey biweights, the last a plain
         weighted fit to the heights within :data:`TUKEY_C` robust SDs: heights of a pit
         floor, a scratch or a neighbour's edge inside the facet stop pulling its plane (and
@@ -129,16 +129,10 @@ def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size
     with np.errstate(divide="ignore", invalid="ignore"):
         wt = np.where(use, 1.0 / sig ** 2, 0.0)
     zu = np.where(use, z, np.nan)
+    if robust_rounds > 0:
+        wt = _robust_weights(labels, zu, wt, pixel_size_um, S, robust_rounds)
     m = plane_moments(labels, zu, wt, pixel_size_um=pixel_size_um, n_labels=S)
-    w_round = wt
-    for k in range(robust_rounds):
-        # first concentration steps on the better half of each plane's heights (a start that
-        # a cluster of outliers, such as a pit floor, cannot drag: least trimmed squares),
-        # then biweights; the last fit is plain WLS on the biweight's inliers
-        tukey = _biweight(labels, zu, wt, m, pixel_size_um, half=(k < HALF_ROUNDS))
-        w_round = wt * (tukey if HALF_ROUNDS <= k < robust_rounds - 1 else (tukey > 0))
-        m = plane_moments(labels, zu, w_round, pixel_size_um=pixel_size_um, n_labels=S)
-    use = use & (w_round > 0)
+    use = use & (wt > 0)
     n = np.bincount(labels.ravel(), weights=use.ravel(), minlength=S).astype(np.int64)
     a, b, rss, cov = plane_from_moments(m)
     fitted = (n >= max(int(min_pixels), 4)) & np.isfinite(a) & np.isfinite(b)
@@ -162,11 +156,47 @@ def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size
     return FacetFit(a + nan, b + nan, cov, ssig, tilt, tsig, n, chi2, fitted)
 
 
-def _robust_scale(labels, r, use, S):
-    """Per label: 1.4826 × the median |r| over ``use`` (NaN without any)."""
-    lab = labels.ravel()[use.ravel()]
-    a = np.abs(r.ravel()[use.ravel()])
-    order = np.lexsort((a, lab))
+def _robust_weights(labels, z, wt, pixel_size_um, S, rounds):
+    """The weights ``wt`` after the robust rounds: first :data:`HALF_ROUNDS` concentration
+    steps on the better half of each plane's heights (a start that a cluster of outliers,
+    such as a pit floor, cannot drag: least trimmed squares), then Tukey biweights
+    (c = :data:`TUKEY_C` robust SDs, the SD at least the heights' own σ); the last round keeps
+    the biweight's inliers at their full weight. Worked on the used pixels only."""
+    h, w = labels.shape
+    idx = np.flatnonzero(wt.ravel() > 0)
+    lab, zz, w0 = labels.ravel()[idx], z.ravel()[idx], wt.ravel()[idx]
+    py, px = pixel_size_yx(pixel_size_um)
+    x = (idx % w - (w - 1) / 2.0) * px
+    y = (idx // w - (h - 1) / 2.0) * py
+    sig = 1.0 / np.sqrt(w0)
+    wr = w0
+    for k in range(rounds):
+        cols = (wr, wr * x, wr * y, wr * zz, wr * x * x, wr * x * y, wr * y * y, wr * x * zz,
+                wr * y * zz, wr * zz * zz)
+        m = np.stack([np.bincount(lab, c, S) for c in cols], axis=1)
+        a, b, _, _ = plane_from_moments(m)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c0 = (m[:, 3] - a * m[:, 1] - b * m[:, 2]) / m[:, 0]
+            r = (zz - (a[lab] * x + b[lab] * y + c0[lab])) / sig
+        scale = np.nan_to_num(_robust_scale(lab, r, S), nan=1.0)
+        if k < HALF_ROUNDS:
+            t = (np.abs(r) <= scale[lab] / 1.4826).astype(np.float64)
+        else:
+            u = r / (TUKEY_C * np.maximum(scale, 1.0)[lab])
+            t = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
+        t = np.where(np.isfinite(a)[lab], t, 1.0)       # no plane yet: nothing to judge
+        wr = w0 * (t if HALF_ROUNDS <= k < rounds - 1 else (t > 0))
+    out = np.zeros(labels.size)
+    out[idx] = wr
+    return out.reshape(labels.shape)
+
+
+def _robust_scale(lab, r, S):
+    """Per label: 1.4826 × the median |r| (NaN without any finite one)."""
+    ok = np.isfinite(r)
+    lab, a = lab[ok], np.abs(r[ok])
+    # one sort of label + |r| scaled into [0, 1): the labels' runs, each in |r| order
+    order = np.argsort(lab + a / (float(a.max(initial=0.0)) * 1.0001 + 1e-300))
     lab, a = lab[order], a[order]
     cnt = np.bincount(lab, minlength=S)
     start = np.concatenate([[0], np.cumsum(cnt)[:-1]])
@@ -174,33 +204,6 @@ def _robust_scale(labels, r, use, S):
     has = cnt > 0
     med[has] = a[start[has] + cnt[has] // 2]
     return 1.4826 * med
-
-
-def _biweight(labels, z, wt, m, pixel_size_um, *, half=False):
-    """Tukey-biweight factors (c = :data:`TUKEY_C` robust SDs, the SD at least the heights'
-    own σ) of the residuals about each label's current plane ``m`` (0 beyond c; 1 where the
-    label has no plane yet); with ``half``, 1 for the half of each label's residuals nearest
-    the plane and 0 for the others."""
-    S = m.shape[0]
-    a, b, _, _ = plane_from_moments(m)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sw = m[:, 0]
-        c0 = (m[:, 3] - a * m[:, 1] - b * m[:, 2]) / sw
-    h, w = labels.shape
-    py, px = pixel_size_yx(pixel_size_um)
-    x = ((np.arange(w) - (w - 1) / 2.0) * px)[None, :]
-    y = ((np.arange(h) - (h - 1) / 2.0) * py)[:, None]
-    sig = np.sqrt(np.where(wt > 0, 1.0 / np.where(wt > 0, wt, 1.0), np.inf))
-    with np.errstate(invalid="ignore"):
-        r = (z - (a[labels] * x + b[labels] * y + c0[labels])) / sig
-    use = (wt > 0) & np.isfinite(r)
-    scale = np.nan_to_num(_robust_scale(labels, r, use, S), nan=1.0)
-    if half:
-        tukey = (use & (np.abs(r) <= scale[labels] / 1.4826)).astype(np.float64)
-        return np.where(np.isfinite(a)[labels], tukey, 1.0)
-    u = r / (TUKEY_C * np.maximum(scale, 1.0)[labels])
-    tukey = np.where(use & (np.abs(u) < 1.0), (1.0 - u * u) ** 2, 0.0)
-    return np.where(np.isfinite(a)[labels], tukey, 1.0)   # no plane yet: nothing to judge
 
 
 def facet_edge_distance(labels) -> np.ndarray:

@@ -286,7 +286,8 @@ def _scene(focus, labels, cells, *, z_um, pixel_size_um, numerical_aperture, noi
     # the scene's own measured surface (holes: their facet's mean height) carries the
     # injected planes: the relief, its range in z and its creases stay the scene's
     base = np.clip(np.where(ok, h, centre[lab]), z.min(), z.max())
-    return _Scene(lab, _relabelled(cells[rs, cs]), tex, base, z, pyx, blur, float(noise_sd))
+    cell = cells((rs, cs)) if callable(cells) else np.asarray(cells)[rs, cs]
+    return _Scene(lab, _relabelled(cell), tex, base, z, pyx, blur, float(noise_sd))
 
 
 @dataclass(frozen=True)
@@ -336,8 +337,9 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
         The scene's height from focus (its all-in-focus image and heights are reused).
     labels : ndarray of int (H, W)
         The scene's facets (the segments whose planes the NDF is made of).
-    cells : ndarray of int (H, W), optional
-        The facets the injected planes follow; default ``labels``. The analysis passes a
+    cells : ndarray of int (H, W) or callable, optional
+        The facets the injected planes follow (or ``cells(crop)`` giving them on the crop,
+        a pair of slices, that the self-check works on); default ``labels``. The analysis passes a
         second segmentation of the colour image re-noised with its own noise: where the image
         does not fix the facets' edges the two disagree, as the true facets and the segments
         do, and the recovered widths pay for it.
