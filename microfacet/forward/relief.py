@@ -265,16 +265,24 @@ def dust_layer(rng, shape, p):
     n : int
         Number of particles.
     """
-    px = p.pixel_size_um
-    n = _count(rng, p.dust_density_per_mm2, shape, p)
-    cy, cx = rng.uniform(0, shape[0], n) * px, rng.uniform(0, shape[1], n) * px
-    ra = p.dust_radius_um * np.exp(0.4 * rng.standard_normal(n))
-    rb = ra * rng.uniform(0.5, 1.0, n)
-    phi = rng.uniform(0, math.pi, n)
+    ell = _random_ellipses(rng, shape, p, p.dust_density_per_mm2, p.dust_radius_um)
+    n = ell[0].size
     bright = rng.random(n) < p.dust_bright_fraction
     grey = np.where(bright, rng.uniform(0.5, 0.9, n), rng.uniform(0.02, 0.08, n))
-    cov, level = _ellipse_layer(shape, px, cy, cx, ra, rb, phi, grey)
+    cov, level = _ellipse_layer(shape, p.pixel_size_um, *ell, grey)
     return cov, level, n
+
+
+def _random_ellipses(rng, shape, p, density_per_mm2, radius_um):
+    """Poisson-many ellipses: centres (µm) uniform over the image, semi-axes log-normal
+    around ``radius_um`` (SD 0.4 in log) with an aspect uniform in 0.5-1, orientation
+    uniform; ``(cy, cx, ra, rb, phi)``."""
+    px = p.pixel_size_um
+    n = _count(rng, density_per_mm2, shape, p)
+    cy, cx = rng.uniform(0, shape[0], n) * px, rng.uniform(0, shape[1], n) * px
+    ra = radius_um * np.exp(0.4 * rng.standard_normal(n))
+    rb = ra * rng.uniform(0.5, 1.0, n)
+    return cy, cx, ra, rb, rng.uniform(0, math.pi, n)
 
 
 def stain_layer(rng, shape, p):
@@ -293,14 +301,10 @@ def stain_layer(rng, shape, p):
     n : int
         Number of stains.
     """
-    px = p.pixel_size_um
-    n = _count(rng, p.stain_density_per_mm2, shape, p)
-    cy, cx = rng.uniform(0, shape[0], n) * px, rng.uniform(0, shape[1], n) * px
-    ra = p.stain_radius_um * np.exp(0.4 * rng.standard_normal(n))
-    rb = ra * rng.uniform(0.5, 1.0, n)
-    phi = rng.uniform(0, math.pi, n)
+    ell = _random_ellipses(rng, shape, p, p.stain_density_per_mm2, p.stain_radius_um)
+    n = ell[0].size
     factor = rng.uniform(p.stain_reflectance_min, p.stain_reflectance_max, n)
-    cov, level = _ellipse_layer(shape, px, cy, cx, ra, rb, phi, factor)
+    cov, level = _ellipse_layer(shape, p.pixel_size_um, *ell, factor)
     return cov, level, n
 
 
