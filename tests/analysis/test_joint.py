@@ -34,7 +34,7 @@ def nd(tmp_path_factory):
 
 def test_height_inputs_from_focus_are_the_reliable_heights(nd):
     foc = nd["surface"].focus
-    hi = height_inputs(nd["surface"], OPTIONS, from_focus=True)
+    hi = height_inputs(nd["surface"], OPTIONS, from_focus=True, evidence=False)
     h, sig, rel, corr = hi.height_um, hi.sigma_um, hi.reliable, hi.correlation_px
     assert h.shape == sig.shape == rel.shape == foc.reliable.shape and rel.dtype == bool
     assert rel.mean() > 0.5                                   # a textured nd stack
@@ -52,14 +52,34 @@ def test_height_inputs_from_focus_are_the_reliable_heights(nd):
     assert OPTIONS.focus_error_correlation == 0.7
     assert corr == pytest.approx(0.7 * foc.params["window_px"] ** 2)
     other = height_inputs(nd["surface"], JointOptions(focus_error_correlation=0.35),
-                          from_focus=True)
+                          from_focus=True, evidence=False)
     assert other.correlation_px == pytest.approx(corr / 2)
+
+
+def test_the_planes_of_the_ndf_take_the_evidence_heights(nd):
+    """By default the heights are the evidence window's (3 px): each from the focus evidence
+    at the pixel itself, fewer than the combined ones, unbiased against the truth within their
+    σ as often, and correlated over that window only."""
+    foc = nd["surface"].focus
+    ev = height_inputs(nd["surface"], OPTIONS, from_focus=True)
+    comb = height_inputs(nd["surface"], OPTIONS, from_focus=True, evidence=False)
+    rel = ev.reliable
+    assert 0.2 < rel.mean() < comb.reliable.mean()
+    np.testing.assert_array_equal(rel, np.isfinite(foc.evidence_height_um))
+    np.testing.assert_array_equal(ev.height_um[rel], foc.evidence_height_um[rel])
+    err = ev.height_um[rel] - nd["truth"]["height_um"][rel]
+    err -= np.median(err)
+    assert np.mean(np.abs(err) <= 2 * ev.sigma_um[rel]) > 0.8
+    assert ev.correlation_px == pytest.approx(0.7 * foc.params["evidence_window_px"] ** 2)
+    j = nd["result"].joint
+    assert j.evidence_planes is not None and j.slope_planes is j.evidence_planes
 
 
 def test_height_inputs_without_per_pixel_errors_use_a_quarter_step(nd):
     s = nd["surface"]
     foc = dataclasses.replace(s.focus, height_sigma_um=None)
-    hi = height_inputs(dataclasses.replace(s, focus=foc), OPTIONS, from_focus=True)
+    hi = height_inputs(dataclasses.replace(s, focus=foc), OPTIONS, from_focus=True,
+                       evidence=False)
     h, sig, rel = hi.height_um, hi.sigma_um, hi.reliable
     step = float(np.median(np.diff(np.sort(np.asarray(foc.z_um)))))
     np.testing.assert_allclose(sig, 0.25 * step)
@@ -95,9 +115,10 @@ def test_facets_cover_the_image(nd):
 
 def test_planes_are_fitted_where_heights_are_reliable(nd):
     j = nd["result"].joint
-    rel = height_inputs(nd["surface"], OPTIONS, from_focus=True).reliable
+    rel = height_inputs(nd["surface"], OPTIONS, from_focus=True, evidence=False).reliable
     S = j.area_px.size
     # plane fits use reliable pixels at least joint.plane_edge_px (1 px) inside the facet
+    # (the colour's prior: the combined heights; the NDF's evidence planes likewise)
     inside = facet_edge_distance(j.facets) >= OPTIONS.plane_edge_px
     usable = np.bincount(j.facets[rel & inside], minlength=S)
     pl = j.planes
