@@ -16,6 +16,7 @@ References
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -211,6 +212,10 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                                     colour, surface, scene, options.joint,
                                     rng=np.random.default_rng([scene.seed, 22]), crop=crop))
             dist.ndf_judgement = self_check_judgement(dist.ndf_judgement, check, options.fits)
+            if check is not None and dist.ndf is not None:
+                err = check.width_error(dist.ndf.info.get("width_relative_error"))
+                dist.ndf.info["width_relative_error_total"] = (float(err) if math.isfinite(err)
+                                                               else None)
     timer.total()
     return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
                           dist, dict(timer.timings), check)

@@ -113,6 +113,19 @@ class SelfCheck:
     height_sigma_scale: float = math.nan
     height_coverage: float = math.nan
 
+    def width_error(self, noise_relative_error) -> float:
+        """Relative error of the NDF's width with its systematic part: the noise's
+        (``noise_relative_error``, :func:`~.ndf_fit.width_relative_error`), the self-check's
+        bias (1 − ``width_transfer``) and its spread over the injected widths, in
+        quadrature (NaN where the self-check measured nothing).
+
+        >>> SelfCheck([0.1], [0.09], [0.9], 0.9, 0.05, 50, [0.8], 0.8).width_error(0.02)
+        0.2071
+        """
+        noise = noise_relative_error if noise_relative_error is not None else 0.0
+        err = math.sqrt(noise ** 2 + (1.0 - self.width_transfer) ** 2 + self.spread ** 2)
+        return round(err, 4) if math.isfinite(err) else math.nan
+
     def to_json(self) -> dict:
         """For ``ndf.self_check`` in summary.json."""
         def num(v):

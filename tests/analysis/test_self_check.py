@@ -132,3 +132,14 @@ def test_the_analysis_records_the_self_check_when_asked(tmp_path):
     assert r.distributions.ndf_judgement.identified <= (low <= c.transfer <= high)
     off = AnalysisOptions(fits=FitOptions(self_check=False))
     assert analyse_stack(stack, off).self_check is None
+
+
+def test_the_width_error_carries_the_self_checks_bias_and_spread():
+    """The width's error with its systematic part: noise, bias (1 − width transfer) and
+    spread in quadrature; without a measured width transfer, not a number."""
+    c = SelfCheck([0.1, 0.2], [0.09, 0.18], [0.9, 0.9], 0.9, 0.03, 50, [0.7, 0.9], 0.8)
+    assert c.width_error(0.04) == pytest.approx(math.sqrt(0.04 ** 2 + 0.2 ** 2 + 0.03 ** 2),
+                                                abs=1e-4)
+    assert c.width_error(None) == pytest.approx(math.sqrt(0.2 ** 2 + 0.03 ** 2), abs=1e-4)
+    nothing = SelfCheck([math.nan], [math.nan], [math.nan], math.nan, math.nan, 0)
+    assert math.isnan(nothing.width_error(0.04))
