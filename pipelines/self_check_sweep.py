@@ -86,37 +86,84 @@ def _use_truth_facets(stack_dir: Path) -> None:
     pipeline.facet_labels = labels
 
 
+def analysis_options(overrides: dict | None = None) -> AnalysisOptions:
+    """The options of the sweep: the self-check on, and ``{"focus": {...}, "joint": {...},
+    "fits": {...}}`` option values."""
+    o = overrides or {}
+    return AnalysisOptions(fits=FitOptions(**{"self_check": True, **o.get("fits", {})}),
+                           focus=FocusOptions(**o.get("focus", {})),
+                           joint=JointOptions(**o.get("joint", {})))
+
+
+def scene_record(d: Path, options: AnalysisOptions) -> dict:
+    """One stack analysed and scored against its truth: its world, the NDF's identification
+    and reason, the lobes' RMS ratio and W1, the self-check, censored against truly past
+    the limit, the height's 2σ coverage, and the planes' actual slope gain."""
+    r = analyse_stack(d, options)
+    t = facet_tilts(d / "truth")
+    vis = np.isfinite(t) & (t < r.scene.max_tilt_deg)
+    true_rms = float(np.sqrt(np.mean(np.tan(np.radians(t[vis])) ** 2)))
+    meas = sc.measured_rms_slope(r.joint, r.scene.max_tilt_deg)
+    c = r.self_check
+    params = json.loads((d / "truth" / "params.json").read_text())["params"]
+    return {
+        "world": world_of(params), "relief_file": params.get("relief_file"),
+        "past_limit_fraction": past_limit_fraction(d / "truth", r.scene.max_tilt_deg),
+        **censored_fractions(r),
+        "actual_gain": _actual_gain(r, np.load(d / "truth" / "height_um.npy")),
+        "scene": d.name, "true_rms_slope": true_rms, "measured_rms_slope": meas,
+        "actual_ratio": None if meas is None else meas / true_rms,
+        "self_check": None if c is None else c.to_json(),
+        **lobe_scores(r, t),
+        "height_coverage": height_coverage(r.focus.height_um, height_sigma_um(r), d / "truth")
+        if r.scene.from_focus else None,
+        "identified": r.distributions.ndf_judgement.identified,
+        "reason_code": r.distributions.ndf_judgement.to_json()["reason_code"]}
+
+
+def _num(v, digits=2):
+    return "–" if v is None or not np.isfinite(v) else f"{v:.{digits}f}"
+
+
+def world_table(rows, label="") -> str:
+    """Markdown: per world (and all) the scenes, the NDFs identified, those off by more than
+    25 % in RMS slope, the identified ones' lobe RMS ratio and W1, the median |censored −
+    truly past the limit| and the height's median (min) 2σ coverage."""
+    from pipelines._shared import md_table
+
+    body = []
+    for w in ("faceted", "sparse", "measured", "all"):
+        sub = rows if w == "all" else [r for r in rows if r["world"] == w]
+        if not sub:
+            continue
+        ident = [r for r in sub if r["identified"]]
+        wrong = [r for r in ident if r.get("lobe_ratio") is None
+                 or not abs(r["lobe_ratio"] - 1.0) <= 0.25]
+        cens = [abs((r["censored_fraction"] or 0.0) - r["past_limit_fraction"]) for r in sub
+                if r["past_limit_fraction"] is not None]
+        hc = [r["height_coverage"] for r in sub if r.get("height_coverage") is not None]
+        body.append([label, w, str(len(sub)), str(len(ident)), str(len(wrong)),
+                     ", ".join(f"{_num(r['lobe_ratio'])}, {_num(r['w1_deg'])}°" for r in ident)
+                     or "–",
+                     _num(float(np.median(cens)) if cens else None, 3),
+                     f"{_num(float(np.median(hc)) if hc else None)} "
+                     f"({_num(min(hc) if hc else None)})"])
+    return md_table(["sweep", "world", "scenes", "NDF identified",
+                     "identified, RMS slope off > 25 %", "identified: lobe RMS ratio, W1",
+                     "median abs(censored − past limit)", "height 2σ coverage, median (min)"],
+                    body)
+
+
 def main(folder: str, overrides: dict | None = None) -> None:
-    """``overrides``: ``{"focus": {...}, "joint": {...}, "fits": {...}}`` option values, and
-    ``"truth_facets": true`` to analyse on the true facets (a diagnostic)."""
+    """``overrides``: option values (:func:`analysis_options`), and ``"truth_facets": true``
+    to analyse on the true facets (a diagnostic)."""
     o = dict(overrides or {})
     truth_facets = bool(o.pop("truth_facets", False))
-    options = AnalysisOptions(fits=FitOptions(**{"self_check": True, **o.get("fits", {})}),
-                              focus=FocusOptions(**o.get("focus", {})),
-                              joint=JointOptions(**o.get("joint", {})))
+    options = analysis_options(o)
     for d in sorted(p for p in Path(folder).iterdir() if (p / "truth").is_dir()):
         if truth_facets:
             _use_truth_facets(d)
-        r = analyse_stack(d, options)
-        t = facet_tilts(d / "truth")
-        vis = np.isfinite(t) & (t < r.scene.max_tilt_deg)
-        true_rms = float(np.sqrt(np.mean(np.tan(np.radians(t[vis])) ** 2)))
-        meas = sc.measured_rms_slope(r.joint, r.scene.max_tilt_deg)
-        c = r.self_check
-        params = json.loads((d / "truth" / "params.json").read_text())["params"]
-        print(json.dumps({
-            "world": world_of(params), "relief_file": params.get("relief_file"),
-            "past_limit_fraction": past_limit_fraction(d / "truth", r.scene.max_tilt_deg),
-            **censored_fractions(r),
-            "actual_gain": _actual_gain(r, np.load(d / "truth" / "height_um.npy")),
-            "scene": d.name, "true_rms_slope": true_rms, "measured_rms_slope": meas,
-            "actual_ratio": None if meas is None else meas / true_rms,
-            "self_check": None if c is None else c.to_json(),
-            **lobe_scores(r, t),
-            "height_coverage": height_coverage(r.focus.height_um, height_sigma_um(r), d / "truth")
-            if r.scene.from_focus else None,
-            "identified": r.distributions.ndf_judgement.identified,
-            "reason_code": r.distributions.ndf_judgement.to_json()["reason_code"]}), flush=True)
+        print(json.dumps(scene_record(d, options)), flush=True)
 
 
 if __name__ == "__main__":
