@@ -49,6 +49,17 @@ def _actual_gain(r, true_height_um) -> float | None:
                          r.joint.area_px[ok].astype(np.float64))
 
 
+def facet_purity(labels, true_facets) -> float:
+    """Share of the pixels whose segment's majority true facet is their own: 1 when every
+    segment lies inside one true facet."""
+    _, lab = np.unique(labels, return_inverse=True)
+    _, tru = np.unique(true_facets, return_inverse=True)
+    m = int(tru.max()) + 1
+    counts = np.bincount(lab.ravel().astype(np.int64) * m + tru.ravel(),
+                         minlength=(int(lab.max()) + 1) * m).reshape(-1, m)
+    return float(counts.max(axis=1).sum() / counts.sum())
+
+
 def censored_fractions(r) -> dict:
     """The analysis' censored share: the NDF fit's censored weight fraction
     (``MixtureFit.info["censored_fraction"]``) and the fraction of pixels it marked
@@ -111,6 +122,7 @@ def scene_record(d: Path, options: AnalysisOptions) -> dict:
         "past_limit_fraction": past_limit_fraction(d / "truth", r.scene.max_tilt_deg),
         **censored_fractions(r),
         "actual_gain": _actual_gain(r, np.load(d / "truth" / "height_um.npy")),
+        "facet_purity": facet_purity(r.joint.facets, np.load(d / "truth" / "facet_id.npy")),
         "scene": d.name, "true_rms_slope": true_rms, "measured_rms_slope": meas,
         "actual_ratio": None if meas is None else meas / true_rms,
         "self_check": None if c is None else c.to_json(),

@@ -122,8 +122,8 @@ def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed):
     use = pl.fitted & np.isfinite(pl.tilt_deg) & (cens_frac < CENSORED_FACET_FRACTION)
     # Only what is dark is censored. A bright facet whose plane reads steeper than the
     # acceptance is seen, so it is not past it: its plane is a noisy sample like the others
-    # (counted as censored, noise alone put 20-54 % of an instrument-measured surface with
-    # 0.3 % truly past the limit into a wide lobe; docs/accuracy.md).
+    # (counted as censored, slope noise alone turned instrument-measured surfaces with
+    # almost nothing past the limit into a wide lobe).
     C = float(joint.censored.sum())
     mean_area = float(area[use].mean()) if use.any() else float(area.mean())
     n_eff = float(use.sum()) + C / max(mean_area, 1.0)

@@ -198,7 +198,7 @@ def self_check_judgement(judgement: Judgement, check, options: FitOptions) -> Ju
     if not judgement.identified or check is None:
         return judgement
     low, high = options.self_check_range
-    t, wt = check.transfer, getattr(check, "width_transfer", 1.0)
+    t, wt = check.transfer, check.width_transfer
     if math.isfinite(t) and low <= t <= high and math.isfinite(wt) and low <= wt <= high:
         return judgement
     if not math.isfinite(t):

@@ -146,7 +146,7 @@ def focus_heights(foc, options: JointOptions, *, evidence=True) -> HeightInputs:
     with ``evidence`` (the planes) its evidence window's, each from the focus evidence at the
     pixel itself, where the focus stage measured them; else (the segmentation: denser,
     smoother) its combined height; errors correlated over about that window."""
-    if evidence and getattr(foc, "evidence_height_um", None) is not None:
+    if evidence and foc.evidence_height_um is not None:
         h = np.asarray(foc.evidence_height_um, dtype=np.float64)
         sig = np.asarray(foc.evidence_sigma_um, dtype=np.float64)
         ok = np.isfinite(h) & np.isfinite(sig) & (sig > 0)
@@ -227,17 +227,17 @@ def facet_labels(colour, surface, scene, options: JointOptions) -> Segmented:
     hi = height_inputs(surface, options, from_focus=scene.from_focus, evidence=False)
     labels = _segment(colour.lab, hi, colour.noise_de, scene, options)
     has_evidence = (scene.from_focus and not surface.no_focus
-                    and getattr(surface.focus, "evidence_height_um", None) is not None)
+                    and surface.focus.evidence_height_um is not None)
     return Segmented(labels, hi, focus_heights(surface.focus, options) if has_evidence
                      else None)
 
 
-def bootstrap_labels(colour, surface, scene, options: JointOptions, *, rng, crop):
-    """Facets of the ``crop`` (a pair of slices) segmented as :func:`facet_labels` does,
-    after fresh noise of the image's own measured level is added to its Lab values: a
-    second segmentation as likely as the first (a parametric bootstrap), which differs from
-    it wherever the image does not fix the facets' edges."""
-    hi = height_inputs(surface, options, from_focus=scene.from_focus, evidence=False)
+def bootstrap_labels(colour, seg: Segmented, scene, options: JointOptions, *, rng, crop):
+    """Facets of the ``crop`` (a pair of slices) segmented as :func:`facet_labels` did
+    ``seg`` (with its heights), after fresh noise of the image's own measured level is added
+    to its Lab values: a second segmentation as likely as the first (a parametric
+    bootstrap), which differs from it wherever the image does not fix the facets' edges."""
+    hi = seg.heights
     lab = colour.lab[crop]
     lab = lab + rng.normal(0.0, colour.noise_de, lab.shape).astype(np.float32)
     part = HeightInputs(hi.height_um[crop], hi.sigma_um[crop], hi.reliable[crop],
@@ -281,11 +281,16 @@ def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOption
     S = int(facets.max()) + 1
     area = np.bincount(facets.ravel(), minlength=S)
     dist = facet_edge_distance(facets)
-    planes, ev_planes = (None if h is None else fit_facet_planes(
-        facets, h.height_um, height_sigma_um=h.sigma_um,
-        reliable=h.reliable & (dist >= options.plane_edge_px),
-        pixel_size_um=scene.pixel_size_um, min_pixels=options.min_plane_pixels,
-        correlation_px=h.correlation_px) for h in (hi, seg.evidence))
+    inside = dist >= options.plane_edge_px
+
+    def planes_through(h: HeightInputs) -> FacetFit:
+        return fit_facet_planes(facets, h.height_um, height_sigma_um=h.sigma_um,
+                                reliable=h.reliable & inside, pixel_size_um=scene.pixel_size_um,
+                                min_pixels=options.min_plane_pixels,
+                                correlation_px=h.correlation_px)
+
+    planes = planes_through(hi)
+    ev_planes = None if seg.evidence is None else planes_through(seg.evidence)
     fitted = planes.fitted
     t_in, s_in = _stand_in_tilt(planes, area)
     log.info("facets: %d, %d with a height tilt (%.0f%% of the area); stand-in tilt %.1f ± "
@@ -306,7 +311,7 @@ def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOption
     censored = (dark > 0.5 * area)[facets]
     h = hi if seg.evidence is None else seg.evidence
     dome = dome_mean_square_slope(facets, h.height_um, height_sigma_um=h.sigma_um,
-                                  reliable=h.reliable & (dist >= options.plane_edge_px),
+                                  reliable=h.reliable & inside,
                                   pixel_size_um=scene.pixel_size_um,
                                   correlation_px=h.correlation_px)
     return JointResult(None, facets, planes, ft, area, censored, c_sig, float(model.exposure),

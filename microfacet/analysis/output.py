@@ -249,8 +249,8 @@ def build_summary(r) -> Summary:
 def sigma_scale(r) -> float | None:
     """The factor the self-check measured for the focus stage's height σ (None without)."""
     c = r.self_check
-    s = None if c is None else getattr(c, "height_sigma_scale", None)
-    return float(s) if s is not None and np.isfinite(s) else None
+    return None if c is None or not np.isfinite(c.height_sigma_scale) \
+        else float(c.height_sigma_scale)
 
 
 def height_sigma_um(r) -> np.ndarray | None:
@@ -258,7 +258,7 @@ def height_sigma_um(r) -> np.ndarray | None:
     reliable, with the variance of its unexplained disagreement with the evidence window
     (:func:`~microfacet.focus.uncertainty.height_sigma_with_bias`), times the self-check's
     :func:`sigma_scale` (None for an export)."""
-    if getattr(r.focus, "height_sigma_um", None) is None or not r.scene.from_focus:
+    if r.focus.height_sigma_um is None or not r.scene.from_focus:
         return None
     sig = height_sigma_with_bias(r.focus)
     k = sigma_scale(r) or 1.0
@@ -272,7 +272,7 @@ def _height_section(r) -> dict:
     and the 2σ coverage of its heights before it."""
     sigma_px = r.options.focus.slope_sigma_px if r.scene.from_focus else 0.0
     c = r.self_check
-    cov = None if c is None else getattr(c, "height_coverage", None)
+    cov = None if c is None else c.height_coverage
     return {"unreliable_fraction": float(np.mean(~np.isfinite(r.focus.height_um))),
             "normals_slope_sigma_um": [sigma_px * p for p in pixel_size_yx(
                 r.scene.pixel_size_um)],

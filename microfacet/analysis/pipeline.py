@@ -209,7 +209,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         with timer.stage(Stage.SELF_CHECK):
             check = _self_check(st, focus, joint, scene, options,
                                 cells=lambda crop: bootstrap_labels(
-                                    colour, surface, scene, options.joint,
+                                    colour, seg, scene, options.joint,
                                     rng=np.random.default_rng([scene.seed, 22]), crop=crop))
             dist.ndf_judgement = self_check_judgement(dist.ndf_judgement, check, options.fits)
             if check is not None and dist.ndf is not None:

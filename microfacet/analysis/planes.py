@@ -138,9 +138,8 @@ def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size
     fitted = (n >= max(int(min_pixels), 4)) & np.isfinite(a) & np.isfinite(b)
     with np.errstate(invalid="ignore", divide="ignore"):
         chi2 = np.where(fitted, rss / np.maximum(n - 3, 1), np.nan)
-    A = max(float(correlation_px), 1.0)
-    corr = n * A / (n + 5.0 * A) if A > 1.0 else np.ones(n.shape)
-    infl = np.where(fitted, np.maximum(chi2, 1.0) * np.maximum(corr, 1.0), np.nan)
+    infl = np.where(fitted, np.maximum(chi2, 1.0) * _correlation_factor(n, correlation_px),
+                    np.nan)
     cov = np.where(fitted[:, None, None], cov * infl[:, None, None], np.nan)
     g = np.hypot(a, b)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -154,6 +153,15 @@ def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size
                     np.nan)
     nan = np.where(fitted, 0.0, np.nan)
     return FacetFit(a + nan, b + nan, cov, ssig, tilt, tsig, n, chi2, fitted)
+
+
+def _correlation_factor(n, correlation_px):
+    """How much more a fit to ``n`` heights whose errors are correlated over
+    ``correlation_px`` (A) varies than one to independent errors: ``n A / (n + 5 A)``, at
+    least 1 (:func:`fit_facet_planes`)."""
+    n = np.asarray(n, dtype=np.float64)
+    A = max(float(correlation_px), 1.0)
+    return np.maximum(n * A / (n + 5.0 * A), 1.0) if A > 1.0 else np.ones(n.shape)
 
 
 def _robust_weights(labels, z, wt, pixel_size_um, S, rounds):
@@ -171,6 +179,7 @@ def _robust_weights(labels, z, wt, pixel_size_um, S, rounds):
     sig = 1.0 / np.sqrt(w0)
     wr = w0
     for k in range(rounds):
+        # plane_moments' ten sums, over the used pixels only
         cols = (wr, wr * x, wr * y, wr * zz, wr * x * x, wr * x * y, wr * y * y, wr * x * zz,
                 wr * y * zz, wr * zz * zz)
         m = np.stack([np.bincount(lab, c, S) for c in cols], axis=1)
@@ -282,9 +291,7 @@ def dome_mean_square_slope(labels, height_um, *, height_sigma_um, reliable, pixe
     coef = np.einsum("sij,sj->si", inv, rhs[ok])
     rss = np.bincount(lab, w * zz * zz, S)[ok] - np.einsum("si,si->s", coef, rhs[ok])
     chi2 = np.maximum(rss / np.maximum(n[ok] - 4, 1), 1.0)
-    A_c = max(float(correlation_px), 1.0)
-    corr = np.maximum(n[ok] * A_c / (n[ok] + 5.0 * A_c), 1.0) if A_c > 1.0 else 1.0
-    d, var_d = coef[:, 3], inv[:, 3, 3] * chi2 * corr
+    d, var_d = coef[:, 3], inv[:, 3, 3] * chi2 * _correlation_factor(n[ok], correlation_px)
     # the dome's slope 2 d r, its mean square over the facet's pixels (all of them)
     r2 = np.bincount(lab, x * x + y * y, S)[ok] / np.bincount(lab, minlength=S)[ok]
     area = np.bincount(lab, minlength=S)[ok].astype(np.float64)

@@ -2,22 +2,26 @@
 them (injection–recovery).
 
 Where the truth is unknown, the analysis measures its own slope transfer on the stack it
-analyses. On the scene's own facets (the joint mode's segmentation) it adds to the scene's own
-measured surface a piecewise-planar perturbation of known slopes — the pattern of the facets'
-own measured slopes, scaled to 0.5, 1 and 2 times their RMS, the planes joined at the edges —
-renders focus stacks of the surface with and without it through the scene's own all-in-focus
-image (its texture, sparse or not), z grid, numerical aperture and slice noise, runs the same
-height-from-focus and plane fits on both, and projects the change of the recovered slopes on
-the injected ones. That gain (the *transfer*) far from 1 says the heights flatten or steepen
-the facets here — for example where a facet has no texture of its own and its heights are
-borrowed from a pit or scratch micrometres away — and the NDF is then not identified
-(:func:`~.identification.self_check_judgement`). Injected slopes drawn independently per
-facet instead (every segment edge a crease) read 0.3-0.4 where the analysis' actual gain is
-0.6-0.85; the scene's own pattern reads within 0.07 of the actual gain on 8 of 12 synthetic
-scenes (``python -m pipelines.self_check_sweep``).
+analyses. It adds to the scene's own measured surface a piecewise-planar perturbation of known
+slopes — the pattern of the scene's own slopes, scaled to 0.5, 1 and 2 times their RMS, the
+planes joined at the edges — on *cells* that are a second segmentation of the colour image
+re-noised with its own noise (a parametric bootstrap: where the image does not fix the
+facets' edges it differs from the analysis' segments as the true facets do). It renders focus
+stacks of the surface with and without it through the scene's own all-in-focus image (its
+texture, sparse or not), z grid, numerical aperture and slice noise, runs the same
+height-from-focus and plane fits on the analysis' segments, and measures two ratios: the gain
+of the change of the recovered slopes on the injected ones (the *transfer*: do the heights
+flatten or steepen the facets here, for example where a facet has no texture of its own and
+its heights are borrowed from a pit or scratch micrometres away), and the RMS slope the NDF
+would report, noise removed, over the true per-pixel RMS of the rendered surface (the *width
+transfer*, which also pays for segments that are not the cells). Outside
+``fits.self_check_range`` the NDF is not identified
+(:func:`~.identification.self_check_judgement`). How well it predicts the truth on
+randomized scenes: docs/accuracy.md (``python -m pipelines run accuracy-ndf-worlds``).
 
-What it cannot see: a facet that the segmentation got wrong (two true facets in one segment)
-is one plane in the injected surface, so segmentation errors are not part of the transfer.
+What it cannot see: a surface unlike the injected one — steps at the facet edges, rounded
+facets (the planar-facet check, :func:`~.planes.dome_mean_square_slope`, looks for those),
+brightness that fades with tilt and so selects the flatter facets.
 
 References
 ----------
@@ -43,6 +47,7 @@ from ..focus.uncertainty import height_sigma_with_bias
 from .joint import focus_heights
 from .options import JointOptions
 from .planes import deconvolved_rms_slope, facet_edge_distance, fit_facet_planes
+from .segmentation import _relabel
 
 __all__ = ["Conditions", "SelfCheck", "measured_rms_slope", "render_focus_stack", "self_check_ndf",
            "slice_noise_sd", "slope_gain"]
@@ -273,15 +278,10 @@ class _Scene:
     noise_sd: float
 
 
-def _relabelled(labels):
-    _, lab = np.unique(labels, return_inverse=True)
-    return lab.reshape(labels.shape).astype(np.int32)
-
-
 def _scene(focus, labels, cells, *, z_um, pixel_size_um, numerical_aperture, noise_sd
            ) -> _Scene:
     rs, cs = _crop(labels.shape)
-    lab = _relabelled(labels[rs, cs])
+    lab = _relabel(labels[rs, cs])
     img = np.asarray(focus.all_in_focus, np.float32)[rs, cs]
     tex = img @ np.array([0.2126, 0.7152, 0.0722], np.float32) if img.ndim == 3 else img
     h = np.asarray(focus.height_fit_um, np.float64)[rs, cs]
@@ -300,7 +300,7 @@ def _scene(focus, labels, cells, *, z_um, pixel_size_um, numerical_aperture, noi
     # injected planes: the relief, its range in z and its creases stay the scene's
     base = np.clip(np.where(ok, h, centre[lab]), z.min(), z.max())
     cell = cells((rs, cs)) if callable(cells) else np.asarray(cells)[rs, cs]
-    return _Scene(lab, _relabelled(cell), tex, base, z, pyx, blur, float(noise_sd))
+    return _Scene(lab, _relabel(cell), tex, base, z, pyx, blur, float(noise_sd))
 
 
 @dataclass(frozen=True)

@@ -258,6 +258,11 @@ def height_from_focus(source, options: FocusOptions | None = None, *,
                        evidence_height_um=evidence[0], evidence_sigma_um=evidence[1])
 
 
+def _precision_db(sigma):
+    """``reliability_db`` of a σ in z steps: −20·log10(σ), σ clipped to 1e-3…1e6."""
+    return -20.0 * np.log10(np.clip(sigma, 1e-3, 1e6))
+
+
 def _evidence(plan: _Plan, fits: list[WindowFit], step):
     """Height and σ (µm, float32) of the evidence window where its peak is significant and
     passes the reliability cut (NaN elsewhere); (None, None) without the window."""
@@ -265,11 +270,9 @@ def _evidence(plan: _Plan, fits: list[WindowFit], step):
         return None, None
     f = fits[plan.evidence]
     sigma = f.sigma.astype(np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        db = -20.0 * np.log10(np.clip(sigma, 1e-3, 1e6))
     ok = f.detected & np.isfinite(sigma)
     if plan.options.reliability == "sigma":
-        ok &= db >= plan.options.reliability_cut_db
+        ok &= _precision_db(sigma) >= plan.options.reliability_cut_db
     nan = np.float32(np.nan)
     return (np.where(ok, f.height_um, nan).astype(np.float32),
             np.where(ok, sigma * abs(step), nan).astype(np.float32))
@@ -453,7 +456,7 @@ def _choose(plan: _Plan, fits: list[WindowFit], step) -> _Choice:
         rel = np.take_along_axis(np.stack([f.pertuz_db for f in fits]), pick, 0)[0]
         reliable = rel >= cut
     else:
-        rel = -20.0 * np.log10(np.clip(sigma, 1e-3, 1e6))
+        rel = _precision_db(sigma)
         rel = np.where(detected, rel, np.minimum(rel, 0.0))
         reliable = (detected & (rel >= cut)) if cut > -np.inf \
             else np.ones(plan.slices.shape, bool)

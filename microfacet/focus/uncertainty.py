@@ -385,7 +385,7 @@ def height_sigma_with_bias(focus):
     variance of its unexplained disagreement with the evidence window added
     (:func:`disagreement_variance`); its own σ without an evidence window."""
     s = np.asarray(focus.height_sigma_um, np.float32)
-    if getattr(focus, "evidence_height_um", None) is None:
+    if focus.evidence_height_um is None:
         return s
     v = disagreement_variance(focus.height_fit_um, s, focus.evidence_height_um,
                               focus.evidence_sigma_um)
