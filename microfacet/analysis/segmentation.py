@@ -214,7 +214,8 @@ def _felzenszwalb_tiles(img, scale, slope, *, min_size, tile=None):
     return out
 
 
-def _relabel(labels):
+def relabel(labels):
+    """Labels renumbered 0..S-1 in the order of their values (int32)."""
     _, inv = np.unique(labels, return_inverse=True)
     return inv.reshape(labels.shape).astype(np.int32)
 
@@ -350,7 +351,7 @@ def merge_adjacent(labels, moments, cost, *, max_rounds, pairs=None):
     """
     S = int(labels.max()) + 1
     if not np.all(np.bincount(labels.ravel(), minlength=S)):  # labels 0..S-1 with gaps
-        labels = _relabel(labels)
+        labels = relabel(labels)
         S, pairs = int(labels.max()) + 1, None
     moments = np.asarray(moments, dtype=np.float64)
     # the segment graph: merged segments neighbour the union of their parts' neighbours, so

@@ -47,7 +47,7 @@ from ..focus.uncertainty import height_sigma_with_bias
 from .joint import focus_heights
 from .options import JointOptions
 from .planes import deconvolved_rms_slope, facet_edge_distance, fit_facet_planes
-from .segmentation import _relabel
+from .segmentation import relabel
 
 __all__ = ["Conditions", "SelfCheck", "measured_rms_slope", "render_focus_stack", "self_check_ndf",
            "slice_noise_sd", "slope_gain"]
@@ -281,7 +281,7 @@ class _Scene:
 def _scene(focus, labels, cells, *, z_um, pixel_size_um, numerical_aperture, noise_sd
            ) -> _Scene:
     rs, cs = _crop(labels.shape)
-    lab = _relabel(labels[rs, cs])
+    lab = relabel(labels[rs, cs])
     img = np.asarray(focus.all_in_focus, np.float32)[rs, cs]
     tex = img @ np.array([0.2126, 0.7152, 0.0722], np.float32) if img.ndim == 3 else img
     h = np.asarray(focus.height_fit_um, np.float64)[rs, cs]
@@ -300,7 +300,7 @@ def _scene(focus, labels, cells, *, z_um, pixel_size_um, numerical_aperture, noi
     # injected planes: the relief, its range in z and its creases stay the scene's
     base = np.clip(np.where(ok, h, centre[lab]), z.min(), z.max())
     cell = cells((rs, cs)) if callable(cells) else np.asarray(cells)[rs, cs]
-    return _Scene(lab, _relabel(cell), tex, base, z, pyx, blur, float(noise_sd))
+    return _Scene(lab, relabel(cell), tex, base, z, pyx, blur, float(noise_sd))
 
 
 @dataclass(frozen=True)
