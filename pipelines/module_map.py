@@ -26,8 +26,8 @@ ROOT = Path(__file__).resolve().parents[1] / "microfacet"
 
 #: The one-way order of the subpackages (lower index = lower layer); a module may import its
 #: own layer and those below it.
-LAYERS = ["core", "optics", "colour", "io", "focus", "analysis", "forward", "report", "workflow",
-          "cli"]
+LAYERS = ["core", "optics", "colour", "io", "focus", "analysis", "forward", "report", "render",
+          "workflow", "cli"]
 _COMPAT = {"thinfilm", "color"}  # re-export shims of the public names in shared/spec/api.md
 _ENTRY = {"__main__"}            # ``python -m microfacet``: the command line's entry point
 

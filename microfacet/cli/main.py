@@ -34,6 +34,8 @@ COMMANDS = (
     "height",
     "synth",
     "simulate",
+    "export_brdf",
+    "render",
     "fit_spectrum",
     "batch",
 )

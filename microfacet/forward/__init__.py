@@ -9,6 +9,7 @@ module              concern
 ``eq6``             the seed's eq. 6
 ``angular``         angular colour maps of any model; the display exposure rule
 ``compare``         ΔE00 against a measured map; fitting exposure and eq. 6's n
+``material``        the measured material tabulated for renderers (film average × lobes)
 ``scene``           synthetic surfaces, thickness fields and sharp images
 ``relief``          relief beyond planar facets: shaped cells, domes, terraces, pits, dust
 ``imaging``         the microscope's pupil, vignetting, white balance and drift

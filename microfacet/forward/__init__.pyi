@@ -5,6 +5,7 @@ from . import (
     eq6,
     halfvector,
     imaging,
+    material,
     relief,
     scene,
     synth,
@@ -13,10 +14,12 @@ from . import (
 from .angular import display_exposure, simulate_map
 from .brdf import microfacet_brdf
 from .eq6 import eq6_reflectance
+from .material import Material
 from .synth import generate_stack, preset
 from .synth_params import SynthParams
 
 __all__ = [
+    "Material",
     "SynthParams",
     "angular",
     "brdf",
@@ -27,6 +30,7 @@ __all__ = [
     "generate_stack",
     "halfvector",
     "imaging",
+    "material",
     "microfacet_brdf",
     "preset",
     "relief",

@@ -10,6 +10,7 @@ module              workflow
 ``batch_summary``   the rows and folder names of ``batch_summary.csv``
 ``height``          :func:`height_to_folder`: one stack → height-from-focus folder
 ``simulate``        :func:`simulate_to_folder`: distributions → angular colour maps
+``material``        :func:`export_material`: a results folder → one material file
 ``executors``       local worker processes and Dask clusters
 ==================  ==========================================================
 """
@@ -17,9 +18,11 @@ module              workflow
 from ..core.lazy import attach
 
 __getattr__, __dir__, __all__ = attach(__name__, submodules=(
-    "analyse", "batch", "batch_summary", "executors", "height", "simulate"), submod_attrs={
+    "analyse", "batch", "batch_summary", "executors", "height", "material", "simulate"),
+    submod_attrs={
     "analyse": ["analyse_to_folder", "open_stack"],
     "batch": ["BatchInterrupted", "BatchResult", "run_batch"],
     "height": ["HeightOutput", "height_to_folder"],
+    "material": ["ExportOutput", "export_material"],
     "simulate": ["FilmOptics", "SimulateOptions", "SimulateOutput", "simulate_to_folder"],
 })

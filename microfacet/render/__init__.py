@@ -1,0 +1,1 @@
+"""Rendering the measured material in Mitsuba 3 (optional extra ``render``)."""
