@@ -3,6 +3,7 @@ reads (:mod:`microfacet.io.material_file`; docs/rendering.md)."""
 
 from __future__ import annotations
 
+from .. import workflow
 from .options import HelpFormatter, example_epilog
 
 _EXAMPLES = ("microfacet export-brdf nd-analysis --out nd-material",
@@ -32,11 +33,9 @@ def register(sub):
 
 
 def run(args) -> int:
-    from ..workflow.material import export_material
-
     grid = {k: v for k, v in (("theta_step_deg", args.theta_step_deg),
                               ("wavelength_step_nm", args.wavelength_step_nm)) if v is not None}
-    done = export_material(args.results, args.out, overwrite=args.overwrite, **grid)
+    done = workflow.export_material(args.results, args.out, overwrite=args.overwrite, **grid)
     if not args.quiet:
         m = done.material
         lobes = ", ".join(f"{sd:.1f}° ({w:.0%})" for w, sd in m.ndf.components)

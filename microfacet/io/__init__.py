@@ -16,6 +16,7 @@ module              format / concern
 ``summary``         its ``summary.json`` as a typed, versioned :class:`Summary`
 ``height_folder``   the height folder of ``microfacet height`` (``microfacet-height/1``)
 ``angular_map``     angular maps (``microfacet-angular/1``)
+``material_file``   the exported BRDF (``microfacet-brdf/1``): film average table + lobes
 ``spectrum``        measured spectra (spectrometer text exports)
 ``jsonfile``        strict JSON reading
 ``limits``          sizes and memory checked before they are spent

@@ -56,11 +56,13 @@ KINDS = {
     "height": "a height-from-focus folder",
     "simulate": "a simulation folder",
     "batch": "a batch output folder",
+    "render": "a render folder",
     "synthetic stack": "a synthetic stack",
 }
 _JSON_MARKERS = (("summary.json", "microfacet-results/", "results"),
                  ("height.json", "microfacet-height/", "height"),
-                 ("simulate.json", "microfacet-simulate/", "simulate"))
+                 ("simulate.json", "microfacet-simulate/", "simulate"),
+                 ("render.json", "microfacet-render/", "render"))
 _BATCH_HEADER = "stack,results,status"
 _WALK_LIMIT = 200_000     # entries looked at for a stack inside an existing output
 _SPACE_MARGIN = 1.2       # free space needed: expected size x margin + 16 MB

@@ -82,8 +82,9 @@ class ThinFilmModel:
         if "filename" not in props:
             raise InputError(f"the {PLUGIN} BSDF needs a 'filename' property (a material "
                              "file written by `microfacet export-brdf`)", param="filename")
-        material = Material.read(str(props["filename"]))
-        self.filename = str(props["filename"])
+        # a name relative to a scene file: Mitsuba's file resolver holds the file's folder
+        self.filename = str(mi.file_resolver().resolve(str(props["filename"])))
+        material = Material.read(self.filename)
         ndf = material.ndf
         self.weights = [float(w) for w in ndf.weights]
         self.alphas = [float(a) for a in ndf.beckmann_alpha]

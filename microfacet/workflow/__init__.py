@@ -11,6 +11,7 @@ module              workflow
 ``height``          :func:`height_to_folder`: one stack → height-from-focus folder
 ``simulate``        :func:`simulate_to_folder`: distributions → angular colour maps
 ``material``        :func:`export_material`: a results folder → one material file
+``render``          :func:`render_to_folder`: the material photographed in Mitsuba 3
 ``executors``       local worker processes and Dask clusters
 ==================  ==========================================================
 """
@@ -18,11 +19,13 @@ module              workflow
 from ..core.lazy import attach
 
 __getattr__, __dir__, __all__ = attach(__name__, submodules=(
-    "analyse", "batch", "batch_summary", "executors", "height", "material", "simulate"),
+    "analyse", "batch", "batch_summary", "executors", "height", "material", "render",
+    "simulate"),
     submod_attrs={
     "analyse": ["analyse_to_folder", "open_stack"],
     "batch": ["BatchInterrupted", "BatchResult", "run_batch"],
     "height": ["HeightOutput", "height_to_folder"],
     "material": ["ExportOutput", "export_material"],
+    "render": ["RenderOptions", "RenderOutput", "render_to_folder"],
     "simulate": ["FilmOptics", "SimulateOptions", "SimulateOutput", "simulate_to_folder"],
 })

@@ -97,6 +97,7 @@ def _child(code: str, libllvm: str) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_an_old_libllvm_falls_back_to_a_newer_one_before_mitsuba_loads():
     if "llvm_ad_spectral" not in available_variants():
@@ -123,6 +124,7 @@ def test_an_old_libllvm_falls_back_to_a_newer_one_before_mitsuba_loads():
     assert libllvm_major(r["env"]) > libllvm_major(old)
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_with_only_an_old_libllvm_scalar_comes_with_the_reason():
     old = _old_libllvm()
