@@ -45,14 +45,15 @@ __all__ = ["attach", "attach_stub", "load"]
 class _LazyModule(types.ModuleType):
     """A stand-in for a module that imports it on the first attribute access."""
 
-    def __init__(self, name: str):
+    def __init__(self, name: str, keep: bool = True):
         super().__init__(name)
         self.__dict__["_lazy_target"] = name
+        self.__dict__["_lazy_keep"] = keep
 
     def __getattr__(self, attr):
         module = importlib.import_module(self.__dict__["_lazy_target"])
         value = getattr(module, attr)
-        if not attr.startswith("__"):
+        if self.__dict__["_lazy_keep"] and not attr.startswith("__"):
             self.__dict__[attr] = value  # the next access is a plain attribute lookup
         return value
 
@@ -60,13 +61,17 @@ class _LazyModule(types.ModuleType):
         return f"<lazy module {self.__dict__['_lazy_target']!r}>"
 
 
-def load(name: str) -> types.ModuleType:
+def load(name: str, *, keep: bool = True) -> types.ModuleType:
     """The module ``name``, imported when one of its attributes is first used.
 
     Parameters
     ----------
     name : str
         Absolute module name (``"cv2"``, ``"scipy.ndimage"``, ``"sklearn.mixture"``).
+    keep : bool
+        Keep each attribute once looked up (the next access is a plain lookup). False for a
+        module whose attributes change at run time: Mitsuba's ``mi.BSDF``, ``mi.Float`` …
+        are those of the variant set when they are looked up.
 
     Returns
     -------
@@ -74,7 +79,7 @@ def load(name: str) -> types.ModuleType:
         The module itself if it is already imported, else a proxy.
     """
     module = sys.modules.get(name)
-    return module if module is not None else _LazyModule(name)
+    return module if module is not None else _LazyModule(name, keep)
 
 
 def attach(package_name: str, submodules=(), submod_attrs=None):

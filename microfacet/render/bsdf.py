@@ -45,8 +45,8 @@ from ..core.errors import InputError
 from ..core.lazy import load
 from ..forward.material import Material
 
-mi = load("mitsuba")
-dr = load("drjit")
+mi = load("mitsuba", keep=False)
+dr = load("drjit", keep=False)
 
 __all__ = ["PLUGIN", "bsdf_class", "register"]
 

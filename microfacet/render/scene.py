@@ -61,7 +61,7 @@ from ..core.errors import InputError
 from ..core.lazy import load
 from ..core.options import Options, option
 
-mi = load("mitsuba")
+mi = load("mitsuba", keep=False)
 
 __all__ = ["MAX_DEPTH", "MESH_TYPES", "OBJECTS", "SCENE_FILE", "Camera", "Light", "Plate",
            "Sheet", "Sphere", "TriangleMesh", "UserMesh", "build_scene", "luminance_cd_m2",

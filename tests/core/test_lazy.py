@@ -40,6 +40,20 @@ def test_load_returns_a_proxy_that_imports_on_first_use():
     assert r == [False, "_LazyModule", "<lazy module 'wave'>", True, True, True]
 
 
+def test_a_proxy_that_keeps_nothing_follows_the_module():
+    """keep=False (Mitsuba: mi.BSDF is the variant's set at the time) looks every attribute up
+    anew."""
+    r = _run("""
+        import json, sys
+        from microfacet.core.lazy import load
+        m = load("wave", keep=False)
+        first = m.Error
+        sys.modules["wave"].Error = KeyError
+        print(json.dumps([first is not KeyError, m.Error is KeyError, "Error" in vars(m)]))
+    """)
+    assert r == [True, True, False]
+
+
 def test_an_imported_module_is_returned_itself():
     r = _run("""
         import json, sys, wave
