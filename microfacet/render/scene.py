@@ -64,8 +64,8 @@ from ..core.options import Options, option
 mi = load("mitsuba", keep=False)
 
 __all__ = ["MAX_DEPTH", "MESH_TYPES", "OBJECTS", "SCENE_FILE", "Camera", "Light", "Plate",
-           "Sheet", "Sphere", "TriangleMesh", "UserMesh", "build_scene", "luminance_cd_m2",
-           "scene_object", "write_ply"]
+           "Sheet", "Sphere", "TriangleMesh", "UserMesh", "build_scene", "gonio_scene",
+           "luminance_cd_m2", "scene_object", "write_ply"]
 
 #: Path-tracing depth: the camera ray, direct light at the object, one inter-reflection (a
 #: bent sheet or a user's concave mesh); a plate or a sphere needs 2.
@@ -475,6 +475,56 @@ def build_scene(*, obj, bsdf: dict, camera: Camera | None = None, light: Light |
     return {"type": "scene", "integrator": integrator, "camera": camera.sensor(spp=spp),
             "object": scene_object(obj).shape(bsdf, mesh_folder=mesh_folder),
             **light.emitters()}
+
+
+def gonio_scene(*, bsdf: dict, theta_light_deg: float, theta_view_deg: float,
+                irradiance_lux: float = 1.0, width_px: int = 8, spp: int = 256) -> dict:
+    """A gonioreflectometer in Mitsuba: a large flat sample in the xy plane lit by a parallel
+    D65 beam and seen by an orthographic camera, both in the xz plane of incidence (the
+    angles of ``microfacet simulate``: the view positive on the mirror side), so that every
+    pixel sees the same pair of directions.
+
+    Parameters
+    ----------
+    bsdf : dict
+        The sample's BSDF.
+    theta_light_deg, theta_view_deg : float
+        Zenith angles, degrees, in (−90, 90).
+    irradiance_lux : float
+        Illuminance of the beam on a surface facing it.
+    width_px, spp : int
+        Image side and samples per pixel (direct lighting only: ``direct`` integrator).
+
+    Returns
+    -------
+    dict
+        Render it and divide by a white Lambertian sample rendered the same way: the ratio
+        is the reflectance factor π f_r of the two directions (``tests/render/test_bsdf.py``).
+
+    Examples
+    --------
+    >>> import mitsuba as mi
+    >>> mi.set_variant("scalar_spectral")
+    >>> d = gonio_scene(bsdf={"type": "diffuse"}, theta_light_deg=30, theta_view_deg=20)
+    >>> d["light"]["type"], d["camera"]["type"]
+    ('directional', 'orthographic')
+    """
+    tl, tv = math.radians(theta_light_deg), math.radians(theta_view_deg)
+    view = [5 * math.sin(tv), 0.0, 5 * math.cos(tv)]
+    T = _transform()
+    return {
+        "type": "scene",
+        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
+        "light": {"type": "directional", "direction": [math.sin(tl), 0.0, -math.cos(tl)],
+                  "irradiance": {"type": "d65", "scale": float(irradiance_lux)}},
+        "object": {"type": "rectangle", "bsdf": bsdf, "to_world": T().scale([10.0, 10.0, 1.0])},
+        "camera": {"type": "orthographic",
+                   "to_world": T().look_at(origin=view, target=[0, 0, 0], up=[0, 1, 0])
+                   @ T().scale([0.5, 0.5, 1.0]),
+                   "film": {"type": "hdrfilm", "width": int(width_px), "height": int(width_px),
+                            "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+                   "sampler": {"type": "independent", "sample_count": int(spp)}},
+    }
 
 
 def luminance_cd_m2(image) -> np.ndarray:

@@ -3,8 +3,8 @@
 The film's colours are computed per wavelength, so microfacet renders in Mitsuba's
 unpolarized *spectral* variants only: ``llvm_ad_spectral`` (vectorised, JIT-compiled by
 LLVM; the fast one) and ``scalar_spectral`` (one ray at a time; a BSDF written in Python is
-called per sample, about 100× slower). CUDA variants are never chosen automatically (they may
-be requested).
+called per sample: the thin-film BSDF renders ~2000x slower per sample there, see
+docs/rendering.md). CUDA variants are never chosen automatically (they may be requested).
 
 Probing (:func:`variant_probes`)
     A variant is known to work only once it has rendered: an LLVM variant can *abort the
@@ -353,7 +353,7 @@ def _scalar_note(chosen: str) -> str | None:
     if not failed or any(p.works for p in failed):
         return None
     why = "; ".join(f"{p.variant} unavailable ({p.reason})" for p in failed)
-    return one_line(f"{why}: using {chosen}, about 100× slower")
+    return one_line(f"{why}: using {chosen}, ~2000x slower per sample (docs/rendering.md)")
 
 
 def choose_variant(requested: str | None = None) -> tuple[str, str | None]:

@@ -19,6 +19,7 @@ from microfacet.forward.angular import simulate_map  # noqa: E402
 from microfacet.forward.brdf import microfacet_geometry  # noqa: E402
 from microfacet.forward.material import Material  # noqa: E402
 from microfacet.render import bsdf  # noqa: E402
+from microfacet.render.scene import gonio_scene  # noqa: E402
 
 SCALAR = "scalar_spectral"
 THICKNESS = ThicknessMixture([(0.6, 112.0, 3.0), (0.4, 150.0, 5.0)])
@@ -206,23 +207,8 @@ def test_rgb_variants_are_refused():
 def _plate_scene(bsdf_spec, theta_light_deg, theta_view_deg, variant):
     mi.set_variant(variant)
     bsdf.register()
-    tl, tv = math.radians(theta_light_deg), math.radians(theta_view_deg)
-    view = [math.sin(tv), 0.0, math.cos(tv)]
-    return mi.load_dict({
-        "type": "scene",
-        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
-        "light": {"type": "directional", "direction": [math.sin(tl), 0.0, -math.cos(tl)],
-                  "irradiance": {"type": "d65", "scale": 1.0}},
-        "plate": {"type": "rectangle", "bsdf": bsdf_spec,
-                  "to_world": mi.ScalarTransform4f().scale([10.0, 10.0, 1.0])},
-        "camera": {"type": "orthographic",
-                   "to_world": mi.ScalarTransform4f().look_at(
-                       origin=[5 * c for c in view], target=[0, 0, 0], up=[0, 1, 0])
-                   @ mi.ScalarTransform4f().scale([0.5, 0.5, 1.0]),
-                   "film": {"type": "hdrfilm", "width": 8, "height": 8,
-                            "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-                   "sampler": {"type": "independent", "sample_count": 256}},
-    })
+    return mi.load_dict(gonio_scene(bsdf=bsdf_spec, theta_light_deg=theta_light_deg,
+                                    theta_view_deg=theta_view_deg))
 
 
 def _mean_xyz(scene):
