@@ -81,6 +81,26 @@ def test_a_material_file_renders_the_same_material(results, tmp_path):
                                   m.film_average)
 
 
+@pytest.mark.parametrize("kind", ["ply", "obj"])
+def test_a_users_mesh(results, tmp_path, kind):
+    """A mesh file is rendered centred, copied beside scene.xml, and its object is lit."""
+    from microfacet.render.scene import Sheet, write_ply
+    if kind == "ply":
+        mesh = write_ply(tmp_path / "part.ply", Sheet().mesh())
+    else:
+        mesh = tmp_path / "part.obj"
+        mesh.write_text("v -0.05 -0.05 1.0\nv 0.05 -0.05 1.0\nv 0.05 0.05 1.0\n"
+                        "v -0.05 0.05 1.0\nf 1 2 3\nf 1 3 4\n")
+    out = tmp_path / f"mesh-{kind}"
+    render_to_folder(out, results=results, options=RenderOptions.from_dict(
+        {**TINY, "scene": str(mesh), "light": {"sky_fraction": 0.0}}))
+    y = luminance_cd_m2(_exr(out / "render.exr"))
+    assert y.max() > 0 and (y > 0).mean() > 0.05   # the object fills part of the frame
+    assert (y == 0).mean() > 0.05                   # and the black background the rest
+    assert (out / "meshes" / mesh.name).is_file()
+    assert f'value="meshes/{mesh.name}"' in (out / "scene.xml").read_text()
+
+
 def test_the_scalar_variant_renders_too(results, tmp_path):
     out = tmp_path / "scalar"
     done = render_to_folder(out, results=results, options=RenderOptions.from_dict(
