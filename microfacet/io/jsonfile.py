@@ -34,7 +34,7 @@ import numpy as np
 from ..core.errors import InputError, one_line
 from .limits import MAX_JSON_BYTES
 
-__all__ = ["json_safe", "read_json"]
+__all__ = ["json_safe", "parse_json", "read_json"]
 
 
 def _pairs(pairs):
@@ -76,6 +76,16 @@ def read_json(path, *, max_bytes: int = MAX_JSON_BYTES):
         raise InputError(f"{shown}: cannot read ({exc.strerror or exc})") from None
     except UnicodeDecodeError as exc:
         raise InputError(f"{shown}: not UTF-8 text (byte {exc.start})") from None
+    return parse_json(text, shown)
+
+
+def parse_json(text: str, shown: str):
+    """``text`` parsed as strictly as :func:`read_json` reads a file; errors name ``shown``
+    (the file, or the archive member, the text came from).
+
+    >>> parse_json('{"a": [1, 2]}', "x.json")
+    {'a': [1, 2]}
+    """
     try:
         return json.loads(text, object_pairs_hook=_pairs, parse_int=_int)
     except _Duplicate as exc:

@@ -51,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError, one_line
+from .jsonfile import parse_json
 
 __all__ = ["FORMAT", "SUFFIX", "read_material_file", "write_material_file"]
 
@@ -130,7 +131,8 @@ def read_material_file(path) -> tuple[dict, dict]:
             if missing:
                 raise InputError(f"{shown}: not a microfacet material file (no "
                                  f"{missing[0]})")
-            meta = json.loads(zf.read("metadata.json").decode("utf-8"))
+            meta = parse_json(zf.read("metadata.json").decode("utf-8-sig"),
+                              f"{shown}: metadata.json")
             arrays = {a: np.load(io.BytesIO(zf.read(f"{a}.npy")), allow_pickle=False)
                       for a in ARRAYS}
     except FileNotFoundError:

@@ -30,20 +30,12 @@ from microfacet.render.scene import (  # noqa: E402
     scene_object,
     write_ply,
 )
-from microfacet.render.variants import choose_variant  # noqa: E402
 
 WHITE = {"type": "diffuse", "reflectance": 1.0}
 #: D65's chromaticity (CIE 015:2018, 2° observer).
 D65_XY = (0.31272, 0.32903)
 #: A light at the zenith with no ambient: the plate is lit uniformly.
 ZENITH_SUN = Light(kind="sun", illuminance_lux=1000.0, elevation_deg=90.0, sky_fraction=0.0)
-
-
-@pytest.fixture(scope="module")
-def variant():
-    v, _ = choose_variant()
-    mi.set_variant(v)
-    return v
 
 
 def render(scene: dict, *, spp: int, seed: int = 0) -> np.ndarray:

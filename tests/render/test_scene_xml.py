@@ -12,14 +12,6 @@ dr = pytest.importorskip("drjit")
 from microfacet.core.errors import InputError  # noqa: E402
 from microfacet.render.scene import Camera, Light, build_scene, luminance_cd_m2  # noqa: E402
 from microfacet.render.scene_xml import write_scene_xml  # noqa: E402
-from microfacet.render.variants import choose_variant  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def variant():
-    v, _ = choose_variant()
-    mi.set_variant(v)
-    return v
 
 
 def render(scene: dict, *, spp: int, seed: int = 0) -> np.ndarray:
