@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import InputError, one_line
-from .limits import MAX_JSON_BYTES
+from .limits import MAX_JSON_BYTES, check_file_size
 
 __all__ = ["json_safe", "parse_json", "read_json"]
 
@@ -67,10 +67,7 @@ def read_json(path, *, max_bytes: int = MAX_JSON_BYTES):
     path = Path(path)
     shown = one_line(path)
     try:
-        size = path.stat().st_size
-        if size > max_bytes:
-            raise InputError(f"{shown}: {size / (1 << 20):,.0f} MB is too large for this file "
-                             f"(limit {max_bytes / (1 << 20):,.0f} MB)")
+        check_file_size(path, max_bytes, shown)
         text = path.read_bytes().decode("utf-8-sig")
     except OSError as exc:
         raise InputError(f"{shown}: cannot read ({exc.strerror or exc})") from None

@@ -32,10 +32,12 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
+from pathlib import Path
 
 from ..core.errors import InputError
 
-__all__ = ["DEFAULT_MAX_MEGAPIXELS", "DEFAULT_MAX_STACK_MEGAPIXELS", "Limits", "check_memory"]
+__all__ = ["DEFAULT_MAX_MEGAPIXELS", "DEFAULT_MAX_STACK_MEGAPIXELS", "Limits", "check_file_size",
+           "check_memory"]
 
 DEFAULT_MAX_MEGAPIXELS = 50.0
 DEFAULT_MAX_STACK_MEGAPIXELS = 20000.0
@@ -125,3 +127,20 @@ def check_memory(need_bytes: float, what: str, *, param: str | None = None,
         where = "this machine has" if budget_bytes is None else "the limit is"
         raise InputError(f"{what} needs about {need_bytes / _MB:,.0f} MB of memory; {where} "
                          f"{usable / _MB:,.0f} MB", param=param)
+
+
+def check_file_size(path, max_bytes: int, shown: str) -> int:
+    """The size of ``path`` in bytes; an InputError naming ``shown`` when it is over
+    ``max_bytes`` (checked before the file is read). OSError propagates (missing file).
+
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "f"
+    >>> _ = p.write_bytes(b"12345")
+    >>> check_file_size(p, 10, "f")
+    5
+    """
+    size = Path(path).stat().st_size
+    if size > max_bytes:
+        raise InputError(f"{shown}: {size / _MB:,.0f} MB is too large for this file "
+                         f"(limit {max_bytes / _MB:,.0f} MB)")
+    return size

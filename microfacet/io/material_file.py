@@ -52,6 +52,7 @@ import numpy as np
 
 from ..core.errors import InputError, one_line
 from .jsonfile import parse_json
+from .limits import check_file_size
 
 __all__ = ["FORMAT", "SUFFIX", "read_material_file", "write_material_file"]
 
@@ -120,10 +121,7 @@ def read_material_file(path) -> tuple[dict, dict]:
     path = Path(path)
     shown = one_line(path)
     try:
-        size = path.stat().st_size
-        if size > MAX_BYTES:
-            raise InputError(f"{shown}: {size / 2**20:,.0f} MB, larger than a material file "
-                             f"can be ({MAX_BYTES >> 20} MB)")
+        check_file_size(path, MAX_BYTES, shown)
         with zipfile.ZipFile(path) as zf:
             names = set(zf.namelist())
             missing = [n for n in (*(f"{a}.npy" for a in ARRAYS), "metadata.json")

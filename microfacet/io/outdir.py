@@ -84,6 +84,7 @@ def output_kind(folder) -> str | None:
 
     Recognised by content, not by name: ``summary.json`` of format ``microfacet-results/*``,
     ``height.json`` (``microfacet-height/*``), ``simulate.json`` (``microfacet-simulate/*``),
+    ``render.json`` (``microfacet-render/*``),
     ``batch_summary.csv`` (its header), or a ``stack.json`` with ``truth/params.json`` of
     format ``microfacet-synth-truth/*``.
     """

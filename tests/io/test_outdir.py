@@ -33,6 +33,8 @@ def _write_kind(folder, kind):
         (folder / "height.json").write_text('{"format": "microfacet-height/1"}')
     elif kind == "simulate":
         (folder / "simulate.json").write_text('{"format": "microfacet-simulate/2"}')
+    elif kind == "render":
+        (folder / "render.json").write_text('{"format": "microfacet-render/1"}')
     elif kind == "batch":
         (folder / "batch_summary.csv").write_text("stack,results,status,reason\n")
     elif kind == "synthetic stack":
