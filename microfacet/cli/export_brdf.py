@@ -3,6 +3,8 @@ reads (:mod:`microfacet.io.material_file`; docs/rendering.md)."""
 
 from __future__ import annotations
 
+import sys
+
 from .. import workflow
 from .options import HelpFormatter, example_epilog
 
@@ -46,5 +48,5 @@ def run(args) -> int:
         if source and not source.get("ndf_identified", True):
             print(f"note: the analysis did not identify this NDF "
                   f"({source.get('ndf_reason') or 'no reason recorded'}); the material "
-                  "renders it as fitted")
+                  "renders it as fitted", file=sys.stderr)
     return 0

@@ -53,6 +53,10 @@ def run(args) -> int:
                                          overwrite=args.overwrite, progress=bar.update)
     if done.note:
         print(f"note: {done.note}", file=sys.stderr)
+    if done.source.get("ndf_identified") is False:
+        print(f"note: the analysis did not identify this NDF "
+              f"({done.source.get('ndf_reason') or 'no reason recorded'}); it is rendered as "
+              "fitted", file=sys.stderr)
     if not args.quiet:
         h, w = done.shape
         msg = (f"wrote {args.out}/render.png and render.exr ({w} x {h} px, "

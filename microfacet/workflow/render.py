@@ -87,6 +87,9 @@ class RenderOutput:
         Rendering time (all passes).
     saturated_fraction : float
         Pixels at or above sensor saturation in the exposed image.
+    source : dict
+        Where the material came from; ``ndf_identified`` False when the analysis did not
+        identify the NDF it renders (``ndf_reason`` says why).
     """
 
     path: Path
@@ -95,6 +98,7 @@ class RenderOutput:
     shape: tuple
     seconds: float
     saturated_fraction: float
+    source: dict
 
 
 def passes(spp: int) -> list[int]:
@@ -109,14 +113,16 @@ def passes(spp: int) -> list[int]:
 
 
 def _material_into(folder: Path, *, results, material) -> dict:
-    """Write the material file into ``folder``; returns what it came from."""
+    """Write the material file into ``folder``; returns where it came from (and whether the
+    analysis identified its NDF)."""
     target = folder / MATERIAL_FILE
     if results is not None:
-        Material.from_results(results).write(target)
-        return {"results": str(Path(results).resolve())}
-    read_material_file(material)  # checked before it is copied
+        m = Material.from_results(results)
+        m.write(target)
+        return dict(m.metadata.get("source", {}))
+    _, meta = read_material_file(material)  # checked before it is copied
     shutil.copyfile(material, target)
-    return {"material": str(Path(material).resolve())}
+    return {**meta.get("source", {}), "material": str(Path(material).resolve())}
 
 
 def _render_passes(scene, shape, plan, seed, progress):
@@ -204,4 +210,5 @@ def render_to_folder(out, *, results=None, material=None, options: RenderOptions
                   "render_exr": "linear sRGB (D65 white), Y in cd/m² (scene-referred)",
                   "render_png": "sRGB, sensor value x exposure_scale, 1 = saturation"}
         (tmp / "render.json").write_text(json.dumps(record, indent=1), encoding="utf-8")
-    return RenderOutput(Path(os.fspath(out)), variant, note, (h, w), seconds, saturated)
+    return RenderOutput(Path(os.fspath(out)), variant, note, (h, w), seconds, saturated,
+                        source)

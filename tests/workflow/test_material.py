@@ -63,7 +63,7 @@ def test_command_line(results, tmp_path, capsys):
     out = tmp_path / "cli"
     assert main(["export-brdf", str(results), "--out", str(out), "--theta-step-deg", "1",
                  "--wavelength-step-nm", "5"]) == 0
-    text = capsys.readouterr().out
-    assert "cli.npz" in text and "did not identify" in text
+    captured = capsys.readouterr()
+    assert "cli.npz" in captured.out and "did not identify" in captured.err
     assert main(["export-brdf", str(results), "--out", str(out)]) == 2
     assert "--out" in capsys.readouterr().err

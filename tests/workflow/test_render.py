@@ -26,7 +26,7 @@ def results(tmp_path_factory):
     folder = tmp_path_factory.mktemp("analysis")
     (folder / "summary.json").write_text(json.dumps({
         "format": "microfacet-results/1", "thickness": {"mixture": G3.to_json()},
-        "ndf": {"mixture": F2.to_json(), "identified": True}}))
+        "ndf": {"mixture": F2.to_json(), "identified": False, "reason": "too few planes"}}))
     return folder
 
 
@@ -57,6 +57,7 @@ def test_the_folder_holds_what_it_says(rendered):
                     1.055 * exposed ** (1 / 2.4) - 0.055)
     assert np.abs(png - srgb).max() <= 1.5 / 255
     assert Material.read(out / "material.npz").ndf == F2
+    assert record["source"]["ndf_identified"] is False and done.source["ndf_reason"]
 
 
 def test_the_scene_file_re_renders_in_mitsuba(rendered, monkeypatch, tmp_path):
@@ -133,7 +134,8 @@ def test_command_line(results, tmp_path, capsys):
     out = tmp_path / "cli"
     assert main(["render", "--results", str(results), "--out", str(out), "--spp", "4",
                  "--camera-width-px", "24", "--light-kind", "sun", "--scene", "sheet"]) == 0
-    assert "render.png" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "render.png" in captured.out and "too few planes" in captured.err
     assert json.loads((out / "render.json").read_text())["options"]["light"]["kind"] == "sun"
     assert main(["render", "--results", str(results), "--out", str(out), "--spp", "4"]) == 2
     assert "--out" in capsys.readouterr().err
