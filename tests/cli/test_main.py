@@ -25,7 +25,7 @@ def test_every_registered_command_has_help_with_an_example(capsys):
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")
     assert set(sub.choices) == {"init", "analyze", "height", "synth", "simulate", "fit-spectrum",
-                                "batch"}
+                                "batch", "export-brdf", "render"}
     for name, p in sub.choices.items():
         assert "example" in (p.epilog or ""), name
 
