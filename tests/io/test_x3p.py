@@ -176,3 +176,58 @@ def test_we_read_surface_topography_files(tmp_path, data_type):
     assert m.height_um.shape == (5, 8) and np.isnan(m.height_um[3, 2])
     np.testing.assert_allclose(m.height_um, ref, rtol=1e-6, atol=1e-9)
     assert m.pixel_size_um == pytest.approx((0.3, 0.5), rel=1e-12)
+
+
+# ------------------------------------------------------------- x3pio as an independent oracle
+@pytest.mark.parametrize("data_type", ["D", "F", "L", "I"])
+def test_x3pio_reads_our_files_with_their_checksums(tmp_path, data_type):
+    """x3pio (MIT, an independent ISO 25178-72 implementation) reads what we write with every
+    MD5 checksum verified, the same heights (within one quantization step for the integer
+    types; their z offset is in x3pio's placement, applied by ``globalized``), the same
+    spacing and the same invalid points."""
+    x3pio = pytest.importorskip("x3pio")
+    h = _heights(shape=(9, 6))
+    write_x3p(tmp_path / "h.x3p", h, (0.4, 0.25), data_type=data_type)
+    layer = x3pio.read(tmp_path / "h.x3p", verify=True).globalized().layers[0]
+    assert layer.shape == h.shape
+    assert layer.spacing == pytest.approx((0.25e-6, 0.4e-6), rel=1e-12)   # (x, y), m
+    np.testing.assert_array_equal(~layer.valid, np.isnan(h))
+    ok = np.isfinite(h)
+    step = {"D": 0.0, "F": 1e-6 * 60 * 2.0 ** -23, "L": 1e-6 * np.ptp(h[ok]) / 2.0 ** 31,
+            "I": 1e-6 * np.ptp(h[ok]) / 2.0 ** 15}[data_type]
+    np.testing.assert_allclose(np.asarray(layer.z)[ok], h[ok] * 1e-6, rtol=1e-12,
+                               atol=1.01 * step)
+
+
+def test_x3pio_sees_a_changed_byte(tmp_path):
+    """Our checksums are real: one changed height byte is caught by x3pio's verification."""
+    x3pio = pytest.importorskip("x3pio")
+    write_x3p(tmp_path / "h.x3p", np.arange(12.0).reshape(3, 4), 0.5)
+    with zipfile.ZipFile(tmp_path / "h.x3p") as zf:
+        members = {n: zf.read(n) for n in zf.namelist()}
+    data = bytearray(members["bindata/data.bin"])
+    data[8] ^= 0x01
+    members["bindata/data.bin"] = bytes(data)
+    with zipfile.ZipFile(tmp_path / "bad.x3p", "w") as zf:
+        for n, b in members.items():
+            zf.writestr(n, b)
+    with pytest.raises(x3pio.X3pChecksumError):
+        x3pio.read(tmp_path / "bad.x3p", verify=True)
+
+
+@pytest.mark.parametrize("z_type", ["D", "F", "L", "I"])
+def test_we_read_x3pio_files(tmp_path, z_type):
+    """Files x3pio writes, in each data type, with an unmeasured point: our heights (µm),
+    pixel size and NaN match x3pio's own reading of them."""
+    x3pio = pytest.importorskip("x3pio")
+    rng = np.random.default_rng(5)
+    z = rng.normal(0, 2e-6, (5, 8))                            # metres, rows = y
+    z[3, 2] = np.nan
+    x3pio.write(tmp_path / "x.x3p", z, x_scale=0.5e-6, y_scale=0.3e-6,
+                z_type=x3pio.DataType(z_type))
+    m = read_x3p(tmp_path / "x.x3p")
+    theirs = x3pio.read(tmp_path / "x.x3p").layers[0]
+    ref = np.where(np.asarray(theirs.valid), np.asarray(theirs.z), np.nan) * 1e6
+    assert m.height_um.shape == (5, 8) and np.isnan(m.height_um[3, 2])
+    np.testing.assert_allclose(m.height_um, ref, rtol=1e-6, atol=1e-9)
+    assert m.pixel_size_um == pytest.approx((0.3, 0.5), rel=1e-12)
