@@ -7,6 +7,7 @@ module               stage / concern
                      per stage; :class:`~.options.Scene`
 ``stages``           :class:`~.stages.Stage`: the stages in order (timer, progress, docs)
 ``surface``          height map (from focus or an export), normals, tilt
+``iso25178``         ISO 25178-2 areal parameters of the height map (Sq, Sa, Sdq, Sdr)
 ``colour_image``     CIELAB, the colour mask (``mask``), the colour noise
 ``roi``              thickness per region of interest, interference order, exposure
 ``search``           the one grid minimiser: coarse-to-fine, parabola refinement

@@ -17,6 +17,7 @@ import numpy as np
 
 from .. import __version__
 from ..core.densities import cell_edges, pdf_table
+from ..core.errors import InputError
 from ..core.pixels import pixel_size_yx
 from ..focus.uncertainty import height_sigma_with_bias
 from ..io.outdir import atomic_output_dir
@@ -25,6 +26,7 @@ from ..io.summary import (
     DeltaE,
     FacetCounts,
     Inputs,
+    Iso25178Section,
     NdfSection,
     RoiCounts,
     Summary,
@@ -35,6 +37,7 @@ from .identification import (
     NOISE_FLOOR_FACTOR,
     mean_plane_tilt_deg,
 )
+from .iso25178 import REFERENCES, areal_parameters
 
 __all__ = ["results_size_bytes", "save_results", "write_results"]
 
@@ -237,7 +240,7 @@ def build_summary(r) -> Summary:
                        noise_floor_median=MEDIAN_NOISE_FLOOR_FACTOR * noise),
         masked_fraction=r.colour.mask.fraction, mask=r.colour.mask.fractions(),
         colour_noise_de=noise, tilt_information=_tilt_information(r.pixels),
-        height=_height_section(r),
+        height=_height_section(r), iso25178=_iso25178_section(r),
         colour_table={"spectral_step_nm": table.spectral_step_nm,
                       "spectral_error_de00": table.spectral_error_de00,
                       "interp_error_de00": table.interp_error_de00,
@@ -279,6 +282,30 @@ def _height_section(r) -> dict:
             "sigma_scale": sigma_scale(r),
             "self_check_coverage": float(cov) if cov is not None and np.isfinite(cov)
             else None}
+
+
+def _iso25178_section(r) -> Iso25178Section | None:
+    """``summary.json`` ``iso25178``: the height map's ISO 25178-2 parameters on its reliable
+    pixels (finite ``height_um``) about the least-squares plane, SurfaceTopography's RMS
+    height and gradient of the map as measured, and the RMS slope of the analysis' own
+    normals on the same pixels (None with fewer than 3 reliable heights, or all on a line)."""
+    h = np.asarray(r.focus.height_um, dtype=np.float64)
+    px = r.scene.pixel_size_um
+    try:
+        iso = areal_parameters(h, pixel_size_um=px, reference="plane")
+        raw = areal_parameters(h, pixel_size_um=px, reference="mean")
+    except InputError:
+        return None
+    rel = np.isfinite(h)
+    tan = np.tan(np.radians(np.asarray(r.surface.tilt_deg, dtype=np.float64)[rel]))
+    tan = tan[np.isfinite(tan)]
+    gy, gx = iso.plane_slope_yx
+    return Iso25178Section(
+        reference=REFERENCES["plane"], differences="forward", n_points=iso.n_points,
+        Sq_um=iso.Sq_um, Sa_um=iso.Sa_um, Sdq=iso.Sdq, Sdr_percent=iso.Sdr_percent,
+        plane_tilt_deg=math.degrees(math.atan(math.hypot(gy, gx))),
+        rms_height_um=raw.Sq_um, rms_gradient=raw.Sdq,
+        rms_slope_normals=float(np.sqrt(np.mean(tan ** 2))) if tan.size else None)
 
 
 def _facet_summary(joint) -> FacetCounts | None:

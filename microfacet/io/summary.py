@@ -34,8 +34,8 @@ from ..core.distributions import MAX_COMPONENTS
 from ..core.errors import InputError
 from .jsonfile import json_safe
 
-__all__ = ["DeltaE", "FacetCounts", "Inputs", "NdfSection", "RoiCounts", "Summary",
-           "ThicknessSection"]
+__all__ = ["DeltaE", "FacetCounts", "Inputs", "Iso25178Section", "NdfSection", "RoiCounts",
+           "Summary", "ThicknessSection"]
 
 FORMAT = "microfacet-results/1"
 #: Version of the summary's layout within the format (2: no repeated keys, structured
@@ -125,6 +125,30 @@ class DeltaE:
 
 
 @dataclass
+class Iso25178Section:
+    """ISO 25178-2 areal parameters of the height map on its reliable pixels
+    (:mod:`microfacet.analysis.iso25178`): Sq, Sa (µm), Sdq, Sdr (%) about ``reference``
+    (the least-squares plane: the S-F surface), gradients by ``differences``; beside them
+    the map as measured (mean removed, not levelled) by SurfaceTopography's conventions,
+    ``rms_height_um`` (``rms_height_from_area()``) and ``rms_gradient``
+    (``rms_gradient()``), and microfacet's own ``rms_slope_normals`` (tan of
+    ``tilt_height_deg.npy``: central differences, smoothed for a height from focus)."""
+
+    standard: str = "ISO 25178-2"
+    reference: str = ""
+    differences: str = ""
+    n_points: int = 0
+    Sq_um: float | None = None
+    Sa_um: float | None = None
+    Sdq: float | None = None
+    Sdr_percent: float | None = None
+    plane_tilt_deg: float | None = None
+    rms_height_um: float | None = None
+    rms_gradient: float | None = None
+    rms_slope_normals: float | None = None
+
+
+@dataclass
 class Summary:
     """``summary.json`` (docs/results-format.md)."""
 
@@ -146,6 +170,7 @@ class Summary:
     colour_noise_de: float | None = None
     tilt_information: dict = field(default_factory=dict)
     height: dict = field(default_factory=dict)
+    iso25178: Iso25178Section | None = None
     colour_table: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     timings_s: dict = field(default_factory=dict)

@@ -1,7 +1,9 @@
 """Page 4 of the report, **parameters**: tables of the thickness components (weight, mean, SD),
 the NDF lobes (weight, slope SD as an angle, tan, Beckmann α), the analysis (mode, exposure,
-ΔE00, masking, optics, colour-table settings, ROIs) and the run (timings, versions, the files
-missing from the folder). :func:`parameter_tables` returns the same tables as strings."""
+ΔE00, masking, optics, colour-table settings, ROIs), the height map's ISO 25178-2 areal
+parameters (Sq, Sa, Sdq, Sdr, with SurfaceTopography's RMS height and gradient and the
+analysis' own RMS slope beside them) and the run (timings, versions, the files missing from
+the folder). :func:`parameter_tables` returns the same tables as strings."""
 
 from __future__ import annotations
 
@@ -34,7 +36,10 @@ def parameter_tables(results_dir) -> dict:
     dict
         ``"thickness"`` (header ``component, weight, mean (nm), SD (nm)``), ``"ndf"``
         (``lobe, weight, slope SD (°), tan(slope SD), Beckmann α``), ``"analysis"`` and
-        ``"run"`` (``quantity, value`` pairs: versions, missing files), ``"timings"``
+        ``"run"`` (``quantity, value`` pairs: versions, missing files), ``"iso25178"``
+        (``parameter, value``: Sq, Sa, Sdq, Sdr by their ISO 25178-2 names, the reference
+        plane, the RMS height and gradient of the map as measured, the normals' RMS slope;
+        no rows without it), ``"timings"``
         (``step, time``), each ``{"header": [...], "rows": [[...]]}``; ``"thickness"`` and
         ``"ndf"`` also have a ``"note"`` on the fit. Numbers are formatted as printed:
         weights with 3 decimals, thickness mean with 1 and SD with 2 (nm), lobe SD with 2 (°).
@@ -66,6 +71,7 @@ def parameter_tables(results_dir) -> dict:
     out["ndf"] = {"header": ["lobe", "weight", "slope SD σ (°)", "tan σ", "Beckmann α"],
                   "rows": rows, "note": _fit_note(ctx, "ndf", ctx.ndf)}
     out["analysis"] = {"header": ["quantity", "value"], "rows": _analysis_rows(ctx)}
+    out["iso25178"] = {"header": ["parameter", "value"], "rows": _iso25178_rows(ctx)}
     out["run"] = {"header": ["quantity", "value"], "rows": _run_rows(ctx)}
     out["timings"] = {"header": ["step", "time"], "rows": _timing_rows(ctx)}
     return out
@@ -113,8 +119,13 @@ def draw(pg, ctx):
                    fontsize=7.5, row_h=0.18)
     rows = [[k if j == 0 else "", line] for k, v in tables["analysis"]["rows"]
             for j, line in enumerate(wrap(v, 50))]
-    draw_table(pg, xr, pg.top - 0.05, pg.right - xr, rows, col_widths=[0.40, 0.60],
-               title="analysis (summary.json)", fontsize=8.0)
+    y = draw_table(pg, xr, pg.top - 0.05, pg.right - xr, rows, col_widths=[0.40, 0.60],
+                   title="analysis (summary.json)", fontsize=8.0) - 0.42
+    rows = tables["iso25178"]["rows"]
+    if rows:
+        draw_table(pg, xr, y, pg.right - xr, rows, col_widths=[0.52, 0.48],
+                   title="height map: ISO 25178-2 areal parameters", fontsize=7.5,
+                   row_h=0.18)
 
 
 def _fit_note(ctx, key, mix):
@@ -219,6 +230,27 @@ def _parameter_rows(res, mode):
     if k is not None:
         rows.append(["largest k tried (BIC)", fmt(k, ".0f")])
     return rows
+
+
+def _iso25178_rows(ctx):
+    """[[name, value]] of summary.json's ``iso25178`` (empty without it)."""
+    iso = ctx.res.get("iso25178")
+    if not isinstance(iso, dict):
+        return []
+    n = number(iso.get("n_points"))
+    return [
+        ["Sq, root mean square height", fmt(iso.get("Sq_um"), ".4g", "µm")],
+        ["Sa, arithmetic mean height", fmt(iso.get("Sa_um"), ".4g", "µm")],
+        ["Sdq, root mean square gradient", fmt(iso.get("Sdq"), ".4g")],
+        ["Sdr, developed interfacial area ratio", fmt(iso.get("Sdr_percent"), ".4g", "%")],
+        ["reference (S-F surface)", f"{iso.get('reference') or '—'}, tilt "
+         f"{fmt(iso.get('plane_tilt_deg'), '.3g', '°')}"
+         + (f", {n:.0f} pixels" if n is not None else "")],
+        ["as measured: RMS height / gradient", f"{fmt(iso.get('rms_height_um'), '.4g', 'µm')}"
+         f" / {fmt(iso.get('rms_gradient'), '.4g')} (SurfaceTopography)"],
+        ["RMS slope of the normals (microfacet)", fmt(iso.get("rms_slope_normals"), ".4g")
+         + " (central differences)"],
+    ]
 
 
 def _timing_rows(ctx):

@@ -23,6 +23,7 @@ from microfacet.io.summary import (
     DeltaE,
     FacetCounts,
     Inputs,
+    Iso25178Section,
     NdfSection,
     RoiCounts,
     Summary,
@@ -51,6 +52,10 @@ def _summary():
         exposure_source="estimated", delta_e=DeltaE(1.2, 1.0, 3.4, 0.8, 0.77),
         masked_fraction=0.04, mask={"any": 0.04}, colour_noise_de=0.5,
         tilt_information={"colour_weight_mean": 0.1}, height={"unreliable_fraction": 0.03},
+        iso25178=Iso25178Section(reference="least-squares plane", differences="forward",
+                                 n_points=81000, Sq_um=0.41, Sa_um=0.33, Sdq=0.12,
+                                 Sdr_percent=0.71, plane_tilt_deg=1.2, rms_height_um=0.6,
+                                 rms_gradient=0.125, rms_slope_normals=0.09),
         colour_table={"spectral_step_nm": 5.0},
         warnings=["1 of 4 ROIs have an ambiguous interference order"],
         timings_s={"normals": 0.1, "total": 9.5})
@@ -67,6 +72,7 @@ def test_a_summary_survives_strict_json_unchanged():
     assert back.to_json() == s.to_json()
     assert back.format == FORMAT and back.summary_version == SUMMARY_VERSION == 2
     assert isinstance(back.inputs, Inputs) and isinstance(back.facets, FacetCounts)
+    assert isinstance(back.iso25178, Iso25178Section) and back.iso25178.Sdr_percent == 0.71
     assert AnalysisOptions.from_dict(back.parameters) == AnalysisOptions()
 
 
@@ -88,7 +94,7 @@ def test_keys_of_a_newer_writer_are_kept_but_not_used():
 
 def test_an_empty_summary_takes_the_defaults():
     s = Summary.from_json({"summary_version": SUMMARY_VERSION})
-    assert s == Summary() and s.facets is None
+    assert s == Summary() and s.facets is None and s.iso25178 is None   # an older writer's
     assert Summary.from_json({}).summary_version == 1          # no version: version 1
 
 
@@ -176,6 +182,8 @@ HOSTILE = [
     ({"ndf": {"identified": "yes"}}, r"key 'ndf\.identified': expected true or false"),
     ({"summary_version": "2"}, r"key 'summary_version': expected an integer, got '2'"),
     ({"mode": ["joint"]}, r"key 'mode': expected a string"),
+    ({"iso25178": {"Sq_um": "0.4 µm"}}, r"key 'iso25178\.Sq_um': expected a number"),
+    ({"iso25178": {"n_points": 1.5}}, r"key 'iso25178\.n_points': expected an integer"),
     ({"warnings": "check the film"}, r"key 'warnings': expected a list"),
     ({"warnings": ["w"] * (MAX_ITEMS + 1)}, r"key 'warnings': 1001 items, more than 1000"),
     ({"parameters": {str(i): i for i in range(10 ** 5)}},

@@ -77,6 +77,31 @@ def test_parameter_table_matches_summary(results, report, pdf_text):
     for row in t["thickness"]["rows"] + t["ndf"]["rows"]:
         assert re.search(r"\s+".join(map(re.escape, row)), text), row
     assert de_row in text
+    iso = dict(t["iso25178"]["rows"])       # height from focus: its reliable pixels
+    assert iso["Sq, root mean square height"] == f"{summary['iso25178']['Sq_um']:.4g} µm"
+    for row in t["iso25178"]["rows"][:4]:
+        assert re.search(r"\s+".join(map(re.escape, " ".join(row).split())), text), row
+
+
+def test_parameter_page_shows_the_iso25178_parameters_by_their_names(tmp_path):
+    """Hand-made summaries: the ISO 25178-2 names with their units and the conventions
+    beside them; no rows for a summary without the section (an older writer's)."""
+    iso = {"standard": "ISO 25178-2", "reference": "least-squares plane",
+           "differences": "forward", "n_points": 65536, "Sq_um": 1.31822, "Sa_um": 1.08070,
+           "Sdq": 0.504387, "Sdr_percent": 8.87537, "plane_tilt_deg": 2.80371,
+           "rms_height_um": 1.53259, "rms_gradient": 0.503508, "rms_slope_normals": 0.373076}
+    for name, summary in (("new", {"iso25178": iso}), ("old", {})):
+        (tmp_path / name).mkdir()
+        write_results_files(tmp_path / name, summary=summary, maps={})
+    assert parameter_tables(tmp_path / "new")["iso25178"]["rows"] == [
+        ["Sq, root mean square height", "1.318 µm"],
+        ["Sa, arithmetic mean height", "1.081 µm"],
+        ["Sdq, root mean square gradient", "0.5044"],
+        ["Sdr, developed interfacial area ratio", "8.875 %"],
+        ["reference (S-F surface)", "least-squares plane, tilt 2.8°, 65536 pixels"],
+        ["as measured: RMS height / gradient", "1.533 µm / 0.5035 (SurfaceTopography)"],
+        ["RMS slope of the normals (microfacet)", "0.3731 (central differences)"]]
+    assert parameter_tables(tmp_path / "old")["iso25178"]["rows"] == []
 
 
 def test_missing_files_are_listed_on_the_parameter_page(results_copy):
