@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1] / "microfacet"
 #: The one-way order of the subpackages (lower index = lower layer); a module may import its
 #: own layer and those below it.
 LAYERS = ["core", "optics", "colour", "io", "focus", "analysis", "forward", "report", "render",
-          "workflow", "cli"]
+          "workflow", "cli", "napari"]
 _COMPAT = {"thinfilm", "color"}  # re-export shims of the public names in shared/spec/api.md
 _ENTRY = {"__main__"}            # ``python -m microfacet``: the command line's entry point
 

@@ -21,8 +21,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "microfacet"
 API_MD = ROOT / "docs" / "api.md"
 #: The subpackages whose public names are declared in an ``__init__.pyi`` stub.
-PACKAGES = ("analysis", "colour", "core", "focus", "forward", "io", "optics", "render",
-            "report")
+PACKAGES = ("analysis", "colour", "core", "focus", "forward", "io", "napari", "optics",
+            "render", "report")
 #: Modules that implement a published method: their docstring has a References section whose
 #: first entry is the seed paper.
 METHOD_MODULES = (
