@@ -25,6 +25,7 @@ Usage::
     from microfacet.render import bsdf
     bsdf.register()
     material = mi.load_dict({"type": "microfacet_thinfilm", "filename": "material.npz"})
+    # or straight from an analysis: {"type": "microfacet_thinfilm", "results": "out/nd"}
 
 In scalar variants Python runs once per sample and, since Dr.Jit's ``select`` evaluates both
 branches, every division here is guarded against a zero denominator.
@@ -75,16 +76,22 @@ def smith_lambda(alpha: float, cos_theta):
 
 class ThinFilmModel:
     """The BSDF's methods (Mitsuba's ``BSDF`` interface); :func:`bsdf_class` mixes them into
-    the variant's ``mi.BSDF``. Properties: ``filename``, a material file."""
+    the variant's ``mi.BSDF``. Properties: ``filename``, a material file, or ``results``, an
+    analysis results folder (tabulated when the plugin is loaded, ~1 s)."""
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
-        if "filename" not in props:
-            raise InputError(f"the {PLUGIN} BSDF needs a 'filename' property (a material "
-                             "file written by `microfacet export-brdf`)", param="filename")
         # a name relative to a scene file: Mitsuba's file resolver holds the file's folder
-        self.filename = str(mi.file_resolver().resolve(str(props["filename"])))
-        material = Material.read(self.filename)
+        if "filename" in props:
+            self.filename = str(mi.file_resolver().resolve(str(props["filename"])))
+            material = Material.read(self.filename)
+        elif "results" in props:
+            self.filename = str(mi.file_resolver().resolve(str(props["results"])))
+            material = Material.from_results(self.filename)
+        else:
+            raise InputError(f"the {PLUGIN} BSDF needs a 'filename' property (a material "
+                             "file written by `microfacet export-brdf`) or a 'results' "
+                             "property (an analysis results folder)", param="filename")
         ndf = material.ndf
         self.weights = [float(w) for w in ndf.weights]
         self.alphas = [float(a) for a in ndf.beckmann_alpha]

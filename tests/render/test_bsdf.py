@@ -198,6 +198,25 @@ def test_a_missing_filename_is_named(tmp_path):
         mi.load_dict({"type": bsdf.PLUGIN, "filename": str(tmp_path / "none.npz")})
 
 
+def test_a_results_folder_gives_the_material_of_its_export(tmp_path):
+    """``results`` instead of ``filename``: the plugin tabulates the analysis' material
+    itself, and evaluates as the exported file does."""
+    import json
+    folder = tmp_path / "analysis"
+    folder.mkdir()
+    (folder / "summary.json").write_text(json.dumps({
+        "format": "microfacet-results/1", "thickness": {"mixture": THICKNESS.to_json()},
+        "ndf": {"mixture": NDF.to_json()}}))
+    exported = tmp_path / "exported.npz"
+    Material.from_results(folder).write(exported)
+    a = _load(exported)
+    mi.set_variant(SCALAR)
+    b = mi.load_dict({"type": bsdf.PLUGIN, "results": str(folder)})
+    wl = (450.0, 520.0, 600.0, 700.0)
+    for wi, wo in (([0.1, 0.2, 0.97], [-0.2, 0.1, 0.97]), ([0.5, 0.0, 0.87], [-0.4, 0.1, 0.9])):
+        np.testing.assert_allclose(_eval(b, wi, wo, wl), _eval(a, wi, wo, wl), rtol=1e-6)
+
+
 def test_rgb_variants_are_refused():
     with pytest.raises(InputError, match="spectral"):
         bsdf.check_variant("scalar_rgb")
