@@ -17,6 +17,7 @@ from . import (
     stack_write,
     summary,
     tiff_meta,
+    vendor,
     x3p,
 )
 from .instruments import read_height_map
@@ -62,6 +63,7 @@ __all__ = [
     "stack_write",
     "summary",
     "tiff_meta",
+    "vendor",
     "write_stack",
     "write_stack_json",
     "write_x3p",

@@ -45,6 +45,7 @@ from .jsonfile import read_json
 from .limits import Limits
 from .stack_checks import DEFAULT_ILLUMINATION, FORMAT, find_images, stack_fields, warn_height_unit
 from .stack_write import write_stack, write_stack_json
+from .vendor import CziPlanes, is_czi
 
 tifffile = load("tifffile")
 
@@ -132,7 +133,8 @@ class Stack:
     tiff_uniform: bool = field(default=False, repr=False)
 
     def __post_init__(self):
-        reader = MultiPageTiff(self.tiff_path, self.tiff_uniform) if self.tiff_path else None
+        kind = CziPlanes if self.tiff_path and is_czi(self.tiff_path) else MultiPageTiff
+        reader = kind(self.tiff_path, self.tiff_uniform) if self.tiff_path else None
         object.__setattr__(self, "_tiff", reader)
 
     # -- properties ----------------------------------------------------------------------
@@ -302,6 +304,9 @@ def read_stack(path, *, pixel_size_um: float | None = None, z_step_um: float | N
         raise InputError(f"{one_line(path)}: the path contains a NUL byte")
     if path.is_file() and path.name == "stack.json":
         path = path.parent
+    if path.is_file() and is_czi(path):
+        return vendor_stack(path, pixel_size_um=pixel_size_um, z_step_um=z_step_um,
+                            limits=limits)
     if not path.exists():
         raise InputError(f"{path}: stack folder not found")
     if not path.is_dir():
@@ -365,6 +370,31 @@ def stack_from_images(folder, *, pixel_size_um: float | None = None,
              one_line(names[-1]), float(z.min()) if z.size else 0.0,
              float(z.max()) if z.size else 0.0, st.sources.get("z_step_um", "given"),
              "x".join(f"{v:g}" for v in st.pixel_size_yx_um),
+             st.sources.get("pixel_size_um", "given"))
+    return st
+
+
+def vendor_stack(path, *, pixel_size_um=None, z_step_um=None, limits: Limits | None = None
+                 ) -> Stack:
+    """A validated stack from one vendor z-stack file (``.czi``): its Z planes are the
+    slices; the pixel size and z step come from the file unless given (the caller's values
+    win, as over TIFF metadata). Nothing is written beside it.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    pixel_size_um, z_step_um, limits
+        As in :func:`read_stack`.
+    """
+    path = Path(path).resolve()
+    meta = {"format": FORMAT, "tiff": path.name}
+    st = Stack(**stack_fields(path.parent, meta, path, limits or Limits(),
+                              given={"pixel_size_um": pixel_size_um, "z_step_um": z_step_um},
+                              plain=True))
+    log.info("%s: %d planes, z step %s µm (%s), pixel size %s µm (%s)", one_line(path),
+             st.n_slices, f"{np.median(np.diff(st.z_um)):.4g}" if st.n_slices > 1 else "-",
+             st.sources.get("z_um", "given"), "x".join(f"{v:g}" for v in st.pixel_size_yx_um),
              st.sources.get("pixel_size_um", "given"))
     return st
 

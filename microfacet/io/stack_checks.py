@@ -47,6 +47,7 @@ from .stack_schema import (
     present,
 )
 from .tiff_meta import tiff_scale
+from .vendor import czi_headers, czi_scale, is_czi
 
 tifffile = load("tifffile")
 
@@ -171,9 +172,10 @@ def _multipage(c: _Check) -> tuple[Path, bool]:
     """The file of ``tiff``, every page header read and checked; True when every page is
     encoded like the first."""
     path = _file(c, "tiff")
-    uniform = read_tiff_headers(path, c.where("tiff"), c.add)
+    headers = czi_headers if is_czi(path) else read_tiff_headers
+    uniform = headers(path, c.where("tiff"), c.add)
     if not c.infos:
-        raise InputError(f"{c.where('tiff')} ({path.name}): TIFF has no pages")
+        raise InputError(f"{c.where('tiff')} ({path.name}): the file has no pages or planes")
     c.limits.check_stack(len(c.infos), c.infos[0][1].shape, c.where("tiff"))
     return path, uniform
 
@@ -276,6 +278,8 @@ def _missing(c: _Check, where: str, *, need_z: bool, has_ps: bool = False) -> No
 def _metadata_scale(c: _Check, files: list, tiff_path: Path | None, need: bool):
     """The scale in the first TIFF's metadata (the multi-page TIFF, the first slice or the
     export's height map) when a value is needed and there is one."""
+    if need and tiff_path is not None and is_czi(tiff_path):
+        return czi_scale(tiff_path, c.where("tiff"))
     first = next((p for p in files if p is not None and p.suffix.lower() in _TIFF), None)
     if first is None or not need:
         return None
