@@ -42,8 +42,8 @@ def register(sub):
     )
     p.add_argument("stack", metavar="STACK",
                    help="stack folder (microfacet-stack/1), a plain folder of images with "
-                        "--pixel-size-um and --z-step-um, or a Zeiss .czi z-stack (extra "
-                        "microscopes)")
+                        "--pixel-size-um and --z-step-um, or a Zeiss .czi or Leica .lif z-stack "
+                        "(extra microscopes)")
     p.add_argument("--out", required=True, metavar="OUT",
                    help="results folder (new, empty, or an earlier results folder with "
                         "--overwrite; never an input or a folder holding one)")

@@ -45,7 +45,7 @@ from .jsonfile import read_json
 from .limits import Limits
 from .stack_checks import DEFAULT_ILLUMINATION, FORMAT, find_images, stack_fields, warn_height_unit
 from .stack_write import write_stack, write_stack_json
-from .vendor import CziPlanes, is_czi
+from .vendor import is_vendor, vendor_planes
 
 tifffile = load("tifffile")
 
@@ -133,7 +133,7 @@ class Stack:
     tiff_uniform: bool = field(default=False, repr=False)
 
     def __post_init__(self):
-        kind = CziPlanes if self.tiff_path and is_czi(self.tiff_path) else MultiPageTiff
+        kind = vendor_planes if self.tiff_path and is_vendor(self.tiff_path) else MultiPageTiff
         reader = kind(self.tiff_path, self.tiff_uniform) if self.tiff_path else None
         object.__setattr__(self, "_tiff", reader)
 
@@ -304,7 +304,7 @@ def read_stack(path, *, pixel_size_um: float | None = None, z_step_um: float | N
         raise InputError(f"{one_line(path)}: the path contains a NUL byte")
     if path.is_file() and path.name == "stack.json":
         path = path.parent
-    if path.is_file() and is_czi(path):
+    if path.is_file() and is_vendor(path):
         return vendor_stack(path, pixel_size_um=pixel_size_um, z_step_um=z_step_um,
                             limits=limits)
     if not path.exists():
@@ -376,7 +376,7 @@ def stack_from_images(folder, *, pixel_size_um: float | None = None,
 
 def vendor_stack(path, *, pixel_size_um=None, z_step_um=None, limits: Limits | None = None
                  ) -> Stack:
-    """A validated stack from one vendor z-stack file (``.czi``): its Z planes are the
+    """A validated stack from one vendor z-stack file (``.czi``, ``.lif``): its Z planes are the
     slices; the pixel size and z step come from the file unless given (the caller's values
     win, as over TIFF metadata). Nothing is written beside it.
 

@@ -47,7 +47,7 @@ from .stack_schema import (
     present,
 )
 from .tiff_meta import tiff_scale
-from .vendor import czi_headers, czi_scale, is_czi
+from .vendor import is_vendor, vendor_headers, vendor_scale
 
 tifffile = load("tifffile")
 
@@ -172,7 +172,7 @@ def _multipage(c: _Check) -> tuple[Path, bool]:
     """The file of ``tiff``, every page header read and checked; True when every page is
     encoded like the first."""
     path = _file(c, "tiff")
-    headers = czi_headers if is_czi(path) else read_tiff_headers
+    headers = vendor_headers if is_vendor(path) else read_tiff_headers
     uniform = headers(path, c.where("tiff"), c.add)
     if not c.infos:
         raise InputError(f"{c.where('tiff')} ({path.name}): the file has no pages or planes")
@@ -278,8 +278,8 @@ def _missing(c: _Check, where: str, *, need_z: bool, has_ps: bool = False) -> No
 def _metadata_scale(c: _Check, files: list, tiff_path: Path | None, need: bool):
     """The scale in the first TIFF's metadata (the multi-page TIFF, the first slice or the
     export's height map) when a value is needed and there is one."""
-    if need and tiff_path is not None and is_czi(tiff_path):
-        return czi_scale(tiff_path, c.where("tiff"))
+    if need and tiff_path is not None and is_vendor(tiff_path):
+        return vendor_scale(tiff_path, c.where("tiff"))
     first = next((p for p in files if p is not None and p.suffix.lower() in _TIFF), None)
     if first is None or not need:
         return None

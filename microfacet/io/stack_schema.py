@@ -177,8 +177,8 @@ SPECS = {s.name: s for s in (
     KeySpec("slices", "paths", "one image per focal plane, in any z order (PNG, TIFF or "
             "JPEG; 8- or 16-bit; RGB or grey)",
             when="one of `slices`, `tiff` or an export (`height_um` + `image`)"),
-    KeySpec("tiff", "path", "a multi-page TIFF, one page per slice, or a Zeiss .czi z-stack "
-            "(extra `microscopes`)", suffixes=(".tif", ".tiff", ".czi"),
+    KeySpec("tiff", "path", "a multi-page TIFF, one page per slice, or a Zeiss .czi or Leica "
+            ".lif z-stack (extra `microscopes`)", suffixes=(".tif", ".tiff", ".czi", ".lif"),
             when="instead of `slices`"),
     KeySpec("z_um", "numbers", "the stage height of each slice, as many as slices; any "
             "order, any spacing, no repeats", unit="µm", slices_only=True,
