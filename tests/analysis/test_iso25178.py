@@ -21,6 +21,8 @@ from microfacet.io.instruments import read_height_map
 from microfacet.io.stack import read_stack
 
 ROOT = Path(__file__).resolve().parents[2]
+#: SurfaceTopography calls its own deprecated `Sq` internally (as in tests/io/test_x3p.py)
+pytestmark = pytest.mark.filterwarnings("ignore:Function/property `Sq` is deprecated")
 INSTRUMENTS = ROOT / "fixtures" / "instrument-heights"
 X3P = ROOT / "fixtures" / "exports" / "nd-x3p"
 
