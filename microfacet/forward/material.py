@@ -8,10 +8,9 @@ uniform (θ_d, λ) grid and looks it up by bilinear interpolation, exactly as th
 of :mod:`microfacet.render.bsdf` does; it is written to and read from the file of
 :mod:`microfacet.io.material_file` (``microfacet export-brdf``).
 
-The grid (0.25° in θ_d, 1 nm over 360-825 nm, ~0.7 MB) was chosen by measured error: the
-bilinear ⟨R⟩ differs from the exact Airy reflectance of a single 60 nm film by at most
-5.6e-4 in R (at θ_d > 89°), 99 % of random (θ_d, λ) within 7e-5; 0.5° × 5 nm errs by up to
-2e-3, and much more on a thick single film (docs/rendering.md). Wavelengths outside the grid
+The grid (0.25° in θ_d, 1 nm over 360-825 nm, ~0.7 MB) was chosen by measured error against
+the exact Airy reflectance (``python -m pipelines run accuracy-material-table``; the numbers
+are in docs/rendering.md): 0.5° × 5 nm errs 10-20 times more. Wavelengths outside the grid
 take the nearest end's value: Mitsuba samples 360-830 nm and the default film's optical
 constants end at 826.6 nm, where the CIE 1931 observer weighs less than 2e-5 of its peak.
 

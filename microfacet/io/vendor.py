@@ -147,14 +147,11 @@ class CziPlanes:
             except Exception as exc:
                 raise InputError(f"{where}: cannot decode CZI plane ({exc})") from None
         img = np.asarray(img)
-        if img.ndim == 3 and img.shape[-1] == 3:
+        if img.ndim == 3 and img.shape[-1] == 3 and channels == 3:
             img = img[..., ::-1]                        # BGR → RGB
         elif img.ndim == 3:
-            img = img[..., 0]
-        img = np.ascontiguousarray(img)
-        if channels == 1 and img.ndim == 3:
-            img = img[..., 1]
-        return img
+            img = img[..., 0]                           # a grey plane's one sample
+        return np.ascontiguousarray(img)
 
     def close(self):
         with self._lock:

@@ -15,7 +15,8 @@ Photometric units (measured: ``tests/render/test_scene.py``)
     ``d65`` spectra scaled by their illuminance in lux (:class:`Light`), which puts every
     spectrum in units of 1/683 W m⁻² nm⁻¹ (sr⁻¹): one unit of Y in a render is a luminance
     of 1 cd/m². A white Lambertian plate facing a light of E lux renders at Y = E/π
-    (:func:`luminance_cd_m2` of the ``rgb`` film; measured 1.0002 E/π at 64 spp).
+    (:func:`luminance_cd_m2` of the ``rgb`` film; tests/render/test_scene.py checks it within
+    Monte Carlo noise).
 
 Exposure (:meth:`Camera.exposure_scale`)
     ISO 12232's saturation-based speed: a sensor saturates at a focal-plane exposure

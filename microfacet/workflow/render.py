@@ -17,9 +17,7 @@ The output folder (written whole or not at all, :mod:`microfacet.io.outdir`):
 ==================  ==========================================================
 
 The samples are rendered in :data:`PASSES` passes with their own seeds and averaged, so the
-progress bar moves; the passes cost no measurable time (8 passes vs 1 at 512² × 64 spp: 4.7
-vs 4.4 s, within the machine's noise), and Mitsuba's memory does not grow with the samples
-(peak RSS 131-169 MB from 256² to 512² and 64 to 256 spp in ``llvm_ad_spectral``).
+progress bar moves; what the passes cost is in docs/rendering.md (``speed-render``).
 """
 
 from __future__ import annotations
@@ -41,7 +39,7 @@ from ..forward.material import Material
 from ..io.material_file import read_material_file
 from ..io.outdir import OutputFolder
 from ..render import bsdf
-from ..render.scene import OBJECTS, Camera, Light, build_scene, luminance_cd_m2
+from ..render.scene import Camera, Light, UserMesh, build_scene, luminance_cd_m2, scene_object
 from ..render.scene_xml import write_scene_xml
 from ..render.variants import choose_variant
 
@@ -154,11 +152,9 @@ def _check_sources(results, material, scene) -> list:
         raise InputError("give a results folder or a material file (one of them)",
                          param="results")
     inputs = [results if results is not None else material]
-    if scene not in OBJECTS:
-        if not Path(scene).is_file():
-            raise InputError(f"{scene}: no such mesh file (or one of {', '.join(OBJECTS)})",
-                             param="scene")
-        inputs.append(scene)
+    obj = scene_object(scene)          # a user's mesh is checked (exists, known type) here
+    if isinstance(obj, UserMesh):
+        inputs.append(obj.path)
     return inputs
 
 

@@ -39,7 +39,7 @@ STUDY = Study(
 FIXTURE = ROOT / "fixtures" / "stacks" / "nd-fixture"
 
 
-def _panels(results: Path, out: Path):
+def _panels(results: Path):
     fitted = Material.from_results(results)
     mean = float(fitted.thickness.mean_nm)
     smooth = NDFMixture([(1.0, 1.0)])
@@ -82,7 +82,7 @@ def run(*, quick: bool, out: Path, width=360, spp=256) -> str:
                                        "camera": {"width_px": width, "shutter_s": 1 / 60},
                                        "light": {"sky_fraction": 0.3}})
     rows, images, titles = [], [], []
-    for k, (title, material) in enumerate(_panels(results, out)):
+    for k, (title, material) in enumerate(_panels(results)):
         path = material.write(out / f"material-{k}.npz")
         done = render_to_folder(out / f"render-{k}", material=path, options=options,
                                 overwrite=True)
