@@ -42,8 +42,8 @@ def register(sub):
     )
     p.add_argument("stack", metavar="STACK",
                    help="stack folder (microfacet-stack/1), a plain folder of images with "
-                        "--pixel-size-um and --z-step-um, or a Zeiss .czi or Leica .lif z-stack "
-                        "(extra microscopes)")
+                        "--pixel-size-um and --z-step-um, or a Zeiss .czi, Nikon .nd2 or Leica "
+                        ".lif z-stack (extra microscopes)")
     p.add_argument("--out", required=True, metavar="OUT",
                    help="results folder (new, empty, or an earlier results folder with "
                         "--overwrite; never an input or a folder holding one)")
@@ -106,7 +106,8 @@ def run(args) -> int:
     out = Path(args.out)
     opts = analysis_options(args)
     pixel_size_um, z_step_um = plain_folder_values(args)
-    source = io.stack.StackSource(args.stack, pixel_size_um, z_step_um, limits_from_args(args))
+    source = io.stack.StackSource(args.stack, pixel_size_um, z_step_um, limits_from_args(args),
+                                  args.series)
     t0 = time.perf_counter()
     with StageProgress("analyze", list(Stage), skip=_skipped(args, opts),
                        quiet=args.quiet) as bar:

@@ -65,7 +65,8 @@ def run(args) -> int:
     t0 = time.perf_counter()
     options = options_from_args(args, FocusOptions)
     pixel_size_um, z_step_um = plain_folder_values(args)
-    source = io.stack.StackSource(args.stack, pixel_size_um, z_step_um, limits_from_args(args))
+    source = io.stack.StackSource(args.stack, pixel_size_um, z_step_um, limits_from_args(args),
+                                  args.series)
     with Progress("height", total=1, unit="slices", quiet=args.quiet) as bar:
         res = workflow.height_to_folder(source, args.out, options=options,
                                         smooth_sigma_px=args.smooth_sigma_px,

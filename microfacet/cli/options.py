@@ -14,6 +14,7 @@ from ..core.options import option_fields
 from ..core.pixels import pixel_size_value
 from ..io import limits
 from ..io.limits import DEFAULT_MAX_MEGAPIXELS, DEFAULT_MAX_STACK_MEGAPIXELS
+from ..io.vendor import is_vendor
 
 
 def add_optics_options(p: argparse.ArgumentParser) -> None:
@@ -59,6 +60,9 @@ def add_plain_folder_options(p: argparse.ArgumentParser) -> None:
                         "(Y,X for non-square pixels)")
     p.add_argument("--z-step-um", type=float, default=None, metavar="UM",
                    help="for a plain image folder without stack.json: z step in µm")
+    p.add_argument("--series", type=int, default=None, metavar="N",
+                   help="which z-stack of a .czi (scene), .nd2 (XY position) or .lif (image) "
+                        "file, counted from 0 (default 0, or stack.json's series)")
 
 
 def plain_folder_values(args) -> tuple[float | None, float | None]:
@@ -73,6 +77,8 @@ def plain_folder_values(args) -> tuple[float | None, float | None]:
     folder = path.parent if path.name == "stack.json" else path
     given = {"--pixel-size-um": args.pixel_size_um, "--z-step-um": args.z_step_um}
     jpath = folder / "stack.json"
+    if path.is_file() and is_vendor(path):   # the file's values unless given
+        return args.pixel_size_um, args.z_step_um
     if jpath.is_file():
         what = {"--pixel-size-um": "pixel size", "--z-step-um": "slice heights"}
         for option, value in given.items():

@@ -9,7 +9,8 @@ module              format / concern
 ``stack_write``     writing ``stack.json`` (validated first) and stacks of images
 ``images``          image headers, decoding, writing (PNG with pHYs, JPEG, TIFF, ``.npy``)
 ``tiff_meta``       physical size in TIFF metadata (OME, ImageJ, resolution tags)
-``vendor``          vendors' z-stack files (Zeiss ``.czi``, Leica ``.lif``; extra ``microscopes``)
+``vendor``          vendors' z-stack files (Zeiss ``.czi``, Nikon ``.nd2``, Leica ``.lif``;
+                    extra ``microscopes``)
 ``instruments``     instrument height maps (``.x3p``, float TIFF, ``.npy``; through
                     SurfaceTopography ``.al3d``, ``.plu``, ``.sur``, ``.vk4``, ``.datx``, ...)
 ``x3p``             ISO 25178-72 ``.x3p`` height maps, read and written

@@ -106,6 +106,8 @@ class Stack:
         The microscope export: height map in µm (TIFF or ``.npy``) and its colour image.
     meta : dict
         The whole stack.json as read (extra keys included).
+    series : int
+        The z-stack of a vendor file the slices come from (0 for other stacks).
     sources : dict
         Where ``"pixel_size_um"`` and ``"z_um"`` came from: ``"stack.json"``, ``"given"``
         (the caller's value), ``"instrument file NAME"`` or ``"ImageJ metadata of NAME"`` (or
@@ -131,10 +133,14 @@ class Stack:
     meta: dict = field(default_factory=dict)
     sources: dict = field(default_factory=dict)
     tiff_uniform: bool = field(default=False, repr=False)
+    series: int = 0
 
     def __post_init__(self):
-        kind = vendor_planes if self.tiff_path and is_vendor(self.tiff_path) else MultiPageTiff
-        reader = kind(self.tiff_path, self.tiff_uniform) if self.tiff_path else None
+        reader = None
+        if self.tiff_path and is_vendor(self.tiff_path):
+            reader = vendor_planes(self.tiff_path, self.tiff_uniform, self.series)
+        elif self.tiff_path:
+            reader = MultiPageTiff(self.tiff_path, self.tiff_uniform)
         object.__setattr__(self, "_tiff", reader)
 
     # -- properties ----------------------------------------------------------------------
@@ -262,7 +268,7 @@ class Stack:
 
 
 def read_stack(path, *, pixel_size_um: float | None = None, z_step_um: float | None = None,
-               limits: Limits | None = None) -> Stack:
+               limits: Limits | None = None, series: int | None = None) -> Stack:
     """Read and validate a stack folder (or its ``stack.json``), or a plain folder of images.
 
     Parameters
@@ -278,6 +284,9 @@ def read_stack(path, *, pixel_size_um: float | None = None, z_step_um: float | N
     limits : Limits, optional
         Largest image and stack, checked from the headers before anything is decoded
         (default :class:`microfacet.io.limits.Limits`).
+    series : int, optional
+        Which z-stack of a vendor file (``.czi`` scene, ``.nd2`` XY position, ``.lif``
+        image), counted from 0; it wins over stack.json's ``series`` (default 0).
 
     Returns
     -------
@@ -306,7 +315,7 @@ def read_stack(path, *, pixel_size_um: float | None = None, z_step_um: float | N
         path = path.parent
     if path.is_file() and is_vendor(path):
         return vendor_stack(path, pixel_size_um=pixel_size_um, z_step_um=z_step_um,
-                            limits=limits)
+                            limits=limits, series=series)
     if not path.exists():
         raise InputError(f"{path}: stack folder not found")
     if not path.is_dir():
@@ -320,7 +329,8 @@ def read_stack(path, *, pixel_size_um: float | None = None, z_step_um: float | N
     if not isinstance(meta, dict):
         raise InputError(f"{one_line(jpath)}: must hold a JSON object")
     return Stack(**stack_fields(root, meta, jpath, limits or Limits(),
-                                given={"pixel_size_um": pixel_size_um, "z_step_um": z_step_um}))
+                                given={"pixel_size_um": pixel_size_um, "z_step_um": z_step_um,
+                                       "series": series}))
 
 
 def stack_from_images(folder, *, pixel_size_um: float | None = None,
@@ -374,26 +384,27 @@ def stack_from_images(folder, *, pixel_size_um: float | None = None,
     return st
 
 
-def vendor_stack(path, *, pixel_size_um=None, z_step_um=None, limits: Limits | None = None
-                 ) -> Stack:
-    """A validated stack from one vendor z-stack file (``.czi``, ``.lif``): its Z planes are the
-    slices; the pixel size and z step come from the file unless given (the caller's values
-    win, as over TIFF metadata). Nothing is written beside it.
+def vendor_stack(path, *, pixel_size_um=None, z_step_um=None, limits: Limits | None = None,
+                 series: int | None = None) -> Stack:
+    """A validated stack from one vendor z-stack file (``.czi``, ``.nd2``, ``.lif``): the Z
+    planes of one series are the slices; the pixel size and z step come from the file unless
+    given (the caller's values win, as over TIFF metadata). Nothing is written beside it.
 
     Parameters
     ----------
     path : str or Path
         The file.
-    pixel_size_um, z_step_um, limits
+    pixel_size_um, z_step_um, limits, series
         As in :func:`read_stack`.
     """
     path = Path(path).resolve()
     meta = {"format": FORMAT, "tiff": path.name}
     st = Stack(**stack_fields(path.parent, meta, path, limits or Limits(),
-                              given={"pixel_size_um": pixel_size_um, "z_step_um": z_step_um},
-                              plain=True))
-    log.info("%s: %d planes, z step %s µm (%s), pixel size %s µm (%s)", one_line(path),
-             st.n_slices, f"{np.median(np.diff(st.z_um)):.4g}" if st.n_slices > 1 else "-",
+                              given={"pixel_size_um": pixel_size_um, "z_step_um": z_step_um,
+                                     "series": series}, plain=True))
+    step = f"{np.median(np.diff(st.z_um)):.4g}" if st.n_slices > 1 else "-"
+    log.info("%s: series %d, %d planes, z step %s µm (%s), pixel size %s µm (%s)",
+             one_line(path), st.series, st.n_slices, step,
              st.sources.get("z_um", "given"), "x".join(f"{v:g}" for v in st.pixel_size_yx_um),
              st.sources.get("pixel_size_um", "given"))
     return st
@@ -409,7 +420,8 @@ class StackSource:
     pixel_size_um: object = None
     z_step_um: float | None = None
     limits: object = None
+    series: int | None = None
 
     def open(self) -> Stack:
         return read_stack(self.path, limits=self.limits, pixel_size_um=self.pixel_size_um,
-                          z_step_um=self.z_step_um)
+                          z_step_um=self.z_step_um, series=self.series)

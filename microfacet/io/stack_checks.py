@@ -74,6 +74,7 @@ class _Check:
     given: dict
     plain: bool
     infos: list = field(default_factory=list)
+    series: int = 0
 
     @property
     def shown(self) -> str:
@@ -172,8 +173,13 @@ def _multipage(c: _Check) -> tuple[Path, bool]:
     """The file of ``tiff``, every page header read and checked; True when every page is
     encoded like the first."""
     path = _file(c, "tiff")
-    headers = vendor_headers if is_vendor(path) else read_tiff_headers
-    uniform = headers(path, c.where("tiff"), c.add)
+    if is_vendor(path):
+        uniform = vendor_headers(path, c.where("tiff"), c.add, c.series)
+    elif c.series:
+        raise InputError(f"{c.where('tiff')} ({path.name}): a TIFF holds one series; `series` "
+                         f"{c.series} is for a .czi, .nd2 or .lif file")
+    else:
+        uniform = read_tiff_headers(path, c.where("tiff"), c.add)
     if not c.infos:
         raise InputError(f"{c.where('tiff')} ({path.name}): the file has no pages or planes")
     c.limits.check_stack(len(c.infos), c.infos[0][1].shape, c.where("tiff"))
@@ -279,7 +285,7 @@ def _metadata_scale(c: _Check, files: list, tiff_path: Path | None, need: bool):
     """The scale in the first TIFF's metadata (the multi-page TIFF, the first slice or the
     export's height map) when a value is needed and there is one."""
     if need and tiff_path is not None and is_vendor(tiff_path):
-        return vendor_scale(tiff_path, c.where("tiff"))
+        return vendor_scale(tiff_path, c.where("tiff"), c.series)
     first = next((p for p in files if p is not None and p.suffix.lower() in _TIFF), None)
     if first is None or not need:
         return None
@@ -341,6 +347,18 @@ def _z_positions(c: _Check, n: int, step: float | None, what: str) -> np.ndarray
     if vals.size != n:
         raise InputError(f"{c.where('z_um')}: duplicate height {vals[counts > 1][0]:g} µm")
     return z_um
+
+
+def _series(c: _Check, value) -> int:
+    """The series to read: the caller's (``series``) over stack.json's; a whole number."""
+    given = c.given.get("series")
+    value = value if given is None else given
+    if float(value) == int(value):
+        return int(value)
+    reason = f"must be a whole number (a series counted from 0), got {value!r}"
+    if given is None:
+        raise InputError(f"{c.where('series')}: {reason}")
+    raise InputError(reason, param="series")
 
 
 def _scale_and_z(c: _Check, values: dict, export: _Export, files: dict):
@@ -425,6 +443,7 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
     check_rules(meta, c.where)
     checked_values(meta, c.where, _names_files)
     export = _export(c)
+    c.series = _series(c, values["series"])
     files = {"slices": (), "tiff": None}
     tiff_uniform = False
     if c.has("slices"):
@@ -448,7 +467,7 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
         film=values["film"], substrate=values["substrate"],
         exposure=None if exposure is None else float(exposure),
         export_height_path=export.height, export_image_path=export.image, meta=meta,
-        tiff_uniform=tiff_uniform)
+        tiff_uniform=tiff_uniform, series=c.series)
 
 
 #: Median |slope| of a height map above which its unit is almost surely wrong (real

@@ -177,9 +177,12 @@ SPECS = {s.name: s for s in (
     KeySpec("slices", "paths", "one image per focal plane, in any z order (PNG, TIFF or "
             "JPEG; 8- or 16-bit; RGB or grey)",
             when="one of `slices`, `tiff` or an export (`height_um` + `image`)"),
-    KeySpec("tiff", "path", "a multi-page TIFF, one page per slice, or a Zeiss .czi or Leica "
-            ".lif z-stack (extra `microscopes`)", suffixes=(".tif", ".tiff", ".czi", ".lif"),
-            when="instead of `slices`"),
+    KeySpec("tiff", "path", "a multi-page TIFF, one page per slice, or a Zeiss .czi, Nikon "
+            ".nd2 or Leica .lif z-stack (extra `microscopes`)",
+            suffixes=(".tif", ".tiff", ".czi", ".nd2", ".lif"), when="instead of `slices`"),
+    KeySpec("series", "number", "which z-stack of the vendor file in `tiff` holds the slices, "
+            "counted from 0: a CZI scene, an ND2 XY position, a LIF image with Z, Y and X; "
+            "`--series` overrides it", default=0, low=0.0, when="with a vendor file in `tiff`"),
     KeySpec("z_um", "numbers", "the stage height of each slice, as many as slices; any "
             "order, any spacing, no repeats", unit="µm", slices_only=True,
             when="with slices, unless `z_step_um` or the first TIFF's metadata gives it"),
