@@ -293,6 +293,9 @@ TARGETS = (
     ("mean ΔE00 − noise floor, median over scenes", "de_excess_median", "≤ 1.0",
      lambda v: v <= 1.0),
     ("scenes with mean ΔE00 − floor ≤ 1.0", "de_excess_ok", "–", None),
+    ("white-balance gains determined (R and B, of all)", "wb_determined_all", "–", None),
+    ("determined gains within 2 % of the truth", "wb_within_2pct", "100 %",
+     lambda v: v >= 1.0),
 )
 
 
@@ -332,6 +335,11 @@ def summarize(rows):
         "de_excess_median": finite_median(r.get("de_excess") for r in ok),
         "de_excess_ok": fraction(r["de_excess"] <= 1.0 if r.get("de_excess") is not None
                                  and np.isfinite(r["de_excess"]) else False for r in ok),
+        "wb_determined_all": fraction(r.get(k) is not None and np.isfinite(r[k]) for r in ok
+                                  for k in ("wb_err_r", "wb_err_b")),
+        "wb_within_2pct": fraction(abs(r[k]) <= 0.02 for r in ok for k in ("wb_err_r",
+                                                                          "wb_err_b")
+                                   if r.get(k) is not None and np.isfinite(r[k])),
     }
 
 

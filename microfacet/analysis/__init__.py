@@ -9,6 +9,7 @@ module               stage / concern
 ``surface``          height map (from focus or an export), normals, tilt
 ``iso25178``         ISO 25178-2 areal parameters of the height map (Sq, Sa, Sdq, Sdr)
 ``colour_image``     CIELAB, the colour mask (``mask``), the colour noise
+``white_balance``    the camera's gains: from a white reference, or estimated (reported)
 ``roi``              thickness per region of interest, interference order, exposure
 ``search``           the one grid minimiser: coarse-to-fine, parabola refinement
 ``tilt``             per-pixel tilt by colour inversion (both modes)

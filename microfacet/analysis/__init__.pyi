@@ -20,6 +20,7 @@ from . import (
     stages,
     surface,
     tilt,
+    white_balance,
 )
 from .options import AnalysisOptions
 from .output import write_results
@@ -50,5 +51,6 @@ __all__ = [
     "stages",
     "surface",
     "tilt",
+    "white_balance",
     "write_results",
 ]

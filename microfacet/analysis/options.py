@@ -257,6 +257,17 @@ class OpticsOptions(Options):
     exposure: float | None = option(
         None, help="scale from the model's linear sRGB to the image's (stack.json's, else "
                    "estimated)", kind=float, low=0, low_exclusive=True, cli=True, metavar="E")
+    white_balance: str = option(
+        "off", help="the camera's white balance without a reference: `off` takes the image "
+                    "as balanced; `report` also estimates the R and B gains from the film's "
+                    "colours into summary.json; `apply` corrects each gain the estimate calls "
+                    "determined (experimental: not yet within 2 percent on the sweep, "
+                    "docs/accuracy.md); a reference (`white_reference`, stack.json's "
+                    "white_balance or white_reference) is always applied",
+        choices=("off", "report", "apply"), cli=True)
+    white_reference: str | None = option(
+        None, help="an image of a white standard taken with the stack's camera settings: its "
+                   "R, G, B set the white balance", kind=str, cli=True, metavar="FILE")
     thickness_range_nm: tuple = option(
         (0.0, 400.0), help="global thickness search range", unit="nm", kind=tuple,
         check=_thickness_range, cli=True)

@@ -16,6 +16,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -37,6 +38,7 @@ from .self_check import Conditions, SelfCheck, measured_rms_slope, self_check_nd
 from .stages import Stage
 from .surface import measure_height, surface_normals
 from .tilt import seed_tilts, tilt_grid
+from .white_balance import WhiteBalance, balanced_lab, choose_white_balance
 
 __all__ = ["AnalysisResult", "analyse_stack", "check_stack_for_analysis", "run_stages"]
 
@@ -89,6 +91,9 @@ class AnalysisResult:
         The facets (joint mode).
     distributions : Distributions
     timings_s : dict
+    self_check : SelfCheck or None
+    white_balance : WhiteBalance
+        The camera gains the colours were corrected for, and the scene's estimate.
     """
 
     stack: Stack
@@ -104,6 +109,7 @@ class AnalysisResult:
     distributions: Distributions
     timings_s: dict = field(default_factory=dict)
     self_check: SelfCheck | None = None
+    white_balance: WhiteBalance = field(default_factory=WhiteBalance)
 
     @property
     def thickness_fit(self):
@@ -186,6 +192,12 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
     with timer.stage(Stage.COLOUR_TABLE):
         model = film_model(scene, options.optics)
     with timer.stage(Stage.ROI):
+        wb = choose_white_balance(st, colour.encoded, surface.tilt_deg, ~colour.mask.mask,
+                                  model, options.optics, illuminant=scene.illuminant,
+                                  seed=scene.seed)
+        if wb.applied:
+            colour = dataclasses.replace(colour, lab=balanced_lab(
+                colour.encoded, wb.gains_rgb, illuminant=scene.illuminant))
         roi = _roi(st, colour, surface, model, options, scene)
     model = model.with_exposure(roi.exposure)
     grid = tilt_grid(scene.max_tilt_deg, options.tilt.step_deg)
@@ -218,7 +230,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                                                                else None)
     timer.total()
     return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
-                          dist, dict(timer.timings), check)
+                          dist, dict(timer.timings), check, wb)
 
 
 def _self_check(st, focus, joint, scene, options, *, cells) -> SelfCheck | None:

@@ -113,6 +113,7 @@ class KeySpec:
     slices_only: bool = False
     plausible: tuple | None = None
     fields: tuple = ()
+    length: int | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -149,8 +150,15 @@ class KeySpec:
             if self.suffixes else ""
         return {"string": "string", "name": "non-empty string", "number": self.range_text(),
                 "size": f"{self.range_text()}, or `[y, x]`", "path": "relative path" + suffixes,
-                "paths": "list of relative paths", "numbers": "list of finite numbers",
+                "paths": "list of relative paths",
+                "numbers": f"list of {spec_len(self)}finite numbers"
+                + (f" ({self.range_text()})" if self.low is not None else ""),
                 "object": "object", "any": "any"}[self.kind]
+
+
+def spec_len(spec) -> str:
+    """``"3 "`` for a list of a fixed length, else ``""`` (the docs' type text)."""
+    return f"{spec.length} " if spec.length is not None else ""
 
 
 _PATH = dict(kind="path")
@@ -200,6 +208,13 @@ SPECS = {s.name: s for s in (
                 "an unknown name is an error that lists the known ones; `--film` overrides it"),
     KeySpec("substrate", **_OPTICAL_SET, default=DEFAULT_SUBSTRATE,
             doc="the metal's optical constants; `--substrate` overrides it"),
+    KeySpec("white_balance", "numbers", "the camera's R, G, B gains (image = balanced "
+            "colour × gain, linear): the colours are divided by them; `--white-reference` "
+            "overrides it", null_absent=True, default_doc="estimated", length=3, low=0.0,
+            low_exclusive=True),
+    KeySpec("white_reference", **_PATH, doc="an image of a white standard taken with the "
+            "stack's camera settings: its linear R, G, B over G are the gains; "
+            "`--white-reference` overrides it"),
     KeySpec("exposure", "number", "scale from the model's linear sRGB to the image's; "
             "`--exposure` overrides it", low=0.0, low_exclusive=True, null_absent=True,
             default_doc="estimated"),
@@ -296,9 +311,13 @@ def _check_paths(spec: KeySpec, v, where: str) -> None:
 def _check_numbers(spec: KeySpec, v, where: str) -> None:
     if not isinstance(v, list):
         raise InputError(f"{where}: must be a list of numbers")
+    if spec.length is not None and len(v) != spec.length:
+        raise InputError(f"{where}: must be a list of {spec.length} numbers, got {len(v)}")
     for i, x in enumerate(v):
         if not is_number(x) or not math.isfinite(x):
             raise InputError(f"{where}[{i}]: must be a finite number, got {x!r}")
+        if spec.low is not None and (x <= spec.low if spec.low_exclusive else x < spec.low):
+            raise InputError(f"{where}[{i}]: must be a {spec.range_text()}, got {x!r}")
 
 
 def _check_object(spec: KeySpec, v, where: str) -> None:

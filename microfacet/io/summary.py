@@ -164,6 +164,7 @@ class Summary:
     facets: FacetCounts | None = None
     exposure: float | None = None
     exposure_source: str = ""
+    white_balance: dict | None = None
     delta_e: DeltaE = field(default_factory=DeltaE)
     masked_fraction: float | None = None
     mask: dict = field(default_factory=dict)

@@ -304,7 +304,25 @@ def score_scene(results: Path, truth: Path) -> dict:
             else None,
             "de_mean": de, "de_floor": floor,
             "de_excess": de - floor if de is not None else math.nan,
-            "masked_fraction": res.get("masked_fraction")}
+            "masked_fraction": res.get("masked_fraction"),
+            **white_balance_errors(res.summary.get("white_balance"),
+                                   meta["params"].get("white_balance_gains", (1, 1, 1)))}
+
+
+def white_balance_errors(wb, true_gains) -> dict:
+    """The estimated R and B gains' relative errors against the truth's (G-normalised),
+    each where the analysis says it is determined (NaN elsewhere)."""
+    out = {"wb_err_r": math.nan, "wb_err_b": math.nan, "wb_true_r": math.nan,
+           "wb_true_b": math.nan}
+    g = np.asarray(true_gains, float) / float(true_gains[1])
+    out["wb_true_r"], out["wb_true_b"] = float(g[0]), float(g[2])
+    if not wb or not wb.get("estimate_rgb"):
+        return out
+    est, det = wb["estimate_rgb"], wb.get("determined_rb") or (False, False)
+    for k, (i, ok) in zip(("wb_err_r", "wb_err_b"), ((0, det[0]), (2, det[1]))):
+        if ok:
+            out[k] = float(est[i] / g[i] - 1.0)
+    return out
 
 
 def scene_row(name, p, on, truth: Path) -> dict:
@@ -343,7 +361,8 @@ def run_mode(mode, plan, gen, work: Path, jobs, scheduler):
         try:
             res = run_batch(stacks, work / "results" / mode, jobs=jobs or None,
                             scheduler=scheduler or None,
-                            options=AnalysisOptions(mode=mode), report=False)
+                            options=AnalysisOptions(mode=mode).replace(
+                                optics={"white_balance": "report"}), report=False)
             brows = dict(zip(todo, res.rows))
         except Exception as exc:  # the whole batch refused: every scene failed
             brows = {n: {"status": "failed", "reason": f"batch: {exc}"} for n in todo}
@@ -370,7 +389,8 @@ COLUMNS = ["name", "mode", "seed", "world", "relief_file", "status", "reason", "
            "region_median_ae_nm", "regions_scored", "regions_true", "pops_found", "pops_true",
            "lobes_found", "lobes_true", "identified", "ndf_w1_deg", "lobe_rms_ratio",
            "censored_fraction", "past_limit_fraction", "height_coverage", "de_mean", "de_floor",
-           "de_excess", "masked_fraction"] + [f"v_{v}" for v in VARIATIONS]
+           "de_excess", "masked_fraction", "wb_true_r", "wb_true_b", "wb_err_r", "wb_err_b"
+           ] + [f"v_{v}" for v in VARIATIONS]
 
 
 def per_scene_table(rows) -> str:

@@ -171,11 +171,13 @@ def test_every_default_is_accepted_and_is_the_value_when_absent(stack, spec):
 def _bounds():
     for spec in SPECS.values():
         for s, inside in [(spec, None)] + [(f, spec.name) for f in spec.fields]:
+            as_list = (lambda v: [v] * s.length) if s.length else (lambda v: v)
             for bound, open_ in ((s.low, s.low_exclusive), (s.high, False)):
                 if bound is not None and not open_:
-                    yield pytest.param(s.name, inside, bound, id=f"{s.name}={bound}")
+                    yield pytest.param(s.name, inside, as_list(bound), id=f"{s.name}={bound}")
                 elif bound is not None:
-                    yield pytest.param(s.name, inside, math.nextafter(bound, math.inf),
+                    yield pytest.param(s.name, inside,
+                                       as_list(math.nextafter(bound, math.inf)),
                                        id=f"{s.name} just above {bound}")
 
 

@@ -1,0 +1,321 @@
+"""The camera's white balance: estimated from the film's own colours, or from a reference.
+
+A camera multiplies the linear R, G and B of the scene by gains of its own (its white
+balance); an image balanced for another light than the one modelled has every colour moved
+the same way. For one film colour a gain and a thickness are interchangeable, but the
+film's colours at several thicknesses and tilts lie on one physical curve, and two gains
+shared by the whole image are over-determined once the scene holds a few distinct film
+colours. :func:`estimate_white_balance` therefore fits the R and B gains (G = 1: the
+exposure takes the overall scale) to the image's tiles, each tile at its own thickness and
+every pixel at its own tilt, comparing hue and chroma only (the model rescaled to each
+pixel's L*, as the interference-order consensus of :mod:`.roi` does, so that the exposure
+does not enter). The uncertainty is the spread of the best gains over bootstrap resamples
+of the tiles: a scene of one colour leaves the gains free, and the spread says so.
+
+A reference wins over the estimate: ``white_balance`` gains in stack.json, or a
+``white_reference`` image of a white standard (its mean linear R, G, B, divided by G, are
+the gains).
+
+Examples
+--------
+>>> wb = WhiteBalance.none()
+>>> wb.gains_rgb, wb.source
+((1.0, 1.0, 1.0), 'none')
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..colour.colorimetry import xyz_to_lab
+from ..colour.srgb import image_white_xyz, linear_srgb_to_xyz, model_xyz_to_linear_srgb
+from ..colour.transfer import srgb_decode
+from ..core.lazy import load
+
+ndimage = load("scipy.ndimage")
+
+__all__ = ["WhiteBalance", "balanced_lab", "estimate_white_balance", "reference_gains"]
+
+#: The gains searched: log gain in ±LOG_RANGE (about 0.82-1.22), a coarse grid then a fine
+#: one about its best.
+LOG_RANGE = 0.2
+COARSE_STEPS = 9
+FINE_STEP = 0.01
+#: Tiles of the estimate (px; a tile mostly lies in one thickness region), pixels per tile,
+#: the most tiles used, and the per-pixel thickness freedom inside a tile (nm).
+TILE_PX = 32
+TILE_SAMPLE_PX = 24
+MAX_TILES = 64
+PIXEL_FREEDOM_NM = 3.0
+#: Bootstrap resamples of the tiles, and the spread (1σ of the log gain) below which the
+#: gains are determined.
+BOOTSTRAP = 64
+DETERMINED_LOG_SD = 0.01
+
+
+@dataclass(frozen=True)
+class WhiteBalance:
+    """The white balance the colours were corrected for, and the scene's own estimate.
+
+    Attributes
+    ----------
+    gains_rgb : tuple of 3 float
+        The camera's gains the image was divided by (G = 1): image = balanced × gains.
+    source : str
+        ``"none"`` (not corrected), ``"estimated"``, ``"stack.json"`` or ``"white reference
+        NAME"``.
+    estimate_rgb : tuple of 3 float or None
+        The gains the film's colours ask for (None: not estimated).
+    estimate_sigma : tuple of 2 float or None
+        1σ of the R and B estimates (bootstrap over the image's tiles), relative.
+    determined : tuple of 2 bool or None
+        Per gain (R, B): the estimate's spread is below 1 % and its best lies inside the
+        search.
+    delta_e_gain : float or None
+        How much the tiles' misfit (mean squared log chromaticity) improves at the
+        estimate, against gains 1.
+    tiles : int
+        Tiles the estimate used.
+    """
+
+    gains_rgb: tuple = (1.0, 1.0, 1.0)
+    source: str = "none"
+    estimate_rgb: tuple | None = None
+    estimate_sigma: tuple | None = None
+    determined: tuple | None = None
+    delta_e_gain: float | None = None
+    tiles: int = 0
+
+    @classmethod
+    def none(cls) -> WhiteBalance:
+        return cls()
+
+    @property
+    def applied(self) -> bool:
+        return self.source != "none"
+
+    def to_dict(self) -> dict:
+        """summary.json's ``white_balance``."""
+        r = {"gains_rgb": [float(g) for g in self.gains_rgb], "source": self.source,
+             "estimate_rgb": None if self.estimate_rgb is None
+             else [float(g) for g in self.estimate_rgb],
+             "estimate_sigma_rb": None if self.estimate_sigma is None
+             else [float(s) for s in self.estimate_sigma],
+             "determined_rb": None if self.determined is None
+             else [bool(v) for v in self.determined],
+             "misfit_gain": self.delta_e_gain,
+             "tiles": int(self.tiles)}
+        return r
+
+
+def balanced_lab(encoded, gains_rgb, *, illuminant) -> np.ndarray:
+    """CIELAB (float32) of encoded sRGB in [0, 1] after dividing its linear R, G, B by the
+    camera's ``gains_rgb`` (no clipping: a balanced channel may exceed 1).
+
+    >>> from microfacet.colour.transfer import srgb_encode
+    >>> grey = srgb_encode(np.array([[0.5 * 1.1, 0.5, 0.5 * 0.9]]), dtype=np.float32)
+    >>> [round(float(v), 2) + 0.0 for v in balanced_lab(grey, (1.1, 1.0, 0.9),
+    ...                                                  illuminant="D65")[0]]
+    [76.07, 0.0, 0.0]
+    """
+    lin = srgb_decode(np.asarray(encoded, dtype=np.float32)) / np.asarray(gains_rgb,
+                                                                           np.float32)
+    xyz = linear_srgb_to_xyz(lin, illuminant=illuminant)
+    return xyz_to_lab(xyz, white=image_white_xyz(illuminant=illuminant)).astype(np.float32)
+
+
+def reference_gains(encoded, *, where: str) -> tuple:
+    """The gains of a white-standard image (encoded sRGB in [0, 1], (H, W, 3)): the median
+    linear R, G, B over its unclipped pixels, divided by G."""
+    from ..core.errors import InputError
+    a = np.asarray(encoded, dtype=np.float32)
+    if a.ndim != 3 or a.shape[-1] != 3:
+        raise InputError(f"{where}: a white reference must be an RGB image, got shape "
+                         f"{a.shape}")
+    lin = srgb_decode(a).reshape(-1, 3)
+    ok = np.all((lin > 0.02) & (a.reshape(-1, 3) < 0.995), axis=1)
+    if ok.sum() < 16:
+        raise InputError(f"{where}: the white reference has too few pixels that are neither "
+                         f"dark nor clipped ({int(ok.sum())})")
+    m = np.median(lin[ok], axis=0)
+    return tuple(float(v) for v in m / m[1])
+
+
+# ----------------------------------------------------------------------------- estimate
+def _tiles(usable, rng):
+    """Up to :data:`MAX_TILES` tiles of :data:`TILE_PX` with enough usable pixels: a sample
+    of :data:`TILE_SAMPLE_PX` pixel coordinates each."""
+    h, w = usable.shape
+    out = []
+    for r0 in range(0, h - TILE_PX + 1, TILE_PX):
+        for c0 in range(0, w - TILE_PX + 1, TILE_PX):
+            yy, xx = np.nonzero(usable[r0:r0 + TILE_PX, c0:c0 + TILE_PX])
+            if yy.size >= 2 * TILE_SAMPLE_PX:
+                pick = rng.choice(yy.size, TILE_SAMPLE_PX, replace=False)
+                out.append((yy[pick] + r0, xx[pick] + c0))
+    if len(out) > MAX_TILES:
+        out = [out[i] for i in np.sort(rng.choice(len(out), MAX_TILES, replace=False))]
+    return out
+
+
+class _Scorer:
+    """Per-tile misfit of the film model at candidate gains, in log chromaticity.
+
+    A pixel's ``(log R/G, log B/G)`` (linear) does not depend on the exposure, and the
+    gains shift it by ``(log g_R, log g_B)``: the misfit of a pixel at gains g and thickness
+    d is ``|u − log g − M(d, tilt)|²`` (clipped at :data:`CLIP` so that a defect pixel
+    counts as one outlier), M the model's log chromaticity.
+    """
+
+    CLIP = 0.04
+
+    def __init__(self, encoded, tilt, tiles, model, illuminant):
+        ys = np.concatenate([t[0] for t in tiles])
+        xs = np.concatenate([t[1] for t in tiles])
+        self.n_tiles = len(tiles)
+        lin = np.maximum(srgb_decode(np.asarray(encoded, np.float32)[ys, xs]), 1e-4)
+        self.u = np.log(lin[:, [0, 2]] / lin[:, 1:2]).astype(np.float32)          # (T·n, 2)
+        d_lo, d_hi = model.thickness_range_nm
+        self.grid = np.arange(d_lo, d_hi + 1e-9, 2.0)
+        rgb = model_xyz_to_linear_srgb(model.xyz(tilt[ys, xs][:, None], self.grid[None, :]),
+                                       white=model.white, illuminant=illuminant)
+        rgb = np.maximum(rgb, 1e-4)
+        self.m = np.log(rgb[..., [0, 2]] / rgb[..., 1:2]).astype(np.float32)       # (T·n, D, 2)
+        self.resid = self.u[:, None, :] - self.m                                   # (T·n, D, 2)
+        self.k = max(1, int(round(PIXEL_FREEDOM_NM / 2.0)))
+
+    def per_tile(self, log_r, log_b) -> np.ndarray:
+        """Mean misfit per tile at gains (e^log_r, 1, e^log_b), each tile at its best
+        thickness, each pixel free by ±PIXEL_FREEDOM_NM about it."""
+        e = self.resid - np.array([log_r, log_b], np.float32)
+        e = np.minimum(np.einsum("ndc,ndc->nd", e, e), self.CLIP)                  # (T·n, D)
+        e = ndimage.minimum_filter1d(e, size=2 * self.k + 1, axis=1, mode="nearest")
+        per = e.reshape(self.n_tiles, -1, e.shape[-1]).mean(axis=1)                 # (T, D)
+        return per.min(axis=1)
+
+
+def _argmin_2d(scores, ax_r, ax_b):
+    """The (log_r, log_b) of least score on a grid, refined by a parabola per axis, and
+    whether the least node is inside the grid."""
+    i, j = np.unravel_index(int(np.argmin(scores)), scores.shape)
+
+    def off(a, b, c):
+        den = a - 2 * b + c
+        return 0.0 if den <= 0 else float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+
+    n = scores.shape[0]
+    di = off(scores[i - 1, j], scores[i, j], scores[i + 1, j]) if 0 < i < n - 1 else 0.0
+    dj = off(scores[i, j - 1], scores[i, j], scores[i, j + 1]) if 0 < j < n - 1 else 0.0
+    return (ax_r[i] + di * (ax_r[1] - ax_r[0]), ax_b[j] + dj * (ax_b[1] - ax_b[0]),
+            0 < i < n - 1 and 0 < j < n - 1)
+
+
+def estimate_white_balance(encoded, tilt_deg, usable, model, *, illuminant, seed=0
+                           ) -> WhiteBalance:
+    """The camera's R and B gains that make the image's colours the film's (module notes).
+
+    Parameters
+    ----------
+    encoded : ndarray (H, W, 3)
+        The image, encoded sRGB in [0, 1].
+    tilt_deg : ndarray (H, W)
+        Tilt per pixel from the height map (NaN: not used).
+    usable : ndarray of bool (H, W)
+        Pixels that carry colour.
+    model : FilmColourModel
+    illuminant : str
+    seed : int
+
+    Returns
+    -------
+    WhiteBalance
+        ``source`` is ``"none"``: the caller decides whether to apply the estimate.
+    """
+    rng = np.random.default_rng(seed)
+    t_lo, t_hi = model.theta_range_deg
+    tilt = np.clip(np.nan_to_num(np.asarray(tilt_deg, np.float64), nan=t_lo), t_lo, t_hi)
+    ok = np.asarray(usable, bool) & np.isfinite(np.asarray(tilt_deg, np.float64))
+    tiles = _tiles(ok, rng)
+    if len(tiles) < 4:
+        return WhiteBalance(determined=(False, False), tiles=len(tiles))
+    sc = _Scorer(encoded, tilt, tiles, model, illuminant)
+    coarse = np.linspace(-LOG_RANGE, LOG_RANGE, COARSE_STEPS)
+    per = np.array([[sc.per_tile(r, b) for b in coarse] for r in coarse])     # (R, B, T)
+    r0, b0, _ = _argmin_2d(per.mean(axis=2), coarse, coarse)
+    fine_r = np.arange(-3, 4) * FINE_STEP + r0
+    fine_b = np.arange(-3, 4) * FINE_STEP + b0
+    fine = np.array([[sc.per_tile(r, b) for b in fine_b] for r in fine_r])     # (7, 7, T)
+    lr, lb, _ = _argmin_2d(fine.mean(axis=2), fine_r, fine_b)
+    boot = []
+    for _ in range(BOOTSTRAP):
+        pick = rng.integers(0, sc.n_tiles, sc.n_tiles)
+        br, bb, _ = _argmin_2d(fine[:, :, pick].mean(axis=2), fine_r, fine_b)
+        boot.append((br, bb))
+    sd = np.std(np.array(boot), axis=0)
+    at_one = float(sc.per_tile(0.0, 0.0).mean())
+    best = float(sc.per_tile(lr, lb).mean())
+    edge_r = abs(lr) >= LOG_RANGE - FINE_STEP or fine_r[0] >= lr or lr >= fine_r[-1]
+    edge_b = abs(lb) >= LOG_RANGE - FINE_STEP or fine_b[0] >= lb or lb >= fine_b[-1]
+    determined = (bool(sd[0] < DETERMINED_LOG_SD and not edge_r),
+                  bool(sd[1] < DETERMINED_LOG_SD and not edge_b))
+    return WhiteBalance(estimate_rgb=(math.exp(lr), 1.0, math.exp(lb)),
+                        estimate_sigma=(float(sd[0]), float(sd[1])), determined=determined,
+                        delta_e_gain=at_one - best, tiles=sc.n_tiles)
+
+
+# ------------------------------------------------------------------------------ choice
+def _given_gains(stack, options, where_option: str):
+    """The reference's gains and its name, or None: ``white_reference`` (the option, then
+    stack.json's), then stack.json's ``white_balance``."""
+    from pathlib import Path
+
+    from ..core.errors import InputError, one_line
+    from ..io.images import convert_samples, decode_image
+    ref = options.white_reference
+    path = Path(ref) if ref else None
+    where = where_option
+    if path is None and stack.meta.get("white_reference"):
+        path = Path(stack.path) / stack.meta["white_reference"]
+        where = f"{one_line(Path(stack.path) / 'stack.json')}: key 'white_reference'"
+    if path is not None:
+        if not path.is_file():
+            raise InputError(f"{where}: {one_line(path)} not found")
+        img = convert_samples(decode_image(path, f"{where} ({one_line(path.name)})"),
+                              np.float32)
+        return reference_gains(img, where=f"{where} ({one_line(path.name)})"), \
+            f"white reference {path.name}"
+    given = stack.meta.get("white_balance")
+    if given is None:
+        return None
+    g = np.asarray(given, dtype=np.float64)
+    if g.shape != (3,) or not np.all(np.isfinite(g) & (g > 0)):
+        raise InputError(f"{one_line(Path(stack.path) / 'stack.json')}: key 'white_balance': "
+                         f"expected three positive gains [R, G, B], got {given!r}")
+    return tuple(float(v) for v in g / g[1]), "stack.json"
+
+
+def choose_white_balance(stack, encoded, tilt_deg, usable, model, options, *, illuminant,
+                         seed=0) -> WhiteBalance:
+    """The white balance to correct the colours for: a reference when one is given; else,
+    with ``white_balance = "apply"``, each gain the estimate calls determined
+    (:func:`estimate_white_balance`); else none. The estimate is made with ``"report"`` and
+    ``"apply"``.
+
+    ``options`` is the ``optics`` section (``white_balance``, ``white_reference``).
+    """
+    import dataclasses
+    given = _given_gains(stack, options, "white_reference")
+    est = (estimate_white_balance(encoded, tilt_deg, usable, model, illuminant=illuminant,
+                                  seed=seed)
+           if options.white_balance in ("report", "apply") else WhiteBalance())
+    if given is not None:
+        return dataclasses.replace(est, gains_rgb=given[0], source=given[1])
+    if (options.white_balance != "apply" or est.estimate_rgb is None
+            or not any(est.determined)):
+        return est
+    r = est.estimate_rgb[0] if est.determined[0] else 1.0
+    b = est.estimate_rgb[2] if est.determined[1] else 1.0
+    return dataclasses.replace(est, gains_rgb=(r, 1.0, b), source="estimated")

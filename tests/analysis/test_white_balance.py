@@ -1,0 +1,126 @@
+"""The camera's white balance (microfacet.analysis.white_balance): gains from a white
+reference, colours corrected for them against the package's own sRGB → CIELAB (an image
+made balanced × gains reads as the balanced one), and a scene whose slices carry a white
+balance analysed with its white reference like the same scene without one."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from microfacet.analysis.white_balance import WhiteBalance, balanced_lab, reference_gains
+from microfacet.colour.srgb import srgb_to_lab
+from microfacet.colour.transfer import srgb_decode, srgb_encode
+from microfacet.core.errors import InputError
+
+GAINS = (1.12, 1.0, 0.9)
+
+
+def _unbalanced(encoded, gains=GAINS):
+    """Encoded sRGB (float, 0-1) whose linear R, G, B were multiplied by ``gains``."""
+    lin = srgb_decode(np.asarray(encoded, np.float32)) * np.asarray(gains, np.float32)
+    return srgb_encode(lin, dtype=np.float32)
+
+
+def test_an_unbalanced_image_corrected_reads_as_the_balanced_one():
+    rng = np.random.default_rng(0)
+    balanced = rng.uniform(0.05, 0.85, size=(32, 32, 3)).astype(np.float32)
+    lab = balanced_lab(_unbalanced(balanced), GAINS, illuminant="D65")
+    ref = srgb_to_lab(balanced, illuminant="D65")
+    np.testing.assert_allclose(lab, ref, atol=2e-3)
+    # and gains of 1 change nothing
+    np.testing.assert_allclose(balanced_lab(balanced, (1, 1, 1), illuminant="D65"), ref,
+                               atol=1e-4)
+
+
+@pytest.mark.parametrize("level", [0.3, 0.8])
+def test_a_white_standard_gives_the_gains(level):
+    rng = np.random.default_rng(1)
+    white = np.full((40, 50, 3), level, np.float32) * rng.uniform(0.97, 1.03, (40, 50, 1))
+    img = _unbalanced(srgb_encode(white, dtype=np.float32))
+    np.testing.assert_allclose(reference_gains(img, where="ref"), np.array(GAINS) / GAINS[1],
+                               rtol=2e-3)
+
+
+def test_a_clipped_or_grey_reference_is_refused_naming_it():
+    with pytest.raises(InputError, match="ref: the white reference has too few"):
+        reference_gains(np.ones((8, 8, 3), np.float32), where="ref")
+    with pytest.raises(InputError, match="ref: a white reference must be an RGB image"):
+        reference_gains(np.ones((8, 8), np.float32), where="ref")
+
+
+def test_the_summary_section():
+    d = WhiteBalance(gains_rgb=GAINS, source="stack.json").to_dict()
+    assert d["gains_rgb"] == list(GAINS) and d["source"] == "stack.json"
+    assert d["estimate_rgb"] is None and WhiteBalance().applied is False
+
+
+@pytest.fixture(scope="module")
+def scenes(tmp_path_factory):
+    """One synthetic scene, balanced and with R × 1.12, B × 0.90 on its slices, and the
+    latter's white reference (a white standard through the same gains)."""
+    from microfacet.cli import main
+    root = tmp_path_factory.mktemp("wb")
+    for name, extra in (("balanced", []), ("unbalanced", ["--variation",
+                                                         "white_balance_gains=1.12,1,0.9"])):
+        assert main(["synth", "--preset", "nd", "--seed", "3", "--slices", "16",
+                     str(root / name), "-q", *extra]) == 0
+    from microfacet.io.images import write_image
+    white = srgb_encode(np.full((16, 16, 3), 0.7, np.float32) * np.float32(GAINS),
+                        dtype=np.uint8)
+    write_image(root / "unbalanced" / "white.png", white)
+    return root
+
+
+def _thickness(path, **optics):
+    from microfacet.analysis.options import AnalysisOptions
+    from microfacet.analysis.pipeline import analyse_stack
+    from microfacet.io.stack import read_stack
+    opts = AnalysisOptions().replace(optics=optics) if optics else AnalysisOptions()
+    r = analyse_stack(read_stack(path), options=opts)
+    return r.pixels.thickness_nm, r.white_balance
+
+
+@pytest.mark.slow
+def test_a_white_reference_makes_the_unbalanced_scene_read_as_the_balanced_one(scenes):
+    """The reference given as the option and as stack.json's white_reference: the per-pixel
+    thickness of the unbalanced scene equals the balanced scene's (median |Δ| < 0.3 nm),
+    where without the reference it does not."""
+    t_bal, _ = _thickness(scenes / "balanced")
+    t_raw, wb_raw = _thickness(scenes / "unbalanced")
+    t_ref, wb_ref = _thickness(scenes / "unbalanced",
+                               white_reference=str(scenes / "unbalanced" / "white.png"))
+    ok = np.isfinite(t_bal) & np.isfinite(t_raw) & np.isfinite(t_ref)
+    assert wb_raw.source == "none" and wb_ref.source == "white reference white.png"
+    np.testing.assert_allclose(wb_ref.gains_rgb, GAINS, rtol=0.01)
+    err_ref = float(np.median(np.abs(t_ref[ok] - t_bal[ok])))
+    err_raw = float(np.median(np.abs(t_raw[ok] - t_bal[ok])))
+    assert err_ref < 0.3 < err_raw, (err_ref, err_raw)
+    # the same through stack.json
+    meta = json.loads((scenes / "unbalanced" / "stack.json").read_text())
+    copy = scenes / "with-key"
+    shutil.copytree(scenes / "unbalanced", copy)
+    (copy / "stack.json").write_text(json.dumps({**meta, "white_reference": "white.png"}))
+    t_key, wb_key = _thickness(copy)
+    assert wb_key.source == "white reference white.png"
+    np.testing.assert_array_equal(t_key, t_ref)
+
+
+def test_stack_json_gains_are_checked_and_used(tmp_path):
+    from microfacet.analysis.options import OpticsOptions
+    from microfacet.analysis.white_balance import choose_white_balance
+    from microfacet.io.stack import read_stack
+    shutil.copytree("fixtures/stacks/nd-fixture", tmp_path / "s",
+                    ignore=shutil.ignore_patterns("truth"))
+    meta = json.loads((tmp_path / "s" / "stack.json").read_text())
+    (tmp_path / "s" / "stack.json").write_text(json.dumps({**meta,
+                                                           "white_balance": [2.24, 2.0, 1.8]}))
+    st = read_stack(tmp_path / "s")
+    wb = choose_white_balance(st, None, None, None, None, OpticsOptions(), illuminant="D65")
+    assert wb.source == "stack.json" and wb.gains_rgb == pytest.approx(GAINS)
+    (tmp_path / "s" / "stack.json").write_text(json.dumps({**meta, "white_balance": [1, 0]}))
+    with pytest.raises(InputError, match="key 'white_balance': must be a list of 3 numbers"):
+        read_stack(tmp_path / "s")
