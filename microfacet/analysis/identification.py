@@ -306,22 +306,43 @@ def _ndf_width_deg(ndf_fit):
         return None
 
 
+def _white_balance_warning(wb) -> Reason | None:
+    """The colours look unbalanced: an estimate, no reference, a gain off 1 by > 3σ, > 3 %."""
+    if wb is None or wb.estimate_rgb is None or wb.source != "none" or not wb.estimate_sigma:
+        return None
+    off = [(name, g, s) for name, g, s in (("R", wb.estimate_rgb[0], wb.estimate_sigma[0]),
+                                            ("B", wb.estimate_rgb[2], wb.estimate_sigma[1]))
+           if abs(math.log(g)) > max(3.0 * s, 0.03)]
+    if not off:
+        return None
+    gains = ", ".join(f"{n} x{g:.3f} (+-{100 * s:.1f} %)" for n, g, s in off)
+    return Reason("white_balance_suspect", f"the film's colours ask for white-balance gains "
+                  f"{gains}: the image may not be balanced for the illuminant, or the film "
+                  f"model does not fit it; a white reference settles it", "optics.white_reference")
+
+
 def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
-                      options: FitOptions) -> list[Reason]:
+                      options: FitOptions, white_balance=None) -> list[Reason]:
     """One :class:`Reason` per thing a user must know before trusting the distributions.
 
     An unidentified (or missing) thickness mixture or NDF, ambiguous interference orders
     (ROIs whose runner-up order fits within ``options.ambiguous_order_de``), a median ΔE more
     than ``options.excess_delta_e`` above its noise floor (:data:`MEDIAN_NOISE_FLOOR_FACTOR`
     × ``noise_de``), and a sample whose mean plane is tilted by more than
-    ``options.sample_tilt_warn_fraction`` of the NDF's rms lobe width.
+    ``options.sample_tilt_warn_fraction`` of the NDF's rms lobe width; with a white-balance
+    estimate and no reference, gains that differ from 1 by more than 3σ and 3 %.
 
     Parameters
     ----------
     dist : Distributions
         The fits, their judgements and the ROIs' ambiguity (:mod:`.distributions`).
+    white_balance : WhiteBalance, optional
+        The applied gains and the scene's estimate (:mod:`.white_balance`).
     """
     out = []
+    wb = _white_balance_warning(white_balance)
+    if wb is not None:
+        out.append(wb)
     for what, fit, j in (("thickness distribution", dist.thickness, dist.thickness_judgement),
                          ("NDF", dist.ndf, dist.ndf_judgement)):
         if not j.identified:

@@ -133,7 +133,7 @@ class AnalysisResult:
         return analysis_warnings(self.distributions, delta_e_median=self.delta_e_stats["median"],
                                  noise_de=self.colour.noise_de,
                                  mean_plane_tilt=mean_plane_tilt_deg(self.joint),
-                                 options=self.options.fits)
+                                 options=self.options.fits, white_balance=self.white_balance)
 
     @property
     def delta_e_stats(self) -> dict:

@@ -348,3 +348,22 @@ def test_an_ndf_of_planes_is_refused_where_the_facets_may_be_curved():
     assert dome_judgement(ok, 0.8, FitOptions(max_dome_share=1.0)) is ok
     already = Judgement(False)
     assert dome_judgement(already, 5.0, opts) is already
+
+
+def test_a_white_balance_estimate_off_one_beyond_its_sigma_is_a_warning():
+    from microfacet.analysis.white_balance import WhiteBalance
+
+    def warn(est, sigma, source="none"):
+        wb = WhiteBalance(source=source, estimate_rgb=est, estimate_sigma=sigma)
+        return [r for r in analysis_warnings(_dist(), delta_e_median=1.0, noise_de=1.0,
+                                             mean_plane_tilt=None, options=OPTIONS,
+                                             white_balance=wb)
+                if r.code == "white_balance_suspect"]
+
+    (w,) = warn((1.12, 1.0, 0.99), (0.01, 0.01))
+    assert "R x1.120" in w.text and "B" not in w.text.split("gains")[1].split(":")[0]
+    assert w.parameter == "optics.white_reference"
+    assert warn((1.12, 1.0, 1.0), (0.05, 0.01)) == []          # within 3 sigma
+    assert warn((1.02, 1.0, 0.98), (0.001, 0.001)) == []       # within 3 %
+    assert warn((1.12, 1.0, 1.0), (0.01, 0.01), source="stack.json") == []  # a reference
+    assert warn(None, None) == []
