@@ -22,6 +22,7 @@ module               stage / concern
 ``ndf_fit``          NDF lobes (deconvolved, censored Rayleigh EM)
 ``distributions``    the distributions stage (both modes)
 ``self_check``       the NDF's injection-recovery on the stack itself (joint mode)
+``consistency``      the summaries against the maps: mixture vs per-pixel map, ROI vs pixels
 ``identification``   whether the data determine them: structured reasons, warnings
 ``pipeline``         :func:`analyse_stack`: the stages in order
 ``output``           :func:`write_results`: the results folder

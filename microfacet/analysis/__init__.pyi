@@ -1,5 +1,6 @@
 from . import (
     colour_image,
+    consistency,
     distributions,
     facet_thickness,
     identification,
@@ -31,6 +32,7 @@ __all__ = [
     "AnalysisResult",
     "analyse_stack",
     "colour_image",
+    "consistency",
     "distributions",
     "facet_thickness",
     "identification",

@@ -322,7 +322,8 @@ def _white_balance_warning(wb) -> Reason | None:
 
 
 def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
-                      options: FitOptions, white_balance=None) -> list[Reason]:
+                      options: FitOptions, white_balance=None, map_check=None,
+                      roi_check=None) -> list[Reason]:
     """One :class:`Reason` per thing a user must know before trusting the distributions.
 
     An unidentified (or missing) thickness mixture or NDF, ambiguous interference orders
@@ -338,8 +339,29 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
         The fits, their judgements and the ROIs' ambiguity (:mod:`.distributions`).
     white_balance : WhiteBalance, optional
         The applied gains and the scene's estimate (:mod:`.white_balance`).
+    map_check : MapCheck, optional
+        The thickness mixture against the per-pixel map (:mod:`.consistency`): a warning
+        when they disagree.
+    roi_check : tuple, optional
+        ``(pixel_median_nm, disagrees)`` per ROI (:func:`~.consistency.roi_pixel_check`):
+        a warning naming the ROIs whose single fit disagrees with their pixels.
     """
     out = []
+    if map_check is not None and not map_check.consistent:
+        out.append(Reason("mixture_map_mismatch", f"the thickness mixture does not summarize "
+                          f"the per-pixel map: area fractions differ by up to "
+                          f"{map_check.max_fraction_difference:.2f}, means by up to "
+                          f"{map_check.max_mean_difference_nm:.1f} nm, and "
+                          f"{100 * map_check.unexplained_fraction:.0f} % of the map is far "
+                          f"from every component (thickness_nm.npy is the finer answer)",
+                          "fits.max_components"))
+    if roi_check is not None and np.any(roi_check[1]):
+        med, bad = roi_check
+        i = int(np.flatnonzero(bad)[0])
+        out.append(Reason("roi_pixel_mismatch", f"{int(bad.sum())} ROI(s) have a single "
+                          f"thickness far from their own pixels' (ROI {i}: median of its "
+                          f"pixels {med[i]:.1f} nm): a ROI spanning several populations or "
+                          f"orders; thickness_roi.csv flags them", "roi.size_px"))
     wb = _white_balance_warning(white_balance)
     if wb is not None:
         out.append(wb)

@@ -47,9 +47,9 @@ _RESULT_BYTES_PER_PIXEL = 85
 _REPORT_BYTES = 8 << 20
 _ROI_COLUMNS = ["row0", "col0", "size", "thickness_nm", "mean_delta_e", "n_pixels", "width",
                 "runner_up_thickness_nm", "runner_up_delta_e", "ambiguity_delta_e",
-                "ambiguous", "pixel_mean_nm", "pixel_sd_nm"]
+                "ambiguous", "pixel_mean_nm", "pixel_sd_nm", "disagrees_with_pixels"]
 _ROI_FMT = ["%d", "%d", "%d", "%.3f", "%.4f", "%d", "%d", "%.3f", "%.4f", "%.4f", "%d", "%.3f",
-            "%.3f"]
+            "%.3f", "%d"]
 _FACET_COLUMNS = ["facet", "n_pixels", "tilt_deg", "tilt_sigma_deg", "height_plane",
                   "slope_sigma", "thickness_nm", "thickness_sigma_nm", "delta_e",
                   "other_order_delta_e", "censored_fraction"]
@@ -115,7 +115,7 @@ def _tables(r) -> dict:
                                 np.full(roi.row0.size, roi.width_px),
                                 roi.runner_up_thickness_nm, roi.runner_up_delta_e,
                                 roi.ambiguity_delta_e, r.distributions.roi_ambiguous.astype(int),
-                                pix_mean, pix_sd])
+                                pix_mean, pix_sd, r.roi_check[1].astype(int)])
     tables = {"thickness_roi": (roi_rows, _ROI_COLUMNS, _ROI_FMT)}
     if r.joint is not None:
         tables["facets"] = (_facet_rows(r.joint), _FACET_COLUMNS, _FACET_FMT)
@@ -201,11 +201,14 @@ def _thickness_section(r) -> ThicknessSection:
     mix = dist.thickness.to_json() if dist.thickness is not None else {"components": [],
                                                                        "bic": None}
     mix.update(dist.thickness_judgement.to_json())
+    check = r.map_check
+    mix["map_check"] = None if check is None else check.to_json()
     return ThicknessSection(mix, RoiCounts(
         count=int(roi.thickness_nm.size), fitted=int(ok.sum()),
         thickness_nm_mean=float(np.mean(roi.thickness_nm[ok])) if ok.any() else None,
         ambiguous_count=int(dist.roi_ambiguous.sum()),
-        ambiguous_delta_e=r.options.fits.ambiguous_order_de))
+        ambiguous_delta_e=r.options.fits.ambiguous_order_de,
+        pixel_disagree_count=int(r.roi_check[1].sum())))
 
 
 def _ndf_section(r) -> NdfSection:

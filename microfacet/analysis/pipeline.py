@@ -29,6 +29,7 @@ from ..core.timing import StageTimer
 from ..io.limits import check_memory
 from ..io.stack import Stack, read_stack
 from .colour_image import measure_colour, no_colour_message
+from .consistency import mixture_map_check, roi_pixel_check
 from .distributions import Distributions, fit_joint_distributions, fit_seed_distributions
 from .identification import analysis_warnings, mean_plane_tilt_deg, self_check_judgement
 from .joint import bootstrap_labels, facet_labels, joint_facets, joint_pixel_tilts
@@ -112,6 +113,19 @@ class AnalysisResult:
     white_balance: WhiteBalance = field(default_factory=WhiteBalance)
 
     @property
+    def map_check(self):
+        """The thickness mixture against the per-pixel thickness map
+        (:func:`~.consistency.mixture_map_check`; None without either)."""
+        fit = self.thickness_fit
+        return mixture_map_check(self.pixels.thickness_nm, fit.mixture if fit else None)
+
+    @property
+    def roi_check(self):
+        """Per ROI the median of its pixels' thicknesses and whether its single fit disagrees
+        with it (:func:`~.consistency.roi_pixel_check`)."""
+        return roi_pixel_check(self.roi, self.pixels.thickness_nm)
+
+    @property
     def thickness_fit(self):
         """The thickness mixture (:class:`~.mixtures.MixtureFit`, or None)."""
         return self.distributions.thickness
@@ -133,7 +147,8 @@ class AnalysisResult:
         return analysis_warnings(self.distributions, delta_e_median=self.delta_e_stats["median"],
                                  noise_de=self.colour.noise_de,
                                  mean_plane_tilt=mean_plane_tilt_deg(self.joint),
-                                 options=self.options.fits, white_balance=self.white_balance)
+                                 options=self.options.fits, white_balance=self.white_balance,
+                                 map_check=self.map_check, roi_check=self.roi_check)
 
     @property
     def delta_e_stats(self) -> dict:

@@ -67,13 +67,15 @@ class Inputs:
 @dataclass
 class RoiCounts:
     """The regions of interest: how many, how many fitted, the mean thickness, how many have
-    an ambiguous interference order (runner-up within ``ambiguous_delta_e``)."""
+    an ambiguous interference order (runner-up within ``ambiguous_delta_e``), how many fits
+    disagree with their own pixels' thicknesses."""
 
     count: int = 0
     fitted: int = 0
     thickness_nm_mean: float | None = None
     ambiguous_count: int = 0
     ambiguous_delta_e: float | None = None
+    pixel_disagree_count: int | None = None
 
 
 @dataclass

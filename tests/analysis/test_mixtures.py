@@ -463,3 +463,20 @@ def test_collapse_merges_identical_samples_and_keeps_the_em():
         short = _xd_em((xc, vc, ac), start, 0.01, bg=1 / 50, max_iter=n_iter, tol=-np.inf)
         for got, want in zip(short, full):
             np.testing.assert_allclose(got, want, rtol=1e-10)
+
+
+def test_a_small_far_population_counts_its_regions_not_their_kish_size():
+    """Admissibility and the limit on K count regions (``n_regions``), the BIC counts the
+    independent draws (``n_effective``): a population on one small region, 190 nm from the
+    others, is found where the Kish size of the regions' areas (8) would weigh it below one
+    region, 0.12 × 8 < 1 (accuracy-sweep g028)."""
+    rng = np.random.default_rng(5)
+    areas = np.array([30000, 12000, 9000, 6000, 4000, 8500])      # the last: 12 % at 51 nm
+    means = np.array([241.0, 242.5, 239.8, 241.9, 240.6, 51.0])
+    x = np.concatenate([rng.normal(m, 0.4, 40) for m in means])
+    w = np.repeat(areas / 40.0, 40)
+    kw = dict(sigma_nm=0.4, weights=w, background=True)
+    without = fit_thickness_mixture(x, n_effective=8.0, **kw)
+    with_regions = fit_thickness_mixture(x, n_effective=8.0, n_regions=12, **kw)
+    assert len(without.mixture.components) == 1
+    assert sorted(round(m) for m in with_regions.mixture.means_nm) == [51, 241]

@@ -188,3 +188,42 @@ def test_the_seed_mode_skips_the_joint_stages(nd_analysis):
     keys = {s.key for s in Stage if s not in JOINT_ONLY + (Stage.WRITE, Stage.REPORT)}
     assert set(r.timings_s) == keys | {"total"} and r.joint is None
     assert set(nd_analysis("joint").timings_s) == keys | {s.key for s in JOINT_ONLY} | {"total"}
+
+
+def _reencoded(folder, variant):
+    """The fixture's slices, in z order, as a plain folder: re-encoded as JPEG of a quality,
+    saved as 16-bit PNG, or re-exposed by a factor (linear)."""
+    import cv2
+
+    from microfacet.colour.transfer import srgb_decode, srgb_encode
+    from microfacet.io.images import write_image
+    from microfacet.io.stack import read_stack
+    st = read_stack(FIXTURE)
+    folder.mkdir()
+    for k, i in enumerate(st.z_order):
+        img = st.read_slice(int(i), np.uint8)
+        if variant.startswith("jpeg"):
+            cv2.imwrite(str(folder / f"{k:03d}.jpg"), cv2.cvtColor(img, cv2.COLOR_RGB2BGR),
+                        [cv2.IMWRITE_JPEG_QUALITY, int(variant[4:])])
+        elif variant == "16bit":
+            write_image(folder / f"{k:03d}.png", img.astype(np.uint16) * 257, bit_depth=16)
+        else:
+            lin = srgb_decode(img) * (1.0 + float(variant[8:]) / 100.0)
+            write_image(folder / f"{k:03d}.png", srgb_encode(lin, dtype=np.uint8))
+    return folder, float(np.median(np.diff(np.sort(st.z_um))))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("variant", ["jpeg97", "jpeg90", "16bit", "exposure+5", "exposure-5"])
+def test_the_thickness_populations_do_not_follow_encoding_or_exposure(tmp_path, variant,
+                                                                      nd_analysis):
+    """Issue 23: the same slices re-encoded as JPEG (quality 97, 90), saved as 16-bit or
+    re-exposed by ±5 % give the fixture's number of thickness populations, each mean within
+    1 nm (a plain folder: the analysis does not read the encoding's quality)."""
+    from microfacet.io.stack import read_stack
+    ref = nd_analysis("joint").thickness_fit.mixture
+    folder, step = _reencoded(tmp_path / variant, variant)
+    got = analyse_stack(read_stack(folder, pixel_size_um=0.216, z_step_um=step)
+                        ).thickness_fit.mixture
+    assert len(got.components) == len(ref.components) == 3
+    np.testing.assert_allclose(np.sort(got.means_nm), np.sort(ref.means_nm), atol=1.0)

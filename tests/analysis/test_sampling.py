@@ -54,11 +54,11 @@ def test_thickness_regions_estimates_the_scatter_beyond_the_errors():
 
 
 _OVERSPLIT_BUG = ("sampling.thickness_regions: greedy merging of neighbours (mutual best pairs "
-                  "first, chi2 test at alpha = 0.01 per merge, no account of the selection) "
+                  "first, chi2 test at alpha = 1e-4 per merge, no account of the selection) "
                   "sorts one homogeneous region into sub-regions of low and high patches "
                   "whose means then differ 'significantly': 400 patches of one value split "
-                  "into 15 regions, effective_count 5.8 (documented: 1-2x the true regions' "
-                  "Kish count, here 1)")
+                  "into 5 regions, effective_count 2.65 (at alpha = 0.01 per merge: 15 and "
+                  "5.8; documented: the count errs high)")
 
 
 @pytest.mark.xfail(strict=True, reason=_OVERSPLIT_BUG)

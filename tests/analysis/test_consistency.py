@@ -1,0 +1,65 @@
+"""The summaries against the maps they summarize (microfacet.analysis.consistency): a
+mixture that reads two close components where the map holds three populations is caught, a
+ROI whose single fit lies on another order than its pixels is flagged, and a mixture that
+does summarize its map passes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from microfacet.analysis.consistency import mixture_map_check, roi_pixel_check
+from microfacet.core.distributions import ThicknessMixture
+
+
+def _map(seed=0):
+    """A per-pixel map of three populations, 11 / 73 / 16 % of the area (issue 23's scene)."""
+    rng = np.random.default_rng(seed)
+    t = np.concatenate([rng.normal(112, 1.0, 1100), rng.normal(131, 1.5, 7300),
+                        rng.normal(150, 1.0, 1600)])
+    return rng.permutation(t).reshape(100, 100)
+
+
+def test_a_mixture_that_summarizes_its_map_passes():
+    c = mixture_map_check(_map(), ThicknessMixture([(0.11, 112, 1.0), (0.73, 131, 1.5),
+                                                     (0.16, 150, 1.0)]))
+    assert c.consistent and c.unexplained_fraction < 0.01
+    np.testing.assert_allclose(c.map_fractions, [0.11, 0.73, 0.16], atol=0.01)
+    np.testing.assert_allclose(c.map_means_nm, [112, 131, 150], atol=0.2)
+
+
+def test_two_close_components_for_three_populations_are_caught():
+    c = mixture_map_check(_map(), ThicknessMixture([(0.5, 130.9, 1.0), (0.5, 132.1, 1.0)]))
+    assert not c.consistent
+    assert c.unexplained_fraction > 0.2          # the 112 and 150 nm pixels
+    d = c.to_json()
+    assert d["consistent"] is False and len(d["map_fractions"]) == 2
+
+
+def test_a_wrong_weight_is_caught_and_nothing_mapped_is_none():
+    c = mixture_map_check(_map(), ThicknessMixture([(0.4, 112, 1.0), (0.4, 131, 1.5),
+                                                    (0.2, 150, 1.0)]))
+    assert not c.consistent and c.max_fraction_difference > 0.25
+    assert mixture_map_check(np.full((4, 4), np.nan), ThicknessMixture([(1, 100, 1)])) is None
+    assert mixture_map_check(_map(), None) is None
+
+
+class _Roi:
+    """Two ROIs side by side over a 10 × 20 map."""
+
+    row0 = np.array([0, 0])
+    col0 = np.array([0, 10])
+    height_px = width_px = 10
+
+    def __init__(self, fits):
+        self.thickness_nm = np.asarray(fits, dtype=float)
+
+
+def test_a_roi_on_another_order_than_its_pixels_is_flagged():
+    rng = np.random.default_rng(1)
+    t = np.concatenate([rng.normal(129.5, 8.0, (10, 10)), rng.normal(131, 1.0, (10, 10))],
+                       axis=1)
+    med, bad = roi_pixel_check(_Roi([378.0, 133.0]), t)
+    assert bad.tolist() == [True, False]        # 133 vs 131: within 5 nm
+    np.testing.assert_allclose(med, [129.5, 131.0], atol=2.0)
+    med, bad = roi_pixel_check(_Roi([140.0, np.nan]), t)  # within 3 robust SD of a mixed ROI
+    assert bad.tolist() == [False, False]
