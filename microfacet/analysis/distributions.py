@@ -100,8 +100,7 @@ def _joint_thickness(joint, roi, cens_frac, options, seed):
     regions = thickness_regions(joint.facets, np.where(ok, th.thickness_nm, np.nan),
                                 th.sigma_nm)
     fit = fit_thickness_mixture(th.thickness_nm[ok], sigma_nm=th.sigma_nm[ok], weights=area[ok],
-                                n_effective=max(1.0, regions.effective_count),
-                                n_regions=regions.count, options=options,
+                                n_effective=regions, options=options,
                                 background=True, seed=seed)
     a_t = area[ok].sum()
     edge = float(area[ok & th.at_window_edge].sum() / a_t)

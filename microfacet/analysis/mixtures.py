@@ -26,7 +26,8 @@ Model choice with an honest number of independent samples (both fitters)
     ``(Σw)² / Σw²`` of the weights, else the number of samples.
 
     A K whose solution has a component carried by fewer than ``min_component_samples``
-    regions (``w_k`` × the number of regions, ``n_regions`` when given, else ``n_eff``) or
+    regions (``w_k`` × the regions' plain count when their ``Regions`` are given, else
+    ``n_eff``) or
     with its SD at the floor describes a sample or a spike, not a population: it is not
     admissible, whatever its BIC. K is also limited to the number of distinct values and to
     ``p ≤`` that number of regions; ``degenerate`` says when a limit applied. (The Kish size
@@ -73,7 +74,7 @@ from ..core.distributions import ThicknessMixture
 from ..core.lazy import load
 from ..io.jsonfile import json_safe
 from .options import FitOptions
-from .sampling import Samples, collapse, prepare
+from .sampling import Regions, Samples, collapse, prepare
 
 threadpoolctl = load("threadpoolctl")
 
@@ -370,7 +371,7 @@ def _fit_k(k, d, sols, bg):
 
 
 def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=None,
-                          n_effective=None, n_regions=None, options: FitOptions | None = None,
+                          n_effective=None, options: FitOptions | None = None,
                           background=False, seed=0) -> MixtureFit:
     """Gaussian mixture of the true oxide thickness, number of components by BIC.
 
@@ -385,15 +386,14 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
     group : array_like, same shape, optional
         Region / facet id per sample: without ``n_effective``, the number of distinct groups
         is the number of independent observations.
-    n_effective : float, optional
-        The number of independent observations (see the module notes).
-    n_regions : float, optional
-        The number of regions the samples lie in (their plain count, not area-weighted):
-        what admissibility counts a component's regions in (``w_k`` × this ≥
-        ``thickness_min_component_samples``) and what limits K (``3K − 1`` ≤ this); the
-        BIC counts ``n_effective``. Default ``n_effective``. The Kish count of the regions'
-        areas weighs a population of one small region below one region, and at a few
-        regions left a population 190 nm from the other out (accuracy-sweep g028).
+    n_effective : float or Regions, optional
+        The number of independent observations (see the module notes). Given the samples'
+        :class:`~microfacet.analysis.sampling.Regions`, the BIC counts their
+        ``effective_count`` (at least 1) and admissibility and the limit on K their plain
+        ``count`` (``w_k`` × count ≥ ``thickness_min_component_samples``, ``3K − 1`` ≤
+        count): the Kish count of the regions' areas weighs a population on one small
+        region below one region, and at a few regions left a population 190 nm from the
+        others out (accuracy-sweep g028).
     options : FitOptions, optional
         ``max_components`` (largest K tried; also limited to the number of distinct values
         and to ``3K − 1 ≤ n_effective``); ``thickness_sd_floor_nm`` (smallest component SD:
@@ -432,6 +432,9 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
     """
     opts = FitOptions() if options is None else options
     sd_floor_nm = opts.thickness_sd_floor_nm
+    n_regions = None
+    if isinstance(n_effective, Regions):
+        n_regions, n_effective = n_effective.count, max(1.0, n_effective.effective_count)
     x, a, s, n, n_eff = prepare(Samples(thickness_nm, sigma_nm, weights, group, n_effective,
                                         "thickness_nm", "sigma_nm"),
                                 max_samples=opts.thickness_max_samples, seed=seed)

@@ -466,8 +466,8 @@ def test_collapse_merges_identical_samples_and_keeps_the_em():
 
 
 def test_a_small_far_population_counts_its_regions_not_their_kish_size():
-    """Admissibility and the limit on K count regions (``n_regions``), the BIC counts the
-    independent draws (``n_effective``): a population on one small region, 190 nm from the
+    """Admissibility and the limit on K count regions (``Regions.count``), the BIC counts the
+    independent draws (their Kish size): a population on one small region, 190 nm from the
     others, is found where the Kish size of the regions' areas (8) would weigh it below one
     region, 0.12 × 8 < 1 (accuracy-sweep g028)."""
     rng = np.random.default_rng(5)
@@ -476,7 +476,11 @@ def test_a_small_far_population_counts_its_regions_not_their_kish_size():
     x = np.concatenate([rng.normal(m, 0.4, 40) for m in means])
     w = np.repeat(areas / 40.0, 40)
     kw = dict(sigma_nm=0.4, weights=w, background=True)
+    from microfacet.analysis.sampling import Regions
+    a = np.array([(22 + math.sqrt(22 ** 2 + 4 * 7 * 33)) / 14] + [1.0] * 11)
+    regions = Regions(np.zeros(0, int), np.zeros(12), np.zeros(12), a, 0.0)
+    assert (regions.count, round(regions.effective_count, 6)) == (12, 8.0)
     without = fit_thickness_mixture(x, n_effective=8.0, **kw)
-    with_regions = fit_thickness_mixture(x, n_effective=8.0, n_regions=12, **kw)
+    with_regions = fit_thickness_mixture(x, n_effective=regions, **kw)
     assert len(without.mixture.components) == 1
     assert sorted(round(m) for m in with_regions.mixture.means_nm) == [51, 241]
