@@ -306,6 +306,19 @@ def _ndf_width_deg(ndf_fit):
         return None
 
 
+def _spike_warning(fit) -> Reason | None:
+    """A thickness component whose SD sits at the floor: its spread is not measured."""
+    floor = (fit.info.get("sd_at_floor") or []) if fit is not None else []
+    if not floor:
+        return None
+    comps = fit.mixture.components
+    what = ", ".join(f"{comps[i][1]:.1f} nm ({100 * comps[i][0]:.0f} %)" for i in floor)
+    return Reason("thickness_sd_not_measured", f"thickness component(s) {what} rest on too "
+                  f"few regions for a spread: their SD is the floor "
+                  f"({comps[floor[0]][2]:.2f} nm), not a measurement; a larger field would "
+                  f"measure it", "fits.thickness_sd_floor_nm")
+
+
 def _white_balance_warning(wb) -> Reason | None:
     """The colours look unbalanced: an estimate, no reference, a gain off 1 by > 3σ, > 3 %."""
     if wb is None or wb.estimate_rgb is None or wb.source != "none" or not wb.estimate_sigma:
@@ -347,6 +360,9 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
         a warning naming the ROIs whose single fit disagrees with their pixels.
     """
     out = []
+    spike = _spike_warning(dist.thickness)
+    if spike is not None:
+        out.append(spike)
     if map_check is not None and not map_check.consistent:
         out.append(Reason("mixture_map_mismatch", f"the thickness mixture does not summarize "
                           f"the per-pixel map: area fractions differ by up to "

@@ -477,8 +477,11 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
     w = w / w.sum()             # the populations' distribution, without the background
     comps = [(float(a_), float(m_), float(math.sqrt(c_))) for a_, m_, c_ in zip(w, mu, s2)
              if a_ > 1e-12]
-    return MixtureFit(ThicknessMixture(comps), bics[k_best], bics, n, n_eff,
+    mixture = ThicknessMixture(comps)
+    return MixtureFit(mixture, bics[k_best], bics, n, n_eff,
                       k_note(k_max, opts.max_components, uniq.size, n_count, "values"), x.size,
                       lls, bic_margin=margin,
                       info={"inadmissible_k": sorted(set(bics) - set(ok)),
-                            "background_weight": bgw[k_best]})
+                            "background_weight": bgw[k_best],
+                            "sd_at_floor": [i for i, c in enumerate(mixture.components)
+                                            if c[2] <= sd_floor_nm * 1.0001]})

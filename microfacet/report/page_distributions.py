@@ -88,6 +88,12 @@ def _not_identified(ax, reason):
             zorder=10)
 
 
+def _sd_floor(ctx) -> float:
+    """The thickness SD floor the analysis used (0 when the summary does not say)."""
+    v = ctx.res.get("parameters", "fits", "thickness_sd_floor_nm")
+    return float(v) if isinstance(v, (int, float)) else 0.0
+
+
 def _thickness_panel(ax, ctx):
     """Seed Fig. 18a: thickness histogram, mixture components and the ROI thicknesses."""
     ok, why = ctx.identification("thickness")
@@ -112,7 +118,9 @@ def _thickness_panel(ax, ctx):
     n = _density_panel(
         ax, x, dens, mixd, mix, src=src, unit="nm", what="oxide thickness",
         comp_pdf=lambda m, g: m.pdf(g),
-        comp_label=lambda c: f"weight {c[0]:.2f}, mean {c[1]:.1f} nm, SD {c[2]:.2f} nm",
+        comp_label=lambda c: f"weight {c[0]:.2f}, mean {c[1]:.1f} nm, " + (
+            "SD not measured (at the floor)" if c[2] <= _sd_floor(ctx) * 1.0001
+            else f"SD {c[2]:.2f} nm"),
         xrange=rng or (0.0, 1.0))
     roi = ctx.res.table("thickness_roi")
     roi_t = roi["thickness_nm"][np.isfinite(roi["thickness_nm"])] if roi is not None else None

@@ -367,3 +367,16 @@ def test_a_white_balance_estimate_off_one_beyond_its_sigma_is_a_warning():
     assert warn((1.02, 1.0, 0.98), (0.001, 0.001)) == []       # within 3 %
     assert warn((1.12, 1.0, 1.0), (0.01, 0.01), source="stack.json") == []  # a reference
     assert warn(None, None) == []
+
+
+def test_a_component_at_the_sd_floor_is_said_not_measured():
+    fit = MixtureFit(ThicknessMixture([(0.1, 108.4, 0.1), (0.9, 131.5, 1.5)]), 0.0, {2: 0.0},
+                     10, 10.0, info={"sd_at_floor": [0]})
+    w = [r for r in analysis_warnings(Distributions(fit, _fit(), Judgement(True),
+                                                    Judgement(True), np.zeros(0, bool),
+                                                    np.zeros(0, bool)),
+                                      delta_e_median=1.0, noise_de=1.0, mean_plane_tilt=None,
+                                      options=OPTIONS)
+         if r.code == "thickness_sd_not_measured"]
+    assert len(w) == 1 and "108.4 nm (10 %)" in w[0].text and "131.5" not in w[0].text
+    assert _warn(_dist()) == []                  # no component at the floor: no warning
