@@ -275,6 +275,10 @@ TARGETS = (
      lambda v: v <= 0.5),
     ("scenes with the true number of thickness populations", "populations_ok", "≥ 90 %",
      lambda v: v >= 0.9),
+    ("scenes read in a wrong interference order (region median error > 20 nm)",
+     "order_wrong_count", "–", None),
+    ("… of those without the order flagged (ambiguous ROI or facets, or not identified)",
+     "order_wrong_unflagged", "0", lambda v: v == 0),
     ("scenes with the true number of NDF lobes", "lobes_ok", "–", None),
     ("NDF identified, all scenes", "identified_all", "–", None),
     ("identified NDFs with an RMS slope off by > 25 % (scenes)", "identified_wrong", "0",
@@ -299,6 +303,11 @@ TARGETS = (
 )
 
 
+def _true(v) -> bool:
+    """A flag from a row: a bool, or its text in a resumed CSV ("True")."""
+    return v is True or v == "True" or v == 1
+
+
 def summarize(rows):
     """The summary scores of one mode's per-scene rows (keys of :data:`TARGETS`).
 
@@ -317,6 +326,9 @@ def summarize(rows):
         "region_mae_median_nm": finite_median(r.get("region_mae_nm") for r in ok),
         "populations_ok": fraction(r["pops_found"] == r["pops_true"] if r.get("pops_found")
                                    is not None else False for r in ok),
+        "order_wrong_count": sum(1 for r in ok if _true(r.get("order_wrong"))),
+        "order_wrong_unflagged": sum(1 for r in ok if _true(r.get("order_wrong"))
+                                     and not _true(r.get("order_flagged"))),
         "lobes_ok": fraction(r["lobes_found"] == r["lobes_true"] if r.get("lobes_found")
                              is not None else False for r in ok),
         "identified_all": fraction(r.get("identified") for r in ok),

@@ -29,15 +29,19 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from ..colour.colorimetry import xyz_to_lab
 from ..colour.srgb import image_white_xyz, linear_srgb_to_xyz, model_xyz_to_linear_srgb
 from ..colour.transfer import srgb_decode
+from ..core.errors import InputError, one_line
 from ..core.lazy import load
+from ..io.images import convert_samples, decode_image
 
 ndimage = load("scipy.ndimage")
 
@@ -134,7 +138,6 @@ def balanced_lab(encoded, gains_rgb, *, illuminant) -> np.ndarray:
 def reference_gains(encoded, *, where: str) -> tuple:
     """The gains of a white-standard image (encoded sRGB in [0, 1], (H, W, 3)): the median
     linear R, G, B over its unclipped pixels, divided by G."""
-    from ..core.errors import InputError
     a = np.asarray(encoded, dtype=np.float32)
     if a.ndim != 3 or a.shape[-1] != 3:
         raise InputError(f"{where}: a white reference must be an RGB image, got shape "
@@ -296,10 +299,6 @@ def estimate_white_balance(encoded, tilt_deg, usable, model, *, illuminant, seed
 def _given_gains(stack, options, where_option: str):
     """The reference's gains and its name, or None: ``white_reference`` (the option, then
     stack.json's), then stack.json's ``white_balance``."""
-    from pathlib import Path
-
-    from ..core.errors import InputError, one_line
-    from ..io.images import convert_samples, decode_image
     ref = options.white_reference
     path = Path(ref) if ref else None
     where = where_option
@@ -332,7 +331,6 @@ def choose_white_balance(stack, encoded, tilt_deg, usable, model, options, *, il
 
     ``options`` is the ``optics`` section (``white_balance``, ``white_reference``).
     """
-    import dataclasses
     given = _given_gains(stack, options, "white_reference")
     est = (estimate_white_balance(encoded, tilt_deg, usable, model, illuminant=illuminant,
                                   seed=seed)

@@ -305,8 +305,27 @@ def score_scene(results: Path, truth: Path) -> dict:
             "de_mean": de, "de_floor": floor,
             "de_excess": de - floor if de is not None else math.nan,
             "masked_fraction": res.get("masked_fraction"),
+            "order_wrong": bool(np.isfinite(reg["median_ae_nm"])
+                                and reg["median_ae_nm"] > WRONG_ORDER_NM),
+            "order_flagged": order_flagged(res.summary),
             **white_balance_errors(res.summary.get("white_balance"),
                                    meta["params"].get("white_balance_gains", (1, 1, 1)))}
+
+
+#: A scene is read in a wrong interference order when the median error of its true regions'
+#: thicknesses exceeds this (the orders are ~110 nm apart; populations ≥ 12 nm).
+WRONG_ORDER_NM = 20.0
+
+
+def order_flagged(summary) -> bool:
+    """The analysis said the interference order is uncertain: a ROI with an ambiguous order,
+    ≥ 5 % of the facets' area with a runner-up order within the ambiguity margin, or the
+    thickness distribution not identified."""
+    th = summary.get("thickness") or {}
+    mix, roi = th.get("mixture") or {}, th.get("roi") or {}
+    return bool((roi.get("ambiguous_count") or 0) > 0
+                or (mix.get("order_ambiguous_fraction") or 0.0) >= 0.05
+                or mix.get("identified") is False)
 
 
 def white_balance_errors(wb, true_gains) -> dict:
@@ -389,8 +408,8 @@ COLUMNS = ["name", "mode", "seed", "world", "relief_file", "status", "reason", "
            "region_median_ae_nm", "regions_scored", "regions_true", "pops_found", "pops_true",
            "lobes_found", "lobes_true", "identified", "ndf_w1_deg", "lobe_rms_ratio",
            "censored_fraction", "past_limit_fraction", "height_coverage", "de_mean", "de_floor",
-           "de_excess", "masked_fraction", "wb_true_r", "wb_true_b", "wb_err_r", "wb_err_b"
-           ] + [f"v_{v}" for v in VARIATIONS]
+           "de_excess", "masked_fraction", "order_wrong", "order_flagged", "wb_true_r",
+           "wb_true_b", "wb_err_r", "wb_err_b"] + [f"v_{v}" for v in VARIATIONS]
 
 
 def per_scene_table(rows) -> str:
