@@ -29,13 +29,21 @@ def test_header_and_units_are_on_the_pages(results, report, pdf_text):
                   "no value", "component (seed Fig. 18c)"):
         assert label in p2, label
     p3 = pdf_text(out, 3)
-    (w, m, s), (wn, sn) = res.thickness_mixture().components[0], res.ndf_mixture().components[0]
+    wn, sn = res.ndf_mixture().components[0]
+    floor = res.get("parameters", "fits", "thickness_sd_floor_nm")
+
+    def comp_label(w, m, s):     # a component at the SD floor: its spread is not measured
+        sd = "SD not measured (at the floor)" if s <= floor * 1.0001 else f"SD {s:.2f} nm"
+        return f"weight {w:.2f}, mean {m:.1f} nm, {sd}"
+
     for label in ("oxide thickness (nm)", "probability density (1/nm)",
                   "probability density (1/°)", "D(θ) (1/sr)", "fitted mixture",
                   "histogram (thickness_pdf.csv)", "histogram (ndf_pdf.csv)",
-                  f"weight {w:.2f}, mean {m:.1f} nm, SD {s:.2f} nm",
+                  *(comp_label(*c) for c in res.thickness_mixture().components),
                   f"weight {wn:.2f}, slope SD {sn:.2f}°"):
         assert label in p3, label
+    assert "SD not measured" in p3 and sum(c[2] <= floor * 1.0001
+                                          for c in res.thickness_mixture().components) == 1
     check = res.get("ndf", "self_check")
     assert f"self-check: injected slopes recovered at {check['transfer']:.2f}×" in p3
     p5 = pdf_text(out, 5)
