@@ -208,7 +208,12 @@ def _thickness_section(r) -> ThicknessSection:
         thickness_nm_mean=float(np.mean(roi.thickness_nm[ok])) if ok.any() else None,
         ambiguous_count=int(dist.roi_ambiguous.sum()),
         ambiguous_delta_e=r.options.fits.ambiguous_order_de,
-        pixel_disagree_count=int(r.roi_check[1].sum())))
+        pixel_disagree_count=int(r.roi_check[1].sum()),
+        ambiguous=[{"roi": int(i), "thickness_nm": float(roi.thickness_nm[i]),
+                    "delta_e": float(roi.mean_delta_e[i]),
+                    "runner_up_thickness_nm": float(roi.runner_up_thickness_nm[i]),
+                    "runner_up_delta_e": float(roi.runner_up_delta_e[i])}
+                   for i in np.flatnonzero(dist.roi_ambiguous)]))
 
 
 def _ndf_section(r) -> NdfSection:

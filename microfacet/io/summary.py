@@ -67,8 +67,9 @@ class Inputs:
 @dataclass
 class RoiCounts:
     """The regions of interest: how many, how many fitted, the mean thickness, how many have
-    an ambiguous interference order (runner-up within ``ambiguous_delta_e``), how many fits
-    disagree with their own pixels' thicknesses."""
+    an ambiguous interference order (runner-up within ``ambiguous_delta_e``) and, for each of
+    those, both candidates with their ΔE (``ambiguous``), how many fits disagree with their
+    own pixels' thicknesses."""
 
     count: int = 0
     fitted: int = 0
@@ -76,6 +77,7 @@ class RoiCounts:
     ambiguous_count: int = 0
     ambiguous_delta_e: float | None = None
     pixel_disagree_count: int | None = None
+    ambiguous: list = field(default_factory=list)
 
 
 @dataclass

@@ -88,3 +88,24 @@ def test_write_results_replaces_only_its_own_kind(nd_analysis, tmp_path):
         assert err.value.param == "out"
     assert (other / "cat.jpg").read_bytes() == b"\xff\xd8"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["photos", "r"]
+
+
+def test_an_ambiguous_roi_is_reported_with_both_candidates(nd_analysis):
+    """Issue 23: an ambiguous interference order is reported with both candidates' ΔE in
+    summary.json, never silently picked (the fixture's one ROI, marked ambiguous here)."""
+    import dataclasses
+
+    from microfacet.analysis.output import build_summary
+    res = nd_analysis("joint")
+    n = res.roi.thickness_nm.size
+    amb = dataclasses.replace(res, distributions=dataclasses.replace(
+        res.distributions, roi_ambiguous=np.ones(n, bool)))
+    roi = build_summary(amb).to_json()["thickness"]["roi"]
+    assert roi["ambiguous_count"] == n == len(roi["ambiguous"])
+    first = roi["ambiguous"][0]
+    assert first["thickness_nm"] == pytest.approx(float(res.roi.thickness_nm[0]))
+    assert first["runner_up_thickness_nm"] == pytest.approx(
+        float(res.roi.runner_up_thickness_nm[0]))
+    assert first["runner_up_delta_e"] >= first["delta_e"]
+    assert build_summary(res).to_json()["thickness"]["roi"]["ambiguous"] == []
+    Summary.from_json(build_summary(amb).to_json())          # the schema reads it back
