@@ -120,7 +120,7 @@ def roi_pixel_check(roi, thickness_nm) -> tuple[np.ndarray, np.ndarray]:
     Parameters
     ----------
     roi : RoiFit
-        The ROIs (``row0``, ``col0``, ``height_px``, ``width_px``, ``thickness_nm``).
+        The ROIs (their fits and :meth:`~.roi.RoiFit.pixel_values`).
     thickness_nm : ndarray (H, W)
         The per-pixel thickness map.
 
@@ -130,16 +130,11 @@ def roi_pixel_check(roi, thickness_nm) -> tuple[np.ndarray, np.ndarray]:
         NaN where the ROI has no mapped pixel.
     disagrees : ndarray of bool (R,)
     """
-    t = np.asarray(thickness_nm, dtype=np.float64)
     n = roi.thickness_nm.size
     med, gap = np.full(n, np.nan), np.full(n, np.inf)
-    for i in range(n):
-        r0, c0 = int(roi.row0[i]), int(roi.col0[i])
-        v = t[r0:r0 + roi.height_px, c0:c0 + roi.width_px]
-        v = v[np.isfinite(v)]
-        if v.size:
-            med[i] = np.median(v)
-            gap[i] = max(3.0 * 1.4826 * np.median(np.abs(v - med[i])), ROI_MIN_GAP_NM)
+    for i, v in roi.pixel_values(thickness_nm):
+        med[i] = np.median(v)
+        gap[i] = max(3.0 * 1.4826 * np.median(np.abs(v - med[i])), ROI_MIN_GAP_NM)
     fit = np.asarray(roi.thickness_nm, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         disagrees = np.isfinite(fit) & np.isfinite(med) & (np.abs(fit - med) > gap)

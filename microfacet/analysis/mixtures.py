@@ -176,7 +176,7 @@ PARSIMONY_BIC = 2.0
 #: explains; facets whose colour the model does not explain are left out before the fit):
 #: without a cap, at a few independent regions a flat background was a cheaper explanation
 #: of a whole population than a Gaussian with its parameters (the fixture re-exposed by
-#: -5 % read one population, 131.5 nm, with 33 % of the area as background).
+#: -5 % lost populations to it: tests/analysis/test_pipeline.py -k encoding).
 BACKGROUND_MAX = 0.05
 
 

@@ -17,6 +17,7 @@ References
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -112,14 +113,14 @@ class AnalysisResult:
     self_check: SelfCheck | None = None
     white_balance: WhiteBalance = field(default_factory=WhiteBalance)
 
-    @property
+    @functools.cached_property
     def map_check(self):
         """The thickness mixture against the per-pixel thickness map
         (:func:`~.consistency.mixture_map_check`; None without either)."""
         fit = self.thickness_fit
         return mixture_map_check(self.pixels.thickness_nm, fit.mixture if fit else None)
 
-    @property
+    @functools.cached_property
     def roi_check(self):
         """Per ROI the median of its pixels' thicknesses and whether its single fit disagrees
         with it (:func:`~.consistency.roi_pixel_check`)."""

@@ -194,15 +194,21 @@ class RoiFit:
         >>> [round(float(v[0]), 3) for v in r.pixel_stats([[100.0, 110.0], [np.nan, 120.0]])]
         [110.0, 8.165]
         """
-        d = np.asarray(thickness_nm, dtype=np.float64)
         mean = np.full(self.row0.size, np.nan)
         sd = np.full(self.row0.size, np.nan)
+        for i, v in self.pixel_values(thickness_nm):
+            mean[i], sd[i] = v.mean(), v.std()
+        return mean, sd
+
+    def pixel_values(self, thickness_nm):
+        """``(index, values)`` for every ROI with finite per-pixel thicknesses in its window
+        (flat float64 arrays)."""
+        d = np.asarray(thickness_nm, dtype=np.float64)
         for i, (r0, c0) in enumerate(zip(self.row0, self.col0)):
             v = d[r0:r0 + self.height_px, c0:c0 + self.width_px]
             v = v[np.isfinite(v)]
             if v.size:
-                mean[i], sd[i] = v.mean(), v.std()
-        return mean, sd
+                yield i, v
 
     def index_map(self, shape) -> np.ndarray:
         """For every pixel of an image of ``shape``, the index of the ROI whose centre is

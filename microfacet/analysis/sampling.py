@@ -83,8 +83,9 @@ def thickness_regions(labels, value, sigma, *, alpha=1e-4) -> Regions:
     Neighbouring regions are merged, mutual best pairs first, while their means (weights
     1/(σ² + τ²)) differ by less than chance allows (χ² with one degree of freedom,
     ``p > alpha``, 10⁻⁴ by default: every merge is one of hundreds of tests on groups the
-    merging itself selected; at 0.01 the fixture's 12 regions read as 77 and, re-encoded as
-    JPEG 97, as 88, which made the population count follow the encoding). Every region is
+    merging itself selected; at 0.01 the fixture's regions were several times its true 12,
+    and the population count followed the slices' encoding: tests/analysis/test_pipeline.py
+    ``-k encoding``). Every region is
     then one draw of the thickness distribution: the independent samples the mixture's model
     choice counts. The greedy order still sorts a homogeneous field of many patches into a
     few sub-regions of low and high values (tests/analysis/test_sampling.py): the count

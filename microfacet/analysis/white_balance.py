@@ -22,7 +22,7 @@ the gains).
 
 Examples
 --------
->>> wb = WhiteBalance.none()
+>>> wb = WhiteBalance()
 >>> wb.gains_rgb, wb.source
 ((1.0, 1.0, 1.0), 'none')
 """
@@ -42,6 +42,7 @@ from ..colour.transfer import srgb_decode
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
 from ..io.images import convert_samples, decode_image
+from .search import parabola
 
 ndimage = load("scipy.ndimage")
 
@@ -82,7 +83,7 @@ class WhiteBalance:
     determined : tuple of 2 bool or None
         Per gain (R, B): the estimate's spread is below 1 % and its best lies inside the
         search.
-    delta_e_gain : float or None
+    misfit_gain : float or None
         How much the tiles' misfit (mean squared log chromaticity) improves at the
         estimate, against gains 1.
     tiles : int
@@ -94,12 +95,8 @@ class WhiteBalance:
     estimate_rgb: tuple | None = None
     estimate_sigma: tuple | None = None
     determined: tuple | None = None
-    delta_e_gain: float | None = None
+    misfit_gain: float | None = None
     tiles: int = 0
-
-    @classmethod
-    def none(cls) -> WhiteBalance:
-        return cls()
 
     @property
     def applied(self) -> bool:
@@ -107,16 +104,15 @@ class WhiteBalance:
 
     def to_dict(self) -> dict:
         """summary.json's ``white_balance``."""
-        r = {"gains_rgb": [float(g) for g in self.gains_rgb], "source": self.source,
+        return {"gains_rgb": [float(g) for g in self.gains_rgb], "source": self.source,
              "estimate_rgb": None if self.estimate_rgb is None
              else [float(g) for g in self.estimate_rgb],
              "estimate_sigma_rb": None if self.estimate_sigma is None
              else [float(s) for s in self.estimate_sigma],
              "determined_rb": None if self.determined is None
              else [bool(v) for v in self.determined],
-             "misfit_gain": self.delta_e_gain,
+             "misfit_gain": self.misfit_gain,
              "tiles": int(self.tiles)}
-        return r
 
 
 def balanced_lab(encoded, gains_rgb, *, illuminant) -> np.ndarray:
@@ -205,19 +201,13 @@ class _Scorer:
 
 
 def _argmin_2d(scores, ax_r, ax_b):
-    """The (log_r, log_b) of least score on a grid, refined by a parabola per axis, and
-    whether the least node is inside the grid."""
+    """The (log_r, log_b) of least score on a grid, refined by a parabola per axis
+    (:func:`~.search.parabola`)."""
     i, j = np.unravel_index(int(np.argmin(scores)), scores.shape)
-
-    def off(a, b, c):
-        den = a - 2 * b + c
-        return 0.0 if den <= 0 else float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
-
     n = scores.shape[0]
-    di = off(scores[i - 1, j], scores[i, j], scores[i + 1, j]) if 0 < i < n - 1 else 0.0
-    dj = off(scores[i, j - 1], scores[i, j], scores[i, j + 1]) if 0 < j < n - 1 else 0.0
-    return (ax_r[i] + di * (ax_r[1] - ax_r[0]), ax_b[j] + dj * (ax_b[1] - ax_b[0]),
-            0 < i < n - 1 and 0 < j < n - 1)
+    di = float(parabola(*scores[i - 1:i + 2, j])[0]) if 0 < i < n - 1 else 0.0
+    dj = float(parabola(*scores[i, j - 1:j + 2])[0]) if 0 < j < n - 1 else 0.0
+    return ax_r[i] + di * (ax_r[1] - ax_r[0]), ax_b[j] + dj * (ax_b[1] - ax_b[0])
 
 
 def _systematic_sd(scores, ax_r, ax_b, n_tiles):
@@ -272,16 +262,15 @@ def estimate_white_balance(encoded, tilt_deg, usable, model, *, illuminant, seed
     sc = _Scorer(encoded, tilt, tiles, model, illuminant)
     coarse = np.linspace(-LOG_RANGE, LOG_RANGE, COARSE_STEPS)
     per = np.array([[sc.per_tile(r, b) for b in coarse] for r in coarse])     # (R, B, T)
-    r0, b0, _ = _argmin_2d(per.mean(axis=2), coarse, coarse)
+    r0, b0 = _argmin_2d(per.mean(axis=2), coarse, coarse)
     fine_r = np.arange(-3, 4) * FINE_STEP + r0
     fine_b = np.arange(-3, 4) * FINE_STEP + b0
     fine = np.array([[sc.per_tile(r, b) for b in fine_b] for r in fine_r])     # (7, 7, T)
-    lr, lb, _ = _argmin_2d(fine.mean(axis=2), fine_r, fine_b)
+    lr, lb = _argmin_2d(fine.mean(axis=2), fine_r, fine_b)
     boot = []
     for _ in range(BOOTSTRAP):
         pick = rng.integers(0, sc.n_tiles, sc.n_tiles)
-        br, bb, _ = _argmin_2d(fine[:, :, pick].mean(axis=2), fine_r, fine_b)
-        boot.append((br, bb))
+        boot.append(_argmin_2d(fine[:, :, pick].mean(axis=2), fine_r, fine_b))
     sd = np.maximum(np.std(np.array(boot), axis=0), _systematic_sd(fine.mean(axis=2), fine_r,
                                                                     fine_b, sc.n_tiles))
     at_one = float(sc.per_tile(0.0, 0.0).mean())
@@ -292,7 +281,7 @@ def estimate_white_balance(encoded, tilt_deg, usable, model, *, illuminant, seed
                   bool(sd[1] < DETERMINED_LOG_SD and not edge_b))
     return WhiteBalance(estimate_rgb=(math.exp(lr), 1.0, math.exp(lb)),
                         estimate_sigma=(float(sd[0]), float(sd[1])), determined=determined,
-                        delta_e_gain=at_one - best, tiles=sc.n_tiles)
+                        misfit_gain=at_one - best, tiles=sc.n_tiles)
 
 
 # ------------------------------------------------------------------------------ choice
@@ -312,13 +301,10 @@ def _given_gains(stack, options, where_option: str):
                               np.float32)
         return reference_gains(img, where=f"{where} ({one_line(path.name)})"), \
             f"white reference {path.name}"
-    given = stack.meta.get("white_balance")
+    given = stack.meta.get("white_balance")      # 3 numbers > 0: the schema checked it
     if given is None:
         return None
     g = np.asarray(given, dtype=np.float64)
-    if g.shape != (3,) or not np.all(np.isfinite(g) & (g > 0)):
-        raise InputError(f"{one_line(Path(stack.path) / 'stack.json')}: key 'white_balance': "
-                         f"expected three positive gains [R, G, B], got {given!r}")
     return tuple(float(v) for v in g / g[1]), "stack.json"
 
 

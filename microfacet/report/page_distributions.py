@@ -88,10 +88,12 @@ def _not_identified(ax, reason):
             zorder=10)
 
 
-def _sd_floor(ctx) -> float:
-    """The thickness SD floor the analysis used (0 when the summary does not say)."""
-    v = ctx.res.get("parameters", "fits", "thickness_sd_floor_nm")
-    return float(v) if isinstance(v, (int, float)) else 0.0
+def _means_at_floor(ctx) -> set:
+    """The means of the thickness components whose SD sits at the floor (summary.json's
+    ``thickness.mixture.sd_at_floor``): their spread is not measured."""
+    idx = ctx.res.get("thickness", "mixture", "sd_at_floor") or []
+    comps = ctx.thick.components if ctx.thick is not None else ()
+    return {comps[i][1] for i in idx if i < len(comps)}
 
 
 def _thickness_panel(ax, ctx):
@@ -115,12 +117,12 @@ def _thickness_panel(ax, ctx):
     if rng is not None:
         pad = max(0.06 * (rng[1] - rng[0]), 2.0)
         rng = (max(0.0, rng[0] - pad), rng[1] + pad)
+    at_floor = _means_at_floor(ctx)
     n = _density_panel(
         ax, x, dens, mixd, mix, src=src, unit="nm", what="oxide thickness",
         comp_pdf=lambda m, g: m.pdf(g),
         comp_label=lambda c: f"weight {c[0]:.2f}, mean {c[1]:.1f} nm, " + (
-            "SD not measured (at the floor)" if c[2] <= _sd_floor(ctx) * 1.0001
-            else f"SD {c[2]:.2f} nm"),
+            "SD not measured (at the floor)" if c[1] in at_floor else f"SD {c[2]:.2f} nm"),
         xrange=rng or (0.0, 1.0))
     roi = ctx.res.table("thickness_roi")
     roi_t = roi["thickness_nm"][np.isfinite(roi["thickness_nm"])] if roi is not None else None

@@ -43,15 +43,12 @@ def test_a_wrong_weight_is_caught_and_nothing_mapped_is_none():
     assert mixture_map_check(_map(), None) is None
 
 
-class _Roi:
-    """Two ROIs side by side over a 10 × 20 map."""
-
-    row0 = np.array([0, 0])
-    col0 = np.array([0, 10])
-    height_px = width_px = 10
-
-    def __init__(self, fits):
-        self.thickness_nm = np.asarray(fits, dtype=float)
+def _Roi(fits):
+    """Two ROIs side by side over a 10 × 20 map, with their single fits."""
+    from microfacet.analysis.roi import RoiFit
+    z = np.zeros(2)
+    return RoiFit(np.array([0, 0]), np.array([0, 10]), 10, 10, np.asarray(fits, dtype=float),
+                  z, z, z, np.zeros(2, int))
 
 
 def test_a_roi_on_another_order_than_its_pixels_is_flagged():
