@@ -275,9 +275,13 @@ TARGETS = (
      lambda v: v <= 0.5),
     ("scenes with the true number of thickness populations", "populations_ok", "≥ 90 %",
      lambda v: v >= 0.9),
+    ("… counting reported candidate populations (field too small) as populations",
+     "populations_ok_candidates", "–", None),
+    ("scenes with a reported candidate where the count was already right (spurious)",
+     "candidates_spurious", "–", None),
     ("scenes read in a wrong interference order (region median error > 20 nm)",
      "order_wrong_count", "–", None),
-    ("… of those without the order flagged (ambiguous ROI or facets, or not identified)",
+    ("… of those with the order said established (summary.json thickness.order)",
      "order_wrong_unflagged", "0", lambda v: v == 0),
     ("scenes with the true number of NDF lobes", "lobes_ok", "–", None),
     ("NDF identified, all scenes", "identified_all", "–", None),
@@ -326,6 +330,11 @@ def summarize(rows):
         "region_mae_median_nm": finite_median(r.get("region_mae_nm") for r in ok),
         "populations_ok": fraction(r["pops_found"] == r["pops_true"] if r.get("pops_found")
                                    is not None else False for r in ok),
+        "populations_ok_candidates": fraction(
+            r["pops_found"] + int(r.get("pops_candidates") or 0) == r["pops_true"]
+            if r.get("pops_found") is not None else False for r in ok),
+        "candidates_spurious": sum(1 for r in ok if int(r.get("pops_candidates") or 0) > 0
+                                   and r.get("pops_found") == r.get("pops_true")),
         "order_wrong_count": sum(1 for r in ok if _true(r.get("order_wrong"))),
         "order_wrong_unflagged": sum(1 for r in ok if _true(r.get("order_wrong"))
                                      and not _true(r.get("order_flagged"))),

@@ -85,8 +85,9 @@ def _roi_flags(roi, options):
     return fitted & ambiguous_order(roi.ambiguity_delta_e, options.ambiguous_order_de), fitted
 
 
-def _joint_thickness(joint, roi, cens_frac, options, seed):
-    """The thickness mixture of the facets, and its judgement."""
+def _joint_thickness(joint, roi, cens_frac, options, scene):
+    """The thickness mixture of the facets, and its judgement; each candidate population
+    with the side of the square field (µm) that would decide it."""
     th = joint.thickness
     area = joint.area_px.astype(np.float64)
     # Facets whose colour the film model does not explain (dust, pit floors, mixed or dark
@@ -101,7 +102,9 @@ def _joint_thickness(joint, roi, cens_frac, options, seed):
                                 th.sigma_nm)
     fit = fit_thickness_mixture(th.thickness_nm[ok], sigma_nm=th.sigma_nm[ok], weights=area[ok],
                                 n_effective=regions, options=options,
-                                background=True, seed=seed)
+                                background=True, seed=scene.seed)
+    _describe_candidates(fit, regions, th.delta_e, ok,
+                         joint.facets.size * float(np.prod(scene.pixel_size_um)))
     a_t = area[ok].sum()
     edge = float(area[ok & th.at_window_edge].sum() / a_t)
     amb = ok & ambiguous_order(th.delta_e_other_order - th.delta_e, options.ambiguous_order_de)
@@ -113,6 +116,24 @@ def _joint_thickness(joint, roi, cens_frac, options, seed):
                      "order_ambiguous_fraction": other})
     return fit, thickness_judgement(roi, options, edge_fraction=edge,
                                     other_order_fraction=other)
+
+
+def _describe_candidates(fit, regions, delta_e, ok, field_um2) -> None:
+    """Each candidate population's field side (µm) and its facets' colour misfit beside the
+    populations' (a candidate the film does not explain is mis-read regions)."""
+    cands = fit.info.get("candidates", [])
+    if not cands:
+        return
+    region = np.where(ok, regions.patch_region, -1)
+    taken = np.isin(region, np.concatenate([c.region_index for c in cands]))
+    rest = ok & ~taken & np.isfinite(delta_e)
+    pop_de = float(np.median(delta_e[rest])) if rest.any() else None
+    for c in cands:
+        mine = np.isin(region, c.region_index) & np.isfinite(delta_e)
+        c.delta_e = float(np.median(delta_e[mine])) if mine.any() else None
+        c.delta_e_populations = pop_de
+        if c.field_scale is not None:
+            c.decided_at_field_um = math.sqrt(c.field_scale * field_um2)
 
 
 def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed):
@@ -186,7 +207,7 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions) -> Di
     """
     cens_frac = (np.bincount(joint.facets.ravel(), weights=joint.censored.ravel(),
                              minlength=joint.area_px.size) / np.maximum(joint.area_px, 1))
-    tfit, tj = _joint_thickness(joint, roi, cens_frac, options, scene.seed)
+    tfit, tj = _joint_thickness(joint, roi, cens_frac, options, scene)
     nfit, nj = _joint_ndf(joint, model, cens_frac, scene.max_tilt_deg, options, scene.seed)
     return Distributions(tfit, nfit, tj, nj, *_roi_flags(roi, options))
 

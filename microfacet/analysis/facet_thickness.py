@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.lazy import load
+from .colour_image import mean_colour_noise
 from .options import JointOptions
 from .search import coarse_to_fine, refine
 
@@ -174,13 +175,15 @@ def _fine(model, tilt, mean_lab, d_k, step):
     return d, np.sqrt(np.maximum(m.vertex, 0.0)), m.curvature / step ** 2
 
 
-def _sigma(model, fine, n_px, tilt, tilt_sigma_deg, noise_de, hw):
+def _sigma(model, fine, n_px, tilt, tilt_sigma_deg, search, hw):
     """1-σ thickness error: the colour error of the facet's mean per Lab component (noise
-    over its pixels, or the misfit when larger) through the curvature of ΔE², plus the
-    thickness equivalent of the tilt's error; at most the SD of a uniform spread over the
-    window (a flat ΔE curve). ``fine`` is :func:`_fine`'s (thickness, ΔE, curvature)."""
+    over its pixels and the JPEG block error over its blocks, or the misfit when larger)
+    through the curvature of ΔE², plus the thickness equivalent of the tilt's error; at most
+    the SD of a uniform spread over the window (a flat ΔE curve). ``fine`` is
+    :func:`_fine`'s (thickness, ΔE, curvature)."""
     d, de, curv = fine
-    sc = np.maximum(noise_de / np.sqrt(n_px), de / math.sqrt(3.0))
+    sc = np.maximum(mean_colour_noise(search.noise_de, search.block_noise, n_px),
+                    de / math.sqrt(3.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         s2 = (sc * np.sqrt(2.0 / curv)) ** 2
     if tilt_sigma_deg is not None:
@@ -208,12 +211,14 @@ def _other_orders(model, tilt, mean_lab, d, window):
 @dataclass(frozen=True)
 class _Search:
     """How :func:`facet_thickness` searches: the whole range for another order and the
-    neighbouring orders (``thorough``), the final step, the colour noise, the tilts' error."""
+    neighbouring orders (``thorough``), the final step, the colour noise, the tilts' error,
+    the JPEG block error and the pixels that share it."""
 
     thorough: bool
     step_nm: float
     noise_de: float
     tilt_sigma_deg: np.ndarray | None
+    block_noise: tuple = (0.0, 64)
 
 
 def _chunk(model, colours, ii, tilt, options, search: _Search):
@@ -232,14 +237,15 @@ def _chunk(model, colours, ii, tilt, options, search: _Search):
     edge = (k == 0) | (k == offsets.size - 1)
     d, de, curv = _fine(model, th, lab, d_k, search.step_nm)
     ts = None if search.tilt_sigma_deg is None else search.tilt_sigma_deg[ii]
-    s = _sigma(model, (d, de, curv), colours.n_pixels[ii], th, ts, search.noise_de, hw)
+    s = _sigma(model, (d, de, curv), colours.n_pixels[ii], th, ts, search, hw)
     alt = (_other_orders(model, th, lab, d, (hw, offsets)) if search.thorough
            else np.full(ii.size, np.nan))
     return d, s, de, edge, alt
 
 
 def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOptions, *,
-                    tilt_sigma_deg=None, noise_de=1.0, thorough=True) -> FacetThickness:
+                    tilt_sigma_deg=None, noise_de=1.0, block_noise=(0.0, 64),
+                    thorough=True) -> FacetThickness:
     """Thickness per facet from its mean Lab at its tilt, within its interference order.
 
     The order is the ROI's (the window ±``order_window_fraction`` colour periods about the
@@ -263,6 +269,9 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
         Error of ``tilt_deg`` (adds ∂d/∂θ · σ_θ to the error).
     noise_de : float
         Colour noise per Lab component of one pixel.
+    block_noise : (float, int)
+        JPEG slices: the colour error per Lab component of a block's mean and the pixels
+        that share it (:attr:`~.colour_image.ColourImage.block_noise_de`, ``block_px``).
     thorough : bool
         Scan the whole range for another order and the neighbouring orders for
         ``delta_e_other_order``, at ``options.thickness_step_nm``; False (the exposure
@@ -278,7 +287,8 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
     out = np.full((5, S), np.nan)
     search = _Search(thorough, options.thickness_step_nm if thorough
                      else options.exposure_thickness_step_nm, noise_de,
-                     None if tilt_sigma_deg is None else np.asarray(tilt_sigma_deg, np.float64))
+                     None if tilt_sigma_deg is None else np.asarray(tilt_sigma_deg, np.float64),
+                     block_noise)
     idx = np.flatnonzero(has)
     for a in range(0, idx.size, _CHUNK):
         ii = idx[a:a + _CHUNK]

@@ -35,7 +35,7 @@ from ..core.errors import plain_params, render_params
 from .options import FitOptions
 
 __all__ = ["Judgement", "Reason", "analysis_warnings", "colour_tilt_contrast",
-           "mean_plane_tilt_deg", "ndf_judgement", "seed_ndf_judgement", "self_check_judgement",
+           "mean_plane_tilt_deg", "ndf_judgement", "order_check", "seed_ndf_judgement", "self_check_judgement",
            "thickness_judgement"]
 
 #: Mean ΔE00 of pure noise of σ per Lab component, E|N(0, σ²I₃)| = 2·sqrt(2/π)·σ: the
@@ -319,6 +319,59 @@ def _spike_warning(fit) -> Reason | None:
                   f"measure it", "fits.thickness_sd_floor_nm")
 
 
+#: Area fraction of the facets with a runner-up order within ``fits.ambiguous_order_de``
+#: above which the interference order is not established (where it exceeds one half, the
+#: thickness is not identified at all).
+ORDER_AMBIGUOUS_AREA = 0.05
+
+
+def order_check(dist, *, delta_e_median, noise_de, options: FitOptions) -> dict:
+    """Whether the thicknesses' interference order is established, and if not why.
+
+    The order is what the colours decide least firmly (orders ~110 nm apart can give close
+    colours): it is not established where a ROI's runner-up order fits within
+    ``options.ambiguous_order_de``, where more than :data:`ORDER_AMBIGUOUS_AREA` of the
+    facets' area has such a runner-up, where the film model does not explain the colours
+    (median ΔE00 more than ``options.excess_delta_e`` above its noise floor: the least-ΔE
+    order of a model that does not fit is no evidence; on the generalization sweep a scene
+    with unbalanced colours was read ~110 nm off so, with no ambiguity), or where the
+    thickness is not identified. Returns ``{"established": bool, "reasons": [str]}``
+    (summary.json ``thickness.order``).
+    """
+    why = []
+    if int(dist.roi_ambiguous.sum()):
+        why.append(f"{int(dist.roi_ambiguous.sum())} ROI(s) with an ambiguous order")
+    frac = (dist.thickness.info.get("order_ambiguous_fraction") or 0.0) \
+        if dist.thickness is not None else 0.0
+    if frac > ORDER_AMBIGUOUS_AREA:
+        why.append(f"{100 * frac:.0f} % of the facets' area has a runner-up order")
+    floor = MEDIAN_NOISE_FLOOR_FACTOR * noise_de
+    if delta_e_median is not None and delta_e_median > floor + options.excess_delta_e:
+        why.append(f"the film model does not explain the colours (median dE00 "
+                   f"{delta_e_median:.2f}, noise floor {floor:.2f})")
+    if not dist.thickness_judgement.identified:
+        why.append("the thickness is not identified")
+    return {"established": not why, "reasons": why}
+
+
+def _candidate_warning(fit) -> Reason | None:
+    """Populations the regions suggest and the field is too small to decide."""
+    cands = [c for c in ((fit.info.get("candidates") or []) if fit is not None else [])
+             if c.reported and c.decided_at_field_um is not None]
+    if not cands:
+        return None
+
+    def one(c):
+        n = f"{c.regions} region{'s' if c.regions > 1 else ''}"
+        return (f"{c.mean_nm:.1f} nm ({100 * c.area_fraction:.0f} %, {n}; a field of "
+                f"~{c.decided_at_field_um:.0f} um square would decide it)")
+
+    return Reason("thickness_candidates", f"candidate thickness population(s) the field is "
+                  f"too small to tell: {'; '.join(one(c) for c in cands)}; not in the "
+                  f"mixture (summary.json thickness.mixture.candidates)",
+                  "fits.thickness_min_component_samples")
+
+
 def _white_balance_warning(wb) -> Reason | None:
     """The colours look unbalanced: an estimate, no reference, a gain off 1 by > 3σ, > 3 %."""
     if wb is None or wb.estimate_rgb is None or wb.source != "none" or not wb.estimate_sigma:
@@ -359,10 +412,8 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
         ``(pixel_median_nm, disagrees)`` per ROI (:func:`~.consistency.roi_pixel_check`):
         a warning naming the ROIs whose single fit disagrees with their pixels.
     """
-    out = []
-    spike = _spike_warning(dist.thickness)
-    if spike is not None:
-        out.append(spike)
+    out = [r for r in (_spike_warning(dist.thickness), _candidate_warning(dist.thickness))
+           if r is not None]
     if map_check is not None and not map_check.consistent:
         out.append(Reason("mixture_map_mismatch", f"the thickness mixture does not summarize "
                           f"the per-pixel map: area fractions differ by up to "
@@ -388,6 +439,13 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
             out.append(Reason(f"not_identified_{'ndf' if what == 'NDF' else 'thickness'}",
                               f"{what} not identified{how}: {j.reason.text}",
                               j.reason.parameter))
+    frac = (dist.thickness.info.get("order_ambiguous_fraction") or 0.0) \
+        if dist.thickness is not None else 0.0
+    if ORDER_AMBIGUOUS_AREA < frac and dist.thickness_judgement.identified:
+        out.append(Reason("order_ambiguous_facets", f"{100 * frac:.0f} % of the facets' area "
+                          f"has a runner-up interference order within "
+                          f"{options.ambiguous_order_de:g} dE00: the order is not established "
+                          f"there (facets.csv other_order_delta_e)", _RANGE))
     amb = int(dist.roi_ambiguous.sum())
     if amb:
         out.append(Reason("ambiguous_rois", f"{amb} of {int(dist.roi_fitted.sum())} ROIs have "
@@ -398,7 +456,8 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
         out.append(Reason("colours_unexplained", f"median dE00 {delta_e_median:.2f} is "
                           f"{delta_e_median - floor:.2f} above the image's noise floor "
                           f"{floor:.2f}: the model does not explain the colours (wrong film, "
-                          f"illuminant or exposure?)", "optics.film"))
+                          f"illuminant, exposure or white balance?), so the thicknesses' "
+                          f"interference order is not established", "optics.film"))
     width = _ndf_width_deg(dist.ndf)
     if mean_plane_tilt is not None and width is not None \
             and mean_plane_tilt > options.sample_tilt_warn_fraction * width:

@@ -304,7 +304,8 @@ def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOption
             image, np.where(fitted, tilt_f, np.nan), model, options, seed=scene.seed))
         log.info("exposure refined on facets: %.4f", model.exposure)
     ft = facet_thickness(image.colours(), tilt_f, model, options, tilt_sigma_deg=tsig_f,
-                         noise_de=colour.noise_de)
+                         noise_de=colour.noise_de,
+                         block_noise=(colour.block_noise_de, colour.block_px))
     c_sig = _colour_sigma(image, ft, tilt_f, model, colour.noise_de)
     # facets tilted past the acceptance: more than half their pixels far darker than film
     dark = np.bincount(facets.ravel(), weights=colour.mask.steep.ravel(), minlength=S)

@@ -66,7 +66,7 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -78,7 +78,8 @@ from .sampling import Regions, Samples, collapse, prepare
 
 threadpoolctl = load("threadpoolctl")
 
-__all__ = ["MixtureFit", "choose_k", "fit_thickness_mixture"]
+__all__ = ["MixtureFit", "PopulationCandidate", "choose_k", "fit_thickness_mixture",
+           "population_candidates"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 
@@ -140,6 +141,8 @@ class MixtureFit:
                    degenerate=self.degenerate if isinstance(self.degenerate, str)
                    else bool(self.degenerate))
         out.update(self.info)
+        if "candidates" in out:
+            out["candidates"] = [c.to_json() for c in out["candidates"]]
         return json_safe(out)
 
 
@@ -351,6 +354,7 @@ class _Data:
     n_eff: float
     min_samples: float
     bounded: bool
+    n_bic: float = 1.0
 
 
 def _fit_k(k, d, sols, bg):
@@ -432,7 +436,7 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
     """
     opts = FitOptions() if options is None else options
     sd_floor_nm = opts.thickness_sd_floor_nm
-    n_regions = None
+    n_regions, regions = None, n_effective
     if isinstance(n_effective, Regions):
         n_regions, n_effective = n_effective.count, max(1.0, n_effective.effective_count)
     x, a, s, n, n_eff = prepare(Samples(thickness_nm, sigma_nm, weights, group, n_effective,
@@ -463,7 +467,7 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
     # admissible. Without, it is a spike on repeated values: not admissible.
     d = _Data(x, a, v, (xc, vc, ac), s2_floor, spread, n_count,
               opts.thickness_min_component_samples,
-              float(np.average(v, weights=a)) >= 4.0 * s2_floor)
+              float(np.average(v, weights=a)) >= 4.0 * s2_floor, n_eff)
     sols, lls, fits, bgw = {}, {}, {}, {}
     with single_thread():
         for k in range(1, k_max + 1):
@@ -478,10 +482,150 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
     comps = [(float(a_), float(m_), float(math.sqrt(c_))) for a_, m_, c_ in zip(w, mu, s2)
              if a_ > 1e-12]
     mixture = ThicknessMixture(comps)
+    info = {"inadmissible_k": sorted(set(bics) - set(ok)), "background_weight": bgw[k_best],
+            "sd_at_floor": [i for i, c in enumerate(mixture.components)
+                            if c[2] <= sd_floor_nm * 1.0001]}
+    if n_regions is not None:
+        info["candidates"] = population_candidates(d, (sols[k_best], lls[k_best], bg),
+                                                   regions, k_best)
     return MixtureFit(mixture, bics[k_best], bics, n, n_eff,
                       k_note(k_max, opts.max_components, uniq.size, n_count, "values"), x.size,
-                      lls, bic_margin=margin,
-                      info={"inadmissible_k": sorted(set(bics) - set(ok)),
-                            "background_weight": bgw[k_best],
-                            "sd_at_floor": [i for i, c in enumerate(mixture.components)
-                                            if c[2] <= sd_floor_nm * 1.0001]})
+                      lls, bic_margin=margin, info=info)
+
+
+# ------------------------------------------------------------------------- candidates
+
+#: A region farther than this many SD (its own error, the population's SD and the floor in
+#: quadrature) from every population of the chosen mixture is not explained by it.
+CANDIDATE_Z = 4.0
+#: A candidate whose facets' median ΔE00 exceeds this multiple of the populations' (+0.5)
+#: is not explained by the film model: mis-read regions (a wrong order, dust), not a
+#: population.
+CANDIDATE_MISFIT = 1.5
+#: Largest area multiple of the field at which a reported candidate would be decided (a
+#: field 4× the side); candidates that need more are a few regions' worth of area, kept in
+#: summary.json only.
+CANDIDATE_MAX_FIELD_SCALE = 16.0
+#: The field scales tried for the size at which a candidate would be decided (area ×).
+_FIELD_SCALES = np.geomspace(1.0, 1e4, 401)
+
+
+@dataclass
+class PopulationCandidate:
+    """A population the regions suggest but the field does not decide
+    (:func:`population_candidates`).
+
+    Attributes
+    ----------
+    mean_nm : float
+        Area-weighted mean thickness of its regions (nm).
+    sd_nm : float or None
+        Area-weighted SD of its regions' thicknesses (None: one region).
+    area_fraction : float
+        Its regions' share of the area of all regions with a thickness.
+    regions : int
+        Regions it covers.
+    field_scale : float or None
+        How many times the analysed field's area would decide it as a population (the BIC
+        of the mixture with it as a component, at the same composition, beats the chosen
+        one's by the parsimony margin, and it and K + 1 components pass the region limits);
+        None: no field up to 10⁴ × would (it does not look like a population).
+    region_index : ndarray of int
+        Its regions (indices into the fit's :class:`~.sampling.Regions`; not written).
+    delta_e : float or None
+        Median colour misfit (ΔE00) of its facets, where the caller knows it.
+    delta_e_populations : float or None
+        The same of the facets the mixture's populations explain.
+    decided_at_field_um : float or None
+        Side of the square field that ``field_scale`` means, where the caller knows the
+        pixel size.
+    """
+
+    mean_nm: float
+    sd_nm: float | None
+    area_fraction: float
+    regions: int
+    field_scale: float | None
+    region_index: np.ndarray = field(default_factory=lambda: np.zeros(0, int), repr=False)
+    delta_e: float | None = None
+    delta_e_populations: float | None = None
+    decided_at_field_um: float | None = None
+
+    @property
+    def colour_explained(self) -> bool | None:
+        """Its colours fit the film as well as the populations' (ΔE00 at most
+        :data:`CANDIDATE_MISFIT` × theirs, and +0.5): a population, not mis-read regions."""
+        if self.delta_e is None or self.delta_e_populations is None:
+            return None
+        return self.delta_e <= CANDIDATE_MISFIT * self.delta_e_populations + 0.5
+
+    @property
+    def reported(self) -> bool:
+        """Reported to the user as a candidate population (warning, report): its colour is
+        not unexplained and a field of at most :data:`CANDIDATE_MAX_FIELD_SCALE` × the area
+        would decide it."""
+        return (self.colour_explained is not False and self.field_scale is not None
+                and self.field_scale <= CANDIDATE_MAX_FIELD_SCALE)
+
+    def to_json(self) -> dict:
+        out = {k: v for k, v in asdict(self).items() if k != "region_index"}
+        out.update(colour_explained=self.colour_explained, reported=self.reported)
+        return json_safe(out)
+
+
+def population_candidates(d, chosen, regions: Regions, k) -> list[PopulationCandidate]:
+    """Groups of regions that no population of the chosen ``k``-component mixture explains.
+
+    A region is unexplained when its thickness is more than :data:`CANDIDATE_Z` SD from
+    every component; unexplained regions are grouped by thickness (neighbours in value
+    closer than :data:`CANDIDATE_Z` SD of their difference, with the components' median SD
+    as a population's spread, are one group). Each group is a candidate: a population too
+    small for this field (it rests on one or two regions, and the background or a wider
+    component absorbs it) or a few mis-read regions. ``field_scale`` tells them apart: the
+    area the field would need, at the same composition, for the model choice to take it.
+
+    ``d`` is the fit's prepared data (:class:`_Data`), ``chosen`` ``((w, mu, s2), ℓ, bg)``
+    of the chosen K. Returns the candidates, heaviest first.
+    """
+    (w, mu, s2), _, _ = chosen
+    ok = np.isfinite(regions.value) & (regions.area > 0)
+    x, sg, area = regions.value[ok], regions.sigma[ok], regions.area[ok].astype(np.float64)
+    far = np.all(np.abs(x[:, None] - mu) > CANDIDATE_Z * np.sqrt(
+        s2 + sg[:, None] ** 2 + d.s2_floor), axis=1)
+    if not far.any():
+        return []
+    o = np.argsort(x[far])
+    xs, ss, aa = x[far][o], sg[far][o], area[far][o]
+    idx = np.flatnonzero(ok)[far][o]
+    s_pop2 = float(np.median(s2))
+    gap = np.diff(xs) > CANDIDATE_Z * np.sqrt(ss[1:] ** 2 + ss[:-1] ** 2 + 2.0 * s_pop2)
+    group = np.concatenate([[0], np.cumsum(gap)])
+    out = []
+    for g in range(int(group[-1]) + 1):
+        m = group == g
+        mean = float(np.average(xs[m], weights=aa[m]))
+        var = float(np.average((xs[m] - mean) ** 2, weights=aa[m]))
+        frac = float(aa[m].sum() / area.sum())
+        comp = (frac, mean, max(var, float(np.max(ss[m] ** 2)), s_pop2))
+        out.append(PopulationCandidate(mean, math.sqrt(var) if m.sum() > 1 else None, frac,
+                                       int(m.sum()), _field_scale(d, chosen, comp, k),
+                                       idx[m]))
+    return sorted(out, key=lambda c: -c.area_fraction)
+
+
+def _field_scale(d, chosen, comp, k) -> float | None:
+    """Smallest area multiple ``f`` of the field at which the mixture with ``comp = (weight,
+    mean, variance)`` added beats the chosen one: ``−f ΔL + 3 log(f n) ≤ −``
+    :data:`PARSIMONY_BIC` (ΔL: twice the gain in log-likelihood per field, in independent
+    observations), with ``f`` × the regions enough for the component and for 3K + 2
+    parameters."""
+    (w, mu, s2), ll_k, bg = chosen
+    frac, mean, var = comp
+    start = (np.append(w * (1.0 - frac), frac), np.append(mu, mean),
+             np.append(s2, max(var, d.s2_floor)))
+    ll = _xd_em(d.collapsed, start, d.s2_floor, bg=bg)[3]
+    gain = 2.0 * (ll - ll_k) * d.n_bic / float(d.a.sum())
+    f = _FIELD_SCALES
+    decided = ((-f * gain + 3.0 * np.log(f * d.n_bic) <= -PARSIMONY_BIC)
+               & (f * frac * d.n_eff >= d.min_samples) & (3 * k + 2 <= f * d.n_eff))
+    return float(f[np.argmax(decided)]) if gain > 0 and decided.any() else None

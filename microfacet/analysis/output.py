@@ -36,6 +36,7 @@ from .identification import (
     MEDIAN_NOISE_FLOOR_FACTOR,
     NOISE_FLOOR_FACTOR,
     mean_plane_tilt_deg,
+    order_check,
 )
 from .iso25178 import REFERENCES, areal_parameters
 
@@ -187,7 +188,10 @@ def write_results(result, out, *, overwrite=False) -> Path:
 
 def _inputs(r) -> Inputs:
     st = r.stack
-    return Inputs(stack=str(st.path), shape=list(st.shape), n_slices=st.n_slices,
+    jpeg = None if st.jpeg is None else {"quality": st.jpeg.quality,
+                                          "dc_steps": list(st.jpeg.dc_steps),
+                                          "chroma_block_px": st.jpeg.chroma_block_px}
+    return Inputs(stack=str(st.path), shape=list(st.shape), n_slices=st.n_slices, jpeg=jpeg,
                   pixel_size_um=st.pixel_size_um,
                   z_um_range=([float(np.min(st.z_um)), float(np.max(st.z_um))]
                               if st.n_slices else None),
@@ -213,7 +217,9 @@ def _thickness_section(r) -> ThicknessSection:
                     "delta_e": float(roi.mean_delta_e[i]),
                     "runner_up_thickness_nm": float(roi.runner_up_thickness_nm[i]),
                     "runner_up_delta_e": float(roi.runner_up_delta_e[i])}
-                   for i in np.flatnonzero(dist.roi_ambiguous)]))
+                   for i in np.flatnonzero(dist.roi_ambiguous)]),
+        order=order_check(dist, delta_e_median=r.delta_e_stats["median"],
+                          noise_de=r.colour.noise_de, options=r.options.fits))
 
 
 def _ndf_section(r) -> NdfSection:
@@ -247,7 +253,8 @@ def build_summary(r) -> Summary:
         delta_e=DeltaE(**r.delta_e_stats, noise_floor_mean=NOISE_FLOOR_FACTOR * noise,
                        noise_floor_median=MEDIAN_NOISE_FLOOR_FACTOR * noise),
         masked_fraction=r.colour.mask.fraction, mask=r.colour.mask.fractions(),
-        colour_noise_de=noise, tilt_information=_tilt_information(r.pixels),
+        colour_noise_de=noise, colour_block_noise_de=r.colour.block_noise_de,
+        tilt_information=_tilt_information(r.pixels),
         height=_height_section(r), iso25178=_iso25178_section(r),
         colour_table={"spectral_step_nm": table.spectral_step_nm,
                       "spectral_error_de00": table.spectral_error_de00,

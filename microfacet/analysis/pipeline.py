@@ -165,7 +165,7 @@ def _colour(st, focus, options, scene):
     colour = measure_colour(focus.all_in_focus, options.mask, color_space=st.color_space,
                             bit_depth=16 if st.dtype == np.uint16 else 8,
                             illuminant=scene.illuminant,
-                            delta_e_method=options.optics.delta_e_method)
+                            delta_e_method=options.optics.delta_e_method, jpeg=st.jpeg)
     if colour.mask.mask.all():
         raise InputError(no_colour_message(st, colour.mask, "every pixel is masked",
                                            options.mask))

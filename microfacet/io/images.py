@@ -26,7 +26,7 @@ Examples
 >>> p = pathlib.Path(tempfile.mkdtemp()) / "a.png"
 >>> write_image(p, np.full((4, 5, 3), 0.5))
 >>> image_info(p, "a.png")
-ImageInfo(shape=(4, 5), dtype=dtype('uint8'), channels=3)
+ImageInfo(shape=(4, 5), dtype=dtype('uint8'), channels=3, jpeg=None)
 >>> decode_image(p, "a.png")[0, 0].tolist()
 [128, 128, 128]
 """
@@ -50,7 +50,7 @@ from ..core.pixels import pixel_size_yx
 cv2 = load("cv2")
 tifffile = load("tifffile")
 
-__all__ = ["ImageInfo", "MultiPageTiff", "convert_samples", "decode_image", "image_info",
+__all__ = ["ImageInfo", "JpegTables", "MultiPageTiff", "convert_samples", "decode_image", "image_info",
            "png_pixel_size_um", "read_png", "read_tiff_headers", "write_float_tiff", "write_image"]
 
 #: File suffixes accepted for slices and export images (lower case).
@@ -61,12 +61,35 @@ IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
 
 
 @dataclass(frozen=True)
+class JpegTables:
+    """What a JPEG's quantization tables say of its compression error.
+
+    Attributes
+    ----------
+    dc_steps : tuple of int
+        Quantization step of the DC coefficient (the 8 × 8 block's mean × 8, code values) of
+        the luma table and of the chroma table (the luma's again for a grey JPEG).
+    chroma_block_px : int
+        Pixels one chroma block covers: 64, or 128 / 256 with 4:2:2 / 4:2:0 subsampling.
+    quality : int or None
+        The IJG quality (libjpeg, OpenCV, Pillow) whose luma table this is; None: not an
+        IJG-scaled table (a camera's own).
+    """
+
+    dc_steps: tuple[int, int]
+    chroma_block_px: int
+    quality: int | None
+
+
+@dataclass(frozen=True)
 class ImageInfo:
-    """What a header tells about one image: ``(H, W)``, numpy dtype, channels (1 or 3)."""
+    """What a header tells about one image: ``(H, W)``, numpy dtype, channels (1 or 3) and,
+    for a JPEG, its quantization (:class:`JpegTables`)."""
 
     shape: tuple[int, int]
     dtype: np.dtype
     channels: int
+    jpeg: JpegTables | None = None
 
 
 def _png_info(path: Path, where: str) -> ImageInfo:
@@ -92,8 +115,58 @@ def _png_info(path: Path, where: str) -> ImageInfo:
 _SOF_MARKERS = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
 
 
+#: The IJG (ITU-T T.81 Annex K) luminance quantization table at quality 50.
+_IJG_LUMA = np.array([16, 11, 10, 16, 24, 40, 51, 61, 12, 12, 14, 19, 26, 58, 60, 55, 14, 13,
+                      16, 24, 40, 57, 69, 56, 14, 17, 22, 29, 51, 87, 80, 62, 18, 22, 37, 56,
+                      68, 109, 103, 77, 24, 35, 55, 64, 81, 104, 113, 92, 49, 64, 78, 87, 103,
+                      121, 120, 101, 72, 92, 95, 98, 112, 100, 103, 99])
+
+
+def ijg_quality(table) -> int | None:
+    """The IJG quality 1-100 whose scaled luminance table is ``table`` (64 steps, any
+    order), or None.
+
+    >>> t = np.clip((_IJG_LUMA * (200 - 2 * 90) + 50) // 100, 1, 255)
+    >>> ijg_quality(t[::-1]), ijg_quality(np.full(64, 3))
+    (90, None)
+    """
+    want = np.sort(np.asarray(table, dtype=np.int64))
+    for q in range(1, 101):
+        scale = 5000 // q if q < 50 else 200 - 2 * q
+        if np.array_equal(np.sort(np.clip((_IJG_LUMA * scale + 50) // 100, 1, 255)), want):
+            return q
+    return None
+
+
+def _dqt_tables(seg: bytes) -> dict:
+    """The quantization tables of one DQT segment: id → 64 steps (zig-zag order)."""
+    out, i = {}, 0
+    while i < len(seg):
+        pq, tq = seg[i] >> 4, seg[i] & 15
+        n = 128 if pq else 64
+        vals = seg[i + 1:i + 1 + n]
+        if len(vals) < n:
+            break
+        out[tq] = (np.frombuffer(vals, ">u2") if pq else np.frombuffer(vals, np.uint8)).astype(
+            np.int64)
+        i += 1 + n
+    return out
+
+
+def _jpeg_tables(tables: dict, comps: list) -> JpegTables | None:
+    """Compression of a frame with components ``(id, H·V sampling, table id)``."""
+    try:
+        luma = tables[comps[0][2]]
+        chroma = tables[comps[1][2]] if len(comps) > 1 else luma
+    except (KeyError, IndexError):
+        return None
+    block = 64 * max(1, comps[0][1] // max(1, comps[1][1])) if len(comps) > 1 else 64
+    return JpegTables((int(luma[0]), int(chroma[0])), int(block), ijg_quality(luma))
+
+
 def _jpeg_info(path: Path, where: str) -> ImageInfo:
     size = path.stat().st_size
+    tables, comps = {}, []
     with open(path, "rb") as fh:
         if fh.read(2) != b"\xff\xd8":
             raise InputError(f"{where}: not a JPEG file (no SOI marker)")
@@ -116,11 +189,16 @@ def _jpeg_info(path: Path, where: str) -> ImageInfo:
             if len(seglen_b) < 2:
                 break
             seglen = struct.unpack(">H", seglen_b)[0]
+            if m == 0xDB:
+                tables.update(_dqt_tables(fh.read(max(0, seglen - 2))))
+                continue
             if m in _SOF_MARKERS:
-                seg = fh.read(6)
+                seg = fh.read(max(6, seglen - 2))
                 if len(seg) < 6:
                     break
-                precision, h, w, ncomp = struct.unpack(">BHHB", seg)
+                precision, h, w, ncomp = struct.unpack(">BHHB", seg[:6])
+                comps = [(seg[6 + 3 * k], (seg[7 + 3 * k] >> 4) * (seg[7 + 3 * k] & 15),
+                          seg[8 + 3 * k]) for k in range(ncomp) if 9 + 3 * k <= len(seg)]
                 info = (precision, h, w, ncomp)
                 break
             fh.seek(seglen - 2, os.SEEK_CUR)
@@ -137,7 +215,7 @@ def _jpeg_info(path: Path, where: str) -> ImageInfo:
         raise InputError(f"{where}: JPEG has zero size {w}x{h}")
     if ncomp not in (1, 3):
         raise InputError(f"{where}: JPEG with {ncomp} components is not supported (grey or RGB)")
-    return ImageInfo((h, w), np.dtype(np.uint8), ncomp)
+    return ImageInfo((h, w), np.dtype(np.uint8), ncomp, _jpeg_tables(tables, comps))
 
 
 def _tiff_page_info(page, where: str, file_size: int) -> ImageInfo:

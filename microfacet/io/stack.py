@@ -40,7 +40,7 @@ import numpy as np
 from ..core.defaults import DEFAULT_ILLUMINANT
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
-from .images import IMAGE_SUFFIXES, MultiPageTiff, convert_samples, decode_image
+from .images import IMAGE_SUFFIXES, JpegTables, MultiPageTiff, convert_samples, decode_image
 from .jsonfile import read_json
 from .limits import Limits
 from .stack_checks import DEFAULT_ILLUMINATION, FORMAT, find_images, stack_fields, warn_height_unit
@@ -108,6 +108,9 @@ class Stack:
         The whole stack.json as read (extra keys included).
     series : int
         The z-stack of a vendor file the slices come from (0 for other stacks).
+    jpeg : JpegTables or None
+        JPEG slices: the coarsest slice's quantization (largest luma DC step), which the
+        colour noise model counts; None for lossless slices.
     sources : dict
         Where ``"pixel_size_um"`` and ``"z_um"`` came from: ``"stack.json"``, ``"given"``
         (the caller's value), ``"instrument file NAME"`` or ``"ImageJ metadata of NAME"`` (or
@@ -134,6 +137,7 @@ class Stack:
     sources: dict = field(default_factory=dict)
     tiff_uniform: bool = field(default=False, repr=False)
     series: int = 0
+    jpeg: JpegTables | None = None
 
     def __post_init__(self):
         reader = None

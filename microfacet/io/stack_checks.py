@@ -469,7 +469,9 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
         film=values["film"], substrate=values["substrate"],
         exposure=None if exposure is None else float(exposure),
         export_height_path=export.height, export_image_path=export.image, meta=meta,
-        tiff_uniform=tiff_uniform, series=c.series)
+        tiff_uniform=tiff_uniform, series=c.series,
+        jpeg=max((i.jpeg for _, i in c.infos if i.jpeg is not None), default=None,
+                 key=lambda j: j.dc_steps))
 
 
 #: Median |slope| of a height map above which its unit is almost surely wrong (real

@@ -50,11 +50,13 @@ MAX_SUMMARY_BYTES = 4 << 20
 
 @dataclass
 class Inputs:
-    """What was analysed: the stack, its size, pixel size, slices, and the optics modelled."""
+    """What was analysed: the stack, its size, pixel size, slices (and their JPEG
+    compression), and the optics modelled."""
 
     stack: str = ""
     shape: list = field(default_factory=list)
     n_slices: int = 0
+    jpeg: dict | None = None
     pixel_size_um: object = None
     z_um_range: list | None = None
     height_source: str = ""
@@ -83,10 +85,12 @@ class RoiCounts:
 @dataclass
 class ThicknessSection:
     """``mixture``: the components, the fit's statistics, ``identified``, ``reason``,
-    ``reason_code``, ``reason_parameter``; ``roi``: :class:`RoiCounts`."""
+    ``reason_code``, ``reason_parameter``; ``roi``: :class:`RoiCounts`; ``order``: whether
+    the interference order is established (``established``, ``reasons``)."""
 
     mixture: dict = field(default_factory=dict)
     roi: RoiCounts = field(default_factory=RoiCounts)
+    order: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -173,6 +177,7 @@ class Summary:
     masked_fraction: float | None = None
     mask: dict = field(default_factory=dict)
     colour_noise_de: float | None = None
+    colour_block_noise_de: float | None = None
     tilt_information: dict = field(default_factory=dict)
     height: dict = field(default_factory=dict)
     iso25178: Iso25178Section | None = None

@@ -96,6 +96,17 @@ def _means_at_floor(ctx) -> set:
     return {comps[i][1] for i in idx if i < len(comps)}
 
 
+def _candidate_lines(ax, ctx) -> int:
+    """The reported candidate populations (``thickness.mixture.candidates``) as dashed
+    lines: a population the field is too small to decide. Returns the legend entries."""
+    cands = [c for c in ctx.res.get("thickness", "mixture", "candidates") or []
+             if c.get("reported")]
+    for i, c in enumerate(cands):
+        ax.axvline(c["mean_nm"], color="#b05000", ls="--", lw=0.9, zorder=4,
+                   label=None if i else "candidate population (field too small to decide)")
+    return int(bool(cands))
+
+
 def _thickness_panel(ax, ctx):
     """Seed Fig. 18a: thickness histogram, mixture components and the ROI thicknesses."""
     ok, why = ctx.identification("thickness")
@@ -131,6 +142,7 @@ def _thickness_panel(ax, ctx):
                 mfc="white", mec="k", transform=ax.get_xaxis_transform(), clip_on=False,
                 zorder=5, label=f"ROI thickness ({roi_t.size} ROI{'s' * (roi_t.size > 1)})")
         n += 1
+    n += _candidate_lines(ax, ctx)
     _legend_room(ax, n, top=_clip_top(ax, x, dens, _curves(ax, x)))
     _legend(ax, x, dens)
     if not ok:
@@ -173,6 +185,7 @@ def _tilt_panel(ax, ctx):
         ax.axvline(mt, color="0.3", lw=0.8, ls=":",
                    label=f"measurable limit asin(NA)/2 = {mt:.1f}°")
         n += 1
+    n += _candidate_lines(ax, ctx)
     _legend_room(ax, n, top=_clip_top(ax, x, dens, _curves(ax, x)))
     _legend(ax, x, dens)
     if not ok:

@@ -290,6 +290,8 @@ def score_scene(results: Path, truth: Path) -> dict:
             "regions_scored": reg["n_scored"], "regions_true": reg["n_regions"],
             "pops_true": true_population_count(meta["populations"]),
             "pops_found": len(thick.components) if thick else 0,
+            "pops_candidates": sum(1 for c in (res.get("thickness", "mixture", "candidates")
+                                               or []) if c.get("reported")),
             "lobes_true": len(meta["lobes"]), "lobes_found": len(lobes),
             "identified": ndf_identified(res.summary),
             "ndf_w1_deg": ndf_w1_deg(lobes, np.load(truth / "tilt_deg.npy"),
@@ -318,14 +320,11 @@ WRONG_ORDER_NM = 20.0
 
 
 def order_flagged(summary) -> bool:
-    """The analysis said the interference order is uncertain: a ROI with an ambiguous order,
-    ≥ 5 % of the facets' area with a runner-up order within the ambiguity margin, or the
-    thickness distribution not identified."""
-    th = summary.get("thickness") or {}
-    mix, roi = th.get("mixture") or {}, th.get("roi") or {}
-    return bool((roi.get("ambiguous_count") or 0) > 0
-                or (mix.get("order_ambiguous_fraction") or 0.0) >= 0.05
-                or mix.get("identified") is False)
+    """The analysis said the interference order is not established (summary.json
+    ``thickness.order``: an ambiguous ROI, ≥ 5 % of the facets' area with a runner-up order,
+    colours the film model does not explain, or the thickness not identified)."""
+    order = (summary.get("thickness") or {}).get("order") or {}
+    return order.get("established") is False
 
 
 def white_balance_errors(wb, true_gains) -> dict:
@@ -354,6 +353,7 @@ def scene_row(name, p, on, truth: Path) -> dict:
            "relief_file": p.to_json()["relief_file"] or "",
            "variations": " ".join(on) or "-",
            "noise_pct": noise_pct(p), "film": p.film, "substrate": p.substrate,
+           "exposure": p.exposure, "bit_depth": p.bit_depth,
            "thickness_means_nm": " ".join(f"{c.mean_nm:.0f}" for c in p.thickness),
            "thickness_span_nm": max(c.mean_nm for c in p.thickness)
            - min(c.mean_nm for c in p.thickness),
@@ -402,10 +402,11 @@ def run_mode(mode, plan, gen, work: Path, jobs, scheduler):
 
 
 COLUMNS = ["name", "mode", "seed", "world", "relief_file", "status", "reason", "gen_s",
-           "analysis_s", "variations",
+           "analysis_s", "variations", "exposure", "bit_depth",
            "textured", "texture_codes", "groove_fraction", "noise_pct", "film", "substrate",
            "thickness_means_nm", "thickness_span_nm", "lobes_deg", "region_mae_nm",
-           "region_median_ae_nm", "regions_scored", "regions_true", "pops_found", "pops_true",
+           "region_median_ae_nm", "regions_scored", "regions_true", "pops_found", "pops_candidates",
+           "pops_true",
            "lobes_found", "lobes_true", "identified", "ndf_w1_deg", "lobe_rms_ratio",
            "censored_fraction", "past_limit_fraction", "height_coverage", "de_mean", "de_floor",
            "de_excess", "masked_fraction", "order_wrong", "order_flagged", "wb_true_r",
@@ -442,15 +443,59 @@ def summary_table(summaries) -> str:
         cells = []
         for s in summaries.values():
             v = s[key]
-            txt = "n/a" if not np.isfinite(v) else (f"{100 * v:.0f} %" if "%" in target
-                                                     or key.endswith(("_ok", "_all",
-                                                                      "_textured"))
-                                                     else fmt(v))
+            txt = ("n/a" if not np.isfinite(v) else f"{100 * v:.0f} %" if "%" in target
+                   or key.endswith(("_ok", "_all", "_textured", "_candidates"))
+                   else str(v) if isinstance(v, int) else fmt(v))
             if ok is not None and np.isfinite(v):
                 txt += " ✓" if ok(v) else " ✗"
             cells.append(txt)
         body.append([label, target] + cells)
     return md_table(["score", "target"] + modes, body)
+
+
+#: The camera variations of the per-variation table: label → test of a row (None: off).
+CAMERA_VARIATIONS = {
+    "JPEG slices (quality 70-95)": lambda r: _flag(r.get("v_jpeg")),
+    "16-bit slices": lambda r: "16" in str(r.get("bit_depth", "")),
+    "white-balance error": lambda r: _flag(r.get("v_white_balance")),
+    "exposure < 0.9": lambda r: _num(r.get("exposure")) < 0.9,
+}
+
+
+def _flag(v) -> bool:
+    return v in (1, "1", True, "True")
+
+
+def _num(v) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def variation_table(rows) -> str:
+    """Markdown: per camera variation (on / off), the scenes, the fraction with the true
+    population count (and counting reported candidates), the median region MAE and the
+    wrong-order scenes without a flag, for each mode."""
+    from pipelines._scoring import summarize
+
+    body = []
+    for mode in sorted({r["mode"] for r in rows}):
+        done = [r for r in rows if r["mode"] == mode]
+        for label, test in CAMERA_VARIATIONS.items():
+            for on in (True, False):
+                sel = [r for r in done if bool(test(r)) == on]
+                if not sel:
+                    continue
+                s = summarize(sel)
+                body.append([mode, label, "on" if on else "off", str(len(sel)),
+                             f"{100 * s['populations_ok']:.0f} %",
+                             f"{100 * s['populations_ok_candidates']:.0f} %",
+                             fmt(s["region_mae_median_nm"]),
+                             f"{s['order_wrong_unflagged']} of {s['order_wrong_count']}"])
+    return md_table(["mode", "variation", "", "scenes", "populations right",
+                     "… counting candidates", "region MAE (nm)",
+                     "wrong order unflagged"], body)
 
 
 def plot(rows, path: Path) -> None:
@@ -536,4 +581,5 @@ def run(*, quick: bool, out: Path, n=30, seed=0, size="256x256", slices=16, mode
     plot(rows, out / "generalization.png")
     note("\n" + per_scene_table(rows) + "\n")
     note(f"{header}\nper-scene rows: {csv_path}; plot: {out / 'generalization.png'}")
-    return summary_table(summaries)
+    return (summary_table(summaries) + "\n\nPer camera variation (scenes with it on and "
+            "off):\n\n" + variation_table(rows))

@@ -7,6 +7,7 @@ import pytest
 from microfacet.analysis.colour_image import estimate_colour_noise, quantization_noise_de
 
 KW = {"illuminant": "D65", "delta_e_method": "CIEDE2000"}
+KW_LAB = {"illuminant": "D65"}
 
 
 def test_noise_estimate_from_neighbours():
@@ -59,3 +60,38 @@ def test_measure_colour_is_the_mask_lab_and_noise_of_the_encoded_image():
     q = quantization_noise_de(flat.encoded, flat.mask.mask, bit_depth=8, **KW)
     assert q > 0 and flat.noise_de == pytest.approx(q)
     assert flat.bit_depth == 8
+
+
+def test_compression_noise_is_the_block_mean_error_a_real_jpeg_leaves(tmp_path):
+    """A real encoder (libjpeg through Pillow, 4:4:4) on an image of 8 × 8 blocks of random
+    colours with pixel noise of 3 code values: the ΔE00 between each block's mean before and
+    after (the AC terms sum to zero over a block: only the DC rounding moves it) is the
+    error :func:`compression_noise_de` predicts from the file's DC steps (median/1.54 per
+    component), and it scales with the step."""
+    from PIL import Image
+
+    from microfacet.analysis.colour_image import compression_noise_de
+    from microfacet.colour.difference import delta_e
+    from microfacet.colour.srgb import srgb_to_lab
+    from microfacet.io.images import image_info
+
+    rng = np.random.default_rng(4)
+    blocks = rng.integers(60, 200, (24, 24, 3)).astype(np.float64)
+    img = np.clip(np.repeat(np.repeat(blocks, 8, 0), 8, 1) + rng.normal(0, 3, (192, 192, 3)),
+                  0, 255).round().astype(np.uint8)
+    before = img.reshape(24, 8, 24, 8, 3).mean(axis=(1, 3)) / 255.0
+    got = {}
+    for q in (30, 60):
+        p = tmp_path / f"{q}.jpg"
+        Image.fromarray(img).save(p, quality=q, subsampling=0)
+        with Image.open(p) as im:
+            dec = np.asarray(im.convert("RGB"), np.float64)
+        after = dec.reshape(24, 8, 24, 8, 3).mean(axis=(1, 3)) / 255.0
+        de = delta_e(srgb_to_lab(before, **KW_LAB), srgb_to_lab(after, **KW_LAB),
+                     method="CIEDE2000")
+        jpeg = image_info(p, "x").jpeg
+        predicted = compression_noise_de(img / 255.0, np.zeros(img.shape[:2], bool), jpeg,
+                                         **KW)
+        assert predicted == pytest.approx(float(np.median(de) / 1.54), rel=0.25)
+        got[q] = (predicted, jpeg.dc_steps[0])
+    assert got[30][0] / got[60][0] == pytest.approx(got[30][1] / got[60][1], rel=0.2)

@@ -380,3 +380,50 @@ def test_a_component_at_the_sd_floor_is_said_not_measured():
          if r.code == "thickness_sd_not_measured"]
     assert len(w) == 1 and "108.4 nm (10 %)" in w[0].text and "131.5" not in w[0].text
     assert _warn(_dist()) == []                  # no component at the floor: no warning
+
+
+def test_a_reported_candidate_population_is_a_warning_naming_the_field():
+    from microfacet.analysis.mixtures import PopulationCandidate
+
+    cands = [PopulationCandidate(230.0, None, 0.04, 1, 3.5, decided_at_field_um=121.0,
+                                 delta_e=0.5, delta_e_populations=0.6),
+             PopulationCandidate(283.8, 1.8, 0.06, 64, 2.7, decided_at_field_um=90.0,
+                                 delta_e=2.6, delta_e_populations=0.8),     # misfit
+             PopulationCandidate(95.0, None, 0.003, 1, 400.0, decided_at_field_um=1100.0)]
+    fit = MixtureFit(ThicknessMixture([(0.5, 120.0, 1.0), (0.5, 150.0, 1.0)]), 0.0, {2: 0.0},
+                     10, 10.0, info={"candidates": cands})
+    w = [r for r in analysis_warnings(Distributions(fit, _fit(), Judgement(True),
+                                                    Judgement(True), np.zeros(0, bool),
+                                                    np.zeros(0, bool)),
+                                      delta_e_median=1.0, noise_de=1.0, mean_plane_tilt=None,
+                                      options=OPTIONS)
+         if r.code == "thickness_candidates"]
+    assert len(w) == 1
+    assert "230.0 nm (4 %, 1 region; a field of ~121 um square" in w[0].text
+    assert "283.8" not in w[0].text and "95.0" not in w[0].text
+    assert [c["reported"] for c in fit.to_json()["candidates"]] == [True, False, False]
+
+
+def test_order_check_says_why_the_order_is_not_established():
+    from microfacet.analysis.identification import MEDIAN_NOISE_FLOOR_FACTOR, order_check
+
+    def check(dist, median=1.0):
+        return order_check(dist, delta_e_median=median, noise_de=1.0, options=OPTIONS)
+
+    assert check(_dist()) == {"established": True, "reasons": []}
+    # a median ΔE00 just above the floor + the excess allowed: the model does not fit
+    bad = MEDIAN_NOISE_FLOOR_FACTOR + OPTIONS.excess_delta_e + 0.01
+    out = check(_dist(), median=bad)
+    assert not out["established"] and "does not explain the colours" in out["reasons"][0]
+    assert check(_dist(), median=bad - 0.02)["established"]
+    # facets with a close runner-up order: above 5 % of the area, not established, warned
+    d = _dist()
+    d.thickness.info["order_ambiguous_fraction"] = 0.06
+    assert check(d)["reasons"] == ["6 % of the facets' area has a runner-up order"]
+    assert [w.code for w in _warn(d)] == ["order_ambiguous_facets"]
+    d.thickness.info["order_ambiguous_fraction"] = 0.04
+    assert check(d)["established"] and _warn(d) == []
+    # an ambiguous ROI; an unidentified thickness
+    amb = check(_dist(_roi([130.0, 131.0], [0.5, 5.0])))
+    assert amb["reasons"] == ["1 ROI(s) with an ambiguous order"]
+    assert check(_dist(tj=Judgement(False)))["reasons"] == ["the thickness is not identified"]

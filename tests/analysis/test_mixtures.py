@@ -484,3 +484,69 @@ def test_a_small_far_population_counts_its_regions_not_their_kish_size():
     with_regions = fit_thickness_mixture(x, n_effective=regions, **kw)
     assert len(without.mixture.components) == 1
     assert sorted(round(m) for m in with_regions.mixture.means_nm) == [51, 241]
+
+
+def _small_population_scene(copies, seed=0):
+    """Facet thicknesses of ``copies`` × (8 regions at 120 nm, 6 at 150 nm, 1 small region at
+    230 nm: 3 % of the area), 10 facets per region, and their Regions."""
+    from microfacet.analysis.sampling import Regions
+
+    rng = np.random.default_rng(seed)
+    means = np.array(([120.0] * 8 + [150.0] * 6 + [230.0]) * copies)
+    areas = np.array(([5000.0] * 14 + [2200.0]) * copies)
+    value = means + rng.normal(0.0, 1.0, means.size)          # each region a draw, SD 1 nm
+    x = np.repeat(value, 10) + rng.normal(0.0, 0.3, 10 * means.size)
+    w = np.repeat(areas / 10.0, 10)
+    regions = Regions(np.repeat(np.arange(means.size), 10), value,
+                      np.full(means.size, 0.3 / math.sqrt(10)), areas, 0.0)
+    return x, w, regions
+
+
+@pytest.mark.slow
+def test_a_population_on_one_region_is_a_candidate_with_the_field_that_decides_it():
+    """A population on one small region is not drawn as a component (it does not pay for its
+    parameters) and not dropped either: it is a candidate, with its mean, area and the field
+    (area ×) at which the model choice would take it; grown to that field (more copies of
+    the same composition, new draws) the mixture does take it."""
+    from microfacet.analysis.mixtures import CANDIDATE_MAX_FIELD_SCALE
+
+    x, w, regions = _small_population_scene(1)
+    fit = fit_thickness_mixture(x, sigma_nm=0.3, weights=w, n_effective=regions,
+                                background=True)
+    np.testing.assert_allclose(sorted(fit.mixture.means_nm), [120, 150], atol=1.5)
+    (cand,) = fit.info["candidates"]
+    assert cand.mean_nm == pytest.approx(regions.value[-1], abs=1e-9)
+    assert cand.regions == 1 and cand.sd_nm is None
+    assert cand.area_fraction == pytest.approx(2200.0 / (14 * 5000 + 2200))
+    assert 1.0 < cand.field_scale <= CANDIDATE_MAX_FIELD_SCALE and cand.reported
+    js = fit.to_json()["candidates"][0]
+    assert js["mean_nm"] == cand.mean_nm and "region_index" not in js
+    json.dumps(fit.to_json())
+    # the prediction (3.6× here) holds: at 1.25× it the population is decided, at 0.6× not
+    for scale, k in ((1.25, 3), (0.6, 2)):
+        xb, wb, rb = _small_population_scene(int(math.ceil(scale * cand.field_scale)) if k == 3
+                                             else int(scale * cand.field_scale), seed=1)
+        grown = fit_thickness_mixture(xb, sigma_nm=0.3, weights=wb, n_effective=rb,
+                                      background=True)
+        assert grown.n_components == k
+        assert len(grown.info["candidates"]) == 3 - k
+    np.testing.assert_allclose(sorted(grown.mixture.means_nm), [120, 150], atol=1.5)
+
+
+@pytest.mark.slow
+def test_candidates_only_with_regions_and_a_misfit_one_is_not_reported():
+    """Without the regions (seed mode's groups) there are no candidates; a candidate whose
+    facets' colours the film does not explain (ΔE00 well above the populations') is mis-read
+    regions, kept in summary.json but not reported."""
+    x, w, regions = _small_population_scene(1)
+    grouped = fit_thickness_mixture(x, sigma_nm=0.3, weights=w, group=regions.patch_region,
+                                    background=True)
+    assert "candidates" not in grouped.info
+    (cand,) = fit_thickness_mixture(x, sigma_nm=0.3, weights=w, n_effective=regions,
+                                    background=True).info["candidates"]
+    assert cand.colour_explained is None and cand.reported
+    cand.delta_e, cand.delta_e_populations = 0.9, 0.8
+    assert cand.colour_explained and cand.reported
+    cand.delta_e = 3.0
+    assert cand.colour_explained is False and not cand.reported
+    assert cand.to_json()["reported"] is False

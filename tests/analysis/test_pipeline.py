@@ -219,11 +219,18 @@ def test_the_thickness_populations_do_not_follow_encoding_or_exposure(tmp_path, 
                                                                       nd_analysis):
     """Issue 23: the same slices re-encoded as JPEG (quality 97, 90), saved as 16-bit or
     re-exposed by ±5 % give the fixture's number of thickness populations, each mean within
-    1 nm (a plain folder: the analysis does not read the encoding's quality)."""
+    1 nm. The JPEG quality is read from the files and its block error enters the noise
+    model (larger at lower quality; none for the lossless variants)."""
     from microfacet.io.stack import read_stack
     ref = nd_analysis("joint").thickness_fit.mixture
     folder, step = _reencoded(tmp_path / variant, variant)
-    got = analyse_stack(read_stack(folder, pixel_size_um=0.216, z_step_um=step)
-                        ).thickness_fit.mixture
+    st = read_stack(folder, pixel_size_um=0.216, z_step_um=step)
+    res = analyse_stack(st)
+    got = res.thickness_fit.mixture
+    if variant.startswith("jpeg"):
+        assert st.jpeg.quality == int(variant[4:])
+        assert 0.0 < res.colour.block_noise_de < res.colour.noise_de
+    else:
+        assert st.jpeg is None and res.colour.block_noise_de == 0.0
     assert len(got.components) == len(ref.components) == 3
     np.testing.assert_allclose(np.sort(got.means_nm), np.sort(ref.means_nm), atol=1.0)

@@ -148,8 +148,9 @@ def test_jpeg_header_matches_decoding(tmp_path, rgb):
     assert cv2.imwrite(str(p), img)
     info = image_info(p, WHERE)
     dec = decode_image(p, WHERE, channels=info.channels)
-    assert info == ImageInfo(dec.shape[:2], dec.dtype, 1 if dec.ndim == 2 else 3)
+    assert info == ImageInfo(dec.shape[:2], dec.dtype, 1 if dec.ndim == 2 else 3, info.jpeg)
     assert info.channels == (3 if rgb else 1)
+    assert info.jpeg.quality == 95                       # OpenCV's default
     # truncated: no end-of-image marker, and cut before the frame header
     data = p.read_bytes()
     p.write_bytes(data[: len(data) - 80])
@@ -161,6 +162,40 @@ def test_jpeg_header_matches_decoding(tmp_path, rgb):
     p.write_bytes(b"not a jpeg")
     with pytest.raises(InputError, match=r"not a JPEG"):
         image_info(p, WHERE)
+
+
+@pytest.mark.parametrize("quality", [50, 70, 90, 97])
+@pytest.mark.parametrize("writer", ["opencv", "pillow 4:4:4", "pillow grey"])
+def test_jpeg_quantization_is_read_from_the_file(tmp_path, quality, writer):
+    """The IJG quality and the DC steps, against the writers' own tables (Pillow reads them
+    back independently); the chroma block is 16 × 16 pixels with 4:2:0 subsampling
+    (OpenCV's default), 8 × 8 without."""
+    img = np.random.default_rng(0).integers(0, 256, (32, 48, 3), dtype=np.uint8)
+    p = tmp_path / "q.jpg"
+    if writer == "opencv":
+        assert cv2.imwrite(str(p), img, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    elif writer == "pillow grey":
+        Image.fromarray(img[..., 0]).save(p, quality=quality)
+    else:
+        Image.fromarray(img).save(p, quality=quality, subsampling=0)
+    jpeg = image_info(p, WHERE).jpeg
+    with Image.open(p) as im:
+        tables = im.quantization
+    assert jpeg.quality == quality
+    assert jpeg.dc_steps == (tables[0][0], tables[1][0] if 1 in tables else tables[0][0])
+    assert jpeg.chroma_block_px == (256 if writer == "opencv" else 64)
+
+
+def test_a_camera_s_own_jpeg_table_has_no_ijg_quality(tmp_path):
+    img = np.random.default_rng(1).integers(0, 256, (16, 16, 3), dtype=np.uint8)
+    p = tmp_path / "cam.jpg"
+    own = [2 + (i % 7) for i in range(64)]
+    Image.fromarray(img).save(p, qtables=[own, own], subsampling=0)
+    jpeg = image_info(p, WHERE).jpeg
+    assert jpeg.quality is None and jpeg.dc_steps == (2, 2)
+    png = tmp_path / "a.png"
+    cv2.imwrite(str(png), img)
+    assert image_info(png, WHERE).jpeg is None
 
 
 @pytest.mark.parametrize("shape, dtype, channels", [
