@@ -35,8 +35,8 @@ from ..core.errors import plain_params, render_params
 from .options import FitOptions
 
 __all__ = ["Judgement", "Reason", "analysis_warnings", "colour_tilt_contrast",
-           "mean_plane_tilt_deg", "ndf_judgement", "order_check", "seed_ndf_judgement", "self_check_judgement",
-           "thickness_judgement"]
+           "mean_plane_tilt_deg", "ndf_judgement", "order_check", "seed_ndf_judgement",
+           "self_check_judgement", "thickness_judgement"]
 
 #: Mean ΔE00 of pure noise of σ per Lab component, E|N(0, σ²I₃)| = 2·sqrt(2/π)·σ: the
 #: image's noise floor of the mean ΔE00 is this × ``noise_de``.

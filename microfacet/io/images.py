@@ -50,8 +50,9 @@ from ..core.pixels import pixel_size_yx
 cv2 = load("cv2")
 tifffile = load("tifffile")
 
-__all__ = ["ImageInfo", "JpegTables", "MultiPageTiff", "convert_samples", "decode_image", "image_info",
-           "png_pixel_size_um", "read_png", "read_tiff_headers", "write_float_tiff", "write_image"]
+__all__ = ["ImageInfo", "JpegTables", "MultiPageTiff", "convert_samples", "decode_image",
+           "image_info", "png_pixel_size_um", "read_png", "read_tiff_headers",
+           "write_float_tiff", "write_image"]
 
 #: File suffixes accepted for slices and export images (lower case).
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
