@@ -114,6 +114,8 @@ class FacetThickness:
         The least ΔE in the neighbouring orders' windows (one colour period above and
         below; NaN where both lie outside the table): close to ``delta_e``, the order is
         uncertain.
+    thickness_other_order_nm : ndarray
+        Where that least ΔE lies (1 nm grid; NaN as above).
     """
 
     thickness_nm: np.ndarray
@@ -122,6 +124,11 @@ class FacetThickness:
     at_window_edge: np.ndarray
     n_pixels: np.ndarray
     delta_e_other_order: np.ndarray
+    thickness_other_order_nm: np.ndarray = None
+
+    def __post_init__(self):
+        if self.thickness_other_order_nm is None:
+            self.thickness_other_order_nm = np.full(self.thickness_nm.shape, np.nan)
 
 
 class _Rows:
@@ -195,17 +202,20 @@ def _sigma(model, fine, n_px, tilt, tilt_sigma_deg, search, hw):
 
 def _other_orders(model, tilt, mean_lab, d, window):
     """The least ΔE in the windows (``window = (hw, offsets)``) one colour period above and
-    below ``d``."""
+    below ``d``, and the thickness (1 nm grid) where it lies."""
     lo, hi = model.thickness_range_nm
     hw, offsets = window
-    alt = np.full(d.size, np.inf)
+    alt, alt_d = np.full(d.size, np.inf), np.full(d.size, np.nan)
     for shift in (-model.period_nm, model.period_nm):
         c2 = d + shift
         inside = (c2 + hw >= lo) & (c2 - hw <= hi)
         if inside.any():
             rows = _Rows(model, tilt[inside], mean_lab[inside], c2[inside], offsets)
-            alt[inside] = np.minimum(alt[inside], _window_minimum(rows)[2])
-    return np.where(np.isfinite(alt), alt, np.nan)
+            t, _, v = _window_minimum(rows)
+            better = v < alt[inside]
+            idx = np.flatnonzero(inside)[better]
+            alt[idx], alt_d[idx] = v[better], t[better]
+    return np.where(np.isfinite(alt), alt, np.nan), alt_d
 
 
 @dataclass(frozen=True)
@@ -222,7 +232,8 @@ class _Search:
 
 
 def _chunk(model, colours, ii, tilt, options, search: _Search):
-    """:func:`facet_thickness` on the facets ``ii``: (d, σ, ΔE, edge, other-order ΔE)."""
+    """:func:`facet_thickness` on the facets ``ii``: (d, σ, ΔE, edge, other-order ΔE, its
+    thickness)."""
     hw = options.order_window_fraction * model.period_nm
     t_lo, t_hi = model.theta_range_deg
     th = np.clip(tilt[ii], t_lo, t_hi)
@@ -238,9 +249,9 @@ def _chunk(model, colours, ii, tilt, options, search: _Search):
     d, de, curv = _fine(model, th, lab, d_k, search.step_nm)
     ts = None if search.tilt_sigma_deg is None else search.tilt_sigma_deg[ii]
     s = _sigma(model, (d, de, curv), colours.n_pixels[ii], th, ts, search, hw)
-    alt = (_other_orders(model, th, lab, d, (hw, offsets)) if search.thorough
-           else np.full(ii.size, np.nan))
-    return d, s, de, edge, alt
+    alt, alt_d = (_other_orders(model, th, lab, d, (hw, offsets)) if search.thorough
+                  else (np.full(ii.size, np.nan),) * 2)
+    return d, s, de, edge, alt, alt_d
 
 
 def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOptions, *,
@@ -284,7 +295,7 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
     S = colours.mean_lab.shape[0]
     tilt = np.asarray(tilt_deg, dtype=np.float64)
     has = (colours.n_pixels > 0) & np.isfinite(colours.roi_thickness_nm) & np.isfinite(tilt)
-    out = np.full((5, S), np.nan)
+    out = np.full((6, S), np.nan)
     search = _Search(thorough, options.thickness_step_nm if thorough
                      else options.exposure_thickness_step_nm, noise_de,
                      None if tilt_sigma_deg is None else np.asarray(tilt_sigma_deg, np.float64),
@@ -294,7 +305,7 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
         ii = idx[a:a + _CHUNK]
         out[:, ii] = _chunk(model, colours, ii, tilt, options, search)
     return FacetThickness(out[0], out[1], out[2], out[3] == 1.0,
-                          colours.n_pixels.astype(np.int64), out[4])
+                          colours.n_pixels.astype(np.int64), out[4], out[5])
 
 
 def refine_exposure_on_facets(image: FacetImage, tilt_deg, model, options: JointOptions, *,

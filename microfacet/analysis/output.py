@@ -53,8 +53,9 @@ _ROI_FMT = ["%d", "%d", "%d", "%.3f", "%.4f", "%d", "%d", "%.3f", "%.4f", "%.4f"
             "%.3f", "%d"]
 _FACET_COLUMNS = ["facet", "n_pixels", "tilt_deg", "tilt_sigma_deg", "height_plane",
                   "slope_sigma", "thickness_nm", "thickness_sigma_nm", "delta_e",
-                  "other_order_delta_e", "censored_fraction"]
-_FACET_FMT = ["%d", "%d", "%.4f", "%.4f", "%d", "%.5f", "%.3f", "%.3f", "%.4f", "%.4f", "%.4f"]
+                  "other_order_delta_e", "other_order_thickness_nm", "censored_fraction"]
+_FACET_FMT = ["%d", "%d", "%.4f", "%.4f", "%d", "%.5f", "%.3f", "%.3f", "%.4f", "%.4f", "%.1f",
+              "%.4f"]
 
 
 def results_size_bytes(shape, *, report: bool = True) -> int:
@@ -105,7 +106,8 @@ def _facet_rows(joint):
                        minlength=area.size) / np.maximum(area, 1)
     return np.column_stack([np.arange(area.size), area, pl.tilt_deg, pl.tilt_sigma_deg,
                             pl.fitted.astype(int), pl.slope_sigma, th.thickness_nm, th.sigma_nm,
-                            th.delta_e, th.delta_e_other_order, cens])
+                            th.delta_e, th.delta_e_other_order, th.thickness_other_order_nm,
+                            cens])
 
 
 def _tables(r) -> dict:

@@ -91,6 +91,16 @@ def test_facet_thickness_is_recovered_at_the_facet_tilt(model):
     # the neighbouring orders fit worse (by 1.5-15 ΔE00 here): the order is not in doubt
     assert np.all(ft.delta_e_other_order[ok] > ft.delta_e[ok] + 1.0)
     assert np.median(ft.delta_e_other_order[ok]) > 5.0
+    # ... and the other candidate lies about one colour period away, where the model's
+    # colour is that far from the facet's (the ΔE reported is the ΔE there, 1 nm grid)
+    gap = np.abs(ft.thickness_other_order_nm[ok] - ft.thickness_nm[ok])
+    assert np.all((gap > 0.5 * model.period_nm) & (gap < 1.5 * model.period_nm))
+    m09 = model.with_exposure(0.9)
+    de_there = [float(m09.delta_e(lab[labels == i].mean(axis=0), float(t[i]),
+                                  float(ft.thickness_other_order_nm[i])))
+                for i in np.flatnonzero(ok)[:8]]
+    np.testing.assert_allclose(de_there, ft.delta_e_other_order[np.flatnonzero(ok)[:8]],
+                               atol=1e-3)
     # at a wrong tilt the colour fits worse (tilt and thickness are not interchangeable)
     wrong = _thickness(labels, lab, usable, np.clip(t + 10, 0, 27), roi, model, exposure=0.9)
     assert np.median(wrong.delta_e[ok]) > np.median(ft.delta_e[ok])
