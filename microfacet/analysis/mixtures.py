@@ -169,7 +169,8 @@ def k_note(k_max, max_components, n_unique, n_eff, what):
         return False
     if n_unique <= k_max:
         return f"only {n_unique} distinct {what}: max_components reduced to {k_max}"
-    return f"n_effective {n_eff:g}: max_components reduced to {k_max} (parameters <= n_effective)"
+    return (f"{n_eff:g} independent samples (regions or facets): max_components reduced to "
+            f"{k_max} (parameters <= independent samples)")
 
 
 #: A larger K must beat every smaller admissible K by at least this much BIC ("positive

@@ -495,7 +495,7 @@ def variation_table(rows) -> str:
                              f"{s['order_wrong_unflagged']} of {s['order_wrong_count']}"])
     return md_table(["mode", "variation", "", "scenes", "populations right",
                      "… counting candidates", "region MAE (nm)",
-                     "wrong order unflagged"], body)
+                     "wrong order, said established"], body)
 
 
 def plot(rows, path: Path) -> None:

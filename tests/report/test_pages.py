@@ -173,3 +173,29 @@ def test_angular_page_without_fits(tmp_path):
         write_results_files(tmp_path / name, summary=summary, maps={})
         maps = predicted_maps(Context.open(tmp_path / name))
         assert [t.split()[0] for t, _, _ in maps] == models
+
+
+def test_reported_candidate_populations_are_drawn_dashed_and_only_they(results_copy):
+    """summary.json's thickness.mixture.candidates: the reported ones are dashed lines at
+    their means, with one legend entry; the others (mis-read regions, or a field too large
+    to matter) are not drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from microfacet.report.page_distributions import _thickness_panel
+
+    folder = results_copy()
+    summary = json.loads((folder / "summary.json").read_text())
+    summary["thickness"]["mixture"]["candidates"] = [
+        {"mean_nm": 171.5, "reported": True}, {"mean_nm": 95.0, "reported": False}]
+    (folder / "summary.json").write_text(json.dumps(summary))
+    fig, ax = plt.subplots()
+    _thickness_panel(ax, Context(Results(folder)))
+    vertical = [ln for ln in ax.get_lines() if ln.get_linestyle() == "--"
+                and len(set(np.ravel(ln.get_xdata()))) == 1]
+    assert [ln.get_xdata()[0] for ln in vertical] == [171.5]
+    labels = ax.get_legend_handles_labels()[1]
+    assert labels.count("candidate population (field too small to decide)") == 1
+    plt.close(fig)
