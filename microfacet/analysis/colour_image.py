@@ -162,23 +162,32 @@ def compression_noise_de(encoded_srgb, mask, jpeg, *, illuminant, delta_e_method
 
     Parameters
     ----------
-    encoded_srgb : ndarray, shape (H, W, 3)
-        The encoded image in [0, 1].
-    mask : ndarray of bool, shape (H, W)
-        True where a pixel is not used.
+    encoded_srgb, mask
+        As :func:`quantization_noise_de`.
     jpeg : JpegTables
     """
+    steps = np.asarray(jpeg.dc_steps, dtype=np.float64) / (8.0 * 255.0)   # full ranges
+
+    def block_error(img, rng):
+        y, cb, cr = (rng.uniform(-0.5, 0.5, img.shape[0]) * q for q in steps[[0, 1, 1]])
+        return np.stack([y + 1.402 * cr, y - 0.344136 * cb - 0.714136 * cr,
+                         y + 1.772 * cb], -1).astype(np.float32)
+
+    return _moved_de(encoded_srgb, mask, block_error, illuminant=illuminant,
+                     delta_e_method=delta_e_method, n_sample=n_sample, seed=seed)
+
+
+def _moved_de(encoded_srgb, mask, error, *, illuminant, delta_e_method, n_sample, seed):
+    """ΔE00 per Lab component (median / 1.54: the norm of a 3-D error of per-component SD σ
+    has median ~1.54 σ) between up to ``n_sample`` unmasked pixels and themselves moved by
+    ``error(pixels, rng)``; NaN without unmasked pixels."""
     img = np.asarray(encoded_srgb, dtype=np.float32)[~np.asarray(mask, bool)]
     if img.shape[0] == 0:
         return float("nan")
     rng = np.random.default_rng(seed)
     if img.shape[0] > n_sample:
         img = img[rng.choice(img.shape[0], n_sample, replace=False)]
-    sd_y, sd_c = (q / (8.0 * np.sqrt(12.0)) / 255.0 for q in jpeg.dc_steps)
-    y, cb, cr = (rng.uniform(-0.5, 0.5, img.shape[0]) * np.sqrt(12.0) * sd
-                 for sd in (sd_y, sd_c, sd_c))
-    err = np.stack([y + 1.402 * cr, y - 0.344136 * cb - 0.714136 * cr, y + 1.772 * cb], -1)
-    moved = np.clip(img + err.astype(np.float32), 0, 1)
+    moved = np.clip(img + error(img, rng), 0, 1)
     de = delta_e(srgb_to_lab(img, illuminant=illuminant),
                  srgb_to_lab(moved, illuminant=illuminant), method=delta_e_method)
     return float(np.median(de) / 1.54)
@@ -203,18 +212,10 @@ def quantization_noise_de(encoded_srgb, mask, *, bit_depth, illuminant, delta_e_
         True where a pixel is not used.
     bit_depth : {8, 16}
     """
-    img = np.asarray(encoded_srgb, dtype=np.float32)[~np.asarray(mask, bool)]
-    if img.shape[0] == 0:
-        return float("nan")
-    rng = np.random.default_rng(seed)
-    if img.shape[0] > n_sample:
-        img = img[rng.choice(img.shape[0], n_sample, replace=False)]
     lsb = np.float32(1.0 / (2 ** bit_depth - 1))
-    moved = np.clip(img + rng.uniform(-0.5, 0.5, img.shape).astype(np.float32) * lsb, 0, 1)
-    de = delta_e(srgb_to_lab(img, illuminant=illuminant),
-                 srgb_to_lab(moved, illuminant=illuminant), method=delta_e_method)
-    # |difference| of one pixel from its re-rounded self: the norm of a 3-D error of
-    # per-component SD sigma has median ~1.54 sigma
-    return float(np.median(de) / 1.54)
+    return _moved_de(encoded_srgb, mask,
+                     lambda img, rng: rng.uniform(-0.5, 0.5, img.shape).astype(np.float32) * lsb,
+                     illuminant=illuminant, delta_e_method=delta_e_method, n_sample=n_sample,
+                     seed=seed)
 
 
