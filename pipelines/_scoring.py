@@ -279,6 +279,8 @@ TARGETS = (
      "populations_ok_candidates", "–", None),
     ("scenes with a reported candidate where the count was already right (spurious)",
      "candidates_spurious", "–", None),
+    ("scenes where the analysis says the interference order is not established",
+     "order_not_established", "–", None),
     ("scenes read in a wrong interference order (region median error > 20 nm)",
      "order_wrong_count", "–", None),
     ("… of those with the order said established (summary.json thickness.order)",
@@ -335,6 +337,7 @@ def summarize(rows):
             if r.get("pops_found") is not None else False for r in ok),
         "candidates_spurious": sum(1 for r in ok if int(r.get("pops_candidates") or 0) > 0
                                    and r.get("pops_found") == r.get("pops_true")),
+        "order_not_established": sum(1 for r in ok if _true(r.get("order_flagged"))),
         "order_wrong_count": sum(1 for r in ok if _true(r.get("order_wrong"))),
         "order_wrong_unflagged": sum(1 for r in ok if _true(r.get("order_wrong"))
                                      and not _true(r.get("order_flagged"))),
