@@ -275,7 +275,9 @@ TARGETS = (
      lambda v: v <= 0.5),
     ("scenes with the true number of thickness populations", "populations_ok", "≥ 90 %",
      lambda v: v >= 0.9),
-    ("… counting reported candidate populations (field too small) as populations",
+    ("… counting a component the analysis calls another's order alias as that one",
+     "populations_ok_distinct", "–", None),
+    ("… and counting the reported candidate populations (field too small) too",
      "populations_ok_candidates", "–", None),
     ("scenes with a reported candidate where the count was already right (spurious)",
      "candidates_spurious", "–", None),
@@ -309,6 +311,14 @@ TARGETS = (
 )
 
 
+def _int(v, default):
+    """An integer from a row (a CSV text, or missing: ``default``)."""
+    try:
+        return int(float(v))
+    except (TypeError, ValueError):
+        return default if default is None else int(float(default))
+
+
 def _true(v) -> bool:
     """A flag from a row: a bool, or its text in a resumed CSV ("True")."""
     return v is True or v == "True" or v == 1
@@ -332,8 +342,12 @@ def summarize(rows):
         "region_mae_median_nm": finite_median(r.get("region_mae_nm") for r in ok),
         "populations_ok": fraction(r["pops_found"] == r["pops_true"] if r.get("pops_found")
                                    is not None else False for r in ok),
+        "populations_ok_distinct": fraction(
+            _int(r.get("pops_distinct"), r.get("pops_found")) == r["pops_true"]
+            if r.get("pops_found") is not None else False for r in ok),
         "populations_ok_candidates": fraction(
-            r["pops_found"] + int(r.get("pops_candidates") or 0) == r["pops_true"]
+            _int(r.get("pops_distinct"), r.get("pops_found")) + int(r.get("pops_candidates")
+                                                                    or 0) == r["pops_true"]
             if r.get("pops_found") is not None else False for r in ok),
         "candidates_spurious": sum(1 for r in ok if int(r.get("pops_candidates") or 0) > 0
                                    and r.get("pops_found") == r.get("pops_true")),

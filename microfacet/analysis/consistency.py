@@ -11,6 +11,13 @@ the ROI spans several populations it can land on another interference order alto
 while its pixels read the right one. :func:`roi_pixel_check` flags a ROI whose single fit
 lies further from the median of its own pixels' thicknesses than their spread allows.
 
+A component of the mixture can be another component read in a neighbouring interference
+order: its facets' colours fit both orders within the ambiguity margin, and the least-ΔE
+pick put some of them an order away. :func:`component_orders` says, per component, how much
+of its area has a runner-up order that close, where that order lies, and whether it lies on
+another component (an order alias: on the generalization sweep only g016's 139.6 nm
+component, whose facets are truly at 250 nm beside a 252.3 nm component, docs/accuracy.md).
+
 Examples
 --------
 >>> from microfacet.core.distributions import ThicknessMixture
@@ -26,7 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["MapCheck", "mixture_map_check", "roi_pixel_check"]
+__all__ = ["MapCheck", "component_orders", "distinct_populations", "mixture_map_check",
+           "roi_pixel_check"]
 
 #: The per-pixel map's error floor (nm) each component is widened by: the thickness per true
 #: region errs by a median 0.6-0.8 nm on the generalization sweep (docs/accuracy.md).
@@ -139,3 +147,89 @@ def roi_pixel_check(roi, thickness_nm) -> tuple[np.ndarray, np.ndarray]:
     with np.errstate(invalid="ignore"):
         disagrees = np.isfinite(fit) & np.isfinite(med) & (np.abs(fit - med) > gap)
     return med, disagrees
+
+
+#: Smallest share of a component's area with a close runner-up order for it to be checked
+#: as a possible order alias.
+ALIAS_MIN_AMBIGUOUS = 0.2
+#: The runner-up order's median thickness lies on another component when it is within this
+#: many SD of it (the component's SD and :data:`MAP_FLOOR_NM` × 2 in quadrature).
+ALIAS_SD = 3.0
+
+
+def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguous) -> list:
+    """Per component: how much of its samples' weight has an ambiguous interference order,
+    where the runner-up order lies, and the component it lies on, if any.
+
+    Each sample (facet) belongs to its most likely component within
+    :data:`UNEXPLAINED_SD` widened SD. Returns one dict per component:
+    ``order_ambiguous_fraction``, ``other_order_nm`` (weighted median of the ambiguous
+    samples' runner-up thickness; None without any) and ``alias_of_nm`` (the mean of the
+    other component it lies on when at least :data:`ALIAS_MIN_AMBIGUOUS` of the weight is
+    ambiguous; else None).
+
+    >>> from microfacet.core.distributions import ThicknessMixture
+    >>> m = ThicknessMixture([(0.8, 250.0, 1.0), (0.2, 140.0, 1.0)])
+    >>> d = np.array([250.0, 251.0, 140.0, 139.5])
+    >>> out = component_orders(m, d, np.array([140.0, 360.0, 252.0, 251.0]), np.ones(4),
+    ...                        np.array([False, False, True, False]))
+    >>> [(o["order_ambiguous_fraction"], o["alias_of_nm"]) for o in out]   # by mean
+    [(0.5, 250.0), (0.0, None)]
+    """
+    comps = mixture.components
+    mu = np.array([c[1] for c in comps])
+    sd = np.sqrt(np.array([c[2] for c in comps]) ** 2 + MAP_FLOOR_NM ** 2)
+    d = np.asarray(thickness_nm, dtype=np.float64)
+    ok = np.isfinite(d)
+    z = np.abs(np.where(ok, d, 0.0)[:, None] - mu) / sd
+    own = np.where(ok & (z.min(axis=1) <= UNEXPLAINED_SD), np.argmin(z, axis=1), -1)
+    w = np.asarray(weights, dtype=np.float64)
+    out = []
+    for k in range(mu.size):
+        mine = own == k
+        amb = mine & np.asarray(ambiguous, bool) & np.isfinite(other_thickness_nm)
+        frac = float(w[amb].sum() / w[mine].sum()) if w[mine].sum() > 0 else 0.0
+        other = _weighted_median(np.asarray(other_thickness_nm)[amb], w[amb])
+        alias = None
+        if other is not None and frac >= ALIAS_MIN_AMBIGUOUS:
+            zz = np.abs(other - mu) / np.sqrt(sd ** 2 + MAP_FLOOR_NM ** 2)
+            zz[k] = np.inf
+            j = int(np.argmin(zz))
+            alias = float(mu[j]) if zz[j] <= ALIAS_SD else None
+        out.append({"order_ambiguous_fraction": frac, "other_order_nm": other,
+                    "alias_of_nm": alias})
+    return out
+
+
+def _weighted_median(x, w) -> float | None:
+    if x.size == 0 or w.sum() <= 0:
+        return None
+    o = np.argsort(x)
+    c = np.cumsum(w[o])
+    return float(x[o][np.searchsorted(c, 0.5 * c[-1])])
+
+
+def distinct_populations(mixture, orders) -> int:
+    """The number of populations when each order alias (``orders`` from
+    :func:`component_orders`) is counted with the component it may be: the connected groups
+    of the components joined by their aliases.
+
+    >>> from microfacet.core.distributions import ThicknessMixture
+    >>> m = ThicknessMixture([(0.2, 140.0, 1.0), (0.3, 180.0, 1.0), (0.5, 250.0, 1.0)])
+    >>> distinct_populations(m, [{"alias_of_nm": 250.0}, {"alias_of_nm": None},
+    ...                          {"alias_of_nm": 140.0}])
+    2
+    """
+    means = [c[1] for c in mixture.components]
+    group = list(range(len(means)))
+
+    def root(i):
+        while group[i] != i:
+            i = group[i]
+        return i
+
+    for i, o in enumerate(orders):
+        if o.get("alias_of_nm") is not None and o["alias_of_nm"] in means:
+            group[root(i)] = root(means.index(o["alias_of_nm"]))
+    return len({root(i) for i in range(len(means))})
+

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .consistency import component_orders, distinct_populations
 from .identification import (
     NO_SAMPLES,
     Judgement,
@@ -109,6 +110,10 @@ def _joint_thickness(joint, roi, cens_frac, options, scene):
     edge = float(area[ok & th.at_window_edge].sum() / a_t)
     amb = ok & ambiguous_order(th.delta_e_other_order - th.delta_e, options.ambiguous_order_de)
     other = float(area[amb].sum() / a_t)
+    orders = component_orders(fit.mixture, np.where(ok, th.thickness_nm, np.nan),
+                              th.thickness_other_order_nm, area, amb)
+    fit.info.update(component_orders=orders,
+                    distinct_populations=distinct_populations(fit.mixture, orders))
     fit.info.update({"facets": int(ok.sum()),
                      "unexplained_area_fraction": float(area[unexplained].sum()
                                                         / max(area.sum(), 1.0)),

@@ -349,9 +349,23 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions) -> dict:
     if delta_e_median is not None and delta_e_median > floor + options.excess_delta_e:
         why.append(f"the film model does not explain the colours (median dE00 "
                    f"{delta_e_median:.2f}, noise floor {floor:.2f})")
+    for a in _aliases(dist.thickness):
+        why.append(f"the {a[0]:.1f} nm component may be the {a[1]:.1f} nm one read in "
+                   f"another order")
     if not dist.thickness_judgement.identified:
         why.append("the thickness is not identified")
     return {"established": not why, "reasons": why}
+
+
+def _aliases(fit) -> list:
+    """``(mean, alias mean, ambiguous fraction)`` of each component that may be another read
+    in a neighbouring order (``info["component_orders"]``,
+    :func:`~.consistency.component_orders`)."""
+    if fit is None:
+        return []
+    orders = fit.info.get("component_orders") or []
+    return [(c[1], o["alias_of_nm"], o["order_ambiguous_fraction"])
+            for c, o in zip(fit.mixture.components, orders) if o.get("alias_of_nm") is not None]
 
 
 def _candidate_warning(fit) -> Reason | None:
@@ -446,6 +460,12 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
                           f"has a runner-up interference order within "
                           f"{options.ambiguous_order_de:g} dE00: the order is not established "
                           f"there (facets.csv other_order_delta_e)", _RANGE))
+    for mean, other, frac in _aliases(dist.thickness):
+        out.append(Reason("order_alias", f"the {mean:.1f} nm thickness component may be the "
+                          f"{other:.1f} nm population read in another interference order: "
+                          f"{100 * frac:.0f} % of its area fits that order within "
+                          f"{options.ambiguous_order_de:g} dE00 (facets.csv "
+                          f"other_order_thickness_nm)", _RANGE))
     amb = int(dist.roi_ambiguous.sum())
     if amb:
         out.append(Reason("ambiguous_rois", f"{amb} of {int(dist.roi_fitted.sum())} ROIs have "

@@ -60,3 +60,46 @@ def test_a_roi_on_another_order_than_its_pixels_is_flagged():
     np.testing.assert_allclose(med, [129.5, 131.0], atol=2.0)
     med, bad = roi_pixel_check(_Roi([140.0, np.nan]), t)  # within 3 robust SD of a mixed ROI
     assert bad.tolist() == [False, False]
+
+
+def test_a_component_read_one_order_away_from_another_is_an_order_alias():
+    """Facets of a 250 nm population: 200 read right, 60 read one order down at ~140 nm
+    (their colour fits both within the margin: ambiguous, the runner-up at ~250 nm), and a
+    clear 120 nm population whose runner-up order lies on nothing. Only the 140 nm
+    component is an alias, of the 250 nm one; an ambiguous share below 20 % is not checked."""
+    from microfacet.analysis.consistency import component_orders
+
+    rng = np.random.default_rng(2)
+    d = np.concatenate([rng.normal(250, 1, 200), rng.normal(140, 1, 60),
+                        rng.normal(120, 1, 150)])
+    other = np.concatenate([d[:200] - 110, d[200:260] + 110 + rng.normal(0, 2, 60),
+                            d[260:] + 110])
+    amb = np.zeros(d.size, bool)
+    amb[200:240] = True                                  # two thirds of the 140 nm facets
+    amb[260:270] = True                                  # 7 % of the 120 nm ones
+    m = ThicknessMixture([(0.36, 120.0, 1.0), (0.15, 140.0, 1.0), (0.49, 250.0, 1.0)])
+    out = component_orders(m, d, other, np.ones(d.size), amb)
+    assert [o["alias_of_nm"] for o in out] == [None, 250.0, None]
+    assert out[1]["order_ambiguous_fraction"] == np.float64(40 / 60)
+    assert abs(out[1]["other_order_nm"] - 250.0) < 2.0
+    assert out[0]["order_ambiguous_fraction"] == np.float64(10 / 150)
+    assert out[2]["order_ambiguous_fraction"] == 0.0 and out[2]["other_order_nm"] is None
+    # the 140 nm facets' runner-up nowhere near a component: not an alias
+    far = other.copy()
+    far[200:260] += 60.0
+    assert component_orders(m, d, far, np.ones(d.size), amb)[1]["alias_of_nm"] is None
+
+
+def test_distinct_populations_count_each_alias_with_its_component():
+    from microfacet.analysis.consistency import distinct_populations
+
+    m = ThicknessMixture([(0.2, 12.0, 1.0), (0.3, 93.0, 1.0), (0.3, 176.0, 1.0),
+                          (0.2, 227.0, 1.0)])
+    none = [{"alias_of_nm": None}] * 4
+    assert distinct_populations(m, none) == 4
+    one = [{"alias_of_nm": 93.0}] + none[1:]
+    assert distinct_populations(m, one) == 3
+    both_ways = [{"alias_of_nm": 93.0}, {"alias_of_nm": 12.0}] + none[2:]
+    assert distinct_populations(m, both_ways) == 3
+    chain = [{"alias_of_nm": 93.0}, {"alias_of_nm": 176.0}] + none[2:]
+    assert distinct_populations(m, chain) == 2

@@ -427,3 +427,11 @@ def test_order_check_says_why_the_order_is_not_established():
     amb = check(_dist(_roi([130.0, 131.0], [0.5, 5.0])))
     assert amb["reasons"] == ["1 ROI(s) with an ambiguous order"]
     assert check(_dist(tj=Judgement(False)))["reasons"] == ["the thickness is not identified"]
+    # a component that may be another read in another order: not established, warned
+    d = _dist()
+    d.thickness.info["component_orders"] = [{"alias_of_nm": 252.3,
+                                             "order_ambiguous_fraction": 0.49}]
+    assert check(d)["reasons"] == ["the 130.0 nm component may be the 252.3 nm one read in "
+                                   "another order"]
+    (w,) = _warn(d)
+    assert w.code == "order_alias" and "49 % of its area" in w.text
