@@ -185,7 +185,6 @@ def _tilt_panel(ax, ctx):
         ax.axvline(mt, color="0.3", lw=0.8, ls=":",
                    label=f"measurable limit asin(NA)/2 = {mt:.1f}°")
         n += 1
-    n += _candidate_lines(ax, ctx)
     _legend_room(ax, n, top=_clip_top(ax, x, dens, _curves(ax, x)))
     _legend(ax, x, dens)
     if not ok:

@@ -199,3 +199,26 @@ def test_reported_candidate_populations_are_drawn_dashed_and_only_they(results_c
     labels = ax.get_legend_handles_labels()[1]
     assert labels.count("candidate population (field too small to decide)") == 1
     plt.close(fig)
+
+
+def test_candidate_populations_are_not_drawn_on_the_tilt_panel(results_copy):
+    """A thickness candidate (nm) has no place on the tilt axis (°)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from microfacet.report.page_distributions import _tilt_panel
+
+    folder = results_copy()
+    summary = json.loads((folder / "summary.json").read_text())
+    summary["thickness"]["mixture"]["candidates"] = [{"mean_nm": 17.5, "reported": True}]
+    (folder / "summary.json").write_text(json.dumps(summary))
+    fig, ax = plt.subplots()
+    _tilt_panel(ax, Context(Results(folder)))
+    assert "candidate population (field too small to decide)" not in \
+        ax.get_legend_handles_labels()[1]
+    assert not any(ln.get_xdata()[0] == 17.5 for ln in ax.get_lines()
+                   if len(set(np.ravel(ln.get_xdata()))) == 1)
+    plt.close(fig)
+
