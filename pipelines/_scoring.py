@@ -38,6 +38,7 @@ from scipy import ndimage
 
 from microfacet.colour import delta_e_2000, srgb_to_lab
 from microfacet.core.distributions import NDFMixture
+from pipelines._shared import truthy
 
 #: Fewest used pixels of a ROI for its thickness to be scored (the analysis' ``roi.min_pixels``).
 ROI_MIN_PIXELS = 20
@@ -319,11 +320,6 @@ def _int(v, default):
         return default if default is None else int(float(default))
 
 
-def _true(v) -> bool:
-    """A flag from a row: a bool, or its text in a resumed CSV ("True")."""
-    return v is True or v == "True" or v == 1
-
-
 def summarize(rows):
     """The summary scores of one mode's per-scene rows (keys of :data:`TARGETS`).
 
@@ -351,10 +347,10 @@ def summarize(rows):
             if r.get("pops_found") is not None else False for r in ok),
         "candidates_spurious": sum(1 for r in ok if int(r.get("pops_candidates") or 0) > 0
                                    and r.get("pops_found") == r.get("pops_true")),
-        "order_not_established": sum(1 for r in ok if _true(r.get("order_flagged"))),
-        "order_wrong_count": sum(1 for r in ok if _true(r.get("order_wrong"))),
-        "order_wrong_unflagged": sum(1 for r in ok if _true(r.get("order_wrong"))
-                                     and not _true(r.get("order_flagged"))),
+        "order_not_established": sum(1 for r in ok if truthy(r.get("order_flagged"))),
+        "order_wrong_count": sum(1 for r in ok if truthy(r.get("order_wrong"))),
+        "order_wrong_unflagged": sum(1 for r in ok if truthy(r.get("order_wrong"))
+                                     and not truthy(r.get("order_flagged"))),
         "lobes_ok": fraction(r["lobes_found"] == r["lobes_true"] if r.get("lobes_found")
                              is not None else False for r in ok),
         "identified_all": fraction(r.get("identified") for r in ok),

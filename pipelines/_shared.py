@@ -294,3 +294,9 @@ def cou_rmse(height, reference):
     o = COU_OFFSET_PX
     d = height[o:o + reference.shape[0], o:o + reference.shape[1]]
     return float(np.sqrt(np.mean((d - reference) ** 2)))
+
+
+def truthy(v) -> bool:
+    """A flag from a row: a bool or 1, or its text in a resumed CSV ("True", "1")."""
+    return v is True or v in ("True", "1") or v == 1
+

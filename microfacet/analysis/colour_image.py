@@ -63,7 +63,6 @@ class ColourImage:
     block_px: int = 64
 
 
-
 def mean_colour_noise(noise_de, block_noise, n_px):
     """Colour error per Lab component of the mean of ``n_px`` pixels: the pixel noise
     ``noise_de`` averaged over them, and the JPEG block error ``block_noise = (ΔE, pixels

@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .sampling import weighted_median
+
 __all__ = ["MapCheck", "component_orders", "distinct_populations", "mixture_map_check",
            "roi_pixel_check"]
 
@@ -189,7 +191,7 @@ def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguo
         mine = own == k
         amb = mine & np.asarray(ambiguous, bool) & np.isfinite(other_thickness_nm)
         frac = float(w[amb].sum() / w[mine].sum()) if w[mine].sum() > 0 else 0.0
-        other = _weighted_median(np.asarray(other_thickness_nm)[amb], w[amb])
+        other = weighted_median(np.asarray(other_thickness_nm)[amb], w[amb])
         alias = None
         if other is not None and frac >= ALIAS_MIN_AMBIGUOUS:
             zz = np.abs(other - mu) / np.sqrt(sd ** 2 + MAP_FLOOR_NM ** 2)
@@ -199,14 +201,6 @@ def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguo
         out.append({"order_ambiguous_fraction": frac, "other_order_nm": other,
                     "alias_of_nm": alias})
     return out
-
-
-def _weighted_median(x, w) -> float | None:
-    if x.size == 0 or w.sum() <= 0:
-        return None
-    o = np.argsort(x)
-    c = np.cumsum(w[o])
-    return float(x[o][np.searchsorted(c, 0.5 * c[-1])])
 
 
 def distinct_populations(mixture, orders) -> int:

@@ -112,9 +112,9 @@ def _joint_thickness(joint, roi, cens_frac, options, scene):
     other = float(area[amb].sum() / a_t)
     orders = component_orders(fit.mixture, np.where(ok, th.thickness_nm, np.nan),
                               th.thickness_other_order_nm, area, amb)
-    fit.info.update(component_orders=orders,
-                    distinct_populations=distinct_populations(fit.mixture, orders))
-    fit.info.update({"facets": int(ok.sum()),
+    fit.info.update({"component_orders": orders,
+                     "distinct_populations": distinct_populations(fit.mixture, orders),
+                     "facets": int(ok.sum()),
                      "unexplained_area_fraction": float(area[unexplained].sum()
                                                         / max(area.sum(), 1.0)),
                      "thickness_regions": regions.count, "order_edge_fraction": edge,

@@ -124,11 +124,7 @@ class FacetThickness:
     at_window_edge: np.ndarray
     n_pixels: np.ndarray
     delta_e_other_order: np.ndarray
-    thickness_other_order_nm: np.ndarray = None
-
-    def __post_init__(self):
-        if self.thickness_other_order_nm is None:
-            self.thickness_other_order_nm = np.full(self.thickness_nm.shape, np.nan)
+    thickness_other_order_nm: np.ndarray
 
 
 class _Rows:

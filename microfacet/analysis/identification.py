@@ -341,12 +341,11 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions) -> dict:
     why = []
     if int(dist.roi_ambiguous.sum()):
         why.append(f"{int(dist.roi_ambiguous.sum())} ROI(s) with an ambiguous order")
-    frac = (dist.thickness.info.get("order_ambiguous_fraction") or 0.0) \
-        if dist.thickness is not None else 0.0
+    frac = _order_ambiguous_fraction(dist.thickness)
     if frac > ORDER_AMBIGUOUS_AREA:
         why.append(f"{100 * frac:.0f} % of the facets' area has a runner-up order")
-    floor = MEDIAN_NOISE_FLOOR_FACTOR * noise_de
-    if delta_e_median is not None and delta_e_median > floor + options.excess_delta_e:
+    floor = _unexplained_floor(delta_e_median, noise_de, options)
+    if floor is not None:
         why.append(f"the film model does not explain the colours (median dE00 "
                    f"{delta_e_median:.2f}, noise floor {floor:.2f})")
     for a in _aliases(dist.thickness):
@@ -355,6 +354,21 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions) -> dict:
     if not dist.thickness_judgement.identified:
         why.append("the thickness is not identified")
     return {"established": not why, "reasons": why}
+
+
+def _order_ambiguous_fraction(fit) -> float:
+    """The facets' area share with a close runner-up order (0 without the joint fit's)."""
+    return (fit.info.get("order_ambiguous_fraction") or 0.0) if fit is not None else 0.0
+
+
+def _unexplained_floor(delta_e_median, noise_de, options) -> float | None:
+    """The median ΔE00's noise floor where the median lies more than
+    ``options.excess_delta_e`` above it (the model does not explain the colours); else
+    None."""
+    floor = MEDIAN_NOISE_FLOOR_FACTOR * noise_de
+    if delta_e_median is not None and delta_e_median > floor + options.excess_delta_e:
+        return floor
+    return None
 
 
 def _aliases(fit) -> list:
@@ -453,8 +467,7 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
             out.append(Reason(f"not_identified_{'ndf' if what == 'NDF' else 'thickness'}",
                               f"{what} not identified{how}: {j.reason.text}",
                               j.reason.parameter))
-    frac = (dist.thickness.info.get("order_ambiguous_fraction") or 0.0) \
-        if dist.thickness is not None else 0.0
+    frac = _order_ambiguous_fraction(dist.thickness)
     if ORDER_AMBIGUOUS_AREA < frac and dist.thickness_judgement.identified:
         out.append(Reason("order_ambiguous_facets", f"{100 * frac:.0f} % of the facets' area "
                           f"has a runner-up interference order within "
@@ -471,8 +484,8 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
         out.append(Reason("ambiguous_rois", f"{amb} of {int(dist.roi_fitted.sum())} ROIs have "
                           f"an ambiguous interference order (runner-up within "
                           f"{options.ambiguous_order_de:g} dE00)", _RANGE))
-    floor = MEDIAN_NOISE_FLOOR_FACTOR * noise_de
-    if delta_e_median is not None and delta_e_median > floor + options.excess_delta_e:
+    floor = _unexplained_floor(delta_e_median, noise_de, options)
+    if floor is not None:
         out.append(Reason("colours_unexplained", f"median dE00 {delta_e_median:.2f} is "
                           f"{delta_e_median - floor:.2f} above the image's noise floor "
                           f"{floor:.2f}: the model does not explain the colours (wrong film, "

@@ -41,6 +41,7 @@ from .facet_thickness import (
 )
 from .options import JointOptions, TiltOptions
 from .planes import FacetFit, dome_mean_square_slope, facet_edge_distance, fit_facet_planes
+from .sampling import weighted_median
 from .segmentation import segment_facets
 from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
 
@@ -164,19 +165,13 @@ def focus_heights(foc, options: JointOptions, *, evidence=True) -> HeightInputs:
     return HeightInputs(h, sig, rel & np.isfinite(sig) & (sig > 0), corr)
 
 
-def _weighted_median(x, w):
-    o = np.argsort(x)
-    c = np.cumsum(w[o])
-    return float(x[o][np.searchsorted(c, 0.5 * c[-1])])
-
-
 def _stand_in_tilt(planes, area):
     """Area-weighted median and spread of the fitted facets' tilts (0, 10° without any)."""
     ok = planes.fitted & np.isfinite(planes.tilt_deg)
     if ok.sum() < 3:
         return 0.0, 10.0
     t, a = planes.tilt_deg[ok], area[ok].astype(np.float64)
-    med = _weighted_median(t, a)
+    med = weighted_median(t, a)
     spread = math.sqrt(float(np.average((t - med) ** 2, weights=a)))
     return med, max(spread, 1.0)
 

@@ -588,7 +588,7 @@ def population_candidates(d, chosen, regions: Regions, k) -> list[PopulationCand
     ``d`` is the fit's prepared data (:class:`_Data`), ``chosen`` ``((w, mu, s2), ℓ, bg)``
     of the chosen K. Returns the candidates, heaviest first.
     """
-    (w, mu, s2), _, _ = chosen
+    (_, mu, s2), _, _ = chosen
     ok = np.isfinite(regions.value) & (regions.area > 0)
     x, sg, area = regions.value[ok], regions.sigma[ok], regions.area[ok].astype(np.float64)
     far = np.all(np.abs(x[:, None] - mu) > CANDIDATE_Z * np.sqrt(

@@ -36,7 +36,8 @@ from .segmentation import merge_adjacent, neighbour_pairs
 
 stats = load("scipy.stats")
 
-__all__ = ["Regions", "Samples", "collapse", "prepare", "thickness_regions"]
+__all__ = ["Regions", "Samples", "collapse", "prepare", "thickness_regions",
+           "weighted_median"]
 
 
 @dataclass
@@ -288,3 +289,19 @@ def collapse(a, *cols):
     for c in srt:
         new[1:] |= c[1:] != c[:-1]
     return (np.bincount(np.cumsum(new) - 1, weights=a[order]), *(c[new] for c in srt))
+
+
+def weighted_median(x, w) -> float | None:
+    """The smallest value of ``x`` at which the cumulative weight ``w`` reaches half the
+    total (None without values or weight).
+
+    >>> weighted_median(np.array([3.0, 1.0, 2.0]), np.array([1.0, 1.0, 5.0]))
+    2.0
+    """
+    x, w = np.asarray(x, dtype=np.float64), np.asarray(w, dtype=np.float64)
+    if x.size == 0 or w.sum() <= 0:
+        return None
+    o = np.argsort(x)
+    c = np.cumsum(w[o])
+    return float(x[o][np.searchsorted(c, 0.5 * c[-1])])
+

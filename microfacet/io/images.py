@@ -34,6 +34,7 @@ ImageInfo(shape=(4, 5), dtype=dtype('uint8'), channels=3, jpeg=None)
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import struct
 import threading
@@ -132,11 +133,16 @@ def ijg_quality(table) -> int | None:
     (90, None)
     """
     want = np.sort(np.asarray(table, dtype=np.int64))
-    for q in range(1, 101):
-        scale = 5000 // q if q < 50 else 200 - 2 * q
-        if np.array_equal(np.sort(np.clip((_IJG_LUMA * scale + 50) // 100, 1, 255)), want):
-            return q
-    return None
+    hit = np.flatnonzero(np.all(_ijg_sorted_tables() == want, axis=1))
+    return int(hit[0]) + 1 if hit.size else None
+
+
+@functools.cache
+def _ijg_sorted_tables() -> np.ndarray:
+    """The IJG luminance tables of qualities 1-100, each sorted: (100, 64)."""
+    q = np.arange(1, 101)[:, None]
+    scale = np.where(q < 50, 5000 // q, 200 - 2 * q)
+    return np.sort(np.clip((_IJG_LUMA * scale + 50) // 100, 1, 255), axis=1)
 
 
 def _dqt_tables(seg: bytes) -> dict:

@@ -9,7 +9,8 @@ encodings too). All copies are analysed in the joint mode and scored against the
 (:func:`accuracy_sweep.score_scene`). Per encoding: the scenes whose population count is
 right, the region MAE, the wrong-order scenes, the colour noise the analysis measured, and
 against each scene's own lossless copy: the same count, and every mean within 1 nm (the
-issue's criterion for re-encoding at quality ≥ 90).
+issue's criterion for re-encoding at quality ≥ 90). The per-scene rows go to
+``encoding.csv`` under ``out``.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from pipelines import Study
-from pipelines._shared import fmt, md_table, note
+from pipelines._shared import fmt, md_table, note, write_csv
 
 STUDY = Study(
     name="accuracy-encoding",
@@ -65,35 +66,46 @@ def write_copies(plan, encs, work: Path) -> list:
     return folders
 
 
-def _means(results: Path) -> list:
-    comps = json.loads((results / "summary.json").read_text())["thickness"]["mixture"]
-    return sorted(c["mean_nm"] for c in comps.get("components", []))
+def _summary(results: Path) -> dict | None:
+    path = results / "summary.json"
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def _means(summary: dict) -> list:
+    mix = summary["thickness"]["mixture"]
+    return sorted(c["mean_nm"] for c in mix.get("components", []))
 
 
 def score(plan, encs, work: Path) -> list:
     """One row per scene and encoding: the sweep's scores, the colour noise, and the count
-    and means against the scene's lossless copy."""
+    and means against the scene's lossless copy (each summary.json read once here)."""
     from pipelines.studies.accuracy_sweep import score_scene
 
     rows = []
     for name, _, on in plan:
-        ref = work / "results" / f"{name}-png"
+        ref = _summary(work / "results" / f"{name}-png")
         for label, _ in encs:
-            res, truth = work / "results" / f"{name}-{label}", \
-                work / "stacks" / f"{name}-{label}" / "truth"
+            res = work / "results" / f"{name}-{label}"
+            summ = ref if label == "png" else _summary(res)
             row = {"scene": name, "encoding": label, "jpeg_drawn": "jpeg" in on}
-            if not (res / "summary.json").is_file():
+            if summ is None:
                 rows.append({**row, "status": "failed"})
                 continue
-            row.update(score_scene(res, truth), status="done",
-                       noise=json.loads((res / "summary.json").read_text())["colour_noise_de"])
-            if (ref / "summary.json").is_file():
-                a, b = _means(res), _means(ref)
+            row.update(score_scene(res, work / "stacks" / f"{name}-{label}" / "truth"),
+                       status="done", noise=summ["colour_noise_de"])
+            if ref is not None:
+                a, b = _means(summ), _means(ref)
                 row["same_count"] = len(a) == len(b)
                 row["same_means"] = len(a) == len(b) and bool(
                     np.all(np.abs(np.subtract(a, b)) <= 1.0))
             rows.append(row)
     return rows
+
+
+#: Columns of ``encoding.csv`` (one row per scene and encoding).
+COLUMNS = ["scene", "encoding", "status", "jpeg_drawn", "pops_found", "pops_true",
+           "region_mae_nm", "order_wrong", "order_flagged", "de_mean", "de_floor", "noise",
+           "same_count", "same_means"]
 
 
 def table(rows, encs) -> str:
@@ -138,6 +150,7 @@ def run(*, quick: bool, out: Path, n=30, seed=1, size="256x256", slices=16,
         run_batch(todo, work / "results", jobs=jobs or None,
                   options=AnalysisOptions(mode="joint"), report=False)
     rows = score(plan, encs, work)
+    write_csv(out / "encoding.csv", rows, COLUMNS)
     failed = sum(1 for r in rows if r["status"] != "done")
     note(f"{n} scenes (seed {seed}) × {len(encs)} encodings; {failed} analyses failed")
     head = (f"{n} scenes of the generalization sweep (seed {seed}, {hw[0]}×{hw[1]} px, "

@@ -43,7 +43,16 @@ import numpy as np
 from microfacet.forward.synth import SynthParams, ThicknessComponent, TiltLobe
 from microfacet.optics import DEFAULT_FILM, known_sets
 from pipelines import Study
-from pipelines._shared import ROOT, fmt, md_table, note, pyplot, save_figure, write_csv
+from pipelines._shared import (
+    ROOT,
+    fmt,
+    md_table,
+    note,
+    pyplot,
+    save_figure,
+    truthy,
+    write_csv,
+)
 
 STUDY = Study(
     name="accuracy-sweep",
@@ -457,15 +466,11 @@ def summary_table(summaries) -> str:
 
 #: The camera variations of the per-variation table: label → test of a row (None: off).
 CAMERA_VARIATIONS = {
-    "JPEG slices (quality 70-95)": lambda r: _flag(r.get("v_jpeg")),
+    "JPEG slices (quality 70-95)": lambda r: truthy(r.get("v_jpeg")),
     "16-bit slices": lambda r: "16" in str(r.get("bit_depth", "")),
-    "white-balance error": lambda r: _flag(r.get("v_white_balance")),
+    "white-balance error": lambda r: truthy(r.get("v_white_balance")),
     "exposure < 0.9": lambda r: _num(r.get("exposure")) < 0.9,
 }
-
-
-def _flag(v) -> bool:
-    return v in (1, "1", True, "True")
 
 
 def _num(v) -> float:
