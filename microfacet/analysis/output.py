@@ -19,7 +19,11 @@ from .. import __version__
 from ..core.densities import cell_edges, pdf_table
 from ..core.errors import InputError
 from ..core.pixels import pixel_size_yx
-from ..focus.uncertainty import height_sigma_with_bias
+from ..focus.uncertainty import (
+    RELIEF_COEFFICIENT,
+    height_sigma_with_bias,
+    unresolved_relief_sigma_um,
+)
 from ..io.outdir import atomic_output_dir
 from ..io.results import write_results_files
 from ..io.summary import (
@@ -277,28 +281,45 @@ def height_sigma_um(r) -> np.ndarray | None:
     """``height_sigma_um.npy``: the focus stage's 1-σ height error where the height is
     reliable, with the variance of its unexplained disagreement with the evidence window
     (:func:`~microfacet.focus.uncertainty.height_sigma_with_bias`), times the self-check's
-    :func:`sigma_scale` (None for an export)."""
+    :func:`sigma_scale`, and the relief its window averages away in quadrature
+    (:func:`~microfacet.focus.uncertainty.unresolved_relief_sigma_um`, from the map's
+    :func:`height_rms_gradient`); None for an export."""
     if r.focus.height_sigma_um is None or not r.scene.from_focus:
         return None
-    sig = height_sigma_with_bias(r.focus)
-    k = sigma_scale(r) or 1.0
-    return np.where(np.isfinite(r.focus.height_um), sig * np.float32(k),
+    sig = height_sigma_with_bias(r.focus) * np.float32(sigma_scale(r) or 1.0)
+    relief = np.float32(0.0) if r.focus.window_px_map is None else unresolved_relief_sigma_um(
+        height_rms_gradient(r), r.focus.window_px_map, r.scene.pixel_size_um)
+    return np.where(np.isfinite(r.focus.height_um), np.sqrt(sig * sig + relief * relief),
                     np.float32(np.nan)).astype(np.float32)
+
+
+def height_rms_gradient(r) -> float | None:
+    """The height map's RMS gradient Sdq (ISO 25178-2, about its least-squares plane, on its
+    reliable pixels; None with fewer than 3)."""
+    try:
+        return areal_parameters(r.focus.height_um, pixel_size_um=r.scene.pixel_size_um,
+                                reference="plane").Sdq
+    except InputError:
+        return None
 
 
 def _height_section(r) -> dict:
     """Unreliable fraction; the σ (µm, ``[y, x]``) by which the slopes were smoothed before
     the normals (0 for an instrument's height map); the self-check's scale of the height σ
-    and the 2σ coverage of its heights before it."""
+    and the 2σ coverage of its heights before it; the unresolved-relief term's coefficient
+    and the map's RMS gradient it multiplies (null for an export)."""
     sigma_px = r.options.focus.slope_sigma_px if r.scene.from_focus else 0.0
     c = r.self_check
     cov = None if c is None else c.height_coverage
+    relief = r.scene.from_focus and r.focus.window_px_map is not None
     return {"unreliable_fraction": float(np.mean(~np.isfinite(r.focus.height_um))),
             "normals_slope_sigma_um": [sigma_px * p for p in pixel_size_yx(
                 r.scene.pixel_size_um)],
             "sigma_scale": sigma_scale(r),
             "self_check_coverage": float(cov) if cov is not None and np.isfinite(cov)
-            else None}
+            else None,
+            "relief_coefficient": RELIEF_COEFFICIENT if relief else None,
+            "relief_rms_gradient": height_rms_gradient(r) if relief else None}
 
 
 def _iso25178_section(r) -> Iso25178Section | None:

@@ -130,8 +130,10 @@ class FocusResult:
         |error| ≤ 2σ for 96-99 % of the reliable pixels there (docs/height-from-focus.md).
         It does not hold off that calibration set: on the randomized synthetic sweep of
         docs/accuracy.md 2σ covers 43-95 % (median 80 %); heights borrowed from texture
-        a window away carry a bias σ does not hold (the analysis' ``height_sigma_um.npy``
-        adds :func:`~microfacet.focus.uncertainty.height_sigma_with_bias`).
+        a window away carry a bias σ does not hold, and so does relief smaller than the
+        window (the analysis' ``height_sigma_um.npy`` adds
+        :func:`~microfacet.focus.uncertainty.height_sigma_with_bias` and
+        :func:`~microfacet.focus.uncertainty.unresolved_relief_sigma_um`).
     detected : ndarray of bool, shape (H, W)
         True where at least one window has a significant focus peak (a textureless pixel
         has none: it gets no height, whatever the cut).

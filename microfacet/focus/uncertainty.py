@@ -40,12 +40,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.lazy import load
+from ..core.pixels import pixel_size_yx
 from .peaks import detection_threshold, fit_peak, pertuz_db
 
 cv2 = load("cv2")
 
-__all__ = ["WindowFit", "combine", "disagreement_variance", "fit_window",
-           "height_sigma_with_bias"]
+__all__ = ["RELIEF_COEFFICIENT", "WindowFit", "combine", "disagreement_variance",
+           "fit_window", "height_sigma_with_bias", "unresolved_relief_sigma_um"]
 
 #: Nominal false-peak rate per pixel and window of the detection test (the measured rate on
 #: pure noise is 1e-4 to 4e-4: the tails' mean and spread are estimated from few slices). A
@@ -60,6 +61,12 @@ DETECTION_ALPHA = 1e-5
 #: window in :func:`combine`. Calibration constants of the model, not user options.
 SIGMA_MODEL = {"slope": 0.4, "curv": 1.4, "broad": 0.5, "broad_ratio": 1.5, "floor": 0.03,
                "prior_dof": 8.0, "prefer": 1.0}
+#: Coefficient κ_r of the unresolved-relief term of the analysis' reported height σ
+#: (:func:`unresolved_relief_sigma_um`): the median over the 30 scenes of the development
+#: sweep (seed 0 of docs/accuracy.md's issue-22 worlds) of the κ_r that makes 2σ cover 95 %
+#: of each scene's facet-pixel height errors; checked on the independent seed-1 draw there.
+#: A calibration constant of the model, not a user option.
+RELIEF_COEFFICIENT = 0.57
 
 
 @dataclass
@@ -378,6 +385,54 @@ def disagreement_variance(height, sigma, evidence_height, evidence_sigma, *,
     fallback = np.float32(max(float(np.mean(excess[both])), 0.0))
     pooled = np.where(den > 1e-3, num / np.maximum(den, np.float32(1e-3)), fallback)
     return np.maximum(pooled, 0.0).astype(np.float32)              # clipped once pooled
+
+
+def unresolved_relief_sigma_um(rms_gradient, window_px_map, pixel_size_um, *,
+                               coefficient=RELIEF_COEFFICIENT):
+    """σ (µm) of the relief a pixel's focus window averages away: ``κ_r · Sdq · σ_w · p``.
+
+    A window of spread ``σ_w`` px (:func:`window_spread_px` of the window each pixel took)
+    returns the texture-weighted mean height of what it sees; a surface whose facets are
+    smaller than the window differs from that mean at the pixel by about its slope times
+    ``σ_w``. The slope is not the window's own smoothed gradient (the relief term of
+    :data:`SIGMA_MODEL`, which cannot see facets smaller than the window) but the height
+    map's RMS gradient ``Sdq`` over the whole map (ISO 25178-2, about its plane), with the
+    calibrated coefficient :data:`RELIEF_COEFFICIENT`. Its errors are correlated between the
+    windows, so the evidence window's disagreement (:func:`disagreement_variance`) cannot
+    measure it.
+
+    Parameters
+    ----------
+    rms_gradient : float
+        The height map's RMS gradient Sdq (µm/µm); NaN or None gives 0.
+    window_px_map : ndarray of int (H, W)
+        The focus window (px) whose height each pixel took
+        (:attr:`~microfacet.focus.height.FocusResult.window_px_map`).
+    pixel_size_um : float or (float, float)
+        Pixel size, one number or ``(y, x)`` (their geometric mean is used).
+    coefficient : float
+        κ_r.
+
+    Returns
+    -------
+    ndarray of float32 (H, W)
+        The σ in µm (0 where the window is 0 px, i.e. unknown).
+
+    Examples
+    --------
+    >>> w = np.full((2, 2), 7, np.uint8)
+    >>> s = unresolved_relief_sigma_um(0.2, w, 0.25, coefficient=1.0)
+    >>> round(float(s[0, 0]), 4), round(0.2 * window_spread_px(7) * 0.25, 4)
+    (0.1127, 0.1127)
+    """
+    g = 0.0 if rms_gradient is None or not np.isfinite(rms_gradient) else float(rms_gradient)
+    py, px = pixel_size_yx(pixel_size_um)
+    w = np.asarray(window_px_map)
+    sizes = np.unique(w)
+    spread = np.zeros(int(sizes.max()) + 1 if sizes.size else 1, np.float64)
+    for k in sizes:
+        spread[int(k)] = window_spread_px(int(k)) if k > 0 else 0.0
+    return (coefficient * g * math.sqrt(py * px) * spread[w.astype(np.intp)]).astype(np.float32)
 
 
 def height_sigma_with_bias(focus):

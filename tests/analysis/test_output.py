@@ -109,3 +109,25 @@ def test_an_ambiguous_roi_is_reported_with_both_candidates(nd_analysis):
     assert first["runner_up_delta_e"] >= first["delta_e"]
     assert build_summary(res).to_json()["thickness"]["roi"]["ambiguous"] == []
     Summary.from_json(build_summary(amb).to_json())          # the schema reads it back
+
+
+def test_the_height_sigma_covers_the_fixtures_true_errors(results):
+    """``height_sigma_um.npy`` against the fixture's true height: 2σ covers ≥ 90 % of the
+    reliable pixels' errors; it holds the unresolved-relief term of the map's own RMS gradient
+    (``height.relief_rms_gradient`` = Sdq of ``height_um.npy`` about its plane, ISO 25178-2)."""
+    from microfacet.analysis.iso25178 import areal_parameters
+    from microfacet.focus.uncertainty import RELIEF_COEFFICIENT, window_spread_px
+
+    s = json.loads((results / "summary.json").read_text())
+    h, sig = np.load(results / "height_um.npy"), np.load(results / "height_sigma_um.npy")
+    truth = np.load(TRUTH / "height_um.npy")
+    ok = np.isfinite(h)
+    assert np.isfinite(sig[ok]).all() and np.isnan(sig[~ok]).all()
+    px = s["inputs"]["pixel_size_um"]
+    sdq = areal_parameters(h, pixel_size_um=px).Sdq
+    assert s["height"]["relief_rms_gradient"] == pytest.approx(sdq, rel=1e-9)
+    assert s["height"]["relief_coefficient"] == RELIEF_COEFFICIENT
+    floor = RELIEF_COEFFICIENT * sdq * window_spread_px(3) * float(np.mean(px))
+    assert sig[ok].min() >= floor * 0.999
+    cover = float(np.mean(np.abs(h - truth)[ok] <= 2 * sig[ok]))
+    assert cover >= 0.90, cover
