@@ -207,6 +207,35 @@ def height_coverage(height_um, sigma_um, truth):
     return float(np.mean(np.abs(height_um[ok] - ht[ok]) <= 2.0 * sigma_um[ok]))
 
 
+def relief_coefficient_95(error_um, sigma_um, relief_unit_um, *, target=0.95):
+    """The coefficient κ of the unresolved-relief term
+    (:func:`microfacet.focus.uncertainty.unresolved_relief_sigma_um`, whose value at κ = 1 is
+    ``relief_unit_um``) at which 2·√(σ² + (κ·unit)²) covers ``target`` of the height errors
+    ``error_um`` (0 when σ alone does, inf when no κ up to 50 does, NaN without errors).
+
+    >>> e = np.array([0.1, 0.2, 0.3, 0.4])
+    >>> round(relief_coefficient_95(e, np.full(4, 0.05), np.full(4, 0.1), target=1.0), 3)
+    1.936
+    """
+    ok = np.isfinite(error_um) & np.isfinite(sigma_um) & np.isfinite(relief_unit_um)
+    if not ok.any():
+        return math.nan
+    e, s, u = np.abs(error_um[ok]), sigma_um[ok], relief_unit_um[ok]
+
+    def cover(k):
+        return float(np.mean(e <= 2.0 * np.sqrt(s * s + (k * u) ** 2)))
+
+    if cover(0.0) >= target:
+        return 0.0
+    lo, hi = 0.0, 50.0
+    if cover(hi) < target:
+        return math.inf
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if cover(mid) < target else (lo, mid)
+    return hi
+
+
 def texture_codes(truth_rgb8, window_px=5):
     """Median over pixels of the local SD (``window_px``², reflected borders) of the grey
     level (mean of R, G, B) of an 8-bit image, in code values.

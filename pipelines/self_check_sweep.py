@@ -21,15 +21,17 @@ import numpy as np
 from microfacet.analysis import AnalysisOptions, analyse_stack
 from microfacet.analysis import self_check as sc
 from microfacet.analysis.options import FitOptions, JointOptions
-from microfacet.analysis.output import height_sigma_um
+from microfacet.analysis.output import height_rms_gradient, height_sigma_um, sigma_scale
 from microfacet.analysis.planes import fit_facet_planes
 from microfacet.focus.options import FocusOptions
+from microfacet.focus.uncertainty import height_sigma_with_bias, unresolved_relief_sigma_um
 from pipelines._scoring import (
     facet_tilts,
     height_coverage,
     lobe_rms_ratio,
     ndf_w1_deg,
     past_limit_fraction,
+    relief_coefficient_95,
 )
 from pipelines.studies.accuracy_sweep import world_of
 
@@ -47,6 +49,22 @@ def _actual_gain(r, true_height_um) -> float | None:
         return None
     return sc.slope_gain(pl.slope_x[ok], pl.slope_y[ok], true.slope_x[ok], true.slope_y[ok],
                          r.joint.area_px[ok].astype(np.float64))
+
+
+def _relief_coefficient(r, truth) -> float | None:
+    """The unresolved-relief coefficient κ_r that would make the reported height σ cover
+    95 % of this scene's facet-pixel errors (:func:`pipelines._scoring.relief_coefficient_95`;
+    ``RELIEF_COEFFICIENT`` is the median of it over the development sweep's scenes)."""
+    f = r.focus
+    if not r.scene.from_focus or f.height_sigma_um is None or f.window_px_map is None:
+        return None
+    sig = height_sigma_with_bias(f) * np.float32(sigma_scale(r) or 1.0)
+    unit = unresolved_relief_sigma_um(height_rms_gradient(r), f.window_px_map,
+                                      r.scene.pixel_size_um, coefficient=1.0)
+    facet = np.isfinite(facet_tilts(truth))
+    err = np.where(facet, f.height_um - np.load(truth / "height_um.npy"), np.nan)
+    k = relief_coefficient_95(err, sig, unit)       # inf: not even κ = 50 (counted as 50)
+    return None if np.isnan(k) else float(min(k, 50.0))
 
 
 def facet_purity(labels, true_facets) -> float:
@@ -109,7 +127,8 @@ def analysis_options(overrides: dict | None = None) -> AnalysisOptions:
 def scene_record(d: Path, options: AnalysisOptions) -> dict:
     """One stack analysed and scored against its truth: its world, the NDF's identification
     and reason, the lobes' RMS ratio and W1, the self-check, censored against truly past
-    the limit, the height's 2σ coverage, and the planes' actual slope gain."""
+    the limit, the height's 2σ coverage and the relief coefficient that would make it 95 %,
+    and the planes' actual slope gain."""
     r = analyse_stack(d, options)
     t = facet_tilts(d / "truth")
     vis = np.isfinite(t) & (t < r.scene.max_tilt_deg)
@@ -129,6 +148,7 @@ def scene_record(d: Path, options: AnalysisOptions) -> dict:
         **lobe_scores(r, t),
         "height_coverage": height_coverage(r.focus.height_um, height_sigma_um(r), d / "truth")
         if r.scene.from_focus else None,
+        "relief_coefficient_95": _relief_coefficient(r, d / "truth"),
         "identified": r.distributions.ndf_judgement.identified,
         "reason_code": r.distributions.ndf_judgement.to_json()["reason_code"]}
 
@@ -140,7 +160,9 @@ def _num(v, digits=2):
 def world_table(rows, label="") -> str:
     """Markdown: per world (and all) the scenes, the NDFs identified, those off by more than
     25 % in RMS slope, the identified ones' lobe RMS ratio and W1, the median |censored −
-    truly past the limit| and the height's median (min) 2σ coverage."""
+    truly past the limit|, the height's median (min) 2σ coverage and the median
+    unresolved-relief coefficient that would give 95 % (``RELIEF_COEFFICIENT`` is that of
+    seed 0, all worlds)."""
     from pipelines._shared import md_table
 
     body = []
@@ -154,15 +176,19 @@ def world_table(rows, label="") -> str:
         cens = [abs((r["censored_fraction"] or 0.0) - r["past_limit_fraction"]) for r in sub
                 if r["past_limit_fraction"] is not None]
         hc = [r["height_coverage"] for r in sub if r.get("height_coverage") is not None]
+        kr = [r["relief_coefficient_95"] for r in sub
+              if r.get("relief_coefficient_95") is not None]
         body.append([label, w, str(len(sub)), str(len(ident)), str(len(wrong)),
                      ", ".join(f"{_num(r['lobe_ratio'])}, {_num(r['w1_deg'])}°" for r in ident)
                      or "–",
                      _num(float(np.median(cens)) if cens else None, 3),
                      f"{_num(float(np.median(hc)) if hc else None)} "
-                     f"({_num(min(hc) if hc else None)})"])
+                     f"({_num(min(hc) if hc else None)})",
+                     _num(float(np.median(kr)) if kr else None)])
     return md_table(["sweep", "world", "scenes", "NDF identified",
                      "identified, RMS slope off > 25 %", "identified: lobe RMS ratio, W1",
-                     "median abs(censored − past limit)", "height 2σ coverage, median (min)"],
+                     "median abs(censored − past limit)", "height 2σ coverage, median (min)",
+                     "κ_r for 95 % coverage, median"],
                     body)
 
 

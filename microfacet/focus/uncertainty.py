@@ -64,7 +64,8 @@ SIGMA_MODEL = {"slope": 0.4, "curv": 1.4, "broad": 0.5, "broad_ratio": 1.5, "flo
 #: Coefficient κ_r of the unresolved-relief term of the analysis' reported height σ
 #: (:func:`unresolved_relief_sigma_um`): the median over the 30 scenes of the development
 #: sweep (seed 0 of docs/accuracy.md's issue-22 worlds) of the κ_r that makes 2σ cover 95 %
-#: of each scene's facet-pixel height errors; checked on the independent seed-1 draw there.
+#: of each scene's facet-pixel height errors (``python -m pipelines run accuracy-ndf-worlds``,
+#: its last column); checked on the independent seed-1 draw there.
 #: A calibration constant of the model, not a user option.
 RELIEF_COEFFICIENT = 0.57
 
