@@ -17,7 +17,6 @@ import numpy as np
 
 from .. import __version__
 from ..core.densities import cell_edges, pdf_table
-from ..core.errors import InputError
 from ..core.pixels import pixel_size_yx
 from ..focus.uncertainty import (
     RELIEF_COEFFICIENT,
@@ -296,11 +295,7 @@ def height_sigma_um(r) -> np.ndarray | None:
 def height_rms_gradient(r) -> float | None:
     """The height map's RMS gradient Sdq (ISO 25178-2, about its least-squares plane, on its
     reliable pixels; None with fewer than 3)."""
-    try:
-        return areal_parameters(r.focus.height_um, pixel_size_um=r.scene.pixel_size_um,
-                                reference="plane").Sdq
-    except InputError:
-        return None
+    return None if r.height_areal is None else r.height_areal.Sdq
 
 
 def _height_section(r) -> dict:
@@ -329,11 +324,10 @@ def _iso25178_section(r) -> Iso25178Section | None:
     normals on the same pixels (None with fewer than 3 reliable heights, or all on a line)."""
     h = np.asarray(r.focus.height_um, dtype=np.float64)
     px = r.scene.pixel_size_um
-    try:
-        iso = areal_parameters(h, pixel_size_um=px, reference="plane")
-        raw = areal_parameters(h, pixel_size_um=px, reference="mean")
-    except InputError:
+    iso = r.height_areal
+    if iso is None:
         return None
+    raw = areal_parameters(h, pixel_size_um=px, reference="mean")
     rel = np.isfinite(h)
     tan = np.tan(np.radians(np.asarray(r.surface.tilt_deg, dtype=np.float64)[rel]))
     tan = tan[np.isfinite(tan)]

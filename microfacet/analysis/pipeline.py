@@ -33,6 +33,7 @@ from .colour_image import measure_colour, no_colour_message
 from .consistency import mixture_map_check, roi_pixel_check
 from .distributions import Distributions, fit_joint_distributions, fit_seed_distributions
 from .identification import analysis_warnings, mean_plane_tilt_deg, self_check_judgement
+from .iso25178 import areal_parameters
 from .joint import bootstrap_labels, facet_labels, joint_facets, joint_pixel_tilts
 from .options import AnalysisOptions, Scene, scene_of
 from .roi import thickness_per_roi
@@ -119,6 +120,17 @@ class AnalysisResult:
         (:func:`~.consistency.mixture_map_check`; None without either)."""
         fit = self.thickness_fit
         return mixture_map_check(self.pixels.thickness_nm, fit.mixture if fit else None)
+
+    @functools.cached_property
+    def height_areal(self):
+        """ISO 25178-2 parameters of the height map about its least-squares plane, on its
+        reliable pixels (:func:`~.iso25178.areal_parameters`; None with fewer than 3, or all
+        on a line): computed once for the summary and the height σ."""
+        try:
+            return areal_parameters(self.focus.height_um, pixel_size_um=self.scene.pixel_size_um,
+                                    reference="plane")
+        except InputError:
+            return None
 
     @functools.cached_property
     def roi_check(self):
