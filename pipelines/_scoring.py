@@ -38,7 +38,7 @@ from scipy import ndimage
 
 from microfacet.colour import delta_e_2000, srgb_to_lab
 from microfacet.core.distributions import NDFMixture
-from pipelines._shared import truthy
+from pipelines._shared import row_number, truthy
 
 #: Fewest used pixels of a ROI for its thickness to be scored (the analysis' ``roi.min_pixels``).
 ROI_MIN_PIXELS = 20
@@ -343,10 +343,10 @@ TARGETS = (
 
 def _int(v, default):
     """An integer from a row (a CSV text, or missing: ``default``)."""
-    try:
-        return int(float(v))
-    except (TypeError, ValueError):
-        return default if default is None else int(float(default))
+    x = row_number(v)
+    if math.isfinite(x):
+        return int(x)
+    return default if default is None else int(row_number(default))
 
 
 def summarize(rows):

@@ -300,3 +300,14 @@ def truthy(v) -> bool:
     """A flag from a row: a bool or 1, or its text in a resumed CSV ("True", "1")."""
     return v is True or v in ("True", "1") or v == 1
 
+
+def row_number(v) -> float:
+    """A number from a row: the value, or its text in a resumed CSV (NaN when missing).
+
+    >>> row_number("0.85"), row_number(2), row_number(None)
+    (0.85, 2.0, nan)
+    """
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan

@@ -21,10 +21,9 @@ import numpy as np
 from microfacet.analysis import AnalysisOptions, analyse_stack
 from microfacet.analysis import self_check as sc
 from microfacet.analysis.options import FitOptions, JointOptions
-from microfacet.analysis.output import height_rms_gradient, height_sigma_um, sigma_scale
+from microfacet.analysis.output import height_sigma_terms, height_sigma_um
 from microfacet.analysis.planes import fit_facet_planes
 from microfacet.focus.options import FocusOptions
-from microfacet.focus.uncertainty import height_sigma_with_bias, unresolved_relief_sigma_um
 from pipelines._scoring import (
     facet_tilts,
     height_coverage,
@@ -51,19 +50,16 @@ def _actual_gain(r, true_height_um) -> float | None:
                          r.joint.area_px[ok].astype(np.float64))
 
 
-def _relief_coefficient(r, truth) -> float | None:
+def _relief_coefficient(r, truth, facet) -> float | None:
     """The unresolved-relief coefficient κ_r that would make the reported height σ cover
-    95 % of this scene's facet-pixel errors (:func:`pipelines._scoring.relief_coefficient_95`;
-    ``RELIEF_COEFFICIENT`` is the median of it over the development sweep's scenes)."""
-    f = r.focus
-    if not r.scene.from_focus or f.height_sigma_um is None or f.window_px_map is None:
+    95 % of this scene's ``facet``-pixel errors (:func:`pipelines._scoring.relief_coefficient_95`
+    on :func:`~microfacet.analysis.output.height_sigma_terms`; ``RELIEF_COEFFICIENT`` is the
+    median of it over the development sweep's scenes); at most 50 (none up to 50 does)."""
+    terms = height_sigma_terms(r, coefficient=1.0)
+    if terms is None:
         return None
-    sig = height_sigma_with_bias(f) * np.float32(sigma_scale(r) or 1.0)
-    unit = unresolved_relief_sigma_um(height_rms_gradient(r), f.window_px_map,
-                                      r.scene.pixel_size_um, coefficient=1.0)
-    facet = np.isfinite(facet_tilts(truth))
-    err = np.where(facet, f.height_um - np.load(truth / "height_um.npy"), np.nan)
-    k = relief_coefficient_95(err, sig, unit)       # inf: not even κ = 50 (counted as 50)
+    err = np.where(facet, r.focus.height_um - np.load(truth / "height_um.npy"), np.nan)
+    k = relief_coefficient_95(err, *terms)
     return None if np.isnan(k) else float(min(k, 50.0))
 
 
@@ -148,7 +144,7 @@ def scene_record(d: Path, options: AnalysisOptions) -> dict:
         **lobe_scores(r, t),
         "height_coverage": height_coverage(r.focus.height_um, height_sigma_um(r), d / "truth")
         if r.scene.from_focus else None,
-        "relief_coefficient_95": _relief_coefficient(r, d / "truth"),
+        "relief_coefficient_95": _relief_coefficient(r, d / "truth", np.isfinite(t)),
         "identified": r.distributions.ndf_judgement.identified,
         "reason_code": r.distributions.ndf_judgement.to_json()["reason_code"]}
 

@@ -23,8 +23,8 @@ from ..colour.srgb import srgb_encode, srgb_to_lab
 from .mask import ColourMask, colour_mask
 from .options import MaskOptions
 
-__all__ = ["ColourImage", "compression_noise_de", "mean_colour_noise",
-           "estimate_colour_noise", "measure_colour"]
+__all__ = ["ColourImage", "compression_noise_de", "estimate_colour_noise",
+           "mean_colour_noise", "measure_colour"]
 
 log = logging.getLogger(__name__)
 

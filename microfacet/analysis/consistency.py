@@ -155,7 +155,7 @@ def roi_pixel_check(roi, thickness_nm) -> tuple[np.ndarray, np.ndarray]:
 #: as a possible order alias.
 ALIAS_MIN_AMBIGUOUS = 0.2
 #: The runner-up order's median thickness lies on another component when it is within this
-#: many SD of it (the component's SD and :data:`MAP_FLOOR_NM` × 2 in quadrature).
+#: many SD of it (the component's SD and :data:`MAP_FLOOR_NM` twice, in quadrature).
 ALIAS_SD = 3.0
 
 
@@ -226,4 +226,3 @@ def distinct_populations(mixture, orders) -> int:
         if o.get("alias_of_nm") is not None and o["alias_of_nm"] in means:
             group[root(i)] = root(means.index(o["alias_of_nm"]))
     return len({root(i) for i in range(len(means))})
-

@@ -344,7 +344,9 @@ def _thickness_starts(k, d, sols, bg):
 
 @dataclass
 class _Data:
-    """The prepared samples of one fit and what every K shares."""
+    """The prepared samples of one fit and what every K shares: ``n_eff`` the independent
+    samples admissibility counts (the regions' plain count when given), ``n_bic`` those
+    the BIC counts (their Kish count)."""
 
     x: np.ndarray
     a: np.ndarray
@@ -355,7 +357,7 @@ class _Data:
     n_eff: float
     min_samples: float
     bounded: bool
-    n_bic: float = 1.0
+    n_bic: float
 
 
 def _fit_k(k, d, sols, bg):

@@ -278,18 +278,31 @@ def sigma_scale(r) -> float | None:
 
 def height_sigma_um(r) -> np.ndarray | None:
     """``height_sigma_um.npy``: the focus stage's 1-σ height error where the height is
-    reliable, with the variance of its unexplained disagreement with the evidence window
-    (:func:`~microfacet.focus.uncertainty.height_sigma_with_bias`), times the self-check's
-    :func:`sigma_scale`, and the relief its window averages away in quadrature
-    (:func:`~microfacet.focus.uncertainty.unresolved_relief_sigma_um`, from the map's
-    :func:`height_rms_gradient`); None for an export."""
+    reliable, with its bias terms and the relief its window averages away in quadrature
+    (:func:`height_sigma_terms`); None for an export."""
+    terms = height_sigma_terms(r)
+    if terms is None:
+        return None
+    sig, relief = terms
+    return np.where(np.isfinite(r.focus.height_um), np.sqrt(sig * sig + relief * relief),
+                    np.float32(np.nan)).astype(np.float32)
+
+
+def height_sigma_terms(r, *, coefficient=RELIEF_COEFFICIENT
+                       ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The two parts of :func:`height_sigma_um` (µm): the focus stage's σ with the variance of
+    its unexplained disagreement with the evidence window
+    (:func:`~microfacet.focus.uncertainty.height_sigma_with_bias`) times the self-check's
+    :func:`sigma_scale`, and the unresolved relief at ``coefficient``
+    (:func:`~microfacet.focus.uncertainty.unresolved_relief_sigma_um` of the map's
+    :func:`height_rms_gradient`; 0 without a window map); None for an export."""
     if r.focus.height_sigma_um is None or not r.scene.from_focus:
         return None
     sig = height_sigma_with_bias(r.focus) * np.float32(sigma_scale(r) or 1.0)
-    relief = np.float32(0.0) if r.focus.window_px_map is None else unresolved_relief_sigma_um(
-        height_rms_gradient(r), r.focus.window_px_map, r.scene.pixel_size_um)
-    return np.where(np.isfinite(r.focus.height_um), np.sqrt(sig * sig + relief * relief),
-                    np.float32(np.nan)).astype(np.float32)
+    relief = (np.zeros_like(sig) if r.focus.window_px_map is None else
+              unresolved_relief_sigma_um(height_rms_gradient(r), r.focus.window_px_map,
+                                         r.scene.pixel_size_um, coefficient=coefficient))
+    return sig, relief
 
 
 def height_rms_gradient(r) -> float | None:

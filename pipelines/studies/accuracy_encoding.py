@@ -16,7 +16,6 @@ issue's criterion for re-encoding at quality ≥ 90). The per-scene rows go to
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 import numpy as np
@@ -66,9 +65,11 @@ def write_copies(plan, encs, work: Path) -> list:
     return folders
 
 
-def _summary(results: Path) -> dict | None:
-    path = results / "summary.json"
-    return json.loads(path.read_text()) if path.is_file() else None
+def _opened(results: Path):
+    """The results folder opened once (None where the analysis failed)."""
+    from microfacet.io.results import Results
+
+    return Results(results) if (results / "summary.json").is_file() else None
 
 
 def _means(summary: dict) -> list:
@@ -78,23 +79,23 @@ def _means(summary: dict) -> list:
 
 def score(plan, encs, work: Path) -> list:
     """One row per scene and encoding: the sweep's scores, the colour noise, and the count
-    and means against the scene's lossless copy (each summary.json read once here)."""
+    and means against the scene's lossless copy (each results folder opened once)."""
     from pipelines.studies.accuracy_sweep import score_scene
 
     rows = []
     for name, _, on in plan:
-        ref = _summary(work / "results" / f"{name}-png")
+        ref = _opened(work / "results" / f"{name}-png")
         for label, _ in encs:
-            res = work / "results" / f"{name}-{label}"
-            summ = ref if label == "png" else _summary(res)
+            folder = work / "results" / f"{name}-{label}"
+            res = ref if label == "png" else _opened(folder)
             row = {"scene": name, "encoding": label, "jpeg_drawn": "jpeg" in on}
-            if summ is None:
+            if res is None:
                 rows.append({**row, "status": "failed"})
                 continue
-            row.update(score_scene(res, work / "stacks" / f"{name}-{label}" / "truth"),
-                       status="done", noise=summ["colour_noise_de"])
+            row.update(score_scene(folder, work / "stacks" / f"{name}-{label}" / "truth", res),
+                       status="done", noise=res.summary["colour_noise_de"])
             if ref is not None:
-                a, b = _means(summ), _means(ref)
+                a, b = _means(res.summary), _means(ref.summary)
                 row["same_count"] = len(a) == len(b)
                 row["same_means"] = len(a) == len(b) and bool(
                     np.all(np.abs(np.subtract(a, b)) <= 1.0))

@@ -49,6 +49,7 @@ from pipelines._shared import (
     md_table,
     note,
     pyplot,
+    row_number,
     save_figure,
     truthy,
     write_csv,
@@ -267,8 +268,9 @@ def generate(plan, work: Path, modes):
     return out
 
 
-def score_scene(results: Path, truth: Path) -> dict:
-    """Scores of one results folder against its truth (see :mod:`pipelines._scoring`)."""
+def score_scene(results: Path, truth: Path, res=None) -> dict:
+    """Scores of one results folder against its truth (see :mod:`pipelines._scoring`);
+    ``res``: the folder already opened (:class:`~microfacet.io.results.Results`)."""
     from microfacet.io.images import read_png
     from microfacet.io.results import Results
     from pipelines._scoring import (
@@ -284,7 +286,7 @@ def score_scene(results: Path, truth: Path) -> dict:
     )
 
     meta = json.loads((truth / "params.json").read_text())
-    res = Results(results)
+    res = Results(results) if res is None else res
     est = res.map("thickness_nm")
     reg = region_thickness_errors(est, np.load(truth / "region_id.npy"),
                                   [r["mean_thickness_nm"] for r in meta["regions"]])
@@ -469,15 +471,8 @@ CAMERA_VARIATIONS = {
     "JPEG slices (quality 70-95)": lambda r: truthy(r.get("v_jpeg")),
     "16-bit slices": lambda r: "16" in str(r.get("bit_depth", "")),
     "white-balance error": lambda r: truthy(r.get("v_white_balance")),
-    "exposure < 0.9": lambda r: _num(r.get("exposure")) < 0.9,
+    "exposure < 0.9": lambda r: row_number(r.get("exposure")) < 0.9,
 }
-
-
-def _num(v) -> float:
-    try:
-        return float(v)
-    except (TypeError, ValueError):
-        return math.nan
 
 
 def variation_table(rows) -> str:

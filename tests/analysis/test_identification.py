@@ -233,13 +233,14 @@ def _fit():
 
 
 def _dist(roi=None, *, thickness=True, ndf=True, tj=Judgement(True), nj=Judgement(True),
-          ndf_fit=None):
+          ndf_fit=None, thickness_fit=None):
     """Distributions with the ROI flags the distributions stage computes (ambiguous: a
     runner-up within ``fits.ambiguous_order_de``)."""
     roi = _roi([130.0, 131.0], [5.0, 5.0]) if roi is None else roi
     fitted = np.isfinite(roi.thickness_nm)
     amb = fitted & ambiguous_order(roi.ambiguity_delta_e, OPTIONS.ambiguous_order_de)
-    return Distributions(_fit() if thickness else None,
+    return Distributions(thickness_fit if thickness_fit is not None
+                         else (_fit() if thickness else None),
                          ndf_fit if ndf_fit is not None else (_fit() if ndf else None),
                          tj, nj, amb, fitted)
 
@@ -372,12 +373,7 @@ def test_a_white_balance_estimate_off_one_beyond_its_sigma_is_a_warning():
 def test_a_component_at_the_sd_floor_is_said_not_measured():
     fit = MixtureFit(ThicknessMixture([(0.1, 108.4, 0.1), (0.9, 131.5, 1.5)]), 0.0, {2: 0.0},
                      10, 10.0, info={"sd_at_floor": [0]})
-    w = [r for r in analysis_warnings(Distributions(fit, _fit(), Judgement(True),
-                                                    Judgement(True), np.zeros(0, bool),
-                                                    np.zeros(0, bool)),
-                                      delta_e_median=1.0, noise_de=1.0, mean_plane_tilt=None,
-                                      options=OPTIONS)
-         if r.code == "thickness_sd_not_measured"]
+    w = [r for r in _warn(_dist(thickness_fit=fit)) if r.code == "thickness_sd_not_measured"]
     assert len(w) == 1 and "108.4 nm (10 %)" in w[0].text and "131.5" not in w[0].text
     assert _warn(_dist()) == []                  # no component at the floor: no warning
 
@@ -392,12 +388,7 @@ def test_a_reported_candidate_population_is_a_warning_naming_the_field():
              PopulationCandidate(95.0, None, 0.003, 1, 400.0, decided_at_field_um=1100.0)]
     fit = MixtureFit(ThicknessMixture([(0.5, 120.0, 1.0), (0.5, 150.0, 1.0)]), 0.0, {2: 0.0},
                      10, 10.0, info={"candidates": cands})
-    w = [r for r in analysis_warnings(Distributions(fit, _fit(), Judgement(True),
-                                                    Judgement(True), np.zeros(0, bool),
-                                                    np.zeros(0, bool)),
-                                      delta_e_median=1.0, noise_de=1.0, mean_plane_tilt=None,
-                                      options=OPTIONS)
-         if r.code == "thickness_candidates"]
+    w = [r for r in _warn(_dist(thickness_fit=fit)) if r.code == "thickness_candidates"]
     assert len(w) == 1
     assert "230.0 nm (4 %, 1 region; a field of ~121 um square" in w[0].text
     assert "283.8" not in w[0].text and "95.0" not in w[0].text
