@@ -71,6 +71,9 @@ class Distributions:
         ROIs whose runner-up interference order fits within ``fits.ambiguous_order_de``.
     roi_fitted : ndarray of bool
         ROIs with a thickness.
+    exposure_readings : ExposureReadings or None
+        Joint mode with two exposure readings: what the facets decided between
+        (:class:`~.joint.ExposureReadings`); an ambiguous pair leaves the order undecided.
     """
 
     thickness: MixtureFit | None
@@ -79,6 +82,7 @@ class Distributions:
     ndf_judgement: Judgement
     roi_ambiguous: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     roi_fitted: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    exposure_readings: object = None
 
 
 def _roi_flags(roi, options):

@@ -216,8 +216,8 @@ def _other_orders(model, tilt, mean_lab, d, window):
 
 @dataclass(frozen=True)
 class _Search:
-    """How :func:`facet_thickness` searches: the whole range for another order and the
-    neighbouring orders (``thorough``), the final step, the colour noise, the tilts' error,
+    """How :func:`facet_thickness` searches: the neighbouring orders too (``thorough``),
+    the final step, the colour noise, the tilts' error,
     the JPEG block error and the pixels that share it."""
 
     thorough: bool
@@ -234,11 +234,10 @@ def _chunk(model, colours, ii, tilt, options, search: _Search):
     t_lo, t_hi = model.theta_range_deg
     th = np.clip(tilt[ii], t_lo, t_hi)
     lab, cen = colours.mean_lab[ii], colours.roi_thickness_nm[ii]
-    if search.thorough:
-        best_in, d_out, de_out = _order_scan(model, th, lab, cen, hw)
-        switch = ((de_out < best_in - options.order_switch_de)
-                  & (de_out < options.order_switch_ratio * best_in))
-        cen = np.where(switch, d_out, cen)
+    best_in, d_out, de_out = _order_scan(model, th, lab, cen, hw)
+    switch = ((de_out < best_in - options.order_switch_de)
+              & (de_out < options.order_switch_ratio * best_in))
+    cen = np.where(switch, d_out, cen)
     offsets = np.arange(-hw, hw + 1e-9, 1.0)
     d_k, k, _ = _window_minimum(_Rows(model, th, lab, cen, offsets))
     edge = (k == 0) | (k == offsets.size - 1)
@@ -280,9 +279,12 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
         JPEG slices: the colour error per Lab component of a block's mean and the pixels
         that share it (:attr:`~.colour_image.ColourImage.block_noise_de`, ``block_px``).
     thorough : bool
-        Scan the whole range for another order and the neighbouring orders for
-        ``delta_e_other_order``, at ``options.thickness_step_nm``; False (the exposure
-        refinement): stay in the ROI's order, at ``options.exposure_thickness_step_nm``.
+        Also scan the neighbouring orders for ``delta_e_other_order``, at
+        ``options.thickness_step_nm``; False (the exposure refinement): at
+        ``options.exposure_thickness_step_nm``, without that report. Either way a facet
+        takes another order by the rule above, so the exposure is refined on the orders the
+        final fit will use (held in the ROI's order, the facets of a population in another
+        order pulled a wrong exposure up to the refinement's bound).
 
     Returns
     -------
@@ -307,7 +309,8 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
 def refine_exposure_on_facets(image: FacetImage, tilt_deg, model, options: JointOptions, *,
                               seed=0) -> float:
     """Exposure of least median facet ΔE, each facet's thickness re-solved per candidate
-    (within ×/÷ 1.5 of the model's).
+    (within ×/÷ 1.5 of the model's; each facet in its ROI's order or, by
+    :func:`facet_thickness`'s rule, its own).
 
     Facets are homogeneous (one tilt, one thickness), unlike ROIs that span several
     thickness regions, so they pin the exposure down better than the ROI fit did. Facets

@@ -341,6 +341,10 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions) -> dict:
     why = []
     if int(dist.roi_ambiguous.sum()):
         why.append(f"{int(dist.roi_ambiguous.sum())} ROI(s) with an ambiguous order")
+    readings = dist.exposure_readings
+    if readings is not None and readings.ambiguous:
+        why.append("two exposures fit the facets' colours alike (" + _readings_text(readings)
+                   + ")")
     frac = _order_ambiguous_fraction(dist.thickness)
     if frac > ORDER_AMBIGUOUS_AREA:
         why.append(f"{100 * frac:.0f} % of the facets' area has a runner-up order")
@@ -354,6 +358,14 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions) -> dict:
     if not dist.thickness_judgement.identified:
         why.append("the thickness is not identified")
     return {"established": not why, "reasons": why}
+
+
+def _readings_text(readings) -> str:
+    """``"exposure 0.97: median dE00 2.10 (reported), exposure 0.36: 2.40"``."""
+    parts = [f"exposure {e:.3g}: median dE00 {d:.2f}" + (" (reported)" if i == readings.chosen
+                                                         else "")
+             for i, (e, d) in enumerate(zip(readings.exposures, readings.median_delta_e))]
+    return ", ".join(parts)
 
 
 def _order_ambiguous_fraction(fit) -> float:
@@ -479,6 +491,14 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
                           f"{100 * frac:.0f} % of its area fits that order within "
                           f"{options.ambiguous_order_de:g} dE00 (facets.csv "
                           f"other_order_thickness_nm)", _RANGE))
+    readings = dist.exposure_readings
+    if readings is not None and readings.ambiguous:
+        out.append(Reason("exposure_ambiguous", f"two exposures fit the facets' colours "
+                          f"within {options.ambiguous_order_de:g} dE00 ("
+                          f"{_readings_text(readings)}), each with its own interference "
+                          f"orders: the reported one fits best, but the order is not "
+                          f"established; give the exposure (--exposure, stack.json) or a "
+                          f"white reference to decide", "optics.exposure"))
     amb = int(dist.roi_ambiguous.sum())
     if amb:
         out.append(Reason("ambiguous_rois", f"{amb} of {int(dist.roi_fitted.sum())} ROIs have "

@@ -10,8 +10,12 @@ per pixel (:func:`joint_pixel_tilts`).
    samples, which the windows' smoothing would flatten).
 3. The exposure refined on facets with a height tilt, then each facet's thickness from its
    colour at its tilt, within its interference order
-   (:func:`~.facet_thickness.facet_thickness`). Facets without a height tilt use the
-   area-weighted median tilt of those with one as a stand-in, with their spread as its error.
+   (:func:`~.facet_thickness.facet_thickness`). Where the ROI stage has two exposure
+   readings (:mod:`.roi`), both are carried through this step and the one of least median
+   facet ΔE00 wins (:func:`facets_at_exposure_readings`); within ``ambiguous_de`` of each
+   other they leave the order undecided (:class:`ExposureReadings`). Facets without a
+   height tilt use the area-weighted median tilt of those with one as a stand-in, with their
+   spread as its error.
 4. The tilt per pixel: the MAP of the colour likelihood and the facet's plane as prior
    (:func:`~.tilt.invert_tilt`). The colour term is calibrated: its error per Lab component
    is the facet's own scatter about the model (noise, thickness variation inside the facet,
@@ -41,12 +45,13 @@ from .facet_thickness import (
 )
 from .options import JointOptions, TiltOptions
 from .planes import FacetFit, dome_mean_square_slope, facet_edge_distance, fit_facet_planes
+from .roi import EXPOSURE_DISTINCT
 from .sampling import weighted_median
 from .segmentation import segment_facets
 from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
 
-__all__ = ["JointResult", "Segmented", "bootstrap_labels", "facet_labels", "joint_facets",
-           "joint_pixel_tilts"]
+__all__ = ["ExposureReadings", "JointResult", "Segmented", "bootstrap_labels", "facet_labels",
+           "facets_at_exposure_readings", "joint_facets", "joint_pixel_tilts"]
 
 log = logging.getLogger(__name__)
 
@@ -312,6 +317,62 @@ def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOption
                                   correlation_px=h.correlation_px)
     return JointResult(None, facets, planes, ft, area, censored, c_sig, float(model.exposure),
                        tilt_f, tsig_f, usable, ev_planes, dome)
+
+
+@dataclass(frozen=True)
+class ExposureReadings:
+    """The exposure readings the facets decided between (summary.json ``exposure_readings``).
+
+    Attributes
+    ----------
+    exposures : tuple of float
+        Each reading's exposure, refined on the facets: the ROI stage's order band's first,
+        then its blocks' (:mod:`.roi`).
+    median_delta_e : tuple of float
+        The median ΔE00 of each reading's facet thicknesses.
+    chosen : int
+        The reading of least median ΔE00, the one reported.
+    ambiguous : bool
+        The two differ by more than :data:`~.roi.EXPOSURE_DISTINCT` and fit within
+        ``ambiguous_de``: the colours do not tell the exposures, nor so the interference
+        orders, apart.
+    """
+
+    exposures: tuple
+    median_delta_e: tuple
+    chosen: int
+    ambiguous: bool
+
+    def to_json(self) -> dict:
+        return {"exposures": list(self.exposures), "median_delta_e": list(self.median_delta_e),
+                "chosen": self.chosen, "ambiguous": self.ambiguous}
+
+
+def facets_at_exposure_readings(seg: Segmented, colour, roi, model, scene, options, *,
+                                refit_roi):
+    """:func:`joint_facets` at the ROI stage's exposure and, where it has a second reading
+    (``roi.exposure_alternative``), at that one too, with the ROIs refitted at it by
+    ``refit_roi(exposure)``; the reading of least median facet ΔE00 wins.
+
+    ``options``: the :class:`~.options.AnalysisOptions` (``joint``, and ``fits``'
+    ``ambiguous_order_de`` as ``ambiguous_de``). Returns ``(JointResult, RoiFit,
+    ExposureReadings or None)``: None with one reading.
+    """
+    first = joint_facets(seg, colour, roi, model, scene, options.joint)
+    if roi.exposure_alternative is None:
+        return first, roi, None
+    roi_b = refit_roi(roi.exposure_alternative)
+    second = joint_facets(seg, colour, roi_b, model.with_exposure(roi_b.exposure), scene,
+                          options.joint)
+    runs = ((first, roi), (second, roi_b))
+    de = tuple(float(np.nanmedian(j.thickness.delta_e)) for j, _ in runs)
+    k = int(np.nanargmin(de)) if np.isfinite(de).any() else 0
+    e = tuple(j.exposure for j, _ in runs)
+    ambiguous = bool(abs(e[1] / e[0] - 1.0) > EXPOSURE_DISTINCT
+                     and abs(de[1] - de[0]) <= options.fits.ambiguous_order_de)
+    log.info("exposure readings %.4f (median facet dE00 %.2f) and %.4f (%.2f): the %s%s",
+             e[0], de[0], e[1], de[1], ("first", "second")[k], ", ambiguous" * ambiguous)
+    return (*runs[k], ExposureReadings(e, de, k, ambiguous))
 
 
 def joint_pixel_tilts(joint: JointResult, colour, model, theta_grid_deg,

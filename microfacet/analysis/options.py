@@ -109,6 +109,11 @@ class RoiOptions(Options):
     order_margin_de: float = option(
         2.0, help="a ROI leaves the consensus band only for a minimum better by this",
         unit="ΔE", low=0)
+    exposure_block_px: int = option(
+        4, help="side of the blocks of the second exposure reading: each block's mean colour "
+                "at its best thickness over the whole range, so populations in different "
+                "orders each keep their own (a block's mean averages away the pixel noise "
+                "that would otherwise chase other orders)", unit="px", low=1)
 
     def __post_init__(self):
         super().__post_init__()

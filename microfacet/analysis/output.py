@@ -254,7 +254,10 @@ def build_summary(r) -> Summary:
         mode=r.options.mode, inputs=_inputs(r), parameters=r.options.to_dict(),
         versions=_versions(), thickness=_thickness_section(r), ndf=_ndf_section(r),
         facets=_facet_summary(r.joint), exposure=r.exposure,
-        exposure_source=r.scene.exposure_source, white_balance=r.white_balance.to_dict(),
+        exposure_source=r.scene.exposure_source,
+        exposure_readings=(None if r.distributions.exposure_readings is None
+                           else r.distributions.exposure_readings.to_json()),
+        white_balance=r.white_balance.to_dict(),
         delta_e=DeltaE(**r.delta_e_stats, noise_floor_mean=NOISE_FLOOR_FACTOR * noise,
                        noise_floor_median=MEDIAN_NOISE_FLOOR_FACTOR * noise),
         masked_fraction=r.colour.mask.fraction, mask=r.colour.mask.fractions(),

@@ -34,7 +34,12 @@ from .consistency import mixture_map_check, roi_pixel_check
 from .distributions import Distributions, fit_joint_distributions, fit_seed_distributions
 from .identification import analysis_warnings, mean_plane_tilt_deg, self_check_judgement
 from .iso25178 import areal_parameters
-from .joint import bootstrap_labels, facet_labels, joint_facets, joint_pixel_tilts
+from .joint import (
+    bootstrap_labels,
+    facet_labels,
+    facets_at_exposure_readings,
+    joint_pixel_tilts,
+)
 from .options import AnalysisOptions, Scene, scene_of
 from .roi import thickness_per_roi
 from .self_check import Conditions, SelfCheck, measured_rms_slope, self_check_ndf, slice_noise_sd
@@ -194,7 +199,14 @@ def film_model(scene: Scene, options) -> FilmColourModel:
     return FilmColourModel(table, delta_e_method=options.delta_e_method)
 
 
-def _roi(st, colour, surface, model, options, scene):
+def _roi(st, colour, surface, model, options, scene, *, exposure=None):
+    """The ROI stage at the scene's exposure (None: estimated), or at ``exposure``: the
+    second estimated reading (:mod:`.roi`), still reported as estimated."""
+    if exposure is not None:
+        return dataclasses.replace(thickness_per_roi(colour, surface.tilt_deg, model,
+                                                     options.roi, exposure=exposure,
+                                                     seed=scene.seed),
+                                   exposure_estimated=True)
     roi = thickness_per_roi(colour, surface.tilt_deg, model, options.roi,
                             exposure=scene.exposure, seed=scene.seed)
     if not np.isfinite(roi.thickness_nm).any():
@@ -240,12 +252,16 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         with timer.stage(Stage.SEGMENTATION):
             seg = facet_labels(colour, surface, scene, options.joint)
         with timer.stage(Stage.FACET_FITS):
-            joint = joint_facets(seg, colour, roi, model, scene, options.joint)
+            joint, roi, readings = facets_at_exposure_readings(
+                seg, colour, roi, model, scene, options,
+                refit_roi=lambda e: _roi(st, colour, surface, model, options, scene,
+                                         exposure=e))
         model = model.with_exposure(joint.exposure)
         with timer.stage(Stage.TILT):
             pixels = joint.pixels = joint_pixel_tilts(joint, colour, model, grid, options.tilt)
         with timer.stage(Stage.MIXTURES):
             dist = fit_joint_distributions(joint, roi, model, scene, options.fits)
+            dist.exposure_readings = readings
         with timer.stage(Stage.SELF_CHECK):
             check = _self_check(st, focus, joint, scene, options,
                                 cells=lambda crop: bootstrap_labels(

@@ -29,6 +29,17 @@ refinement), on a random sample of pixels per ROI, before the per-ROI fits. The 
 keeps partly shadowed pixels (facet boundaries, grooves: right hue, too dark) from pulling
 the exposure down.
 
+That reading assumes one order band holds every population. Where populations lie in
+different orders (38 and 150 nm on one ROI), the far one is forced into the band and the
+exposure follows it (0.31 for a true 0.99 on the generalization sweep). A second reading
+therefore frees the order: the image cut into blocks of ``exposure_block_px`` (4 px), each
+block's mean colour at its best thickness over the whole range, the median over blocks
+minimised the same way. A block's mean has a quarter of a pixel's noise, so it cannot chase
+noise into another order as single pixels do; but with an unbalanced camera a thin film can
+fit another order at another exposure, which the band's hue and chroma reject. Neither
+reading is right everywhere, so where they differ by more than 5 % both are carried to the
+facets, and the one whose facets fit best is kept (:mod:`.joint`).
+
 References
 ----------
 .. [1] N. Nagata, M. Kamei, K. Takahashi, K. Tobitani, T. Akagi, S. Yamamura, "Simulation
@@ -62,6 +73,10 @@ log = logging.getLogger(__name__)
 #: tolerance in log exposure.
 EXPOSURE_SCAN = (0.25, 4.0, 25)
 EXPOSURE_XATOL = 0.003
+#: Blocks of the second exposure reading (a random sample of the usable ones).
+EXPOSURE_BLOCKS = 1024
+#: Exposure readings closer than this relative difference are one reading.
+EXPOSURE_DISTINCT = 0.05
 
 
 def _starts(n, size, stride):
@@ -154,6 +169,10 @@ class RoiFit:
         Unmasked pixels used.
     exposure : float
     exposure_estimated : bool
+    exposure_alternative : float or None
+        A second exposure reading that differs from ``exposure`` by more than
+        :data:`EXPOSURE_DISTINCT` (see the module notes); the joint mode decides between them
+        on the facets (:func:`~.joint.facets_at_exposure_readings`).
     grid_nm : ndarray
         The global thickness grid of the scan.
     curves : ndarray, shape (n_roi, n_grid)
@@ -173,6 +192,7 @@ class RoiFit:
     n_pixels: np.ndarray
     exposure: float = 1.0
     exposure_estimated: bool = False
+    exposure_alternative: float | None = None
     grid_nm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     curves: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     rows: list = field(default_factory=list)
@@ -299,6 +319,26 @@ def _estimate_exposure(valid, model, grid, band, options):
         return float(np.mean([np.median(model.difference(
             m.lab_from_xyz(x[:, inside]), lab_s[:, None, :]).min(axis=1)) for x, lab_s in sub]))
 
+    return _scan_exposure(objective)
+
+
+def _exposure_readings(valid, img: "_Image", usable, model, options, seed):
+    """The two exposure readings of the module notes: (the order band's, the blocks' or
+    None where it is within :data:`EXPOSURE_DISTINCT` of the first or has too few blocks)."""
+    if not valid:
+        return 1.0, None
+    exposure = _estimate_exposure(valid, model, img.grid, img.band, options)
+    log.info("estimated exposure %.4f", exposure)
+    other = _block_exposure(img, usable, model, options, np.random.default_rng([seed, 1]))
+    if other is None or abs(other / exposure - 1.0) <= EXPOSURE_DISTINCT:
+        return exposure, None
+    log.info("second exposure reading (blocks, each at its own order) %.4f", other)
+    return exposure, other
+
+
+def _scan_exposure(objective) -> float:
+    """The exposure minimising ``objective(log e)``: a log-spaced scan over
+    :data:`EXPOSURE_SCAN`, then a bounded refinement about its best node."""
     lo, hi, count = EXPOSURE_SCAN
     log_grid = np.linspace(math.log(lo), math.log(hi), count)
     vals = np.array([objective(g) for g in log_grid])
@@ -307,6 +347,36 @@ def _estimate_exposure(valid, model, grid, band, options):
     opt = optimize.minimize_scalar(objective, bounds=(a, b), method="bounded",
                                    options={"xatol": EXPOSURE_XATOL})
     return float(math.exp(opt.x if opt.fun <= vals[i] else log_grid[i]))
+
+
+def _block_exposure(img: "_Image", usable, model, options, rng) -> float | None:
+    """The second exposure reading: the exposure minimising the median over blocks of
+    ``exposure_block_px`` of each block's best ΔE over the whole thickness range (its mean
+    Lab at its mean tilt; blocks with at least 3/4 of their pixels usable, at most
+    :data:`EXPOSURE_BLOCKS` of them). None with fewer than 16 such blocks."""
+    b = options.exposure_block_px
+    hb, wb = usable.shape[0] // b, usable.shape[1] // b
+
+    def block_sum(a):
+        a = a[:hb * b, :wb * b]
+        return a.reshape(hb, b, wb, b, *a.shape[2:]).sum(axis=(1, 3)).reshape(hb * wb, -1)
+
+    n = block_sum(usable.astype(np.float64))[:, 0]
+    ok = np.flatnonzero(n >= 0.75 * b * b)
+    if ok.size < 16:
+        return None
+    pick = rng.choice(ok, min(EXPOSURE_BLOCKS, ok.size), replace=False)
+    lab = (block_sum(np.where(usable[..., None], img.lab, 0.0))[pick]
+           / n[pick, None]).astype(np.float32)
+    tilt = block_sum(np.where(usable, img.tilt, 0.0))[pick, 0] / n[pick]
+    xyz = model.xyz(tilt[:, None], img.grid[None, :]).astype(np.float32)
+
+    def objective(log_e):
+        m = model.with_exposure(math.exp(log_e))
+        return float(np.median(model.difference(m.lab_from_xyz(xyz), lab[:, None, :])
+                               .min(axis=1)))
+
+    return _scan_exposure(objective)
 
 
 def _candidate_minima(curve, grid, band, margin_de):
@@ -412,10 +482,10 @@ def fit_roi_thickness(lab, tilt_deg, mask, model, options: RoiOptions, *, rois, 
     samples = _samples(lab, tilt, usable, rois, model, grid, options, rng)
     valid = [s for s in samples if s is not None]
     band = _order_band(valid, model, grid, options)
-    estimated = exposure is None
+    img = _Image(lab, tilt, grid, band)
+    estimated, alternative = exposure is None, None
     if estimated:
-        exposure = _estimate_exposure(valid, model, grid, band, options) if valid else 1.0
-        log.info("estimated exposure %.4f", exposure)
+        exposure, alternative = _exposure_readings(valid, img, usable, model, options, seed)
     model = model.with_exposure(exposure)
     n = len(samples)
     curves = np.full((n, grid.size), np.nan, dtype=np.float32)
@@ -424,7 +494,6 @@ def fit_roi_thickness(lab, tilt_deg, mask, model, options: RoiOptions, *, rois, 
             curves[i] = _curve(model, s.xyz, s.lab)
     best = np.full((n, 2, 2), np.nan)
     npx = np.zeros(n, dtype=np.int64)
-    img = _Image(lab, tilt, grid, band)
     for i, s in enumerate(samples):
         if s is not None:
             npx[i] = s.yy.size
@@ -435,6 +504,7 @@ def fit_roi_thickness(lab, tilt_deg, mask, model, options: RoiOptions, *, rois, 
                   thickness_nm=best[:, 0, 1], mean_delta_e=best[:, 0, 0],
                   runner_up_thickness_nm=best[:, 1, 1], runner_up_delta_e=best[:, 1, 0],
                   n_pixels=npx, exposure=float(exposure), exposure_estimated=estimated,
+                  exposure_alternative=alternative,
                   grid_nm=grid, curves=curves, rows=list(rows), cols=list(cols))
 
 

@@ -172,6 +172,7 @@ class Summary:
     facets: FacetCounts | None = None
     exposure: float | None = None
     exposure_source: str = ""
+    exposure_readings: dict | None = None
     white_balance: dict | None = None
     delta_e: DeltaE = field(default_factory=DeltaE)
     masked_fraction: float | None = None

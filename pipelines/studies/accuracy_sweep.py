@@ -322,6 +322,10 @@ def score_scene(results: Path, truth: Path, res=None) -> dict:
             "order_wrong": bool(np.isfinite(reg["median_ae_nm"])
                                 and reg["median_ae_nm"] > WRONG_ORDER_NM),
             "order_flagged": order_flagged(res.summary),
+            "exposure_error": (res.get("exposure") / meta["params"]["exposure"] - 1.0
+                               if res.summary.get("exposure_source") == "estimated"
+                               else math.nan),
+            "exposure_ambiguous": bool((res.get("exposure_readings") or {}).get("ambiguous")),
             **white_balance_errors(res.summary.get("white_balance"),
                                    meta["params"].get("white_balance_gains", (1, 1, 1)))}
 
@@ -422,7 +426,8 @@ COLUMNS = ["name", "mode", "seed", "world", "relief_file", "status", "reason", "
            "pops_true",
            "lobes_found", "lobes_true", "identified", "ndf_w1_deg", "lobe_rms_ratio",
            "censored_fraction", "past_limit_fraction", "height_coverage", "de_mean", "de_floor",
-           "de_excess", "masked_fraction", "order_wrong", "order_flagged", "wb_true_r",
+           "de_excess", "masked_fraction", "order_wrong", "order_flagged", "exposure_error",
+           "exposure_ambiguous", "wb_true_r",
            "wb_true_b", "wb_err_r", "wb_err_b"] + [f"v_{v}" for v in VARIATIONS]
 
 

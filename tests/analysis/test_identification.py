@@ -426,3 +426,26 @@ def test_order_check_says_why_the_order_is_not_established():
                                    "another order"]
     (w,) = _warn(d)
     assert w.code == "order_alias" and "49 % of its area" in w.text
+
+
+def test_two_exposures_that_fit_alike_leave_the_order_undecided():
+    """Two exposure readings whose facets fit within ``fits.ambiguous_order_de`` (an
+    unbalanced camera can make a thin film fit another order at another exposure): the
+    order is not established, and a warning names both and the option that decides."""
+    from microfacet.analysis.identification import order_check
+    from microfacet.analysis.joint import ExposureReadings
+
+    d = _dist()
+    d.exposure_readings = ExposureReadings((0.915, 0.372), (1.70, 1.27), 1, True)
+    out = order_check(d, delta_e_median=1.0, noise_de=1.0, options=OPTIONS)
+    assert not out["established"]
+    assert out["reasons"] == ["two exposures fit the facets' colours alike (exposure 0.915: "
+                              "median dE00 1.70, exposure 0.372: median dE00 1.27 "
+                              "(reported))"]
+    (w,) = _warn(d)
+    assert w.code == "exposure_ambiguous" and w.parameter == "optics.exposure"
+    assert "0.372" in w.text and "within 1 dE00" in w.text
+    # decided (one fits clearly better): nothing to say
+    d.exposure_readings = ExposureReadings((0.31, 0.99), (3.25, 0.83), 1, False)
+    assert order_check(d, delta_e_median=1.0, noise_de=1.0, options=OPTIONS)["established"]
+    assert _warn(d) == []
