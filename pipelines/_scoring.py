@@ -317,7 +317,7 @@ TARGETS = (
      "order_wrong_count", "–", None),
     ("… of those with the order said established (summary.json thickness.order)",
      "order_wrong_unflagged", "0", lambda v: v == 0),
-    ("estimated exposure within 5 % of the truth", "exposure_within_5pct", "–", None),
+    ("estimated exposure within 5 % of the truth", "exposure_ok", "–", None),
     ("… scenes where two exposures fit alike (order said not established)",
      "exposure_ambiguous", "–", None),
     ("scenes with the true number of NDF lobes", "lobes_ok", "–", None),
@@ -383,7 +383,7 @@ def summarize(rows):
         "order_wrong_count": sum(1 for r in ok if truthy(r.get("order_wrong"))),
         "order_wrong_unflagged": sum(1 for r in ok if truthy(r.get("order_wrong"))
                                      and not truthy(r.get("order_flagged"))),
-        "exposure_within_5pct": fraction(abs(row_number(r.get("exposure_error"))) <= 0.05
+        "exposure_ok": fraction(abs(row_number(r.get("exposure_error"))) <= 0.05
                                          for r in ok
                                          if np.isfinite(row_number(r.get("exposure_error")))),
         "exposure_ambiguous": sum(1 for r in ok if truthy(r.get("exposure_ambiguous"))),

@@ -18,6 +18,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -216,8 +217,8 @@ def _other_orders(model, tilt, mean_lab, d, window):
 
 @dataclass(frozen=True)
 class _Search:
-    """How :func:`facet_thickness` searches: the neighbouring orders too (``thorough``),
-    the final step, the colour noise, the tilts' error,
+    """How :func:`facet_thickness` searches: the whole range for another order and the
+    neighbouring orders (``thorough``), the final step, the colour noise, the tilts' error,
     the JPEG block error and the pixels that share it."""
 
     thorough: bool
@@ -234,10 +235,11 @@ def _chunk(model, colours, ii, tilt, options, search: _Search):
     t_lo, t_hi = model.theta_range_deg
     th = np.clip(tilt[ii], t_lo, t_hi)
     lab, cen = colours.mean_lab[ii], colours.roi_thickness_nm[ii]
-    best_in, d_out, de_out = _order_scan(model, th, lab, cen, hw)
-    switch = ((de_out < best_in - options.order_switch_de)
-              & (de_out < options.order_switch_ratio * best_in))
-    cen = np.where(switch, d_out, cen)
+    if search.thorough:
+        best_in, d_out, de_out = _order_scan(model, th, lab, cen, hw)
+        switch = ((de_out < best_in - options.order_switch_de)
+                  & (de_out < options.order_switch_ratio * best_in))
+        cen = np.where(switch, d_out, cen)
     offsets = np.arange(-hw, hw + 1e-9, 1.0)
     d_k, k, _ = _window_minimum(_Rows(model, th, lab, cen, offsets))
     edge = (k == 0) | (k == offsets.size - 1)
@@ -279,12 +281,9 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
         JPEG slices: the colour error per Lab component of a block's mean and the pixels
         that share it (:attr:`~.colour_image.ColourImage.block_noise_de`, ``block_px``).
     thorough : bool
-        Also scan the neighbouring orders for ``delta_e_other_order``, at
-        ``options.thickness_step_nm``; False (the exposure refinement): at
-        ``options.exposure_thickness_step_nm``, without that report. Either way a facet
-        takes another order by the rule above, so the exposure is refined on the orders the
-        final fit will use (held in the ROI's order, the facets of a population in another
-        order pulled a wrong exposure up to the refinement's bound).
+        Scan the whole range for another order and the neighbouring orders for
+        ``delta_e_other_order``, at ``options.thickness_step_nm``; False (the exposure
+        refinement): stay in the ROI's order, at ``options.exposure_thickness_step_nm``.
 
     Returns
     -------
@@ -309,8 +308,9 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
 def refine_exposure_on_facets(image: FacetImage, tilt_deg, model, options: JointOptions, *,
                               seed=0) -> float:
     """Exposure of least median facet ΔE, each facet's thickness re-solved per candidate
-    (within ×/÷ 1.5 of the model's; each facet in its ROI's order or, by
-    :func:`facet_thickness`'s rule, its own).
+    (within ×/÷ 1.5 of the model's) in its own order: its ROI's, or the one the whole-range
+    scan of :func:`facet_thickness` gives it at the start (held in the ROI's order, the
+    facets of a population in another order pulled a right start up to the bound).
 
     Facets are homogeneous (one tilt, one thickness), unlike ROIs that span several
     thickness regions, so they pin the exposure down better than the ROI fit did. Facets
@@ -327,6 +327,9 @@ def refine_exposure_on_facets(image: FacetImage, tilt_deg, model, options: Joint
     pick[rng.choice(cand, min(options.exposure_facets, cand.size), replace=False)] = True
     colours = image.colours(image.usable & pick[image.labels])
     tilt = np.where(pick, tilt_deg, np.nan)
+    start = facet_thickness(colours, tilt, model, options, thorough=True)
+    colours = dataclasses.replace(colours, roi_thickness_nm=np.where(
+        np.isfinite(start.thickness_nm), start.thickness_nm, colours.roi_thickness_nm))
 
     def objective(log_e):
         ft = facet_thickness(colours, tilt, model.with_exposure(math.exp(log_e)), options,

@@ -41,7 +41,7 @@ from .joint import (
     joint_pixel_tilts,
 )
 from .options import AnalysisOptions, Scene, scene_of
-from .roi import thickness_per_roi
+from .roi import block_exposure_reading, thickness_per_roi
 from .self_check import Conditions, SelfCheck, measured_rms_slope, self_check_ndf, slice_noise_sd
 from .stages import Stage
 from .surface import measure_height, surface_normals
@@ -200,8 +200,9 @@ def film_model(scene: Scene, options) -> FilmColourModel:
 
 
 def _roi(st, colour, surface, model, options, scene, *, exposure=None):
-    """The ROI stage at the scene's exposure (None: estimated), or at ``exposure``: the
-    second estimated reading (:mod:`.roi`), still reported as estimated."""
+    """The ROI stage at the scene's exposure (None: estimated; in the joint mode with the
+    blocks' second reading, :mod:`.roi`), or at ``exposure``: the second reading, still
+    reported as estimated."""
     if exposure is not None:
         return dataclasses.replace(thickness_per_roi(colour, surface.tilt_deg, model,
                                                      options.roi, exposure=exposure,
@@ -213,6 +214,10 @@ def _roi(st, colour, surface, model, options, scene, *, exposure=None):
         raise InputError(no_colour_message(
             st, colour.mask, f"only {int((~colour.mask.mask).sum())} unmasked pixels, too few "
                              f"in every region of interest", options.mask))
+    if roi.exposure_estimated and options.mode == "joint":
+        roi = dataclasses.replace(roi, exposure_alternative=block_exposure_reading(
+            colour, surface.tilt_deg, model, options.roi, exposure=roi.exposure,
+            seed=scene.seed))
     return roi
 
 

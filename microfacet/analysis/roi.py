@@ -31,9 +31,10 @@ the exposure down.
 
 That reading assumes one order band holds every population. Where populations lie in
 different orders (38 and 150 nm on one ROI), the far one is forced into the band and the
-exposure follows it (0.31 for a true 0.99 on the generalization sweep). A second reading
-therefore frees the order: the image cut into blocks of ``exposure_block_px`` (4 px), each
-block's mean colour at its best thickness over the whole range, the median over blocks
+exposure follows it (0.31 for a true 0.99 on the generalization sweep). The joint mode
+therefore takes a second reading that frees the order (:func:`block_exposure_reading`):
+the image cut into blocks of ``exposure_block_px`` (4 px), each block's mean colour at its
+best thickness over the whole range, the median over :data:`EXPOSURE_BLOCKS` random blocks
 minimised the same way. A block's mean has a quarter of a pixel's noise, so it cannot chase
 noise into another order as single pixels do; but with an unbalanced camera a thin film can
 fit another order at another exposure, which the band's hue and chroma reject. Neither
@@ -65,7 +66,8 @@ from .search import local_minima, parabola
 ndimage = load("scipy.ndimage")
 optimize = load("scipy.optimize")
 
-__all__ = ["RoiFit", "fit_roi_thickness", "roi_grid", "thickness_per_roi"]
+__all__ = ["RoiFit", "block_exposure_reading", "fit_roi_thickness", "roi_grid",
+           "thickness_per_roi"]
 
 log = logging.getLogger(__name__)
 
@@ -74,7 +76,7 @@ log = logging.getLogger(__name__)
 EXPOSURE_SCAN = (0.25, 4.0, 25)
 EXPOSURE_XATOL = 0.003
 #: Blocks of the second exposure reading (a random sample of the usable ones).
-EXPOSURE_BLOCKS = 1024
+EXPOSURE_BLOCKS = 256
 #: Exposure readings closer than this relative difference are one reading.
 EXPOSURE_DISTINCT = 0.05
 
@@ -170,9 +172,9 @@ class RoiFit:
     exposure : float
     exposure_estimated : bool
     exposure_alternative : float or None
-        A second exposure reading that differs from ``exposure`` by more than
-        :data:`EXPOSURE_DISTINCT` (see the module notes); the joint mode decides between them
-        on the facets (:func:`~.joint.facets_at_exposure_readings`).
+        The joint mode's second exposure reading where it differs from ``exposure`` by more
+        than :data:`EXPOSURE_DISTINCT` (:func:`block_exposure_reading`); the facets decide
+        between them (:func:`~.joint.facets_at_exposure_readings`).
     grid_nm : ndarray
         The global thickness grid of the scan.
     curves : ndarray, shape (n_roi, n_grid)
@@ -322,18 +324,49 @@ def _estimate_exposure(valid, model, grid, band, options):
     return _scan_exposure(objective)
 
 
-def _exposure_readings(valid, img: "_Image", usable, model, options, seed):
-    """The two exposure readings of the module notes: (the order band's, the blocks' or
-    None where it is within :data:`EXPOSURE_DISTINCT` of the first or has too few blocks)."""
-    if not valid:
-        return 1.0, None
-    exposure = _estimate_exposure(valid, model, img.grid, img.band, options)
-    log.info("estimated exposure %.4f", exposure)
-    other = _block_exposure(img, usable, model, options, np.random.default_rng([seed, 1]))
+def _inputs(lab, tilt_deg, mask, model, options: RoiOptions):
+    """Lab (float32), the tilt clipped to the table's range, the usable pixels (unmasked,
+    with a tilt and a colour) and the global thickness grid."""
+    lab = np.asarray(lab, dtype=np.float32)
+    tilt = np.asarray(tilt_deg, dtype=np.float64)
+    t_lo, t_hi = model.theta_range_deg
+    usable = ~np.asarray(mask, bool) & np.isfinite(tilt) & np.all(np.isfinite(lab), axis=-1)
+    tilt = np.clip(np.where(np.isfinite(tilt), tilt, t_lo), t_lo, t_hi)
+    d_lo, d_hi = model.thickness_range_nm
+    return lab, tilt, usable, np.arange(d_lo, d_hi + 1e-9, options.grid_step_nm)
+
+
+def block_exposure_reading(colour, tilt_deg, model, options: RoiOptions, *, exposure,
+                           seed=0) -> float | None:
+    """The second exposure reading of the module notes, where it differs from the first.
+
+    Parameters
+    ----------
+    colour : ColourImage
+        Lab and mask of the image.
+    tilt_deg : ndarray (H, W)
+        Tilt per pixel from the height map.
+    model : FilmColourModel
+    options : RoiOptions
+        ``exposure_block_px`` and the thickness grid.
+    exposure : float
+        The first reading (the order band's, :func:`fit_roi_thickness`).
+    seed : int
+        The blocks' random sample.
+
+    Returns
+    -------
+    float or None
+        None where it is within :data:`EXPOSURE_DISTINCT` of ``exposure`` or the image has
+        fewer than 16 usable blocks.
+    """
+    lab, tilt, usable, grid = _inputs(colour.lab, tilt_deg, colour.mask.mask, model, options)
+    other = _block_exposure(_Image(lab, tilt, grid, None), usable, model, options,
+                            np.random.default_rng([seed, 1]))
     if other is None or abs(other / exposure - 1.0) <= EXPOSURE_DISTINCT:
-        return exposure, None
+        return None
     log.info("second exposure reading (blocks, each at its own order) %.4f", other)
-    return exposure, other
+    return other
 
 
 def _scan_exposure(objective) -> float:
@@ -361,12 +394,12 @@ def _block_exposure(img: "_Image", usable, model, options, rng) -> float | None:
         a = a[:hb * b, :wb * b]
         return a.reshape(hb, b, wb, b, *a.shape[2:]).sum(axis=(1, 3)).reshape(hb * wb, -1)
 
-    n = block_sum(usable.astype(np.float64))[:, 0]
+    n = block_sum(usable.astype(np.float32))[:, 0]
     ok = np.flatnonzero(n >= 0.75 * b * b)
     if ok.size < 16:
         return None
     pick = rng.choice(ok, min(EXPOSURE_BLOCKS, ok.size), replace=False)
-    lab = (block_sum(np.where(usable[..., None], img.lab, 0.0))[pick]
+    lab = (block_sum(np.where(usable[..., None], img.lab, np.float32(0)))[pick]
            / n[pick, None]).astype(np.float32)
     tilt = block_sum(np.where(usable, img.tilt, 0.0))[pick, 0] / n[pick]
     xyz = model.xyz(tilt[:, None], img.grid[None, :]).astype(np.float32)
@@ -471,21 +504,15 @@ def fit_roi_thickness(lab, tilt_deg, mask, model, options: RoiOptions, *, rois, 
     -------
     RoiFit
     """
-    lab = np.asarray(lab, dtype=np.float32)
-    tilt = np.asarray(tilt_deg, dtype=np.float64)
-    t_lo, t_hi = model.theta_range_deg
-    usable = ~np.asarray(mask, bool) & np.isfinite(tilt) & np.all(np.isfinite(lab), axis=-1)
-    tilt = np.clip(np.where(np.isfinite(tilt), tilt, t_lo), t_lo, t_hi)
-    d_lo, d_hi = model.thickness_range_nm
-    grid = np.arange(d_lo, d_hi + 1e-9, options.grid_step_nm)
+    lab, tilt, usable, grid = _inputs(lab, tilt_deg, mask, model, options)
     rng = np.random.default_rng(seed)
     samples = _samples(lab, tilt, usable, rois, model, grid, options, rng)
     valid = [s for s in samples if s is not None]
     band = _order_band(valid, model, grid, options)
-    img = _Image(lab, tilt, grid, band)
-    estimated, alternative = exposure is None, None
+    estimated = exposure is None
     if estimated:
-        exposure, alternative = _exposure_readings(valid, img, usable, model, options, seed)
+        exposure = _estimate_exposure(valid, model, grid, band, options) if valid else 1.0
+        log.info("estimated exposure %.4f", exposure)
     model = model.with_exposure(exposure)
     n = len(samples)
     curves = np.full((n, grid.size), np.nan, dtype=np.float32)
@@ -494,6 +521,7 @@ def fit_roi_thickness(lab, tilt_deg, mask, model, options: RoiOptions, *, rois, 
             curves[i] = _curve(model, s.xyz, s.lab)
     best = np.full((n, 2, 2), np.nan)
     npx = np.zeros(n, dtype=np.int64)
+    img = _Image(lab, tilt, grid, band)
     for i, s in enumerate(samples):
         if s is not None:
             npx[i] = s.yy.size
@@ -504,7 +532,6 @@ def fit_roi_thickness(lab, tilt_deg, mask, model, options: RoiOptions, *, rois, 
                   thickness_nm=best[:, 0, 1], mean_delta_e=best[:, 0, 0],
                   runner_up_thickness_nm=best[:, 1, 1], runner_up_delta_e=best[:, 1, 0],
                   n_pixels=npx, exposure=float(exposure), exposure_estimated=estimated,
-                  exposure_alternative=alternative,
                   grid_nm=grid, curves=curves, rows=list(rows), cols=list(cols))
 
 

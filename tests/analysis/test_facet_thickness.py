@@ -9,7 +9,6 @@ uses).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -187,10 +186,9 @@ def test_facet_colours_use_the_interior_where_a_facet_has_one():
 
 def test_a_facet_in_another_order_than_its_roi_takes_its_own(model):
     """Facets at 250 nm in ROIs read at 140 nm (a colour period below, outside the window):
-    the whole-range scan finds their order, also in the exposure refinement's quick search
-    (``thorough=False``: coarser step, no other-order report). Held in the ROI's window
-    they would sit on the look-alike of the order below, which fits worse (the colours
-    repeat paler)."""
+    the whole-range scan finds their order; without it (``thorough=False``, the exposure
+    refinement) the search stays in the ROI's window, on the look-alike of the order below,
+    which fits worse (the colours repeat paler)."""
     labels = _block_labels(6, 3, 3)
     S = int(labels.max()) + 1
     d = np.full(S, 250.0)
@@ -201,17 +199,12 @@ def test_a_facet_in_another_order_than_its_roi_takes_its_own(model):
     ft = _thickness(labels, lab, usable, t, roi, model, exposure=1.0)
     np.testing.assert_allclose(ft.thickness_nm, d, atol=0.3)
     assert np.all(ft.delta_e < 0.3)
-    quick = _thickness(labels, lab, usable, t, roi, model, exposure=1.0, thorough=False)
-    np.testing.assert_allclose(quick.thickness_nm, d, atol=0.3)
-    assert np.isnan(quick.delta_e_other_order).all()
-    # held in the ROI's window (a wide switch margin: the rule never fires)
-    held = facet_thickness(FacetImage(labels, lab, usable, np.ones(labels.shape, bool),
-                                      roi).colours(), t, model,
-                           dataclasses.replace(OPTIONS, order_switch_de=1e3))
+    stay = _thickness(labels, lab, usable, t, roi, model, exposure=1.0, thorough=False)
     hw = OPTIONS.order_window_fraction * model.period_nm
-    assert np.all(np.abs(held.thickness_nm - 140.0) <= hw + 1.0)
-    assert np.all(np.abs(held.thickness_nm - 250.0) > 0.5 * model.period_nm)
-    assert np.all(held.delta_e > ft.delta_e + 1.0), held.delta_e
+    assert np.all(np.abs(stay.thickness_nm - 140.0) <= hw + 1.0)
+    assert np.all(np.abs(stay.thickness_nm - 250.0) > 0.5 * model.period_nm)
+    assert np.all(stay.delta_e > ft.delta_e + 1.0), stay.delta_e
+    assert np.isnan(stay.delta_e_other_order).all()
 
 
 @pytest.mark.slow
@@ -238,8 +231,8 @@ def test_the_exposure_is_refined_on_facets(model, truth):
 def test_the_exposure_refinement_lets_a_population_in_another_order_keep_it(model):
     """Two populations in different orders (38 and 150 nm) on one ROI read at 150 nm, the
     generalization sweep's failure: held in the ROI's order, the 38 nm facets pulled the
-    exposure to the refinement's bound. Each facet taking its own order by the final fit's
-    rule, the refinement finds the truth from a start 1.4× off."""
+    exposure to the refinement's bound. Each facet in the order the whole-range scan gives
+    it at the start, the refinement finds the truth from a start 1.4× off."""
     rng = np.random.default_rng(11)
     labels = _block_labels(6, 6, 6)
     S = int(labels.max()) + 1
