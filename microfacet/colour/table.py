@@ -207,7 +207,9 @@ class ColourTable:
             return np.zeros(v.shape, np.intp), np.zeros(v.shape), inside
         step = grid[1] - grid[0]
         u = (v - grid[0]) / step
-        tol = 1e-9
+        # inside within float32 rounding of the edges: a float32 map clipped to the table's
+        # range rounds its edge outward (27.065051 deg is 27.065052 in float32)
+        tol = 2.0 * float(np.spacing(np.float32(max(abs(grid[0]), abs(grid[-1]))))) / step
         inside = (u >= -tol) & (u <= grid.size - 1 + tol)
         u = np.clip(np.where(inside, u, 0.0), 0, grid.size - 1)
         i0 = np.minimum(np.floor(u).astype(np.intp), grid.size - 2)

@@ -145,3 +145,17 @@ def test_grid_nodes_reproduce_the_tabulated_values(table):
 def test_bad_arguments(kw, name):
     with pytest.raises(ValueError, match=name):
         build_colour_table(**{"thickness_range_nm": (0, 100), **kw})
+
+
+@pytest.mark.slow
+def test_a_float32_input_at_the_tables_edge_is_inside():
+    """A float32 tilt map clipped to the table's range (asin(NA)/2, not a float32 number)
+    rounds the edge outward: it is still inside, with the edge's colour (the exposure
+    reading of the ROI stage read NaN everywhere and stopped at its scan's bound)."""
+    edge = float(np.degrees(np.arcsin(0.8))) / 2.0         # NA 0.8
+    assert float(np.float32(edge)) > edge                     # the case is really there
+    t = build_colour_table(thickness_range_nm=(100.0, 120.0), theta_range_deg=(0.0, edge),
+                           spectral_step_nm=10.0, thickness_step_nm=2.0, theta_step_deg=4.0)
+    a = t.xyz_at(np.float32(edge), 110.0)
+    np.testing.assert_allclose(a, t.xyz_at(edge, 110.0), rtol=1e-6)
+    assert np.isnan(t.xyz_at(edge + 1e-3, 110.0)).all()       # past rounding: outside
