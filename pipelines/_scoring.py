@@ -383,9 +383,8 @@ def summarize(rows):
         "order_wrong_count": sum(1 for r in ok if truthy(r.get("order_wrong"))),
         "order_wrong_unflagged": sum(1 for r in ok if truthy(r.get("order_wrong"))
                                      and not truthy(r.get("order_flagged"))),
-        "exposure_ok": fraction(abs(row_number(r.get("exposure_error"))) <= 0.05
-                                         for r in ok
-                                         if np.isfinite(row_number(r.get("exposure_error")))),
+        "exposure_ok": fraction(abs(row_number(r.get("exposure_error"))) <= 0.05 for r in ok
+                                if np.isfinite(row_number(r.get("exposure_error")))),
         "exposure_ambiguous": sum(1 for r in ok if truthy(r.get("exposure_ambiguous"))),
         "lobes_ok": fraction(r["lobes_found"] == r["lobes_true"] if r.get("lobes_found")
                              is not None else False for r in ok),

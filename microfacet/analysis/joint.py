@@ -1,5 +1,5 @@
-"""The joint mode: facets, their planes and thickness (:func:`joint_facets`), then the tilt
-per pixel (:func:`joint_pixel_tilts`).
+"""The joint mode: facets, their planes and thickness (:func:`facets_at_exposure_readings`),
+then the tilt per pixel (:func:`joint_pixel_tilts`).
 
 1. Facets from colour and height edges (:func:`~.segmentation.segment_facets`).
 2. A plane per facet through its reliable heights only (:func:`~.planes.fit_facet_planes`);
@@ -51,7 +51,7 @@ from .segmentation import segment_facets
 from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
 
 __all__ = ["ExposureReadings", "JointResult", "Segmented", "bootstrap_labels", "facet_labels",
-           "facets_at_exposure_readings", "joint_facets", "joint_pixel_tilts"]
+           "facets_at_exposure_readings", "joint_pixel_tilts"]
 
 log = logging.getLogger(__name__)
 
@@ -253,31 +253,25 @@ def _segment(lab, hi: HeightInputs, noise_de, scene, options: JointOptions):
                           options=options)
 
 
-def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOptions
-                 ) -> JointResult:
-    """Steps 2-3 of the module notes: the facets' planes, the exposure refined on them, their
-    thickness and calibrated colour error (the per-pixel tilt is :func:`joint_pixel_tilts`).
+@dataclass
+class _Geometry:
+    """What the joint stage finds without the colour model: the facet labels, their planes
+    (both sets), their tilts (or the stand-in), areas, edge distances, the censored mask and
+    the dome term. Shared by every exposure reading."""
 
-    Parameters
-    ----------
-    seg : Segmented
-        From :func:`facet_labels`.
-    colour : ColourImage
-    roi : RoiFit
-    model : FilmColourModel
-        At the ROI stage's exposure.
-    scene : Scene
-        Pixel size, the acceptance limit, whether the exposure is to be estimated, the seed.
-    options : JointOptions
+    labels: np.ndarray
+    planes: FacetFit
+    evidence_planes: FacetFit | None
+    area: np.ndarray
+    edge_distance: np.ndarray
+    tilt_deg: np.ndarray
+    tilt_sigma_deg: np.ndarray
+    censored: np.ndarray
+    dome: tuple | None
 
-    Returns
-    -------
-    JointResult
-        Without ``pixels``.
-    """
-    lab, facets, hi = colour.lab, seg.labels, seg.heights
-    thick_roi_px = roi.thickness_nm[roi.index_map(lab.shape[:2])]
-    usable = ~colour.mask.mask & np.isfinite(thick_roi_px)
+
+def _facet_geometry(seg: Segmented, colour, scene, options: JointOptions) -> _Geometry:
+    facets, hi = seg.labels, seg.heights
     S = int(facets.max()) + 1
     area = np.bincount(facets.ravel(), minlength=S)
     dist = facet_edge_distance(facets)
@@ -298,15 +292,6 @@ def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOption
              t_in, s_in)
     tilt_f = np.where(fitted, np.clip(planes.tilt_deg, 0, scene.max_tilt_deg), t_in)
     tsig_f = np.where(fitted, planes.tilt_sigma_deg, s_in)
-    image = FacetImage(facets, lab, usable, dist >= options.interior_px, thick_roi_px)
-    if scene.estimate_exposure:
-        model = model.with_exposure(refine_exposure_on_facets(
-            image, np.where(fitted, tilt_f, np.nan), model, options, seed=scene.seed))
-        log.info("exposure refined on facets: %.4f", model.exposure)
-    ft = facet_thickness(image.colours(), tilt_f, model, options, tilt_sigma_deg=tsig_f,
-                         noise_de=colour.noise_de,
-                         block_noise=(colour.block_noise_de, colour.block_px))
-    c_sig = _colour_sigma(image, ft, tilt_f, model, colour.noise_de)
     # facets tilted past the acceptance: more than half their pixels far darker than film
     dark = np.bincount(facets.ravel(), weights=colour.mask.steep.ravel(), minlength=S)
     censored = (dark > 0.5 * area)[facets]
@@ -315,8 +300,29 @@ def joint_facets(seg: Segmented, colour, roi, model, scene, options: JointOption
                                   reliable=h.reliable & inside,
                                   pixel_size_um=scene.pixel_size_um,
                                   correlation_px=h.correlation_px)
-    return JointResult(None, facets, planes, ft, area, censored, c_sig, float(model.exposure),
-                       tilt_f, tsig_f, usable, ev_planes, dome)
+    return _Geometry(facets, planes, ev_planes, area, dist, tilt_f, tsig_f, censored, dome)
+
+
+def _facets_in_colour(g: _Geometry, colour, roi, model, scene, options: JointOptions
+                      ) -> JointResult:
+    """The exposure refined on the facets, their thickness and colour error, at one
+    exposure reading (``roi``'s, ``model``'s)."""
+    thick_roi_px = roi.thickness_nm[roi.index_map(colour.lab.shape[:2])]
+    usable = ~colour.mask.mask & np.isfinite(thick_roi_px)
+    fitted = g.planes.fitted
+    image = FacetImage(g.labels, colour.lab, usable, g.edge_distance >= options.interior_px,
+                       thick_roi_px)
+    if scene.estimate_exposure:
+        model = model.with_exposure(refine_exposure_on_facets(
+            image, np.where(fitted, g.tilt_deg, np.nan), model, options, seed=scene.seed))
+        log.info("exposure refined on facets: %.4f", model.exposure)
+    ft = facet_thickness(image.colours(), g.tilt_deg, model, options,
+                         tilt_sigma_deg=g.tilt_sigma_deg, noise_de=colour.noise_de,
+                         block_noise=(colour.block_noise_de, colour.block_px))
+    c_sig = _colour_sigma(image, ft, g.tilt_deg, model, colour.noise_de)
+    return JointResult(None, g.labels, g.planes, ft, g.area, g.censored, c_sig,
+                       float(model.exposure), g.tilt_deg, g.tilt_sigma_deg, usable,
+                       g.evidence_planes, g.dome)
 
 
 @dataclass(frozen=True)
@@ -350,20 +356,41 @@ class ExposureReadings:
 
 def facets_at_exposure_readings(seg: Segmented, colour, roi, model, scene, options, *,
                                 refit_roi):
-    """:func:`joint_facets` at the ROI stage's exposure and, where it has a second reading
-    (``roi.exposure_alternative``), at that one too, with the ROIs refitted at it by
-    ``refit_roi(exposure)``; the reading of least median facet ΔE00 wins.
+    """Steps 2-3 of the module notes: the facets' planes, the exposure refined on them, their
+    thickness and calibrated colour error (the per-pixel tilt is :func:`joint_pixel_tilts`),
+    at the ROI stage's exposure and, where it has a second reading
+    (``roi.exposure_alternative``), at that one too; the reading of least median facet ΔE00
+    wins. The planes, the censored mask and the dome term do not depend on the exposure:
+    computed once.
 
-    ``options``: the :class:`~.options.AnalysisOptions` (``joint``, and ``fits``'
-    ``ambiguous_order_de`` as ``ambiguous_de``). Returns ``(JointResult, RoiFit,
-    ExposureReadings or None)``: None with one reading.
+    Parameters
+    ----------
+    seg : Segmented
+        From :func:`facet_labels`.
+    colour : ColourImage
+    roi : RoiFit
+    model : FilmColourModel
+        At the ROI stage's exposure.
+    scene : Scene
+        Pixel size, the acceptance limit, whether the exposure is to be estimated, the seed.
+    options : AnalysisOptions
+        ``joint``, and ``fits.ambiguous_order_de`` (two readings that fit within it are
+        ambiguous).
+    refit_roi : callable
+        ``refit_roi(exposure)``: the ROI stage at the second reading.
+
+    Returns
+    -------
+    (JointResult, RoiFit, ExposureReadings or None)
+        The chosen reading's facets (without ``pixels``) and ROIs; None with one reading.
     """
-    first = joint_facets(seg, colour, roi, model, scene, options.joint)
+    geometry = _facet_geometry(seg, colour, scene, options.joint)
+    first = _facets_in_colour(geometry, colour, roi, model, scene, options.joint)
     if roi.exposure_alternative is None:
         return first, roi, None
     roi_b = refit_roi(roi.exposure_alternative)
-    second = joint_facets(seg, colour, roi_b, model.with_exposure(roi_b.exposure), scene,
-                          options.joint)
+    second = _facets_in_colour(geometry, colour, roi_b, model.with_exposure(roi_b.exposure),
+                               scene, options.joint)
     runs = ((first, roi), (second, roi_b))
     de = tuple(float(np.nanmedian(j.thickness.delta_e)) for j, _ in runs)
     k = int(np.nanargmin(de)) if np.isfinite(de).any() else 0

@@ -42,7 +42,8 @@ class Stage(enum.Enum):
                     "`RoiFit`: thickness per ROI, interference order, exposure")
     SEGMENTATION = StageInfo("segmentation", "facets", 2.1, "analysis.joint.facet_labels",
                              "facet labels from colour and height edges (joint mode)")
-    FACET_FITS = StageInfo("facet_fits", "facet fits", 1.6, "analysis.joint.joint_facets",
+    FACET_FITS = StageInfo("facet_fits", "facet fits", 1.6,
+                           "analysis.joint.facets_at_exposure_readings",
                            "`JointResult`: planes, exposure, thickness and colour error per "
                            "facet (joint mode)")
     TILT = StageInfo("tilt_per_pixel", "tilt per pixel", 2.3,
