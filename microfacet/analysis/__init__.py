@@ -16,6 +16,7 @@ module               stage / concern
 ``segmentation``     facets from colour and height edges (joint mode)
 ``planes``           a plane per facet from its reliable heights (joint mode)
 ``facet_thickness``  a thickness per facet from its colour at its tilt (joint mode)
+``flat_field``       the microscope's flat field (vignetting) from the facets' brightness
 ``joint``            the joint mode's stages: facets → tilt per pixel
 ``sampling``         independent samples in a map; the samples a mixture is fitted to
 ``mixtures``         thickness mixture (deconvolved), components by BIC with honest n

@@ -136,6 +136,11 @@ class JointOptions(Options):
                    "probability)", low=1e-9, high=0.5)
     max_area_factor: float = option(2.0, help="largest segment, in facet areas", low=1)
     merge_rounds: int = option(30, help="segment-merge rounds (mutual best pairs each)", low=1)
+    flat_field: str = option(
+        "estimate", help="the microscope's flat field (vignetting): `estimate` fits a smooth "
+                         "field to the facets' brightness and divides the colours by it where "
+                         "the facets then fit better (analysis.flat_field); `off` takes the "
+                         "illumination as even", choices=("off", "estimate"))
     min_plane_pixels: int = option(
         8, help="fewest reliable heights for a facet plane (3 determine it; 8 leave 5 degrees "
                 "of freedom for the residual that scales its covariance)", low=4)

@@ -258,6 +258,7 @@ def build_summary(r) -> Summary:
         exposure_readings=(None if r.distributions.exposure_readings is None
                            else r.distributions.exposure_readings.to_json()),
         white_balance=r.white_balance.to_dict(),
+        flat_field=None if r.flat_field is None else r.flat_field.to_json(r.colour.lab.shape[:2]),
         delta_e=DeltaE(**r.delta_e_stats, noise_floor_mean=NOISE_FLOOR_FACTOR * noise,
                        noise_floor_median=MEDIAN_NOISE_FLOOR_FACTOR * noise),
         masked_fraction=r.colour.mask.fraction, mask=r.colour.mask.fractions(),

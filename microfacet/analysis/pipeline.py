@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import logging
 import math
 from dataclasses import dataclass, field
 
@@ -32,6 +33,13 @@ from ..io.stack import Stack, read_stack
 from .colour_image import measure_colour, no_colour_message
 from .consistency import mixture_map_check, roi_pixel_check
 from .distributions import Distributions, fit_joint_distributions, fit_seed_distributions
+from .flat_field import (
+    MAX_ROUNDS,
+    ROUND_TOLERANCE,
+    FlatField,
+    estimate_flat_field,
+    flat_fielded,
+)
 from .identification import analysis_warnings, mean_plane_tilt_deg, self_check_judgement
 from .iso25178 import areal_parameters
 from .joint import (
@@ -47,6 +55,8 @@ from .stages import Stage
 from .surface import measure_height, surface_normals
 from .tilt import seed_tilts, tilt_grid
 from .white_balance import WhiteBalance, balanced_lab, choose_white_balance
+
+log = logging.getLogger(__name__)
 
 __all__ = ["AnalysisResult", "analyse_stack", "check_stack_for_analysis", "run_stages"]
 
@@ -102,6 +112,8 @@ class AnalysisResult:
     self_check : SelfCheck or None
     white_balance : WhiteBalance
         The camera gains the colours were corrected for, and the scene's estimate.
+    flat_field : FlatField
+        The flat field (vignetting) the colours were divided by, or why none (joint mode).
     """
 
     stack: Stack
@@ -118,6 +130,7 @@ class AnalysisResult:
     timings_s: dict = field(default_factory=dict)
     self_check: SelfCheck | None = None
     white_balance: WhiteBalance = field(default_factory=WhiteBalance)
+    flat_field: FlatField | None = None
 
     @functools.cached_property
     def map_check(self):
@@ -257,10 +270,15 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         with timer.stage(Stage.SEGMENTATION):
             seg = facet_labels(colour, surface, scene, options.joint)
         with timer.stage(Stage.FACET_FITS):
-            joint, roi, readings = facets_at_exposure_readings(
-                seg, colour, roi, model, scene, options,
-                refit_roi=lambda e: _roi(st, colour, surface, model, options, scene,
-                                         exposure=e))
+            def facets(c, r):
+                return facets_at_exposure_readings(
+                    seg, c, r, model.with_exposure(r.exposure), scene, options,
+                    refit_roi=lambda e: _roi(st, c, surface, model, options, scene,
+                                             exposure=e))
+            (joint, roi, readings), colour, flat = _flat_field_pass(
+                facets(colour, roi), colour,
+                lambda c: facets(c, _roi(st, c, surface, model, options, scene)),
+                model, options, scene, wb)
         model = model.with_exposure(joint.exposure)
         with timer.stage(Stage.TILT):
             pixels = joint.pixels = joint_pixel_tilts(joint, colour, model, grid, options.tilt)
@@ -279,7 +297,45 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                                                                else None)
     timer.total()
     return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
-                          dist, dict(timer.timings), check, wb)
+                          dist, dict(timer.timings), check, wb,
+                          flat if options.mode == "joint" else None)
+
+
+def _flat_field_pass(first, colour, facets_in, model, options, scene, wb):
+    """The facets (``first``: facets, ROIs, readings) and the colours, flat-fielded where the
+    facets' brightness asks for a field (:mod:`.flat_field`) and the facets refitted under it
+    (``facets_in(colour)``) fit their colours better; with the :class:`FlatField`. The facets'
+    thicknesses absorb part of an uncorrected field, so the field is estimated again on the
+    refitted facets and added, up to :data:`~.flat_field.MAX_ROUNDS` times."""
+    if options.joint.flat_field == "off":
+        return first, colour, FlatField(reason="joint.flat_field is off")
+    shape = colour.lab.shape[:2]
+    best, best_colour, total = first, colour, None
+    de0 = float(np.nanmedian(first[0].thickness.delta_e))
+    for k in range(MAX_ROUNDS):
+        joint = best[0]
+        ff = estimate_flat_field(joint, best_colour.lab, model.with_exposure(joint.exposure))
+        if ff.reason:
+            break
+        trial = ff if total is None else total.plus(ff)
+        flat = flat_fielded(colour, trial.map(shape),
+                            gains_rgb=wb.gains_rgb if wb.applied else (1.0, 1.0, 1.0),
+                            illuminant=scene.illuminant, steep_ratio=options.mask.steep_ratio)
+        second = facets_in(flat)
+        de = tuple(float(np.nanmedian(j.thickness.delta_e)) for j in (joint, second[0]))
+        log.info("flat field, round %d: corner loss %.3f; median facet dE00 %.3f -> %.3f",
+                 k + 1, trial.corner_loss(shape), *de)
+        if not de[1] < de[0]:
+            break
+        best, best_colour, total = second, flat, dataclasses.replace(trial, rounds=k + 1)
+        if abs(ff.corner_loss(shape)) < ROUND_TOLERANCE:
+            break
+    if total is None:
+        return first, colour, (ff if ff.reason else dataclasses.replace(
+            ff, median_delta_e=de, reason="the facets fit their colours no better with it"))
+    de1 = float(np.nanmedian(best[0].thickness.delta_e))
+    return best, best_colour, dataclasses.replace(total, applied=True,
+                                                  median_delta_e=(de0, de1))
 
 
 def _self_check(st, focus, joint, scene, options, *, cells) -> SelfCheck | None:

@@ -45,7 +45,9 @@ class Stage(enum.Enum):
     FACET_FITS = StageInfo("facet_fits", "facet fits", 1.6,
                            "analysis.joint.facets_at_exposure_readings",
                            "`JointResult`: planes, exposure, thickness and colour error per "
-                           "facet (joint mode)")
+                           "facet; the flat field (vignetting) their brightness asks for "
+                           "(`analysis.flat_field`), the colours divided by it and the facets "
+                           "refitted where they then fit better (joint mode)")
     TILT = StageInfo("tilt_per_pixel", "tilt per pixel", 2.3,
                      "analysis.joint.joint_pixel_tilts / analysis.tilt.seed_tilts",
                      "`PixelEstimates`: thickness, tilt, σ, ΔE per pixel")

@@ -174,6 +174,7 @@ class Summary:
     exposure_source: str = ""
     exposure_readings: dict | None = None
     white_balance: dict | None = None
+    flat_field: dict | None = None
     delta_e: DeltaE = field(default_factory=DeltaE)
     masked_fraction: float | None = None
     mask: dict = field(default_factory=dict)

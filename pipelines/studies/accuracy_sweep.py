@@ -477,14 +477,16 @@ CAMERA_VARIATIONS = {
     "16-bit slices": lambda r: "16" in str(r.get("bit_depth", "")),
     "white-balance error": lambda r: truthy(r.get("v_white_balance")),
     "exposure < 0.9": lambda r: row_number(r.get("exposure")) < 0.9,
+    "vignetting (10-50 % lost at the corners)": lambda r: truthy(r.get("v_vignetting")),
 }
 
 
 def variation_table(rows) -> str:
     """Markdown: per camera variation (on / off), the scenes, the fraction with the true
     population count (and counting order aliases with their component and reported
-    candidates as populations), the median region MAE and the wrong-order scenes the
-    analysis says are established, for each mode."""
+    candidates as populations), the median region MAE, the wrong-order scenes the
+    analysis says are established and the fraction with the exposure within 5 %, for each
+    mode."""
     from pipelines._scoring import summarize
 
     body = []
@@ -500,10 +502,12 @@ def variation_table(rows) -> str:
                              f"{100 * s['populations_ok']:.0f} %",
                              f"{100 * s['populations_ok_candidates']:.0f} %",
                              fmt(s["region_mae_median_nm"]),
-                             f"{s['order_wrong_unflagged']} of {s['order_wrong_count']}"])
+                             f"{s['order_wrong_unflagged']} of {s['order_wrong_count']}",
+                             "n/a" if not math.isfinite(s["exposure_ok"])
+                             else f"{100 * s['exposure_ok']:.0f} %"])
     return md_table(["mode", "variation", "", "scenes", "populations right",
                      "… with aliases and candidates", "region MAE (nm)",
-                     "wrong order, said established"], body)
+                     "wrong order, said established", "exposure within 5 %"], body)
 
 
 def plot(rows, path: Path) -> None:

@@ -1,0 +1,152 @@
+"""The flat field (microfacet.analysis.flat_field): a smooth illumination field estimated
+from the facets' brightness, only where the data ask for it, and the colours divided by it.
+
+References are analytic: facet images rendered by 1 nm spectral integration at a known
+thickness and tilt per facet (:func:`~microfacet.colour.table.direct_xyz`, not the table the
+estimate uses), multiplied by a known field; and a synthetic stack whose vignetting the
+generator records.
+"""
+
+from __future__ import annotations
+
+import json
+import types
+
+import numpy as np
+import pytest
+
+from microfacet import colour as color
+from microfacet.analysis import AnalysisOptions, analyse_stack
+from microfacet.analysis.colour_image import measure_colour
+from microfacet.analysis.flat_field import FlatField, estimate_flat_field, flat_fielded
+from microfacet.analysis.options import MaskOptions
+from microfacet.colour.model import FilmColourModel
+from microfacet.colour.table import build_colour_table, direct_xyz
+from microfacet.colour.transfer import srgb_encode
+from microfacet.forward.synth import generate_stack, preset
+
+SIDE, ROWS = 12, 16           # 16 × 16 facets of 12 px: a 192 px image
+
+
+@pytest.fixture(scope="module")
+def model():
+    return FilmColourModel(build_colour_table(thickness_range_nm=(0.0, 400.0),
+                                              theta_range_deg=(0.0, 27.0)))
+
+
+def _scene(field, *, seed=0):
+    """Facets of random thickness (60-250 nm) and tilt (0-15°), rendered by direct spectral
+    integration and multiplied by ``field(u, v)``; the joint result a fit would give (true
+    thickness and tilt per facet) and the Lab image."""
+    rng = np.random.default_rng(seed)
+    n = ROWS * ROWS
+    yy, xx = np.mgrid[0:ROWS * SIDE, 0:ROWS * SIDE]
+    labels = ((yy // SIDE) * ROWS + xx // SIDE).astype(np.int32)
+    d, t = rng.uniform(60.0, 250.0, n), rng.uniform(0.0, 15.0, n)
+    h = w = ROWS * SIDE
+    r = np.hypot((h - 1) / 2.0, (w - 1) / 2.0)
+    light = field((xx - (w - 1) / 2.0) / r, (yy - (h - 1) / 2.0) / r)
+    xyz = direct_xyz(t[labels], d[labels], spectral_step_nm=1.0) * light[..., None]
+    white = color.spectral_weights(np.arange(380.0, 781.0, 1.0)).sum(axis=0)
+    lab = color.xyz_to_lab(xyz, white=white).astype(np.float32)
+    thick = types.SimpleNamespace(thickness_nm=d, delta_e=np.full(n, 0.5))
+    joint = types.SimpleNamespace(facets=labels, usable=np.ones(labels.shape, bool),
+                                  censored=np.zeros(labels.shape, bool), prior_deg=t,
+                                  thickness=thick)
+    return joint, lab, light
+
+
+def test_the_field_is_one_at_the_centre_and_its_corners_say_their_loss():
+    ff = FlatField(coefficients=(0.0, 0.0, -0.5, 0.0, -0.5))
+    v = ff.map((9, 9))
+    assert v[4, 4] == pytest.approx(1.0)
+    assert v[0, 0] == pytest.approx(np.exp(-0.5), rel=1e-6)       # u = v = -1/√2
+    assert np.allclose(v, v[::-1, ::-1]) and np.allclose(v, v.T)
+    assert ff.corner_loss((9, 9)) == pytest.approx(1.0 - np.exp(-0.5), rel=1e-6)
+    assert FlatField().corner_loss((9, 9)) is None
+    assert np.all(FlatField().map((3, 4)) == 1.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("field", [
+    lambda u, v: 0.6 ** (2.0 * (u * u + v * v)),                            # the generator's
+    lambda u, v: np.exp(-0.3 * (u - 0.2) ** 2 - 0.6 * v * v + 0.1 * u),     # off-centre
+    lambda u, v: 1.0 / (1.0 + 0.8 * (u * u + v * v)) ** 2,                  # not of the form
+], ids=["radial", "off-centre", "rational"])
+def test_a_vignetted_image_gives_back_its_field(model, field):
+    joint, lab, light = _scene(field)
+    ff = estimate_flat_field(joint, lab, model)
+    assert ff.reason == ""
+    want = np.log(light / light[light.shape[0] // 2, light.shape[1] // 2])
+    err = ff.log_map(light.shape) - want
+    # relative to the centre; the fit's constant is the exposure
+    assert np.abs(err - err.mean()).max() < 0.03
+
+
+@pytest.mark.slow
+def test_even_light_asks_for_no_field(model):
+    joint, lab, _ = _scene(lambda u, v: np.ones_like(u))
+    rng = np.random.default_rng(1)
+    lab = lab + rng.normal(0.0, 0.5, lab.shape).astype(np.float32)
+    ff = estimate_flat_field(joint, lab, model)
+    assert "BIC" in ff.reason and not ff.applied
+    assert abs(ff.corner_loss(lab.shape[:2])) < 0.02
+
+
+@pytest.mark.slow
+def test_dark_facets_that_are_not_the_light_do_not_pull_the_field(model):
+    joint, lab, light = _scene(lambda u, v: 0.7 ** (2.0 * (u * u + v * v)), seed=2)
+    rng = np.random.default_rng(3)
+    stained = rng.random(ROWS * ROWS) < 0.1            # a tenth of the facets at half light
+    xyz = color.lab_to_xyz(lab, white=np.array([1.0, 1.0, 1.0]))
+    xyz = np.where(stained[joint.facets][..., None], 0.5 * xyz, xyz)
+    lab = color.xyz_to_lab(xyz, white=np.array([1.0, 1.0, 1.0])).astype(np.float32)
+    ff = estimate_flat_field(joint, lab, model)
+    want = np.log(light / light[light.shape[0] // 2, light.shape[1] // 2])
+    err = ff.log_map(light.shape) - want
+    assert np.abs(err - err.mean()).max() < 0.05
+
+
+def test_too_few_facets_give_no_field(model):
+    joint, lab, _ = _scene(lambda u, v: np.ones_like(u))
+    joint.usable = np.zeros(joint.facets.shape, bool)
+    ff = estimate_flat_field(joint, lab, model)
+    assert ff.coefficients is None and "fewer than" in ff.reason
+
+
+def test_flat_fielded_colours_are_those_of_even_light():
+    rng = np.random.default_rng(4)
+    lin = np.broadcast_to(np.array([0.45, 0.30, 0.12], np.float32), (40, 60, 3)).copy()
+    lin *= rng.uniform(0.9, 1.1, (40, 60, 1)).astype(np.float32)
+    lin[36:, 56:] *= 0.45         # a darker film in the corner: dark enough only when dimmed
+    ff = FlatField(coefficients=(0.0, 0.0, -1.5, 0.0, -1.5))
+    v = ff.map((40, 60))
+    opts = MaskOptions()
+    kw = dict(color_space="sRGB", bit_depth=16, illuminant="D65", delta_e_method="CIEDE2000")
+    even = measure_colour(srgb_encode(lin, dtype=np.float32), opts, **kw)
+    dim = measure_colour(srgb_encode(lin * v[..., None], dtype=np.float32), opts, **kw)
+    fixed = flat_fielded(dim, v, illuminant="D65", steep_ratio=opts.steep_ratio)
+    assert np.abs(fixed.lab - even.lab).max() < 0.05
+    assert dim.mask.steep.sum() > even.mask.steep.sum()        # the corners read as dark
+    assert np.array_equal(fixed.mask.steep, even.mask.steep)
+    assert np.array_equal(fixed.mask.mask, even.mask.mask)
+
+
+@pytest.mark.slow
+def test_the_analysis_divides_a_vignetted_stack_by_its_field(tmp_path):
+    p = preset("nd", height_px=160, width_px=160, n_slices=12, seed=5,
+               vignetting_corner_loss=0.4)
+    generate_stack(tmp_path / "s", p)
+    truth = np.load(tmp_path / "s" / "truth" / "thickness_nm.npy")
+    runs = {}
+    for mode in ("estimate", "off"):
+        opts = AnalysisOptions(mode="joint").replace(joint={"flat_field": mode})
+        runs[mode] = analyse_stack(tmp_path / "s", opts)
+    ff = runs["estimate"].flat_field
+    assert ff.applied and ff.median_delta_e[1] < ff.median_delta_e[0]
+    assert ff.corner_loss((160, 160)) == pytest.approx(0.4, abs=0.1)
+    assert runs["off"].flat_field.reason == "joint.flat_field is off"
+    err = {m: np.nanmedian(np.abs(r.pixels.thickness_nm - truth)) for m, r in runs.items()}
+    assert err["estimate"] < err["off"]
+    params = json.loads((tmp_path / "s" / "truth" / "params.json").read_text())["params"]
+    assert params["vignetting_corner_loss"] == 0.4
