@@ -35,8 +35,8 @@ import numpy as np
 
 from .sampling import weighted_median
 
-__all__ = ["MapCheck", "component_orders", "distinct_populations", "mixture_map_check",
-           "roi_pixel_check"]
+__all__ = ["MapCheck", "candidate_alias", "component_orders", "distinct_populations",
+           "mixture_map_check", "order_alias_of", "roi_pixel_check"]
 
 #: The per-pixel map's error floor (nm) each component is widened by: the thickness per true
 #: region errs by a median 0.6-0.8 nm on the generalization sweep (docs/accuracy.md).
@@ -192,15 +192,57 @@ def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguo
         amb = mine & np.asarray(ambiguous, bool) & np.isfinite(other_thickness_nm)
         frac = float(w[amb].sum() / w[mine].sum()) if w[mine].sum() > 0 else 0.0
         other = weighted_median(np.asarray(other_thickness_nm)[amb], w[amb])
-        alias = None
-        if other is not None and frac >= ALIAS_MIN_AMBIGUOUS:
-            zz = np.abs(other - mu) / np.sqrt(sd ** 2 + MAP_FLOOR_NM ** 2)
-            zz[k] = np.inf
-            j = int(np.argmin(zz))
-            alias = float(mu[j]) if zz[j] <= ALIAS_SD else None
+        alias = (order_alias_of(mixture, other, exclude=k)
+                 if other is not None and frac >= ALIAS_MIN_AMBIGUOUS else None)
         out.append({"order_ambiguous_fraction": frac, "other_order_nm": other,
                     "alias_of_nm": alias})
     return out
+
+
+def order_alias_of(mixture, other_nm, *, exclude=None) -> float | None:
+    """The mean of the component of ``mixture`` that a runner-up order's thickness
+    ``other_nm`` lies on (within :data:`ALIAS_SD` of its SD and :data:`MAP_FLOOR_NM` twice,
+    in quadrature), other than component ``exclude`` (an index into the components, which
+    are ordered by mean); None if none.
+
+    >>> from microfacet.core.distributions import ThicknessMixture
+    >>> m = ThicknessMixture([(0.8, 250.0, 1.0), (0.2, 140.0, 1.0)])
+    >>> order_alias_of(m, 251.5), order_alias_of(m, 260.0), order_alias_of(m, 251.5, exclude=1)
+    (250.0, None, None)
+    """
+    comps = mixture.components
+    mu = np.array([c[1] for c in comps])
+    sd = np.sqrt(np.array([c[2] for c in comps]) ** 2 + MAP_FLOOR_NM ** 2)
+    zz = np.abs(float(other_nm) - mu) / np.sqrt(sd ** 2 + MAP_FLOOR_NM ** 2)
+    if exclude is not None:
+        zz[exclude] = np.inf
+    j = int(np.argmin(zz))
+    return float(mu[j]) if zz[j] <= ALIAS_SD else None
+
+
+def candidate_alias(mixture, other_nm, gap_de, weights, misfit_de):
+    """Whether a candidate population may be a component of ``mixture`` read in another
+    interference order: its facets' runner-up order (``other_nm``, weighted median with
+    ``weights``) lies on a component (:func:`order_alias_of`) and fits them within
+    ``misfit_de`` of their own fit (``gap_de``: the runner-up's ΔE00 minus the chosen one's,
+    median over the facets). Returns ``(alias mean or None, median gap or None)``.
+
+    >>> from microfacet.core.distributions import ThicknessMixture
+    >>> m = ThicknessMixture([(0.7, 110.0, 1.0), (0.3, 55.0, 1.0)])
+    >>> candidate_alias(m, [54.2, 55.1, 56.0], [2.1, 2.6, 3.0], [1, 1, 1], misfit_de=4.0)
+    (55.0, 2.6)
+    >>> candidate_alias(m, [54.2, 55.1, 56.0], [6.1, 6.6, 7.0], [1, 1, 1], misfit_de=4.0)
+    (None, 6.6)
+    """
+    other, gap, w = (np.asarray(a, dtype=np.float64) for a in (other_nm, gap_de, weights))
+    ok = np.isfinite(other) & np.isfinite(gap) & (w > 0)
+    if not ok.any():
+        return None, None
+    g = float(np.median(gap[ok]))
+    at = weighted_median(other[ok], w[ok])
+    if at is None or not g <= misfit_de:
+        return None, g
+    return order_alias_of(mixture, at), g
 
 
 def distinct_populations(mixture, orders) -> int:

@@ -355,6 +355,9 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions) -> dict:
     for a in _aliases(dist.thickness):
         why.append(f"the {a[0]:.1f} nm component may be the {a[1]:.1f} nm one read in "
                    f"another order")
+    for c in _candidate_aliases(dist.thickness):
+        why.append(f"the candidate at {c.mean_nm:.1f} nm may be the {c.alias_of_nm:.1f} nm "
+                   f"component read in another order")
     if not dist.thickness_judgement.identified:
         why.append("the thickness is not identified")
     return {"established": not why, "reasons": why}
@@ -392,6 +395,13 @@ def _aliases(fit) -> list:
     orders = fit.info.get("component_orders") or []
     return [(c[1], o["alias_of_nm"], o["order_ambiguous_fraction"])
             for c, o in zip(fit.mixture.components, orders) if o.get("alias_of_nm") is not None]
+
+
+def _candidate_aliases(fit) -> list:
+    """The candidate populations that may be a component read in another order
+    (:attr:`~.mixtures.PopulationCandidate.alias_of_nm`)."""
+    cands = (fit.info.get("candidates") or []) if fit is not None else []
+    return [c for c in cands if getattr(c, "alias_of_nm", None) is not None]
 
 
 def _candidate_warning(fit) -> Reason | None:
@@ -491,6 +501,14 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
                           f"{100 * frac:.0f} % of its area fits that order within "
                           f"{options.ambiguous_order_de:g} dE00 (facets.csv "
                           f"other_order_thickness_nm)", _RANGE))
+    for c in _candidate_aliases(dist.thickness):
+        out.append(Reason("order_alias", f"the candidate population at {c.mean_nm:.1f} nm "
+                          f"({100 * c.area_fraction:.0f} % of the area) may be the "
+                          f"{c.alias_of_nm:.1f} nm component read in another interference "
+                          f"order, or that component this one: its facets fit that order "
+                          f"within {c.order_gap_de:.2f} dE00 of their own, inside the "
+                          f"populations' misfit (summary.json thickness.mixture.candidates)",
+                          _RANGE))
     readings = dist.exposure_readings
     if readings is not None and readings.ambiguous:
         out.append(Reason("exposure_ambiguous", f"two exposures fit the facets' colours "

@@ -542,6 +542,13 @@ class PopulationCandidate:
     decided_at_field_um : float or None
         Side of the square field that ``field_scale`` means, where the caller knows the
         pixel size.
+    alias_of_nm : float or None
+        The component its facets' runner-up interference order lies on, where that order
+        fits them within the populations' own misfit: the candidate may be that population
+        read in another order (or the component this one), not a population of its own.
+        Where the caller knows the facets' orders.
+    order_gap_de : float or None
+        The median over its facets of the runner-up order's ΔE00 minus the chosen one's.
     """
 
     mean_nm: float
@@ -553,6 +560,8 @@ class PopulationCandidate:
     delta_e: float | None = None
     delta_e_populations: float | None = None
     decided_at_field_um: float | None = None
+    alias_of_nm: float | None = None
+    order_gap_de: float | None = None
 
     @property
     def colour_explained(self) -> bool | None:
@@ -565,9 +574,11 @@ class PopulationCandidate:
     @property
     def reported(self) -> bool:
         """Reported to the user as a candidate population (warning, report): its colour is
-        not unexplained and a field of at most :data:`CANDIDATE_MAX_FIELD_SCALE` × the area
-        would decide it."""
-        return (self.colour_explained is not False and self.field_scale is not None
+        not unexplained, it is not a component's order alias (``alias_of_nm``: that is
+        reported as such) and a field of at most :data:`CANDIDATE_MAX_FIELD_SCALE` × the
+        area would decide it."""
+        return (self.colour_explained is not False and self.alias_of_nm is None
+                and self.field_scale is not None
                 and self.field_scale <= CANDIDATE_MAX_FIELD_SCALE)
 
     def to_json(self) -> dict:

@@ -103,3 +103,22 @@ def test_distinct_populations_count_each_alias_with_its_component():
     assert distinct_populations(m, both_ways) == 3
     chain = [{"alias_of_nm": 93.0}, {"alias_of_nm": 176.0}] + none[2:]
     assert distinct_populations(m, chain) == 2
+
+
+def test_a_candidate_whose_other_order_lies_on_a_component_is_its_alias():
+    """A candidate's facets whose runner-up order lies on a component and fits them within
+    the populations' misfit may be that component read in another order; a runner-up that
+    fits clearly worse, or lies on no component, leaves the candidate a population."""
+    from microfacet.analysis.consistency import candidate_alias
+
+    m = ThicknessMixture([(0.7, 110.0, 1.5), (0.3, 55.0, 1.0)])
+    rng = np.random.default_rng(0)
+    other = 165.0 - 110.0 + rng.normal(0.0, 0.8, 40)          # the 165 nm facets' look-alike
+    area = rng.uniform(20, 200, 40)
+    alias, gap = candidate_alias(m, other, rng.uniform(1.5, 3.5, 40), area, misfit_de=4.0)
+    assert alias == 55.0 and 1.5 < gap < 3.5
+    alias, gap = candidate_alias(m, other, rng.uniform(5.0, 8.0, 40), area, misfit_de=4.0)
+    assert alias is None and gap > 4.0                          # the colours tell them apart
+    alias, _ = candidate_alias(m, other + 30.0, np.full(40, 1.0), area, misfit_de=4.0)
+    assert alias is None                                        # on no component
+    assert candidate_alias(m, [np.nan], [np.nan], [1.0], misfit_de=4.0) == (None, None)

@@ -395,6 +395,36 @@ def test_a_reported_candidate_population_is_a_warning_naming_the_field():
     assert [c["reported"] for c in fit.to_json()["candidates"]] == [True, False, False]
 
 
+def test_a_candidate_that_may_be_a_component_in_another_order_is_said_so():
+    """A candidate that lies an order from a component (``alias_of_nm``) is not reported as
+    a population of its own: it is an order-alias warning, and the order is not
+    established."""
+    from microfacet.analysis.identification import order_check
+    from microfacet.analysis.mixtures import PopulationCandidate
+
+    alias = PopulationCandidate(165.0, 1.1, 0.08, 31, 1.05, decided_at_field_um=60.0,
+                                delta_e=0.8, delta_e_populations=2.0, alias_of_nm=55.3,
+                                order_gap_de=2.52)
+    alone = PopulationCandidate(230.0, None, 0.04, 1, 3.5, decided_at_field_um=121.0,
+                                delta_e=0.5, delta_e_populations=0.6, order_gap_de=6.9)
+    fit = MixtureFit(ThicknessMixture([(0.3, 55.3, 1.0), (0.7, 107.4, 1.0)]), 0.0, {2: 0.0},
+                     10, 10.0, info={"candidates": [alias, alone]})
+    assert not alias.reported and alone.reported
+    w = _warn(_dist(thickness_fit=fit))
+    (a,) = [r for r in w if r.code == "order_alias"]
+    assert "candidate population at 165.0 nm (8 % of the area)" in a.text
+    assert "55.3 nm component" in a.text and "2.52 dE00" in a.text
+    (c,) = [r for r in w if r.code == "thickness_candidates"]
+    assert "230.0" in c.text and "165.0" not in c.text
+    out = order_check(_dist(thickness_fit=fit), delta_e_median=1.0, noise_de=1.0,
+                      options=OPTIONS)
+    assert not out["established"]
+    assert "the candidate at 165.0 nm may be the 55.3 nm component" in out["reasons"][0]
+    js = fit.to_json()["candidates"]
+    assert js[0]["alias_of_nm"] == 55.3 and js[0]["reported"] is False
+    assert js[1]["alias_of_nm"] is None
+
+
 def test_order_check_says_why_the_order_is_not_established():
     from microfacet.analysis.identification import MEDIAN_NOISE_FLOOR_FACTOR, order_check
 
