@@ -56,10 +56,15 @@ import numpy as np
 from ..colour.colorimetry import xyz_to_lab
 from ..colour.srgb import image_white_xyz, linear_srgb_to_xyz
 from ..colour.transfer import srgb_decode, srgb_encode
+from ..core.errors import InputError
+from ..core.lazy import load
 from .identification import unexplained_facets
 from .mask import steep_facet_mask
 
-__all__ = ["MAX_ROUNDS", "ROUND_TOLERANCE", "FlatField", "estimate_flat_field", "flat_fielded"]
+ndimage = load("scipy.ndimage")
+
+__all__ = ["MAX_ROUNDS", "ROUND_TOLERANCE", "FlatField", "estimate_flat_field", "flat_fielded",
+           "reference_flat_field"]
 
 #: The models tried: the number of terms of ln V besides the constant (which the exposure
 #: takes), nested (u, v, u², uv, v², r⁴, r⁶).
@@ -76,6 +81,8 @@ ROUNDS = 10
 #: another round is not tried.
 MAX_ROUNDS = 3
 ROUND_TOLERANCE = 0.01
+#: The reference image's smoothing: a Gaussian of this fraction of its diagonal.
+REFERENCE_SMOOTH_FRACTION = 0.02
 #: Largest ln V the field may reach on the image (a factor e⁻² ≈ 0.14 of the centre's light):
 #: beyond it the corners carry too little light to read, and the fit is not trusted.
 MAX_LOG_LOSS = 2.0
@@ -105,6 +112,11 @@ class FlatField:
         Why it is not applied (empty when applied).
     rounds : int
         Rounds of estimate and refit whose field was kept (each adds to the last).
+    source : str
+        ``"estimated"`` (from the facets) or ``"flat reference NAME"`` (an image of an even
+        target, :func:`reference_flat_field`).
+    image : ndarray (H, W) or None
+        The reference's field (V per pixel); None for an estimate (``coefficients`` hold it).
     """
 
     coefficients: tuple | None = None
@@ -115,6 +127,8 @@ class FlatField:
     median_delta_e: tuple | None = None
     reason: str = ""
     rounds: int = 0
+    source: str = "estimated"
+    image: np.ndarray | None = dataclasses.field(default=None, repr=False, compare=False)
 
     def plus(self, other: "FlatField") -> "FlatField":
         """The field times ``other``'s (ln V added term by term); ``other``'s fit numbers."""
@@ -128,6 +142,8 @@ class FlatField:
     def log_map(self, shape) -> np.ndarray:
         """ln V per pixel, float32 (H, W); zeros without coefficients."""
         h, w = shape
+        if self.image is not None:
+            return np.log(self.image).astype(np.float32)
         if self.coefficients is None:
             return np.zeros((h, w), np.float32)
         u, v = _centred(np.arange(w, dtype=np.float64)[None, :],
@@ -141,13 +157,13 @@ class FlatField:
 
     def corner_loss(self, shape) -> float | None:
         """The largest fraction of light lost at the four corners (None: no coefficients)."""
-        if self.coefficients is None:
+        if self.coefficients is None and self.image is None:
             return None
         lm = self.log_map(shape)
         return float(1.0 - math.exp(min(lm[0, 0], lm[0, -1], lm[-1, 0], lm[-1, -1])))
 
     def to_json(self, shape) -> dict:
-        return {"applied": self.applied,
+        return {"applied": self.applied, "source": self.source,
                 "coefficients": None if self.coefficients is None else list(self.coefficients),
                 "corner_loss": self.corner_loss(shape), "facets": self.facets,
                 "misfit_sd": self.misfit_sd, "bic_gain": self.bic_gain,
@@ -272,6 +288,43 @@ def estimate_flat_field(joint, lab, model) -> FlatField:
         return dataclasses.replace(ff, reason=f"the fitted field loses {1 - math.exp(deepest):.0%}"
                                               f" of the light at a facet: not trusted")
     return ff
+
+
+def reference_flat_field(stack, given, shape, *, where_given) -> FlatField | None:
+    """The flat field of a reference image (module notes), or None without one: ``given``
+    (the option ``optics.flat_reference``, named ``where_given`` in errors), else the file
+    stack.json's ``flat_reference`` names.
+
+    The image's linear luminance (grey: its one channel) is smoothed by a Gaussian of
+    :data:`REFERENCE_SMOOTH_FRACTION` of the image's diagonal, so dust, texture and noise on
+    the target do not enter, and divided by its value at the centre.
+
+    Raises
+    ------
+    InputError
+        The image is missing, not of the stack's size, or too dark or clipped to measure
+        the light (one line naming the file and the key or option).
+    """
+    ref = stack.read_reference("flat_reference", given, where_given=where_given)
+    if ref is None:
+        return None
+    img, name, where = ref
+    if img.shape[:2] != tuple(shape):
+        raise InputError(f"{where}: a flat reference must have the stack's size "
+                         f"{shape[1]} x {shape[0]} px, got {img.shape[1]} x {img.shape[0]}")
+    rgb = img if img.ndim == 3 else img[..., None]
+    clipped = float(np.mean(rgb.max(axis=-1) >= 0.995))
+    lin = srgb_decode(rgb[..., :3]).mean(axis=-1).astype(np.float32)
+    level = float(np.median(lin))
+    if clipped > 0.01 or level < 0.02:
+        what = "clipped" if clipped > 0.01 else "too dark"
+        raise InputError(f"{where}: the flat reference is {what} ({100 * clipped:.0f} % of its "
+                         f"pixels at the top code, median linear value {level:.3f}): take it "
+                         f"with less or more light")
+    sigma = REFERENCE_SMOOTH_FRACTION * math.hypot(*shape)
+    smooth = ndimage.gaussian_filter(lin, sigma, mode="nearest")
+    centre = float(smooth[(shape[0] - 1) // 2, (shape[1] - 1) // 2])
+    return FlatField(applied=True, source=f"flat reference {name}", image=smooth / centre)
 
 
 def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, steep_ratio):

@@ -278,6 +278,11 @@ class OpticsOptions(Options):
     white_reference: str | None = option(
         None, help="an image of a white standard taken with the stack's camera settings: its "
                    "R, G, B set the white balance", kind=str, cli=True, metavar="FILE")
+    flat_reference: str | None = option(
+        None, help="an image of an even, featureless target (a mirror, a white standard or a "
+                   "clean blank field) through the stack's optics and light: its smoothed "
+                   "brightness is the flat field (vignetting) the colours are divided by, in "
+                   "place of the joint mode's estimate", kind=str, cli=True, metavar="FILE")
     thickness_range_nm: tuple = option(
         (0.0, 400.0), help="global thickness search range", unit="nm", kind=tuple,
         check=_thickness_range, cli=True)

@@ -39,6 +39,7 @@ from .flat_field import (
     FlatField,
     estimate_flat_field,
     flat_fielded,
+    reference_flat_field,
 )
 from .identification import analysis_warnings, mean_plane_tilt_deg, self_check_judgement
 from .iso25178 import areal_parameters
@@ -256,6 +257,13 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         if wb.applied:
             colour = dataclasses.replace(colour, lab=balanced_lab(
                 colour.encoded, wb.gains_rgb, illuminant=scene.illuminant))
+        flat_ref = reference_flat_field(st, options.optics.flat_reference,
+                                        colour.lab.shape[:2], where_given="flat_reference")
+        if flat_ref is not None:
+            colour = flat_fielded(colour, flat_ref.map(colour.lab.shape[:2]),
+                                  gains_rgb=wb.gains_rgb if wb.applied else (1.0, 1.0, 1.0),
+                                  illuminant=scene.illuminant,
+                                  steep_ratio=options.mask.steep_ratio)
         roi = _roi(st, colour, surface, model, options, scene)
     model = model.with_exposure(roi.exposure)
     grid = tilt_grid(scene.max_tilt_deg, options.tilt.step_deg)
@@ -278,7 +286,8 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
             (joint, roi, readings), colour, flat = _flat_field_pass(
                 facets(colour, roi), colour,
                 lambda c: facets(c, _roi(st, c, surface, model, options, scene)),
-                model, options, scene, wb)
+                model, options, scene, wb) if flat_ref is None else (
+                facets(colour, roi), colour, flat_ref)
         model = model.with_exposure(joint.exposure)
         with timer.stage(Stage.TILT):
             pixels = joint.pixels = joint_pixel_tilts(joint, colour, model, grid, options.tilt)
@@ -298,7 +307,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
     timer.total()
     return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
                           dist, dict(timer.timings), check, wb,
-                          flat if options.mode == "joint" else None)
+                          flat if options.mode == "joint" else flat_ref)
 
 
 def _flat_field_pass(first, colour, facets_in, model, options, scene, wb):

@@ -32,16 +32,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from ..colour.colorimetry import xyz_to_lab
 from ..colour.srgb import image_white_xyz, linear_srgb_to_xyz, model_xyz_to_linear_srgb
 from ..colour.transfer import srgb_decode
-from ..core.errors import InputError, one_line
+from ..core.errors import InputError
 from ..core.lazy import load
-from ..io.images import convert_samples, decode_image
 from .search import parabola
 
 ndimage = load("scipy.ndimage")
@@ -288,19 +286,11 @@ def estimate_white_balance(encoded, tilt_deg, usable, model, *, illuminant, seed
 def _given_gains(stack, options, where_option: str):
     """The reference's gains and its name, or None: ``white_reference`` (the option, then
     stack.json's), then stack.json's ``white_balance``."""
-    ref = options.white_reference
-    path = Path(ref) if ref else None
-    where = where_option
-    if path is None and stack.meta.get("white_reference"):
-        path = Path(stack.path) / stack.meta["white_reference"]
-        where = f"{one_line(Path(stack.path) / 'stack.json')}: key 'white_reference'"
-    if path is not None:
-        if not path.is_file():
-            raise InputError(f"{where}: {one_line(path)} not found")
-        img = convert_samples(decode_image(path, f"{where} ({one_line(path.name)})"),
-                              np.float32)
-        return reference_gains(img, where=f"{where} ({one_line(path.name)})"), \
-            f"white reference {path.name}"
+    ref = stack.read_reference("white_reference", options.white_reference,
+                               where_given=where_option)
+    if ref is not None:
+        img, name, where = ref
+        return reference_gains(img, where=where), f"white reference {name}"
     given = stack.meta.get("white_balance")      # 3 numbers > 0: the schema checked it
     if given is None:
         return None

@@ -261,6 +261,30 @@ class Stack:
         warn_height_unit(h, self.pixel_size_yx_um, self.path / "stack.json")
         return h
 
+    def read_reference(self, key: str, given=None, *, where_given: str = ""):
+        """A reference image of the stack's camera (a white standard, a flat field): the file
+        ``given`` (an option's value, named ``where_given`` in errors), else the one
+        stack.json's ``key`` names (a path inside the stack folder); None without either.
+        Returns ``(image, name, where)``: float32 in [0, 1] as encoded, the file's name, and
+        the key or option it came from for messages.
+
+        Raises
+        ------
+        InputError
+            The file is missing or not an image (one line naming it and the key or option).
+        """
+        where = where_given
+        path = Path(given) if given else None
+        if path is None and self.meta.get(key):
+            path = self.path / self.meta[key]
+            where = f"{one_line(self.path / 'stack.json')}: key '{key}'"
+        if path is None:
+            return None
+        if not path.is_file():
+            raise InputError(f"{where}: {one_line(path)} not found")
+        where = f"{where} ({one_line(path.name)})"
+        return convert_samples(decode_image(path, where), np.float32), path.name, where
+
     def read_export_image(self, dtype=np.float32) -> np.ndarray:
         """The microscope export's all-in-focus image, (H, W) or (H, W, 3); see
         :meth:`read_slice`."""

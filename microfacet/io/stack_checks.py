@@ -444,8 +444,9 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
     checked_values(meta, c.where, _names_files)
     export = _export(c)
     c.series = _series(c, values["series"])
-    if c.has("white_reference"):
-        image_info(_file(c, "white_reference"), c.where("white_reference"))
+    for key in ("white_reference", "flat_reference"):
+        if c.has(key):
+            image_info(_file(c, key), c.where(key))
     files = {"slices": (), "tiff": None}
     tiff_uniform = False
     if c.has("slices"):

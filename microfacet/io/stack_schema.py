@@ -215,6 +215,10 @@ SPECS = {s.name: s for s in (
     KeySpec("white_reference", **_PATH, doc="an image of a white standard taken with the "
             "stack's camera settings: its linear R, G, B over G are the gains; "
             "`--white-reference` overrides it"),
+    KeySpec("flat_reference", **_PATH, doc="an image of an even, featureless target (a "
+            "mirror, a white standard or a clean blank field) through the stack's optics and "
+            "light: its smoothed brightness, 1 at the centre, is the flat field the colours "
+            "are divided by (vignetting); `--flat-reference` overrides it"),
     KeySpec("exposure", "number", "scale from the model's linear sRGB to the image's; "
             "`--exposure` overrides it", low=0.0, low_exclusive=True, null_absent=True,
             default_doc="estimated"),

@@ -150,3 +150,91 @@ def test_the_analysis_divides_a_vignetted_stack_by_its_field(tmp_path):
     assert err["estimate"] < err["off"]
     params = json.loads((tmp_path / "s" / "truth" / "params.json").read_text())["params"]
     assert params["vignetting_corner_loss"] == 0.4
+
+
+@pytest.fixture(scope="module")
+def vignetted(tmp_path_factory):
+    """One synthetic scene with even light and the same with 40 % lost at the corners, and
+    the latter's flat reference: an even grey target through the generator's vignetting,
+    8-bit, with noise and a dust speck."""
+    from microfacet.forward.imaging import vignetting_factor
+    from microfacet.io.images import write_image
+
+    root = tmp_path_factory.mktemp("ff")
+    for name, loss in (("even", 0.0), ("vignetted", 0.4)):
+        generate_stack(root / name, preset("nd", height_px=128, width_px=128, n_slices=12,
+                                           seed=5, vignetting_corner_loss=loss))
+    rng = np.random.default_rng(0)
+    lin = 0.6 * vignetting_factor((128, 128), corner_loss=0.4)
+    lin = lin * rng.normal(1.0, 0.02, lin.shape)
+    lin[40:44, 70:74] *= 0.3                                    # dust on the target
+    write_image(root / "vignetted" / "flat.png",
+                srgb_encode(np.repeat(lin[..., None], 3, axis=-1).astype(np.float32),
+                            dtype=np.uint8))
+    return root
+
+
+def _analyse(path, **optics):
+    opts = AnalysisOptions(mode="joint")
+    if optics:
+        opts = opts.replace(optics=optics)
+    return analyse_stack(path, opts)
+
+
+@pytest.mark.slow
+def test_a_flat_reference_makes_the_vignetted_scene_read_as_the_even_one(vignetted):
+    """The reference given as the option and as stack.json's flat_reference: the per-pixel
+    thickness of the vignetted scene is the even scene's (median |Δ| < 0.3 nm) and its
+    exposure the even scene's (2 %), where without any flat field it is not."""
+    import shutil
+
+    even = _analyse(vignetted / "even")
+    raw = analyse_stack(vignetted / "vignetted",
+                        AnalysisOptions(mode="joint").replace(joint={"flat_field": "off"}))
+    ref = _analyse(vignetted / "vignetted", flat_reference=str(vignetted / "vignetted" /
+                                                                "flat.png"))
+    assert ref.flat_field.source == "flat reference flat.png" and ref.flat_field.applied
+    assert ref.flat_field.corner_loss((128, 128)) == pytest.approx(0.4, abs=0.03)
+    t0, t_raw, t_ref = (r.pixels.thickness_nm for r in (even, raw, ref))
+    ok = np.isfinite(t0) & np.isfinite(t_raw) & np.isfinite(t_ref)
+    err_ref = float(np.median(np.abs(t_ref[ok] - t0[ok])))
+    err_raw = float(np.median(np.abs(t_raw[ok] - t0[ok])))
+    assert err_ref < 0.3 < err_raw, (err_ref, err_raw)
+    assert ref.exposure == pytest.approx(even.exposure, rel=0.02)
+    assert abs(raw.exposure / even.exposure - 1.0) > 0.03
+    copy = vignetted / "with-key"
+    shutil.copytree(vignetted / "vignetted", copy)
+    meta = json.loads((copy / "stack.json").read_text())
+    (copy / "stack.json").write_text(json.dumps({**meta, "flat_reference": "flat.png"}))
+    key = _analyse(copy)
+    assert key.flat_field.source == "flat reference flat.png"
+    np.testing.assert_array_equal(key.pixels.thickness_nm, t_ref)
+    seed = analyse_stack(copy, AnalysisOptions(mode="seed"))   # the seed mode takes it too
+    assert seed.flat_field.source == "flat reference flat.png"
+    assert seed.exposure == pytest.approx(even.exposure, rel=0.05)
+
+
+def test_a_flat_reference_of_another_size_or_clipped_is_refused(tmp_path):
+    from microfacet.analysis.flat_field import reference_flat_field
+    from microfacet.core.errors import InputError
+    from microfacet.io.images import write_image
+    from microfacet.io.stack import read_stack
+
+    stack = read_stack("fixtures/stacks/nd-fixture")
+    h, w = stack.shape
+    write_image(tmp_path / "small.png", np.full((h // 2, w, 3), 128, np.uint8))
+    write_image(tmp_path / "white.png", np.full((h, w, 3), 255, np.uint8))
+    write_image(tmp_path / "grey.png", np.full((h, w, 3), 150, np.uint8))
+    with pytest.raises(InputError, match=r"flat_reference \(small.png\).*stack's size"):
+        reference_flat_field(stack, str(tmp_path / "small.png"), (h, w),
+                             where_given="flat_reference")
+    with pytest.raises(InputError, match="white.png.*clipped"):
+        reference_flat_field(stack, str(tmp_path / "white.png"), (h, w),
+                             where_given="flat_reference")
+    with pytest.raises(InputError, match="missing.png not found"):
+        reference_flat_field(stack, str(tmp_path / "missing.png"), (h, w),
+                             where_given="flat_reference")
+    even = reference_flat_field(stack, str(tmp_path / "grey.png"), (h, w),
+                                where_given="flat_reference")
+    assert np.allclose(even.map((h, w)), 1.0) and even.corner_loss((h, w)) == pytest.approx(0)
+    assert reference_flat_field(stack, None, (h, w), where_given="flat_reference") is None
