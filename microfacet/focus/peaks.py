@@ -228,10 +228,16 @@ def _solve_parabola(sums: _Sums, tiny):
     dc = s4 * (s2 * t0 - t1 * s1) - s3 * (s3 * t0 - t1 * s2) + t2 * c02
     good = (np.abs(det) > 1e-12 * np.maximum(s4 * s2 * s0, tiny)) & (sums.n_valid >= 3)
     safe = np.where(good, det, 1.0)
-    inv = 1.0 / safe
-    a = np.where(good, da * inv, 0.0)
-    b = np.where(good, db * inv, 0.0)
-    c = np.where(good, dc * inv, 0.0)
+    # a determinant that passes the test but underflows float32 (sums of huge or tiny
+    # focus values) gives an infinite inverse: such a fit has no usable peak, not a NaN one
+    with np.errstate(over="ignore", invalid="ignore"):
+        inv = 1.0 / safe
+        a, b, c = da * inv, db * inv, dc * inv
+    good = good & np.isfinite(inv) & np.isfinite(a) & np.isfinite(b) & np.isfinite(c)
+    inv = np.where(good, inv, 0.0)
+    a = np.where(good, a, 0.0)
+    b = np.where(good, b, 0.0)
+    c = np.where(good, c, 0.0)
     return a, b, c, good, (c00, c01, c11), inv
 
 
