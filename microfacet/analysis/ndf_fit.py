@@ -169,7 +169,7 @@ def _ndf_starts(k, d, sols):
     """Starting points of the EM for K = ``k``: quantile blocks of m², a geometric spread
     about the mean square slope; with ``k`` > 1 the K − 1 solution plus one wide or one
     narrow lobe, or with its heaviest lobe split in two."""
-    starts = [(np.ones(k), np.array([max(b.mean() / 2.0, d.s2_floor)
+    starts = [(np.ones(k), np.array([max(b.mean() / 2.0, d.s2_floor) if b.size else d.base
                                      for b in np.array_split(d.order, k)])),
               (np.ones(k), d.base * np.geomspace(1 / 9.0, 9.0, k))]
     if k > 1:

@@ -140,7 +140,8 @@ class JointOptions(Options):
         "estimate", help="the microscope's flat field (vignetting): `estimate` fits a smooth "
                          "field to the facets' brightness and divides the colours by it where "
                          "the facets then fit better (analysis.flat_field); `off` takes the "
-                         "illumination as even", choices=("off", "estimate"))
+                         "illumination as even (a flat reference, optics.flat_reference, is "
+                         "applied either way)", choices=("off", "estimate"))
     min_plane_pixels: int = option(
         8, help="fewest reliable heights for a facet plane (3 determine it; 8 leave 5 degrees "
                 "of freedom for the residual that scales its covariance)", low=4)

@@ -113,8 +113,9 @@ class AnalysisResult:
     self_check : SelfCheck or None
     white_balance : WhiteBalance
         The camera gains the colours were corrected for, and the scene's estimate.
-    flat_field : FlatField
-        The flat field (vignetting) the colours were divided by, or why none (joint mode).
+    flat_field : FlatField or None
+        The flat field (vignetting) the colours were divided by, or why none: a reference's
+        (both modes) or the joint mode's estimate; None in seed mode without a reference.
     """
 
     stack: Stack
@@ -283,11 +284,13 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                     seg, c, r, model.with_exposure(r.exposure), scene, options,
                     refit_roi=lambda e: _roi(st, c, surface, model, options, scene,
                                              exposure=e))
-            (joint, roi, readings), colour, flat = _flat_field_pass(
-                facets(colour, roi), colour,
-                lambda c: facets(c, _roi(st, c, surface, model, options, scene)),
-                model, options, scene, wb) if flat_ref is None else (
-                facets(colour, roi), colour, flat_ref)
+            if flat_ref is None:
+                (joint, roi, readings), colour, flat = _flat_field_pass(
+                    facets(colour, roi), colour,
+                    lambda c: facets(c, _roi(st, c, surface, model, options, scene)),
+                    model=model, options=options, scene=scene, wb=wb)
+            else:
+                (joint, roi, readings), flat = facets(colour, roi), flat_ref
         model = model.with_exposure(joint.exposure)
         with timer.stage(Stage.TILT):
             pixels = joint.pixels = joint_pixel_tilts(joint, colour, model, grid, options.tilt)
@@ -310,12 +313,31 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                           flat if options.mode == "joint" else flat_ref)
 
 
-def _flat_field_pass(first, colour, facets_in, model, options, scene, wb):
-    """The facets (``first``: facets, ROIs, readings) and the colours, flat-fielded where the
-    facets' brightness asks for a field (:mod:`.flat_field`) and the facets refitted under it
-    (``facets_in(colour)``) fit their colours better; with the :class:`FlatField`. The facets'
-    thicknesses absorb part of an uncorrected field, so the field is estimated again on the
-    refitted facets and added, up to :data:`~.flat_field.MAX_ROUNDS` times."""
+def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):
+    """The joint mode's flat field estimated from the facets (:mod:`.flat_field`).
+
+    Parameters
+    ----------
+    first : tuple
+        ``(JointResult, RoiFit, ExposureReadings or None)`` of the colours as measured.
+    colour : ColourImage
+    facets_in : callable
+        ``facets_in(colour)``: the ROI and facet stages again on other colours, as ``first``.
+    model : FilmColourModel
+    options : AnalysisOptions
+    scene : Scene
+    wb : WhiteBalance
+        The gains applied to the colours (kept when they are divided by the field).
+
+    Returns
+    -------
+    (tuple, ColourImage, FlatField)
+        The facets and the colours, flat-fielded where the facets' brightness asks for a
+        field and the facets refitted under it fit their colours better (median ΔE00), and
+        the :class:`FlatField`. The facets' thicknesses absorb part of an uncorrected field,
+        so it is estimated again on the refitted facets and added, up to
+        :data:`~.flat_field.MAX_ROUNDS` times.
+    """
     if options.joint.flat_field == "off":
         return first, colour, FlatField(reason="joint.flat_field is off")
     shape = colour.lab.shape[:2]
@@ -323,10 +345,14 @@ def _flat_field_pass(first, colour, facets_in, model, options, scene, wb):
     de0 = float(np.nanmedian(first[0].thickness.delta_e))
     for k in range(MAX_ROUNDS):
         joint = best[0]
-        ff = estimate_flat_field(joint, best_colour.lab, model.with_exposure(joint.exposure))
+        ff = estimate_flat_field(joint, best_colour.lab, model.with_exposure(joint.exposure),
+                                 unexplained_mads=options.fits.unexplained_mads)
         if ff.reason:
             break
-        trial = ff if total is None else total.plus(ff)
+        trial = ff if total is None else total.plus(ff).checked(shape)
+        if trial.reason:
+            ff = trial
+            break
         flat = flat_fielded(colour, trial.map(shape),
                             gains_rgb=wb.gains_rgb if wb.applied else (1.0, 1.0, 1.0),
                             illuminant=scene.illuminant, steep_ratio=options.mask.steep_ratio)

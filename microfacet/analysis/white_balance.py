@@ -129,14 +129,15 @@ def balanced_lab(encoded, gains_rgb, *, illuminant) -> np.ndarray:
     return xyz_to_lab(xyz, white=image_white_xyz(illuminant=illuminant)).astype(np.float32)
 
 
-def reference_gains(encoded, *, where: str) -> tuple:
-    """The gains of a white-standard image (encoded sRGB in [0, 1], (H, W, 3)): the median
-    linear R, G, B over its unclipped pixels, divided by G."""
+def reference_gains(encoded, *, where: str, linear: bool = False) -> tuple:
+    """The gains of a white-standard image (encoded sRGB in [0, 1], (H, W, 3); ``linear``:
+    linear sRGB, as a ``linear-sRGB`` stack's): the median linear R, G, B over its unclipped
+    pixels, divided by G."""
     a = np.asarray(encoded, dtype=np.float32)
     if a.ndim != 3 or a.shape[-1] != 3:
         raise InputError(f"{where}: a white reference must be an RGB image, got shape "
                          f"{a.shape}")
-    lin = srgb_decode(a).reshape(-1, 3)
+    lin = (a if linear else srgb_decode(a)).reshape(-1, 3)
     ok = np.all((lin > 0.02) & (a.reshape(-1, 3) < 0.995), axis=1)
     if ok.sum() < 16:
         raise InputError(f"{where}: the white reference has too few pixels that are neither "
@@ -290,7 +291,8 @@ def _given_gains(stack, options, where_option: str):
                                where_given=where_option)
     if ref is not None:
         img, name, where = ref
-        return reference_gains(img, where=where), f"white reference {name}"
+        return (reference_gains(img, where=where, linear=stack.color_space == "linear-sRGB"),
+                f"white reference {name}")
     given = stack.meta.get("white_balance")      # 3 numbers > 0: the schema checked it
     if given is None:
         return None
