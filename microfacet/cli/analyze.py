@@ -60,8 +60,8 @@ def register(sub):
 
 
 #: Keys of summary.json that ``--json`` prints (with ``results``, the output folder).
-JSON_KEYS = ("mode", "thickness", "ndf", "exposure", "exposure_source", "delta_e",
-             "masked_fraction", "warnings", "timings_s")
+JSON_KEYS = ("mode", "thickness", "ndf", "exposure", "exposure_source", "flat_field",
+             "delta_e", "masked_fraction", "warnings", "timings_s")
 
 
 def json_summary(out: Path) -> dict:
@@ -87,11 +87,14 @@ def _text_summary(result, out: Path, elapsed_s: float) -> str:
     if not dist.ndf_judgement.identified:
         lobes += " -- NOT IDENTIFIED, not a measurement"
     de = result.delta_e_stats
+    ff = result.flat_field
+    flat = (f", flat field {100 * ff.corner_loss(result.colour.lab.shape[:2]):.0f}% "
+            f"lost at the corners ({ff.source})" if ff is not None and ff.applied else "")
     return (f"wrote {out} in {elapsed_s:.1f} s\n"
             f"  thickness: {comps}\n  NDF lobes (slope SD): {lobes}\n"
             f"  exposure {result.exposure:.3f} ({result.scene.exposure_source}), "
             f"mean dE00 {de['mean'] if de['mean'] is None else round(de['mean'], 2)}, "
-            f"masked {100 * result.colour.mask.fraction:.1f}%")
+            f"masked {100 * result.colour.mask.fraction:.1f}%{flat}")
 
 
 def _skipped(args, options) -> tuple:

@@ -78,3 +78,36 @@ def test_plain_folder_of_images_with_pixel_size_and_z_step(batch_drawer, tmp_pat
     assert len(err) == 2 and "missing stack.json" in err[0] and "--pixel-size-um" in err[0]
     assert "give both --pixel-size-um and --z-step-um" in err[1]
     assert not (tmp_path / "o2").exists()
+
+
+@pytest.mark.slow
+def test_a_flat_reference_is_applied_and_said_so(batch_drawer, tmp_path, capsys):
+    """``--flat-reference``: the summary line names the field and where it came from; a
+    reference of another size exits 2 with one line naming the option and the file."""
+    import json
+
+    import numpy as np
+
+    from microfacet.colour.transfer import srgb_encode
+    from microfacet.forward.imaging import vignetting_factor
+    from microfacet.io.images import write_image
+    from microfacet.io.stack import read_stack
+
+    h, w = read_stack(batch_drawer / "a").shape
+    lin = 0.5 * vignetting_factor((h, w), corner_loss=0.3)
+    write_image(tmp_path / "flat.png", srgb_encode(np.repeat(lin[..., None], 3, axis=-1),
+                                                   dtype=np.uint8))
+    write_image(tmp_path / "small.png", srgb_encode(np.full((h // 2, w, 3), 0.5, np.float32),
+                                                    dtype=np.uint8))
+    out = tmp_path / "res"
+    assert main(["analyze", str(batch_drawer / "a"), "--out", str(out), "--flat-reference",
+                 str(tmp_path / "flat.png"), *FAST]) == 0
+    line = capsys.readouterr().out.splitlines()[-1]
+    assert "flat field 30% lost at the corners (flat reference flat.png)" in line
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["flat_field"]["source"] == "flat reference flat.png"
+    assert main(["analyze", str(batch_drawer / "a"), "--out", str(tmp_path / "r2"),
+                 "--flat-reference", str(tmp_path / "small.png"), *FAST]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "flat_reference (small.png)" in err[0] and "size" in err[0]
+    assert not (tmp_path / "r2").exists()
