@@ -1,6 +1,6 @@
 """Page 4 of the report, **parameters**: tables of the thickness components (weight, mean, SD),
 the NDF lobes (weight, slope SD as an angle, tan, Beckmann α), the analysis (mode, exposure,
-ΔE00, masking, optics, colour-table settings, ROIs), the height map's ISO 25178-2 areal
+flat field, ΔE00, masking, optics, colour-table settings, ROIs), the height map's ISO 25178-2 areal
 parameters (Sq, Sa, Sdq, Sdr, with SurfaceTopography's RMS height and gradient and the
 analysis' own RMS slope beside them) and the run (timings, versions, the files missing from
 the folder). :func:`parameter_tables` returns the same tables as strings."""
@@ -177,6 +177,12 @@ def _analysis_rows(ctx):
             rows.append([key, shorten(v, 40)])
     src = s.get("exposure_source")
     rows.append(["exposure", fmt(s.get("exposure"), ".4g") + (f" ({src})" if src else "")])
+    ff = s.get("flat_field")
+    if isinstance(ff, dict):
+        rows.append(["flat field (vignetting)",
+                     f"{fmt(pct(ff.get('corner_loss')), '.0f', '%')} lost at the corners "
+                     f"({ff.get('source')})" if ff.get("applied")
+                     else f"none: {ff.get('reason')}"])
     rows.append([f"{DE} mean / median / p95",
                  " / ".join(fmt(res.get("delta_e", k), ".2f")
                             for k in ("mean", "median", "p95"))])

@@ -68,6 +68,10 @@ def test_parameter_table_matches_summary(results, report, pdf_text):
     analysis = dict(t["analysis"]["rows"])
     assert analysis["exposure"] == (f"{summary['exposure']:.4g} "
                                     f"({summary['exposure_source']})")
+    ff = summary["flat_field"]
+    assert analysis["flat field (vignetting)"] == (
+        f"{100 * ff['corner_loss']:.0f} % lost at the corners ({ff['source']})"
+        if ff["applied"] else f"none: {ff['reason']}")
     de = summary["delta_e"]
     de_row = f"{de['mean']:.2f} / {de['median']:.2f} / {de['p95']:.2f}"
     assert analysis["ΔE₀₀ mean / median / p95"] == de_row
