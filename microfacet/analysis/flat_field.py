@@ -21,8 +21,12 @@ centre and the exposure stays the centre's. Second order holds centred and off-c
 vignetting, an elliptical one and a linear gradient of the lamp; the radial terms r⁴ and r⁶
 (r² = u² + v², the even polynomial of lens vignetting [1]) follow a falloff that is not
 Gaussian. The number of terms is the scene's: none, 5, 6 or 7, by BIC over the facets'
-ratios. The caller (:mod:`.pipeline`) also keeps a field only where the facets refitted under
-it fit their colours better (median ΔE00), so it can only follow the evidence.
+ratios. A field that nowhere moves the light by more than the facets' own brightness scatter
+(the robust SD of their log ratios about it) is not used either: it cannot be told from the
+scatter, and on the sweep such fields (1-2 % at the corners) only tipped close model choices
+between copies of one scene in different encodings. The caller (:mod:`.pipeline`) also keeps
+a field only where the facets refitted under it fit their colours better (median ΔE00), so
+it can only follow the evidence.
 
 :func:`flat_fielded` divides the image's linear values by the field: the Lab values and the
 pixels far darker than the film (the steep mask, which compares each pixel with the film's
@@ -291,7 +295,8 @@ def estimate_flat_field(joint, lab, model, *, unexplained_mads) -> FlatField:
     -------
     FlatField
         With ``coefficients`` where at least :data:`MIN_FACETS` facets have a ratio, and
-        ``reason`` when the data do not ask for a field (BIC) or it is deeper than
+        ``reason`` when the data do not ask for a field (BIC), when it moves the light
+        nowhere by more than the facets' brightness scatter, or when it is deeper than
         :data:`MAX_LOG_LOSS` anywhere on the image.
     """
     rho, u, v, n = facet_brightness(joint, lab, model, unexplained_mads=unexplained_mads)
@@ -321,6 +326,11 @@ def estimate_flat_field(joint, lab, model, *, unexplained_mads) -> FlatField:
     if gain <= 0:
         return dataclasses.replace(ff, reason="the facets' brightness does not ask for a "
                                               "flat field (BIC)")
+    amplitude = float(np.abs(ff.log_map(joint.facets.shape)).max())
+    if amplitude < s:
+        return dataclasses.replace(ff, reason=f"the field moves the light by at most "
+                                              f"{amplitude:.1%}, within the facets' own "
+                                              f"brightness scatter ({s:.1%})")
     return ff.checked(joint.facets.shape)
 
 
