@@ -58,13 +58,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..colour.colorimetry import xyz_to_lab
-from ..colour.srgb import image_white_xyz, linear_srgb_to_xyz
 from ..colour.transfer import srgb_decode, srgb_encode
 from ..core.errors import InputError
 from ..core.lazy import load
 from .identification import unexplained_facets
 from .mask import steep_facet_mask
+from .white_balance import balanced_lab
 
 ndimage = load("scipy.ndimage")
 
@@ -168,8 +167,7 @@ class FlatField:
             return np.zeros((h, w), np.float32)
         u, v = _centred(np.arange(w, dtype=np.float64)[None, :],
                         np.arange(h, dtype=np.float64)[:, None], shape)
-        c = np.asarray(self.coefficients, np.float64)
-        return (_design(u, v, c.size)[..., 1:] @ c).astype(np.float32)
+        return _log_field(self.coefficients, u, v).astype(np.float32)
 
     def map(self, shape) -> np.ndarray:
         """V per pixel (float32, (H, W)): the light relative to the image centre."""
@@ -177,10 +175,16 @@ class FlatField:
 
     def corner_loss(self, shape) -> float | None:
         """The largest fraction of light lost at the four corners (None: no coefficients)."""
-        if self.coefficients is None and self.image is None:
+        if self.image is not None:
+            corners = np.log(self.image[[0, 0, -1, -1], [0, -1, 0, -1]].astype(np.float32))
+        elif self.coefficients is not None:
+            h, w = shape
+            u, v = _centred(np.array([0.0, w - 1, 0.0, w - 1]),
+                            np.array([0.0, 0.0, h - 1, h - 1]), shape)
+            corners = _log_field(self.coefficients, u, v).astype(np.float32)
+        else:
             return None
-        lm = self.log_map(shape)
-        return float(1.0 - math.exp(min(lm[0, 0], lm[0, -1], lm[-1, 0], lm[-1, -1])))
+        return float(1.0 - math.exp(float(corners.min())))
 
     def to_json(self, shape) -> dict:
         """summary.json ``flat_field`` (docs/results-format.md); ``shape`` (H, W) of the
@@ -205,6 +209,20 @@ def _design(u, v, n_terms) -> np.ndarray:
     r2 = u * u + v * v
     cols = [np.ones_like(u), u, v, u * u, u * v, v * v, r2 * r2, r2 * r2 * r2]
     return np.stack(cols[:n_terms + 1], axis=-1)
+
+
+def _log_field(c, u, v):
+    """ln V = Σ c_k · term_k(u, v) over the first ``len(c)`` of (u, v, u², uv, v², r⁴, r⁶)
+    (as :func:`_design`), broadcast term by term: an (H, W) map from a row ``u`` and a
+    column ``v`` takes a few (H, W) temporaries, not a stack of all the terms."""
+    c = list(c)
+    out = c[0] * u + c[1] * v + c[2] * (u * u) + c[3] * (u * v) + c[4] * (v * v)
+    if len(c) > 5:
+        r2 = u * u + v * v
+        out = out + c[5] * (r2 * r2)
+        if len(c) > 6:
+            out = out + c[6] * (r2 * r2 * r2)
+    return out
 
 
 def _y_of_l(lightness):
@@ -389,15 +407,16 @@ def _reference_field(lin, block):
     u, v = _centred(xx.ravel(), yy.ravel(), (h, w))
     ok = np.isfinite(med.ravel()) & (med.ravel() > 0)
 
-    def basis(u, v):
-        return np.stack([u ** i * v ** (d - i) for d in range(REFERENCE_DEGREE + 1)
-                         for i in range(d + 1)], axis=-1)
-
-    c, _, _, _ = _biweight_fit(basis(u[ok], v[ok]), np.log(med.ravel()[ok]),
-                               np.ones(int(ok.sum())))
-    gy, gx = np.mgrid[0:h, 0:w]
-    pu, pv = _centred(gx.astype(np.float64), gy.astype(np.float64), (h, w))
-    return ((basis(pu, pv) @ c) - basis(np.zeros(1), np.zeros(1))[0] @ c).astype(np.float32)
+    powers = [(i, d - i) for d in range(REFERENCE_DEGREE + 1) for i in range(d + 1)]
+    basis = np.stack([u[ok] ** i * v[ok] ** j for i, j in powers], axis=-1)
+    c, _, _, _ = _biweight_fit(basis, np.log(med.ravel()[ok]), np.ones(int(ok.sum())))
+    # on every pixel, term by term (each an outer product of a column and a row), 0 at the
+    # centre, where only the constant term is left
+    pu, pv = _centred(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64), (h, w))
+    out = np.zeros((h, w))
+    for (i, j), ck in zip(powers, c):
+        out += ck * np.outer(pv ** j, pu ** i)
+    return (out - c[0]).astype(np.float32)
 
 
 def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, steep_ratio):
@@ -427,8 +446,7 @@ def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, steep_
     v = np.asarray(field, np.float32)
     dim = v < math.exp(-MAX_LOG_LOSS)
     lin = srgb_decode(enc) / np.maximum(v, math.exp(-MAX_LOG_LOSS))[..., None]
-    xyz = linear_srgb_to_xyz(lin / np.asarray(gains_rgb, np.float32), illuminant=illuminant)
-    lab = xyz_to_lab(xyz, white=image_white_xyz(illuminant=illuminant)).astype(np.float32)
+    lab = balanced_lab(lin, gains_rgb, illuminant=illuminant, linear=True)
     cm = colour.mask
     dark = cm.dark | (dim & ~cm.invalid)
     base = cm.low_saturation | dark | cm.clipped | cm.invalid | cm.shadow

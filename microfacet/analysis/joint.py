@@ -50,8 +50,8 @@ from .sampling import weighted_median
 from .segmentation import segment_facets
 from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
 
-__all__ = ["ExposureReadings", "JointResult", "Segmented", "bootstrap_labels", "facet_labels",
-           "facets_at_exposure_readings", "joint_pixel_tilts"]
+__all__ = ["ExposureReadings", "FacetGeometry", "JointResult", "Segmented", "bootstrap_labels",
+           "facet_geometry", "facet_labels", "facets_at_exposure_readings", "joint_pixel_tilts"]
 
 log = logging.getLogger(__name__)
 
@@ -254,10 +254,11 @@ def _segment(lab, hi: HeightInputs, noise_de, scene, options: JointOptions):
 
 
 @dataclass
-class _Geometry:
-    """What the joint stage finds without the colour model: the facet labels, their planes
-    (both sets), their tilts (or the stand-in), areas, edge distances, the censored mask and
-    the dome term. Shared by every exposure reading."""
+class FacetGeometry:
+    """What the joint stage finds without the colours (:func:`facet_geometry`): the facet
+    labels, their planes (both sets), their tilts (or the stand-in) and tilt errors, areas,
+    edge distances and the dome term. Shared by every exposure reading and every flat-field
+    round (:func:`facets_at_exposure_readings`)."""
 
     labels: np.ndarray
     planes: FacetFit
@@ -266,11 +267,20 @@ class _Geometry:
     edge_distance: np.ndarray
     tilt_deg: np.ndarray
     tilt_sigma_deg: np.ndarray
-    censored: np.ndarray
     dome: tuple | None
 
+    def censored(self, steep) -> np.ndarray:
+        """Pixels (H, W) of the facets tilted past the acceptance: more than half their
+        pixels far darker than the film (``steep``, the colour mask's)."""
+        dark = np.bincount(self.labels.ravel(), weights=np.asarray(steep).ravel(),
+                           minlength=self.area.size)
+        return (dark > 0.5 * self.area)[self.labels]
 
-def _facet_geometry(seg: Segmented, colour, scene, options: JointOptions) -> _Geometry:
+
+def facet_geometry(seg: Segmented, scene, options: JointOptions) -> FacetGeometry:
+    """Step 2 of the module notes: the facets' planes through their reliable heights, their
+    tilts (facets without a plane take the stand-in) and the dome term; nothing here depends
+    on the colours."""
     facets, hi = seg.labels, seg.heights
     S = int(facets.max()) + 1
     area = np.bincount(facets.ravel(), minlength=S)
@@ -292,18 +302,15 @@ def _facet_geometry(seg: Segmented, colour, scene, options: JointOptions) -> _Ge
              t_in, s_in)
     tilt_f = np.where(fitted, np.clip(planes.tilt_deg, 0, scene.max_tilt_deg), t_in)
     tsig_f = np.where(fitted, planes.tilt_sigma_deg, s_in)
-    # facets tilted past the acceptance: more than half their pixels far darker than film
-    dark = np.bincount(facets.ravel(), weights=colour.mask.steep.ravel(), minlength=S)
-    censored = (dark > 0.5 * area)[facets]
     h = hi if seg.evidence is None else seg.evidence
     dome = dome_mean_square_slope(facets, h.height_um, height_sigma_um=h.sigma_um,
                                   reliable=h.reliable & inside,
                                   pixel_size_um=scene.pixel_size_um,
                                   correlation_px=h.correlation_px)
-    return _Geometry(facets, planes, ev_planes, area, dist, tilt_f, tsig_f, censored, dome)
+    return FacetGeometry(facets, planes, ev_planes, area, dist, tilt_f, tsig_f, dome)
 
 
-def _facets_in_colour(g: _Geometry, colour, roi, model, scene, options: JointOptions
+def _facets_in_colour(g: FacetGeometry, colour, roi, model, scene, options: JointOptions
                       ) -> JointResult:
     """The exposure refined on the facets, their thickness and colour error, at one
     exposure reading (``roi``'s, ``model``'s)."""
@@ -320,7 +327,8 @@ def _facets_in_colour(g: _Geometry, colour, roi, model, scene, options: JointOpt
                          tilt_sigma_deg=g.tilt_sigma_deg, noise_de=colour.noise_de,
                          block_noise=(colour.block_noise_de, colour.block_px))
     c_sig = _colour_sigma(image, ft, g.tilt_deg, model, colour.noise_de)
-    return JointResult(None, g.labels, g.planes, ft, g.area, g.censored, c_sig,
+    return JointResult(None, g.labels, g.planes, ft, g.area, g.censored(colour.mask.steep),
+                       c_sig,
                        float(model.exposure), g.tilt_deg, g.tilt_sigma_deg, usable,
                        g.evidence_planes, g.dome)
 
@@ -354,19 +362,19 @@ class ExposureReadings:
                 "chosen": self.chosen, "ambiguous": self.ambiguous}
 
 
-def facets_at_exposure_readings(seg: Segmented, colour, roi, model, scene, options, *,
-                                refit_roi):
-    """Steps 2-3 of the module notes: the facets' planes, the exposure refined on them, their
-    thickness and calibrated colour error (the per-pixel tilt is :func:`joint_pixel_tilts`),
-    at the ROI stage's exposure and, where it has a second reading
-    (``roi.exposure_alternative``), at that one too; the reading of least median facet ΔE00
-    wins. The planes, the censored mask and the dome term do not depend on the exposure:
-    computed once.
+def facets_at_exposure_readings(geometry: FacetGeometry, colour, roi, model, scene, options,
+                                *, refit_roi):
+    """Step 3 of the module notes: the exposure refined on the facets, their thickness and
+    calibrated colour error and the censored facets (the per-pixel tilt is
+    :func:`joint_pixel_tilts`), at the ROI stage's exposure and, where it has a second
+    reading (``roi.exposure_alternative``), at that one too; the reading of least median
+    facet ΔE00 wins.
 
     Parameters
     ----------
-    seg : Segmented
-        From :func:`facet_labels`.
+    geometry : FacetGeometry
+        From :func:`facet_geometry` (the planes do not depend on the colours: computed once
+        for every reading and flat-field round).
     colour : ColourImage
     roi : RoiFit
     model : FilmColourModel
@@ -384,7 +392,6 @@ def facets_at_exposure_readings(seg: Segmented, colour, roi, model, scene, optio
     (JointResult, RoiFit, ExposureReadings or None)
         The chosen reading's facets (without ``pixels``) and ROIs; None with one reading.
     """
-    geometry = _facet_geometry(seg, colour, scene, options.joint)
     first = _facets_in_colour(geometry, colour, roi, model, scene, options.joint)
     if roi.exposure_alternative is None:
         return first, roi, None

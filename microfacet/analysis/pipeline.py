@@ -45,6 +45,7 @@ from .identification import analysis_warnings, mean_plane_tilt_deg, self_check_j
 from .iso25178 import areal_parameters
 from .joint import (
     bootstrap_labels,
+    facet_geometry,
     facet_labels,
     facets_at_exposure_readings,
     joint_pixel_tilts,
@@ -255,16 +256,16 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         wb = choose_white_balance(st, colour.encoded, surface.tilt_deg, ~colour.mask.mask,
                                   model, options.optics, illuminant=scene.illuminant,
                                   seed=scene.seed)
-        if wb.applied:
-            colour = dataclasses.replace(colour, lab=balanced_lab(
-                colour.encoded, wb.gains_rgb, illuminant=scene.illuminant))
         flat_ref = reference_flat_field(st, options.optics.flat_reference,
                                         colour.lab.shape[:2], where_given="flat_reference")
-        if flat_ref is not None:
+        if flat_ref is not None:     # the white balance's gains too: Lab computed once
             colour = flat_fielded(colour, flat_ref.map(colour.lab.shape[:2]),
                                   gains_rgb=wb.gains_rgb if wb.applied else (1.0, 1.0, 1.0),
                                   illuminant=scene.illuminant,
                                   steep_ratio=options.mask.steep_ratio)
+        elif wb.applied:
+            colour = dataclasses.replace(colour, lab=balanced_lab(
+                colour.encoded, wb.gains_rgb, illuminant=scene.illuminant))
         roi = _roi(st, colour, surface, model, options, scene)
     model = model.with_exposure(roi.exposure)
     grid = tilt_grid(scene.max_tilt_deg, options.tilt.step_deg)
@@ -279,9 +280,11 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         with timer.stage(Stage.SEGMENTATION):
             seg = facet_labels(colour, surface, scene, options.joint)
         with timer.stage(Stage.FACET_FITS):
+            geometry = facet_geometry(seg, scene, options.joint)
+
             def facets(c, r):
                 return facets_at_exposure_readings(
-                    seg, c, r, model.with_exposure(r.exposure), scene, options,
+                    geometry, c, r, model.with_exposure(r.exposure), scene, options,
                     refit_roi=lambda e: _roi(st, c, surface, model, options, scene,
                                              exposure=e))
             if flat_ref is None:

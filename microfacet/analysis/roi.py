@@ -401,9 +401,7 @@ def _block_exposure(img: "_Image", usable, model, options, rng) -> float | None:
     pick = rng.choice(ok, min(EXPOSURE_BLOCKS, ok.size), replace=False)
     lab = (block_sum(np.where(usable[..., None], img.lab, np.float32(0)))[pick]
            / n[pick, None]).astype(np.float32)
-    # a mean of tilts at the table's edge can round past it (NaN colour): clipped back
-    tilt = np.clip(block_sum(np.where(usable, img.tilt, 0.0))[pick, 0] / n[pick],
-                   *model.theta_range_deg)
+    tilt = block_sum(np.where(usable, img.tilt, 0.0))[pick, 0] / n[pick]
     xyz = model.xyz(tilt[:, None], img.grid[None, :]).astype(np.float32)
 
     def objective(log_e):

@@ -113,9 +113,10 @@ class WhiteBalance:
              "tiles": int(self.tiles)}
 
 
-def balanced_lab(encoded, gains_rgb, *, illuminant) -> np.ndarray:
-    """CIELAB (float32) of encoded sRGB in [0, 1] after dividing its linear R, G, B by the
-    camera's ``gains_rgb`` (no clipping: a balanced channel may exceed 1).
+def balanced_lab(encoded, gains_rgb, *, illuminant, linear=False) -> np.ndarray:
+    """CIELAB (float32) of encoded sRGB in [0, 1] (``linear``: values already linear, e.g.
+    divided by a flat field) after dividing its linear R, G, B by the camera's ``gains_rgb``
+    (no clipping: a balanced channel may exceed 1).
 
     >>> from microfacet.colour.transfer import srgb_encode
     >>> grey = srgb_encode(np.array([[0.5 * 1.1, 0.5, 0.5 * 0.9]]), dtype=np.float32)
@@ -123,8 +124,8 @@ def balanced_lab(encoded, gains_rgb, *, illuminant) -> np.ndarray:
     ...                                                  illuminant="D65")[0]]
     [76.07, 0.0, 0.0]
     """
-    lin = srgb_decode(np.asarray(encoded, dtype=np.float32)) / np.asarray(gains_rgb,
-                                                                           np.float32)
+    a = np.asarray(encoded, dtype=np.float32)
+    lin = (a if linear else srgb_decode(a)) / np.asarray(gains_rgb, np.float32)
     xyz = linear_srgb_to_xyz(lin, illuminant=illuminant)
     return xyz_to_lab(xyz, white=image_white_xyz(illuminant=illuminant)).astype(np.float32)
 
