@@ -35,8 +35,9 @@ import numpy as np
 
 from .sampling import weighted_median
 
-__all__ = ["MapCheck", "candidate_alias", "component_orders", "distinct_populations",
-           "mixture_map_check", "order_alias_of", "roi_pixel_check"]
+__all__ = ["MapCheck", "OrderMove", "candidate_alias", "component_orders",
+           "distinct_populations", "mixture_map_check", "order_alias_of", "order_move",
+           "roi_pixel_check"]
 
 #: The per-pixel map's error floor (nm) each component is widened by: the thickness per true
 #: region errs by a median 0.6-0.8 nm on the generalization sweep (docs/accuracy.md).
@@ -159,6 +160,18 @@ ALIAS_MIN_AMBIGUOUS = 0.2
 ALIAS_SD = 3.0
 
 
+def _own_component(mixture, thickness_nm):
+    """Each sample's most likely component within :data:`UNEXPLAINED_SD` widened SD, -1 for
+    none (or NaN); and the components' means and widened SDs."""
+    comps = mixture.components
+    mu = np.array([c[1] for c in comps])
+    sd = np.sqrt(np.array([c[2] for c in comps]) ** 2 + MAP_FLOOR_NM ** 2)
+    d = np.asarray(thickness_nm, dtype=np.float64)
+    ok = np.isfinite(d)
+    z = np.abs(np.where(ok, d, 0.0)[:, None] - mu) / sd
+    return np.where(ok & (z.min(axis=1) <= UNEXPLAINED_SD), np.argmin(z, axis=1), -1), mu, sd
+
+
 def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguous) -> list:
     """Per component: how much of its samples' weight has an ambiguous interference order,
     where the runner-up order lies, and the component it lies on, if any.
@@ -178,13 +191,7 @@ def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguo
     >>> [(o["order_ambiguous_fraction"], o["alias_of_nm"]) for o in out]   # by mean
     [(0.5, 250.0), (0.0, None)]
     """
-    comps = mixture.components
-    mu = np.array([c[1] for c in comps])
-    sd = np.sqrt(np.array([c[2] for c in comps]) ** 2 + MAP_FLOOR_NM ** 2)
-    d = np.asarray(thickness_nm, dtype=np.float64)
-    ok = np.isfinite(d)
-    z = np.abs(np.where(ok, d, 0.0)[:, None] - mu) / sd
-    own = np.where(ok & (z.min(axis=1) <= UNEXPLAINED_SD), np.argmin(z, axis=1), -1)
+    own, mu, _ = _own_component(mixture, thickness_nm)
     w = np.asarray(weights, dtype=np.float64)
     out = []
     for k in range(mu.size):
@@ -243,6 +250,95 @@ def candidate_alias(mixture, other_nm, gap_de, weights, misfit_de):
     if at is None or not g <= misfit_de:
         return None, g
     return order_alias_of(mixture, at), g
+
+
+#: A component is moved to another component's order only when at least this share of its
+#: area has its runner-up order on that component.
+MOVE_MIN_SHARE = 0.5
+
+
+@dataclass(frozen=True)
+class OrderMove:
+    """A component read in another component's interference order (:func:`order_move`).
+
+    Attributes
+    ----------
+    from_nm, to_nm : float
+        The component's mean and the mean of the component whose order its facets take.
+    area_share : float
+        Share of the component's area that moves (its runner-up order lies on ``to_nm``).
+    mean_gap_de : float
+        Area-weighted mean of the moved facets' ΔE00 at the runner-up order minus at their
+        own (negative: the runner-up fits better).
+    facets : int
+        Facets moved.
+    """
+
+    from_nm: float
+    to_nm: float
+    area_share: float
+    mean_gap_de: float
+    facets: int
+
+    def to_json(self) -> dict:
+        return {"from_nm": self.from_nm, "to_nm": self.to_nm, "area_share": self.area_share,
+                "mean_gap_de": self.mean_gap_de, "facets": self.facets}
+
+
+def order_move(mixture, thickness_nm, other_thickness_nm, gap_de, weights, *, margin_de,
+               min_separation_nm, max_sd_nm=np.inf):
+    """The component whose facets are best read in another component's interference order.
+
+    A population's facets whose colours fit two orders about alike split between them by
+    noise, and the mixture shows one population twice, an order apart. Component ``k`` is
+    that component read in the order of component ``j`` (at least ``min_separation_nm``
+    away) when at least :data:`MOVE_MIN_SHARE` of its area has its runner-up order on ``j``
+    (:func:`order_alias_of`'s criterion) and those facets fit it within ``margin_de`` on
+    average (area-weighted ``gap_de``: ΔE00 at the runner-up minus at the chosen order).
+    Both components must be narrower than ``max_sd_nm``: a component as wide as an order's
+    window holds samples of any order and is no order to move to or from.
+    Of the pairs that qualify, the one of least mean gap: the colours decide the direction,
+    not the areas.
+
+    Returns
+    -------
+    (OrderMove or None, ndarray of bool)
+        The move, and the samples that move (all False without one).
+
+    Examples
+    --------
+    >>> from microfacet.core.distributions import ThicknessMixture
+    >>> m = ThicknessMixture([(0.4, 52.0, 1.0), (0.3, 163.0, 1.0), (0.3, 190.0, 1.0)])
+    >>> d = np.array([52.0, 51.0, 163.0, 162.5, 190.0])
+    >>> other = np.array([163.0, 162.0, 52.0, 51.5, 80.0])
+    >>> gap = np.array([3.0, 4.0, 0.4, 0.6, 5.0])
+    >>> mv, moved = order_move(m, d, other, gap, np.ones(5), margin_de=1.0,
+    ...                        min_separation_nm=55.0)
+    >>> (mv.from_nm, mv.to_nm, mv.facets), moved.tolist()
+    ((163.0, 52.0, 2), [False, False, True, True, False])
+    """
+    own, mu, sd = _own_component(mixture, thickness_nm)
+    other = np.asarray(other_thickness_nm, dtype=np.float64)
+    gap = np.asarray(gap_de, dtype=np.float64)
+    w = np.asarray(weights, dtype=np.float64)
+    on = np.isfinite(other) & np.isfinite(gap)
+    narrow = np.array([c[2] for c in mixture.components]) <= max_sd_nm
+    best = None
+    for k in range(mu.size):
+        mine = own == k
+        for j in range(mu.size):
+            if (j == k or abs(mu[j] - mu[k]) < min_separation_nm or not w[mine].sum() > 0
+                    or not (narrow[j] and narrow[k])):
+                continue
+            mov = mine & on & (np.abs(np.where(on, other, 0.0) - mu[j])
+                               <= ALIAS_SD * np.sqrt(sd[j] ** 2 + MAP_FLOOR_NM ** 2))
+            share = float(w[mov].sum() / w[mine].sum())
+            if share < MOVE_MIN_SHARE:
+                continue
+            g = float(np.sum(w[mov] * gap[mov]) / w[mov].sum())
+            if g <= margin_de and (best is None or g < best[0].mean_gap_de):
+                best = (OrderMove(float(mu[k]), float(mu[j]), share, g, int(mov.sum())), mov)
+    return best if best is not None else (None, np.zeros(own.shape, bool))
 
 
 def distinct_populations(mixture, orders) -> int:

@@ -32,7 +32,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .consistency import candidate_alias, component_orders, distinct_populations
+from .consistency import (
+    ALIAS_SD,
+    MOVE_MIN_SHARE,
+    candidate_alias,
+    component_orders,
+    distinct_populations,
+    order_alias_of,
+    order_move,
+)
 from .identification import (
     NO_SAMPLES,
     Judgement,
@@ -51,7 +59,8 @@ from .options import FitOptions
 from .planes import deconvolved_rms_slope
 from .sampling import thickness_regions
 
-__all__ = ["Distributions", "fit_joint_distributions", "fit_seed_distributions"]
+__all__ = ["Distributions", "fit_joint_distributions", "fit_seed_distributions",
+           "pool_interference_orders"]
 
 #: A facet more than this fraction of whose pixels are dark is censored (tilted past the
 #: acceptance): it carries neither a thickness nor a measured tilt.
@@ -97,24 +106,118 @@ def _roi_flags(roi, options):
     return fitted & ambiguous_order(roi.ambiguity_delta_e, options.ambiguous_order_de), fitted
 
 
-def _joint_thickness(joint, roi, cens_frac, options, scene):
-    """The thickness mixture of the facets, and its judgement; each candidate population
-    with the side of the square field (µm) that would decide it."""
+def _censored_fraction(joint) -> np.ndarray:
+    """Per facet, the share of its pixels that are censored (dark)."""
+    return (np.bincount(joint.facets.ravel(), weights=joint.censored.ravel(),
+                        minlength=joint.area_px.size) / np.maximum(joint.area_px, 1))
+
+
+def _thickness_samples(joint, options):
+    """The facets that carry a thickness sample, those the film does not explain, and the
+    number of independent thickness regions among the samples."""
     th = joint.thickness
-    area = joint.area_px.astype(np.float64)
     # Facets whose colour the film model does not explain (dust, pit floors, mixed or dark
     # facets: ΔE a robust outlier among the facets') and censored (dark) facets carry no
     # thickness: they are left out of the mixture, and counted.
     unexplained = unexplained_facets(th.delta_e, options.unexplained_mads)
-    ok = (np.isfinite(th.thickness_nm) & (area > 0) & (cens_frac < CENSORED_FACET_FRACTION)
-          & ~unexplained)
-    if ok.sum() < 2:
+    ok = (np.isfinite(th.thickness_nm) & (joint.area_px > 0)
+          & (_censored_fraction(joint) < CENSORED_FACET_FRACTION) & ~unexplained)
+    regions = (thickness_regions(joint.facets, np.where(ok, th.thickness_nm, np.nan),
+                                 th.sigma_nm) if ok.sum() >= 2 else None)
+    return ok, unexplained, regions
+
+
+def _thickness_fit(joint, ok, regions, options, seed) -> MixtureFit:
+    th = joint.thickness
+    return fit_thickness_mixture(th.thickness_nm[ok], sigma_nm=th.sigma_nm[ok],
+                                 weights=joint.area_px[ok].astype(np.float64),
+                                 n_effective=regions, options=options, background=True,
+                                 seed=seed)
+
+
+#: Most components moved to another's interference order (:func:`pool_interference_orders`),
+#: one per refitted mixture.
+MAX_ORDER_MOVES = 2
+
+
+def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: FitOptions,
+                             seed=0):
+    """The facets of a component that is another read in a neighbouring interference order,
+    moved to that order (:func:`~.consistency.order_move`), and the mixture refitted; up to
+    :data:`MAX_ORDER_MOVES` times.
+
+    A population whose colours fit two orders about alike (within
+    ``options.ambiguous_order_de`` on average) has its facets split between the orders by
+    noise, white balance or tilt errors, and the mixture counts it twice. Where a
+    component's facets fit the order of another component that well, they are read in it:
+    one population, not two an order apart. The order itself stays not established (its
+    facets' runner-up order fits within the margin: :func:`~.identification.order_check`).
+    A move is kept only where, solved again in the other order, at least
+    :data:`~.consistency.MOVE_MIN_SHARE` of the component's area lies on the component of
+    that order (a facet whose own order still fits better by ``joint.order_switch_de`` keeps
+    it).
+
+    Parameters
+    ----------
+    joint : JointResult
+        Facets with their thicknesses and runner-up orders.
+    resolve : callable
+        ``resolve(joint, moved, centre_nm)``: ``joint`` with the facets ``moved`` solved in
+        the order about ``centre_nm`` (:func:`~.joint.facets_in_other_order`).
+    period_nm, window_nm : float
+        The colours' period in thickness (:attr:`~.FilmColourModel.period_nm`) and the
+        half-width of a facet's order window (``joint.order_window_fraction`` periods): a
+        runner-up order lies at least ``period_nm - window_nm`` away, so components closer
+        than that are not an order apart; a component whose :data:`~.consistency.ALIAS_SD`
+        band is wider than the window is no order (:func:`~.consistency.order_move`).
+    options : FitOptions
+
+    Returns
+    -------
+    (JointResult, list of OrderMove)
+    """
+    moves = []
+    for _ in range(MAX_ORDER_MOVES):
+        ok, _, regions = _thickness_samples(joint, options)
+        if regions is None:
+            break
+        th = joint.thickness
+        fit = _thickness_fit(joint, ok, regions, options, seed)
+        mv, moved = order_move(fit.mixture, np.where(ok, th.thickness_nm, np.nan),
+                               th.thickness_other_order_nm,
+                               th.delta_e_other_order - th.delta_e, joint.area_px,
+                               margin_de=options.ambiguous_order_de,
+                               min_separation_nm=period_nm - window_nm,
+                               max_sd_nm=window_nm / ALIAS_SD)
+        if mv is None:
+            break
+        after = resolve(joint, moved, th.thickness_other_order_nm)
+        if _landed_share(mv, moved, after.thickness.thickness_nm, joint.area_px,
+                         fit.mixture) < MOVE_MIN_SHARE:
+            break       # solved in that order, most of its facets keep their own
+        joint = after
+        moves.append(mv)
+    return joint, moves
+
+
+def _landed_share(mv, moved, thickness_nm, area, mixture) -> float:
+    """Share of the moved component's area whose facets, solved again in the other order,
+    lie on the component of that order (:func:`~.consistency.order_alias_of`)."""
+    a = np.asarray(area, dtype=np.float64)
+    on = np.array([order_alias_of(mixture, t) == mv.to_nm if np.isfinite(t) else False
+                   for t in np.asarray(thickness_nm)[moved]], bool)
+    return float(a[moved][on].sum() / (a[moved].sum() / mv.area_share))
+
+
+def _joint_thickness(joint, roi, options, scene):
+    """The thickness mixture of the facets, and its judgement; each candidate population
+    with the side of the square field (µm) that would decide it."""
+    th = joint.thickness
+    area = joint.area_px.astype(np.float64)
+    ok, unexplained, regions = _thickness_samples(joint, options)
+    if regions is None:
         return None, NO_SAMPLES["thickness"]
-    regions = thickness_regions(joint.facets, np.where(ok, th.thickness_nm, np.nan),
-                                th.sigma_nm)
-    fit = fit_thickness_mixture(th.thickness_nm[ok], sigma_nm=th.sigma_nm[ok], weights=area[ok],
-                                n_effective=regions, options=options,
-                                background=True, seed=scene.seed)
+    fit = _thickness_fit(joint, ok, regions, options, scene.seed)
     _describe_candidates(fit, regions, th, area, ok,
                          joint.facets.size * float(np.prod(scene.pixel_size_um)))
     a_t = area[ok].sum()
@@ -231,9 +334,8 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions) -> Di
         The acceptance limit (censoring) and the seed.
     options : FitOptions
     """
-    cens_frac = (np.bincount(joint.facets.ravel(), weights=joint.censored.ravel(),
-                             minlength=joint.area_px.size) / np.maximum(joint.area_px, 1))
-    tfit, tj = _joint_thickness(joint, roi, cens_frac, options, scene)
+    cens_frac = _censored_fraction(joint)
+    tfit, tj = _joint_thickness(joint, roi, options, scene)
     nfit, nj = _joint_ndf(joint, model, cens_frac, scene.max_tilt_deg, options, scene.seed)
     return Distributions(tfit, nfit, tj, nj, *_roi_flags(roi, options))
 

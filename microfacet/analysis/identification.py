@@ -358,6 +358,10 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions) -> dict:
     for c in _candidate_aliases(dist.thickness):
         why.append(f"the candidate at {c.mean_nm:.1f} nm may be the {c.alias_of_nm:.1f} nm "
                    f"component read in another order")
+    for m in _order_moves(dist.thickness):
+        why.append(f"the facets of a {m['from_nm']:.1f} nm component were read in the order "
+                   f"of the {m['to_nm']:.1f} nm one (their colours fit both within "
+                   f"{options.ambiguous_order_de:g} dE00 on average)")
     if not dist.thickness_judgement.identified:
         why.append("the thickness is not identified")
     return {"established": not why, "reasons": why}
@@ -395,6 +399,12 @@ def _aliases(fit) -> list:
     orders = fit.info.get("component_orders") or []
     return [(c[1], o["alias_of_nm"], o["order_ambiguous_fraction"])
             for c, o in zip(fit.mixture.components, orders) if o.get("alias_of_nm") is not None]
+
+
+def _order_moves(fit) -> list:
+    """The components moved to another's interference order (``info["order_moves"]``,
+    :func:`~.distributions.pool_interference_orders`)."""
+    return (fit.info.get("order_moves") or []) if fit is not None else []
 
 
 def _candidate_aliases(fit) -> list:
@@ -501,6 +511,13 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
                           f"{100 * frac:.0f} % of its area fits that order within "
                           f"{options.ambiguous_order_de:g} dE00 (facets.csv "
                           f"other_order_thickness_nm)", _RANGE))
+    for m in _order_moves(dist.thickness):
+        out.append(Reason("order_pooled", f"{100 * m['area_share']:.0f} % of a "
+                          f"{m['from_nm']:.1f} nm thickness component was read in the "
+                          f"interference order of the {m['to_nm']:.1f} nm population: its "
+                          f"colours fit that order within {m['mean_gap_de']:.2f} dE00 of their "
+                          f"own on average, so it is that population, not another an order "
+                          f"away (fits.order_moves)", "fits.order_moves"))
     for c in _candidate_aliases(dist.thickness):
         out.append(Reason("order_alias", f"the candidate population at {c.mean_nm:.1f} nm "
                           f"({100 * c.area_fraction:.0f} % of the area) may be the "

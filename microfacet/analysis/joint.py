@@ -30,6 +30,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -51,7 +52,8 @@ from .segmentation import segment_facets
 from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
 
 __all__ = ["ExposureReadings", "FacetGeometry", "JointResult", "Segmented", "bootstrap_labels",
-           "facet_geometry", "facet_labels", "facets_at_exposure_readings", "joint_pixel_tilts"]
+           "facet_geometry", "facet_labels", "facets_at_exposure_readings",
+           "facets_in_other_order", "joint_pixel_tilts"]
 
 log = logging.getLogger(__name__)
 
@@ -310,15 +312,20 @@ def facet_geometry(seg: Segmented, scene, options: JointOptions) -> FacetGeometr
     return FacetGeometry(facets, planes, ev_planes, area, dist, tilt_f, tsig_f, dome)
 
 
+def _facet_image(g: FacetGeometry, colour, roi, options: JointOptions) -> FacetImage:
+    """The colour image as ``g``'s facets, with ``roi``'s thickness per pixel."""
+    thick_roi_px = roi.thickness_nm[roi.index_map(colour.lab.shape[:2])]
+    usable = ~colour.mask.mask & np.isfinite(thick_roi_px)
+    return FacetImage(g.labels, colour.lab, usable, g.edge_distance >= options.interior_px,
+                      thick_roi_px)
+
+
 def _facets_in_colour(g: FacetGeometry, colour, roi, model, scene, options: JointOptions
                       ) -> JointResult:
     """The exposure refined on the facets, their thickness and colour error, at one
     exposure reading (``roi``'s, ``model``'s)."""
-    thick_roi_px = roi.thickness_nm[roi.index_map(colour.lab.shape[:2])]
-    usable = ~colour.mask.mask & np.isfinite(thick_roi_px)
-    fitted = g.planes.fitted
-    image = FacetImage(g.labels, colour.lab, usable, g.edge_distance >= options.interior_px,
-                       thick_roi_px)
+    image = _facet_image(g, colour, roi, options)
+    usable, fitted = image.usable, g.planes.fitted
     if scene.estimate_exposure:
         model = model.with_exposure(refine_exposure_on_facets(
             image, np.where(fitted, g.tilt_deg, np.nan), model, options, seed=scene.seed))
@@ -331,6 +338,27 @@ def _facets_in_colour(g: FacetGeometry, colour, roi, model, scene, options: Join
                        c_sig,
                        float(model.exposure), g.tilt_deg, g.tilt_sigma_deg, usable,
                        g.evidence_planes, g.dome)
+
+
+def facets_in_other_order(joint: JointResult, geometry: FacetGeometry, colour, roi, model,
+                          options: JointOptions, *, moved, centre_nm) -> JointResult:
+    """``joint`` with the facets ``moved`` (bool, shape (S,)) solved again in the
+    interference order about ``centre_nm`` (per facet) instead of their ROI's, the others
+    kept; their colour errors follow (:func:`~.consistency.order_move` says which facets).
+    ``model`` is at ``joint``'s exposure; a facet whose old order still fits better by more
+    than ``options.order_switch_de`` keeps it (:func:`~.facet_thickness.facet_thickness`)."""
+    image = _facet_image(geometry, colour, roi, options)
+    moved = np.asarray(moved, bool)
+    cols = dataclasses.replace(image.colours(), roi_thickness_nm=np.where(
+        moved, np.asarray(centre_nm, dtype=np.float64), np.nan))
+    new = facet_thickness(cols, geometry.tilt_deg, model, options,
+                          tilt_sigma_deg=geometry.tilt_sigma_deg, noise_de=colour.noise_de,
+                          block_noise=(colour.block_noise_de, colour.block_px))
+    old = joint.thickness
+    ft = FacetThickness(*(np.where(moved, getattr(new, f.name), getattr(old, f.name))
+                          for f in dataclasses.fields(FacetThickness)))
+    return dataclasses.replace(joint, thickness=ft, colour_sigma_de=_colour_sigma(
+        image, ft, geometry.tilt_deg, model, colour.noise_de))
 
 
 @dataclass(frozen=True)

@@ -204,6 +204,12 @@ class FitOptions(Options):
         cli=True, metavar="K")
     thickness_sd_floor_nm: float = option(0.1, help="smallest thickness component SD",
                                           unit="nm", low=0, low_exclusive=True)
+    order_moves: str = option(
+        "pool", help="`pool`: a thickness component whose facets fit another component's "
+                     "interference order within ambiguous_order_de on average is read in "
+                     "that order, one population and not two an order apart "
+                     "(analysis.distributions.pool_interference_orders); `off` keeps each "
+                     "facet's least-dE order", choices=("off", "pool"))
     thickness_min_component_samples: float = option(
         1.0, help="fewest independent regions a thickness component needs (with two, "
                   "populations on one region were lost on the generalization sweep)", low=0)

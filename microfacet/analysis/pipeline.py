@@ -32,7 +32,12 @@ from ..io.limits import check_memory
 from ..io.stack import Stack, read_stack
 from .colour_image import measure_colour, no_colour_message
 from .consistency import mixture_map_check, roi_pixel_check
-from .distributions import Distributions, fit_joint_distributions, fit_seed_distributions
+from .distributions import (
+    Distributions,
+    fit_joint_distributions,
+    fit_seed_distributions,
+    pool_interference_orders,
+)
 from .flat_field import (
     MAX_ROUNDS,
     ROUND_TOLERANCE,
@@ -48,6 +53,7 @@ from .joint import (
     facet_geometry,
     facet_labels,
     facets_at_exposure_readings,
+    facets_in_other_order,
     joint_pixel_tilts,
 )
 from .options import AnalysisOptions, Scene, scene_of
@@ -294,12 +300,15 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                     model=model, options=options, scene=scene, wb=wb)
             else:
                 (joint, roi, readings), flat = facets(colour, roi), flat_ref
-        model = model.with_exposure(joint.exposure)
+            model = model.with_exposure(joint.exposure)
+            joint, moves = _order_moves(joint, geometry, colour, roi, model, options, scene)
         with timer.stage(Stage.TILT):
             pixels = joint.pixels = joint_pixel_tilts(joint, colour, model, grid, options.tilt)
         with timer.stage(Stage.MIXTURES):
             dist = fit_joint_distributions(joint, roi, model, scene, options.fits)
             dist.exposure_readings = readings
+            if dist.thickness is not None:
+                dist.thickness.info["order_moves"] = [m.to_json() for m in moves]
         with timer.stage(Stage.SELF_CHECK):
             check = _self_check(st, focus, joint, scene, options,
                                 cells=lambda crop: bootstrap_labels(
@@ -314,6 +323,19 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
     return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
                           dist, dict(timer.timings), check, wb,
                           flat if options.mode == "joint" else flat_ref)
+
+
+def _order_moves(joint, geometry, colour, roi, model, options, scene):
+    """The facets of a component that is another read in a neighbouring interference order,
+    in that order (:func:`~.distributions.pool_interference_orders`, ``fits.order_moves``)."""
+    if options.fits.order_moves == "off":
+        return joint, []
+    return pool_interference_orders(
+        joint, lambda j, moved, centre: facets_in_other_order(
+            j, geometry, colour, roi, model, options.joint, moved=moved, centre_nm=centre),
+        period_nm=model.period_nm,
+        window_nm=options.joint.order_window_fraction * model.period_nm, options=options.fits,
+        seed=scene.seed)
 
 
 def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):

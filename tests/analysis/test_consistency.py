@@ -122,3 +122,54 @@ def test_a_candidate_whose_other_order_lies_on_a_component_is_its_alias():
     alias, _ = candidate_alias(m, other + 30.0, np.full(40, 1.0), area, misfit_de=4.0)
     assert alias is None                                        # on no component
     assert candidate_alias(m, [np.nan], [np.nan], [1.0], misfit_de=4.0) == (None, None)
+
+
+def _split_population(seed=3):
+    """A 52 nm population whose colours fit the order above about alike: 150 facets read
+    right (runner-up 163 nm, 3-4 dE00 worse) and 100 read one order up at ~163 nm (runner-up
+    ~52 nm, 0.2-0.8 dE00 worse); and a clear 192 nm population (runner-up ~80 nm, 5 dE00
+    worse)."""
+    rng = np.random.default_rng(seed)
+    d = np.concatenate([rng.normal(52, 1, 150), rng.normal(163, 1, 100), rng.normal(192, 1, 200)])
+    other = np.concatenate([d[:150] + 111, d[150:250] - 111, d[250:] - 112])
+    gap = np.concatenate([rng.uniform(3, 4, 150), rng.uniform(0.2, 0.8, 100),
+                          np.full(200, 5.0)])
+    m = ThicknessMixture([(1 / 3, 52.0, 1.0), (2 / 9, 163.0, 1.0), (4 / 9, 192.0, 1.0)])
+    return m, d, other, gap
+
+
+def test_order_move_reads_a_component_in_the_order_its_facets_fit_alike():
+    """The 163 nm component moves to the 52 nm one's order (its facets fit it within 1 dE00
+    on average); the 52 nm one does not move up (3.5 dE00 worse) and the 192 nm one's
+    runner-up lies on no component."""
+    from microfacet.analysis.consistency import order_move
+
+    m, d, other, gap = _split_population()
+    mv, moved = order_move(m, d, other, gap, np.ones(d.size), margin_de=1.0,
+                           min_separation_nm=55.0)
+    assert (mv.from_nm, mv.to_nm, mv.facets) == (163.0, 52.0, 100)
+    assert mv.area_share == 1.0 and 0.2 < mv.mean_gap_de < 0.8
+    assert np.flatnonzero(moved).tolist() == list(range(150, 250))
+    assert mv.to_json()["to_nm"] == 52.0
+
+
+def test_order_move_needs_the_margin_the_share_and_an_order_between():
+    """No move where the facets fit the other order worse than the margin on average, where
+    fewer than half of the component's area has its runner-up there, or where the two
+    components are closer than the separation asked (not an order apart)."""
+    from microfacet.analysis.consistency import MOVE_MIN_SHARE, order_move
+
+    m, d, other, gap = _split_population()
+    assert order_move(m, d, other, gap + 0.7, np.ones(d.size), margin_de=1.0,
+                      min_separation_nm=55.0)[0] is None
+    half = other.copy()
+    half[150:150 + int(100 * (1 - MOVE_MIN_SHARE)) + 1] += 40.0   # just over half elsewhere
+    assert order_move(m, d, half, gap, np.ones(d.size), margin_de=1.0,
+                      min_separation_nm=55.0)[0] is None
+    assert order_move(m, d, other, gap, np.ones(d.size), margin_de=1.0,
+                      min_separation_nm=120.0)[0] is None
+    # the weights count: the same facets, the moved ones weighing little, still all of theirs
+    w = np.ones(d.size)
+    w[150:250] = 0.1
+    mv, _ = order_move(m, d, other, gap, w, margin_de=1.0, min_separation_nm=55.0)
+    assert mv is not None and mv.area_share == 1.0

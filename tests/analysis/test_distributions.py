@@ -183,3 +183,78 @@ def test_seed_mode_fits_per_roi_and_judges_the_ndf_by_colour(nd_analysis):
     noisy = fit_seed_distributions(px, r.roi, r.model, 10 * contrast + 1.0, OPTIONS)
     assert not noisy.ndf_judgement.identified
     assert noisy.ndf_judgement.reason.code == "colour_only"
+
+
+def _split_joint(seed=5):
+    """Facets of 8×8 px on a 160×160 image: a 52 nm population, 240 facets read right and
+    160 read one order up at ~163 nm (their colours fit both about alike), beside nothing
+    else; the runner-up orders as in facets.csv."""
+    from types import SimpleNamespace
+
+    from microfacet.analysis.facet_thickness import FacetThickness
+
+    rng = np.random.default_rng(seed)
+    labels = np.arange(400).reshape(20, 20).repeat(8, axis=0).repeat(8, axis=1)
+    d = np.concatenate([rng.normal(52, 0.8, 240), rng.normal(163, 0.8, 160)])
+    d = rng.permutation(d)
+    up = d > 100
+    other = np.where(up, d - 111, d + 111)
+    de = rng.uniform(0.8, 1.2, 400)
+    ft = FacetThickness(d, np.full(400, 0.5), de, np.zeros(400, bool), np.full(400, 64),
+                        de + np.where(up, rng.uniform(0.2, 0.6, 400), 3.0), other)
+    return SimpleNamespace(thickness=ft, area_px=np.full(400, 64), facets=labels,
+                           censored=np.zeros(labels.shape, bool)), up
+
+
+def _resolve_at(keep):
+    """A stand-in for joint.facets_in_other_order: the moved facets take the centre they are
+    given, but those in ``keep`` (their own order fits far better) stay."""
+    def resolve(joint, moved, centre_nm):
+        ft = joint.thickness
+        go = np.asarray(moved) & ~keep
+        new = dataclasses.replace(ft, thickness_nm=np.where(go, centre_nm, ft.thickness_nm),
+                                  thickness_other_order_nm=np.where(
+                                      go, ft.thickness_nm, ft.thickness_other_order_nm))
+        return type(joint)(**{**vars(joint), "thickness": new})
+    return resolve
+
+
+@pytest.mark.slow
+def test_a_population_split_between_orders_is_pooled_into_one():
+    """Before: two components an order apart (52 and 163 nm). The 163 nm facets fit the
+    52 nm order within the margin: pooled, one component at 52 nm, and the move recorded;
+    with `fits.order_moves = off` nothing moves."""
+    from microfacet.analysis.distributions import (
+        _thickness_fit,
+        _thickness_samples,
+        pool_interference_orders,
+    )
+
+    joint, up = _split_joint()
+    ok, _, regions = _thickness_samples(joint, OPTIONS)
+    before = _thickness_fit(joint, ok, regions, OPTIONS, 0)
+    assert before.n_components == 2
+    after, moves = pool_interference_orders(joint, _resolve_at(np.zeros(400, bool)),
+                                            period_nm=111.0, window_nm=50.0, options=OPTIONS)
+    assert len(moves) == 1 and moves[0].facets == int(up.sum())
+    assert moves[0].to_nm == pytest.approx(52.0, abs=0.5)
+    assert np.all(np.abs(after.thickness.thickness_nm - 52.0) < 5.0)
+    ok, _, regions = _thickness_samples(after, OPTIONS)
+    assert _thickness_fit(after, ok, regions, OPTIONS, 0).n_components == 1
+
+
+def test_an_order_move_most_facets_refuse_is_not_made():
+    """Solved again in the other order, most of the 163 nm facets keep their own (it fits
+    them better by more than the switch margin): the move is dropped, the facets unchanged."""
+    from microfacet.analysis.distributions import pool_interference_orders
+
+    joint, up = _split_joint()
+    keep = up & (np.cumsum(up) % 3 != 0)               # two thirds of them keep their order
+    after, moves = pool_interference_orders(joint, _resolve_at(keep), period_nm=111.0,
+                                            window_nm=50.0, options=OPTIONS)
+    assert moves == []
+    np.testing.assert_array_equal(after.thickness.thickness_nm, joint.thickness.thickness_nm)
+    # nor into (or out of) a component as wide as an order's window: no order to move to
+    wide, _ = pool_interference_orders(joint, _resolve_at(np.zeros(400, bool)),
+                                       period_nm=111.0, window_nm=1.0, options=OPTIONS)
+    np.testing.assert_array_equal(wide.thickness.thickness_nm, joint.thickness.thickness_nm)

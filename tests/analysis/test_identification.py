@@ -425,6 +425,32 @@ def test_a_candidate_that_may_be_a_component_in_another_order_is_said_so():
     assert js[1]["alias_of_nm"] is None
 
 
+def test_a_component_read_in_another_components_order_is_said_so():
+    """A component whose facets were moved to another's interference order
+    (``info["order_moves"]``) is a warning naming both and the share moved, and the order is
+    not established: the colours did not decide it alone."""
+    from microfacet.analysis.consistency import OrderMove
+    from microfacet.analysis.identification import order_check
+
+    move = OrderMove(163.1, 50.1, 0.92, 0.56, 172).to_json()
+    fit = MixtureFit(ThicknessMixture([(0.5, 52.0, 1.0), (0.5, 192.0, 1.0)]), 0.0, {2: 0.0},
+                     10, 10.0, info={"order_moves": [move]})
+    (w,) = [r for r in _warn(_dist(thickness_fit=fit)) if r.code == "order_pooled"]
+    assert "92 % of a 163.1 nm thickness component" in w.text
+    assert "50.1 nm population" in w.text and "0.56 dE00" in w.text
+    assert w.parameter == "fits.order_moves"
+    out = order_check(_dist(thickness_fit=fit), delta_e_median=1.0, noise_de=1.0,
+                      options=OPTIONS)
+    assert not out["established"]
+    assert out["reasons"] == ["the facets of a 163.1 nm component were read in the order of "
+                              "the 50.1 nm one (their colours fit both within 1 dE00 on "
+                              "average)"]
+    # without moves, the same fit establishes the order
+    fit.info["order_moves"] = []
+    assert order_check(_dist(thickness_fit=fit), delta_e_median=1.0, noise_de=1.0,
+                       options=OPTIONS)["established"]
+
+
 def test_order_check_says_why_the_order_is_not_established():
     from microfacet.analysis.identification import MEDIAN_NOISE_FLOOR_FACTOR, order_check
 
