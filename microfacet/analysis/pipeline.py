@@ -319,6 +319,11 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                 err = check.width_error(dist.ndf.info.get("width_relative_error"))
                 dist.ndf.info["width_relative_error_total"] = (float(err) if math.isfinite(err)
                                                                else None)
+    if not dist.thickness_judgement.identified:
+        wb = wb.withdraw("the thickness is not identified, and the gains the film's colours "
+                         "ask for are those of the thicknesses they were read at"
+                         + (" (the determined gains were applied)" if wb.source == "estimated"
+                            else ""))
     timer.total()
     return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
                           dist, dict(timer.timings), check, wb,

@@ -86,6 +86,9 @@ class WhiteBalance:
         estimate, against gains 1.
     tiles : int
         Tiles the estimate used.
+    withdrawn : str or None
+        Why the analysis no longer calls the estimate determined, where it did before
+        (:meth:`withdraw`).
     """
 
     gains_rgb: tuple = (1.0, 1.0, 1.0)
@@ -95,10 +98,27 @@ class WhiteBalance:
     determined: tuple | None = None
     misfit_gain: float | None = None
     tiles: int = 0
+    withdrawn: str | None = None
 
     @property
     def applied(self) -> bool:
         return self.source != "none"
+
+    def withdraw(self, reason: str) -> WhiteBalance:
+        """The same estimate, no gain called determined, and why: the gains the film's
+        colours ask for are those of the thicknesses they were read at, so where the
+        analysis finds the thickness not identified it cannot vouch for them either.
+
+        >>> wb = WhiteBalance(estimate_rgb=(1.05, 1.0, 1.09), determined=(True, True))
+        >>> w = wb.withdraw("the thickness is not identified")
+        >>> w.determined, w.estimate_rgb, w.to_dict()["determined_withdrawn"]
+        ((False, False), (1.05, 1.0, 1.09), 'the thickness is not identified')
+        >>> WhiteBalance(determined=(False, False)).withdraw("x").withdrawn is None
+        True
+        """
+        if not self.determined or not any(self.determined):
+            return self
+        return dataclasses.replace(self, determined=(False, False), withdrawn=reason)
 
     def to_dict(self) -> dict:
         """summary.json's ``white_balance``."""
@@ -110,7 +130,7 @@ class WhiteBalance:
              "determined_rb": None if self.determined is None
              else [bool(v) for v in self.determined],
              "misfit_gain": self.misfit_gain,
-             "tiles": int(self.tiles)}
+             "tiles": int(self.tiles), "determined_withdrawn": self.withdrawn}
 
 
 def balanced_lab(encoded, gains_rgb, *, illuminant, linear=False) -> np.ndarray:

@@ -234,3 +234,33 @@ def test_the_thickness_populations_do_not_follow_encoding_or_exposure(tmp_path, 
         assert st.jpeg is None and res.colour.block_noise_de == 0.0
     assert len(got.components) == len(ref.components) == 3
     np.testing.assert_allclose(np.sort(got.means_nm), np.sort(ref.means_nm), atol=1.0)
+
+
+@pytest.mark.slow
+def test_white_balance_is_not_called_determined_where_the_thickness_is_not(monkeypatch):
+    """A white-balance estimate whose spread calls it determined stays so where the
+    thickness is identified, and is withdrawn (the estimate kept, with why) where it is not:
+    the gains the colours ask for are those of the thicknesses they were read at."""
+    import microfacet.analysis.pipeline as pl
+    from microfacet.analysis.identification import Judgement, Reason
+    from microfacet.analysis.white_balance import WhiteBalance
+
+    est = WhiteBalance(estimate_rgb=(1.04, 1.0, 0.97), estimate_sigma=(0.005, 0.006),
+                       determined=(True, True), tiles=40)
+    monkeypatch.setattr(pl, "choose_white_balance", lambda *a, **k: est)
+    ok = analyse_stack(FIXTURE, AnalysisOptions(mode="joint"))
+    assert ok.distributions.thickness_judgement.identified
+    assert ok.white_balance.determined == (True, True) and ok.white_balance.withdrawn is None
+    real = pl.fit_joint_distributions
+
+    def unidentified(*args, **kwargs):
+        d = real(*args, **kwargs)
+        d.thickness_judgement = Judgement(False, Reason("order_ambiguous", "order uncertain"))
+        return d
+
+    monkeypatch.setattr(pl, "fit_joint_distributions", unidentified)
+    r = analyse_stack(FIXTURE, AnalysisOptions(mode="joint"))
+    wb = r.white_balance
+    assert wb.determined == (False, False) and wb.estimate_rgb == est.estimate_rgb
+    assert "the thickness is not identified" in wb.withdrawn
+    assert wb.to_dict()["determined_withdrawn"] == wb.withdrawn
