@@ -153,8 +153,13 @@ def test_joint_ndf_mostly_censored_is_not_identified(nd):
     d = _refit(r, cens)
     nfit, nj = d.ndf, d.ndf_judgement
     used = _usable_planes(cens)
-    c = dark.sum()                      # only what is dark is censored
-    frac = c / (c + j.area_px[used].sum())
+    # only what is dark is censored, as a share of the film seen: the facets with a plane
+    # and those without one that are mostly usable film
+    usable = np.bincount(j.facets.ravel(), weights=j.usable.ravel()) / j.area_px
+    lit = np.bincount(j.facets.ravel(), weights=dark.ravel()) <= 0.5 * j.area_px
+    seen = used | (lit & (usable >= 0.5))
+    c = dark.sum()
+    frac = c / (c + j.area_px[seen].sum())
     assert frac > 0.5
     assert nj.identified is False and nj.reason.code == "censored"
     assert f"{100 * frac:.0f} % of the surface is tilted past" in nj.reason.plain()
