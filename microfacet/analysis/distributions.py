@@ -27,6 +27,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -155,7 +156,9 @@ def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: F
     A move is kept only where, solved again in the other order, at least
     :data:`~.consistency.MOVE_MIN_SHARE` of the component's area lies on the component of
     that order (a facet whose own order still fits better by ``joint.order_switch_de`` keeps
-    it).
+    it); the move records that share and those facets. A facet moves once: a later move
+    cannot take it back (its old order, now its runner-up, fits it better, and would
+    otherwise draw its new component back the way the colours rejected).
 
     Parameters
     ----------
@@ -177,6 +180,7 @@ def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: F
     (JointResult, list of OrderMove)
     """
     moves = []
+    done = np.zeros(joint.area_px.shape, bool)      # a facet moves once: no move undoes one
     for _ in range(MAX_ORDER_MOVES):
         ok, _, regions = _thickness_samples(joint, options)
         if regions is None:
@@ -184,7 +188,7 @@ def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: F
         th = joint.thickness
         fit = _thickness_fit(joint, ok, regions, options, seed)
         mv, moved = order_move(fit.mixture, np.where(ok, th.thickness_nm, np.nan),
-                               th.thickness_other_order_nm,
+                               np.where(done, np.nan, th.thickness_other_order_nm),
                                th.delta_e_other_order - th.delta_e, joint.area_px,
                                margin_de=options.ambiguous_order_de,
                                min_separation_nm=period_nm - window_nm,
@@ -192,21 +196,21 @@ def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: F
         if mv is None:
             break
         after = resolve(joint, moved, th.thickness_other_order_nm)
-        if _landed_share(mv, moved, after.thickness.thickness_nm, joint.area_px,
-                         fit.mixture) < MOVE_MIN_SHARE:
+        landed = moved & _on_component(after.thickness.thickness_nm, fit.mixture, mv.to_nm)
+        a = joint.area_px.astype(np.float64)
+        share = float(a[landed].sum() / (a[moved].sum() / mv.area_share))
+        if share < MOVE_MIN_SHARE:
             break       # solved in that order, most of its facets keep their own
-        joint = after
-        moves.append(mv)
+        joint, done = after, done | landed
+        moves.append(dataclasses.replace(mv, area_share=share, facets=int(landed.sum())))
     return joint, moves
 
 
-def _landed_share(mv, moved, thickness_nm, area, mixture) -> float:
-    """Share of the moved component's area whose facets, solved again in the other order,
-    lie on the component of that order (:func:`~.consistency.order_alias_of`)."""
-    a = np.asarray(area, dtype=np.float64)
-    on = np.array([order_alias_of(mixture, t) == mv.to_nm if np.isfinite(t) else False
-                   for t in np.asarray(thickness_nm)[moved]], bool)
-    return float(a[moved][on].sum() / (a[moved].sum() / mv.area_share))
+def _on_component(thickness_nm, mixture, mean_nm) -> np.ndarray:
+    """Samples that lie on the component of ``mixture`` with mean ``mean_nm``
+    (:func:`~.consistency.order_alias_of`)."""
+    return np.array([np.isfinite(t) and order_alias_of(mixture, t) == mean_nm
+                     for t in np.asarray(thickness_nm, dtype=np.float64)], bool)
 
 
 def _joint_thickness(joint, roi, options, scene):
@@ -276,7 +280,6 @@ def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed):
     # almost nothing past the limit into a wide lobe).
     C = float(joint.censored.sum())
     mean_area = float(area[use].mean()) if use.any() else float(area.mean())
-    n_eff = float(use.sum()) + C / max(mean_area, 1.0)
     # The facets seen without a plane (too little texture for one) are not past the limit
     # either: the planes sample the seen film, so the censored share is of all of it
     # (counted against the planes alone, it read 0.29 on a scene with 0.05 past the limit).
@@ -284,6 +287,7 @@ def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed):
     # shadow, whose tilt is as unknown as the planes' absence says nothing of).
     seen_all = float(area[_seen_facets(joint, cens_frac) | use].sum())
     C = C * float(area[use].sum()) / seen_all if use.any() and seen_all > 0 else C
+    n_eff = float(use.sum()) + C / max(mean_area, 1.0)
     d_med = float(np.nanmedian(th.thickness_nm)) if np.isfinite(th.thickness_nm).any() else 0.0
     contrast = colour_tilt_contrast(model, d_med) if d_med > 0 else 0.0
     c_err = float(np.nanmedian(joint.colour_sigma_de / np.sqrt(np.maximum(area, 1))))

@@ -190,36 +190,40 @@ def test_seed_mode_fits_per_roi_and_judges_the_ndf_by_colour(nd_analysis):
     assert noisy.ndf_judgement.reason.code == "colour_only"
 
 
-def _split_joint(seed=5):
-    """Facets of 8×8 px on a 160×160 image: a 52 nm population, 240 facets read right and
-    160 read one order up at ~163 nm (their colours fit both about alike), beside nothing
-    else; the runner-up orders as in facets.csv."""
+def _split_joint(seed=5, n_up=160, gap_down=3.0, gap_up=(0.2, 0.6)):
+    """Facets of 8×8 px on a 160×160 image: a 52 nm population, 400 - ``n_up`` facets read
+    right (their runner-up order ``gap_down`` ΔE00 worse) and ``n_up`` read one order up at
+    ~163 nm (their colours fit both about alike: runner-up worse by uniform ``gap_up``),
+    beside nothing else; the runner-up orders as in facets.csv."""
     from types import SimpleNamespace
 
     from microfacet.analysis.facet_thickness import FacetThickness
 
     rng = np.random.default_rng(seed)
     labels = np.arange(400).reshape(20, 20).repeat(8, axis=0).repeat(8, axis=1)
-    d = np.concatenate([rng.normal(52, 0.8, 240), rng.normal(163, 0.8, 160)])
+    d = np.concatenate([rng.normal(52, 0.8, 400 - n_up), rng.normal(163, 0.8, n_up)])
     d = rng.permutation(d)
     up = d > 100
     other = np.where(up, d - 111, d + 111)
     de = rng.uniform(0.8, 1.2, 400)
     ft = FacetThickness(d, np.full(400, 0.5), de, np.zeros(400, bool), np.full(400, 64),
-                        de + np.where(up, rng.uniform(0.2, 0.6, 400), 3.0), other)
+                        de + np.where(up, rng.uniform(*gap_up, 400), gap_down), other)
     return SimpleNamespace(thickness=ft, area_px=np.full(400, 64), facets=labels,
                            censored=np.zeros(labels.shape, bool)), up
 
 
 def _resolve_at(keep):
     """A stand-in for joint.facets_in_other_order: the moved facets take the centre they are
-    given, but those in ``keep`` (their own order fits far better) stay."""
+    given, their old order becoming their runner-up (thickness and ΔE00 swapped), but those
+    in ``keep`` (their own order fits far better) stay."""
     def resolve(joint, moved, centre_nm):
         ft = joint.thickness
         go = np.asarray(moved) & ~keep
-        new = dataclasses.replace(ft, thickness_nm=np.where(go, centre_nm, ft.thickness_nm),
-                                  thickness_other_order_nm=np.where(
-                                      go, ft.thickness_nm, ft.thickness_other_order_nm))
+        new = dataclasses.replace(
+            ft, thickness_nm=np.where(go, centre_nm, ft.thickness_nm),
+            thickness_other_order_nm=np.where(go, ft.thickness_nm, ft.thickness_other_order_nm),
+            delta_e=np.where(go, ft.delta_e_other_order, ft.delta_e),
+            delta_e_other_order=np.where(go, ft.delta_e, ft.delta_e_other_order))
         return type(joint)(**{**vars(joint), "thickness": new})
     return resolve
 
@@ -251,9 +255,21 @@ def test_a_population_split_between_orders_is_pooled_into_one():
 def test_an_order_move_most_facets_refuse_is_not_made():
     """Solved again in the other order, most of the 163 nm facets keep their own (it fits
     them better by more than the switch margin): the move is dropped, the facets unchanged."""
-    from microfacet.analysis.distributions import pool_interference_orders
+    from microfacet.analysis.consistency import order_move
+    from microfacet.analysis.distributions import (
+        _thickness_fit,
+        _thickness_samples,
+        pool_interference_orders,
+    )
 
     joint, up = _split_joint()
+    ok, _, regions = _thickness_samples(joint, OPTIONS)
+    th = joint.thickness
+    proposed, _ = order_move(_thickness_fit(joint, ok, regions, OPTIONS, 0).mixture,
+                             th.thickness_nm, th.thickness_other_order_nm,
+                             th.delta_e_other_order - th.delta_e, joint.area_px,
+                             margin_de=1.0, min_separation_nm=61.0)
+    assert proposed is not None and proposed.from_nm > 150          # proposed, then refused
     keep = up & (np.cumsum(up) % 3 != 0)               # two thirds of them keep their order
     after, moves = pool_interference_orders(joint, _resolve_at(keep), period_nm=111.0,
                                             window_nm=50.0, options=OPTIONS)
@@ -263,3 +279,24 @@ def test_an_order_move_most_facets_refuse_is_not_made():
     wide, _ = pool_interference_orders(joint, _resolve_at(np.zeros(400, bool)),
                                        period_nm=111.0, window_nm=1.0, options=OPTIONS)
     np.testing.assert_array_equal(wide.thickness.thickness_nm, joint.thickness.thickness_nm)
+
+
+@pytest.mark.slow
+def test_an_order_move_records_what_moved_and_is_never_undone():
+    """40 % of the 163 nm facets keep their own order: the move is kept (60 % land on the
+    52 nm population) and records that share and those facets, not what it proposed.
+    The facets it moved now have their old order as a runner-up that fits better, which
+    would draw the 52 nm component back up an order: a facet moves once, so no second move
+    takes them back (the 52 nm facets here fit the order above within the margin too)."""
+    from microfacet.analysis.distributions import pool_interference_orders
+
+    joint, up = _split_joint(n_up=240, gap_down=0.5, gap_up=(0.3, 0.3))
+    keep = up & (np.cumsum(up) <= 0.4 * up.sum())      # 40 % of them keep their order
+    after, moves = pool_interference_orders(joint, _resolve_at(keep), period_nm=111.0,
+                                            window_nm=50.0, options=OPTIONS)
+    assert len(moves) == 1 and moves[0].to_nm < 60 < moves[0].from_nm
+    went = up & ~keep
+    assert moves[0].facets == int(went.sum())
+    assert moves[0].area_share == pytest.approx(went.sum() / up.sum())
+    t = after.thickness.thickness_nm
+    assert np.all(np.abs(t[went] - 52.0) < 5.0) and np.all(t[keep] > 150)
