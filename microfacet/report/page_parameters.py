@@ -183,6 +183,7 @@ def _analysis_rows(ctx):
                      f"{fmt(pct(ff.get('corner_loss')), '.0f', '%')} lost at the corners "
                      f"({ff.get('source')})" if ff.get("applied")
                      else f"none: {ff.get('reason')}"])
+    rows += _order_rows(res)
     rows.append([f"{DE} mean / median / p95",
                  " / ".join(fmt(res.get("delta_e", k), ".2f")
                             for k in ("mean", "median", "p95"))])
@@ -216,6 +217,24 @@ def _analysis_rows(ctx):
         rows.append([f"colour table: error ({DE})",
                      f"{fmt(ct.get('interp_error_de00'), '.3f')} interpolation, "
                      f"{fmt(ct.get('spectral_error_de00'), '.3f')} spectral"])
+    return rows
+
+
+def _order_rows(res):
+    """The thicknesses' interference order (``thickness.order``: established, or the first
+    reason and how many more) and each component read in another's order
+    (``thickness.mixture.order_moves``)."""
+    rows = []
+    order = res.get("thickness", "order")
+    if isinstance(order, dict) and "established" in order:
+        why = order.get("reasons") or []
+        more = f" (+{len(why) - 1} more)" if len(why) > 1 else ""
+        rows.append(["interference order", "established" if order["established"] else
+                     "not established: " + (why[0] if why else "") + more])
+    for m in res.get("thickness", "mixture", "order_moves") or []:
+        rows.append(["order move", f"{fmt(m.get('from_nm'), '.1f')} → "
+                     f"{fmt(m.get('to_nm'), '.1f', 'nm')} "
+                     f"({fmt(pct(m.get('area_share')), '.0f', '%')} of a component)"])
     return rows
 
 

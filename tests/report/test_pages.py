@@ -72,6 +72,15 @@ def test_parameter_table_matches_summary(results, report, pdf_text):
     assert analysis["flat field (vignetting)"] == (
         f"{100 * ff['corner_loss']:.0f} % lost at the corners ({ff['source']})"
         if ff["applied"] else f"none: {ff['reason']}")
+    order = summary["thickness"]["order"]
+    assert analysis["interference order"] == ("established" if order["established"] else
+                                              f"not established: {order['reasons'][0]}"
+                                              + (f" (+{len(order['reasons']) - 1} more)"
+                                                 if len(order["reasons"]) > 1 else ""))
+    moves = summary["thickness"]["mixture"].get("order_moves") or []
+    assert [v for k, v in t["analysis"]["rows"] if k == "order move"] == [
+        f"{m['from_nm']:.1f} → {m['to_nm']:.1f} nm ({100 * m['area_share']:.0f} % of a "
+        f"component)" for m in moves]
     de = summary["delta_e"]
     de_row = f"{de['mean']:.2f} / {de['median']:.2f} / {de['p95']:.2f}"
     assert analysis["ΔE₀₀ mean / median / p95"] == de_row
@@ -226,3 +235,22 @@ def test_candidate_populations_are_not_drawn_on_the_tilt_panel(results_copy):
                    if len(set(np.ravel(ln.get_xdata()))) == 1)
     plt.close(fig)
 
+
+
+def test_the_parameter_page_states_the_order_and_each_order_move(results_copy):
+    """summary.json's thickness.order (its first reason and how many more) and each
+    thickness.mixture.order_moves entry are rows of the analysis table."""
+    folder = results_copy()
+    summary = json.loads((folder / "summary.json").read_text())
+    summary["thickness"]["order"] = {"established": False, "reasons": [
+        "the facets of a 163.1 nm component were read in the order of the 50.1 nm one",
+        "28 % of the facets' area has a runner-up order"]}
+    summary["thickness"]["mixture"]["order_moves"] = [
+        {"from_nm": 163.1, "to_nm": 50.1, "area_share": 0.92, "mean_gap_de": 0.56,
+         "facets": 172}]
+    (folder / "summary.json").write_text(json.dumps(summary))
+    rows = parameter_tables(folder)["analysis"]["rows"]
+    assert dict(rows)["interference order"] == (
+        "not established: the facets of a 163.1 nm component were read in the order of the "
+        "50.1 nm one (+1 more)")
+    assert [v for k, v in rows if k == "order move"] == ["163.1 → 50.1 nm (92 % of a component)"]
