@@ -47,7 +47,10 @@ class Stage(enum.Enum):
                            "`JointResult`: planes, exposure, thickness and colour error per "
                            "facet; the flat field (vignetting) their brightness asks for "
                            "(`analysis.flat_field`), the colours divided by it and the facets "
-                           "refitted where they then fit better (joint mode)")
+                           "refitted where they then fit better; a thickness component whose "
+                           "facets fit another component's interference order alike read in "
+                           "that order (`analysis.distributions.pool_interference_orders`, "
+                           "`analysis.joint.facets_in_other_order`) (joint mode)")
     TILT = StageInfo("tilt_per_pixel", "tilt per pixel", 2.3,
                      "analysis.joint.joint_pixel_tilts / analysis.tilt.seed_tilts",
                      "`PixelEstimates`: thickness, tilt, σ, ΔE per pixel")
