@@ -60,8 +60,8 @@ from .options import FitOptions
 from .planes import deconvolved_rms_slope
 from .sampling import thickness_regions
 
-__all__ = ["Distributions", "fit_joint_distributions", "fit_seed_distributions",
-           "pool_interference_orders"]
+__all__ = ["Distributions", "PooledOrders", "fit_joint_distributions",
+           "fit_seed_distributions", "pool_interference_orders"]
 
 #: A facet more than this fraction of whose pixels are dark is censored (tilted past the
 #: acceptance): it carries neither a thickness nor a measured tilt.
@@ -141,6 +141,27 @@ def _thickness_fit(joint, ok, regions, options, seed) -> MixtureFit:
 MAX_ORDER_MOVES = 2
 
 
+@dataclass
+class PooledOrders:
+    """What :func:`pool_interference_orders` did.
+
+    Attributes
+    ----------
+    joint : JointResult
+        The facets, those of a component read in another's order moved to it.
+    moves : list of OrderMove
+    samples, fit : tuple or None, MixtureFit or None
+        The thickness samples of ``joint``'s facets (``(ok, unexplained, regions)``) and
+        their mixture, where the last round fitted them (None after a move, which the
+        mixture stage then fits): :func:`fit_joint_distributions` reuses them.
+    """
+
+    joint: object
+    moves: list = field(default_factory=list)
+    samples: tuple | None = None
+    fit: MixtureFit | None = None
+
+
 def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: FitOptions,
                              seed=0):
     """The facets of a component that is another read in a neighbouring interference order,
@@ -177,12 +198,13 @@ def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: F
 
     Returns
     -------
-    (JointResult, list of OrderMove)
+    PooledOrders
     """
     moves = []
     done = np.zeros(joint.area_px.shape, bool)      # a facet moves once: no move undoes one
     for _ in range(MAX_ORDER_MOVES):
-        ok, _, regions = _thickness_samples(joint, options)
+        samples = _thickness_samples(joint, options)
+        ok, _, regions = samples
         if regions is None:
             break
         th = joint.thickness
@@ -194,16 +216,16 @@ def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: F
                                min_separation_nm=period_nm - window_nm,
                                max_sd_nm=window_nm / ALIAS_SD)
         if mv is None:
-            break
+            return PooledOrders(joint, moves, samples, fit)
         after = resolve(joint, moved, th.thickness_other_order_nm)
         landed = moved & _on_component(after.thickness.thickness_nm, fit.mixture, mv.to_nm)
         a = joint.area_px.astype(np.float64)
         share = float(a[landed].sum() / (a[moved].sum() / mv.area_share))
-        if share < MOVE_MIN_SHARE:
-            break       # solved in that order, most of its facets keep their own
+        if share < MOVE_MIN_SHARE:      # solved in that order, most of its facets keep their own
+            return PooledOrders(joint, moves, samples, fit)
         joint, done = after, done | landed
         moves.append(dataclasses.replace(mv, area_share=share, facets=int(landed.sum())))
-    return joint, moves
+    return PooledOrders(joint, moves)
 
 
 def _on_component(thickness_nm, mixture, mean_nm) -> np.ndarray:
@@ -213,15 +235,17 @@ def _on_component(thickness_nm, mixture, mean_nm) -> np.ndarray:
                      for t in np.asarray(thickness_nm, dtype=np.float64)], bool)
 
 
-def _joint_thickness(joint, roi, options, scene):
+def _joint_thickness(joint, roi, options, scene, pooled: PooledOrders | None = None):
     """The thickness mixture of the facets, and its judgement; each candidate population
-    with the side of the square field (µm) that would decide it."""
+    with the side of the square field (µm) that would decide it. ``pooled``: the samples and
+    mixture :func:`pool_interference_orders` fitted to these facets, where it did."""
     th = joint.thickness
     area = joint.area_px.astype(np.float64)
-    ok, unexplained, regions = _thickness_samples(joint, options)
+    ready = pooled is not None and pooled.joint is joint and pooled.fit is not None
+    ok, unexplained, regions = pooled.samples if ready else _thickness_samples(joint, options)
     if regions is None:
         return None, NO_SAMPLES["thickness"]
-    fit = _thickness_fit(joint, ok, regions, options, scene.seed)
+    fit = pooled.fit if ready else _thickness_fit(joint, ok, regions, options, scene.seed)
     _describe_candidates(fit, regions, th, area, ok,
                          joint.facets.size * float(np.prod(scene.pixel_size_um)))
     a_t = area[ok].sum()
@@ -339,7 +363,8 @@ def _dome_share(dome, pl, use, area) -> float | None:
     return float(max(ms + 2.0 * se, 0.0) / rms ** 2) if rms > 0 else None
 
 
-def fit_joint_distributions(joint, roi, model, scene, options: FitOptions) -> Distributions:
+def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
+                            pooled: PooledOrders | None = None) -> Distributions:
     """Thickness mixture and NDF of a :class:`~.joint.JointResult`, with identification.
 
     Parameters
@@ -352,9 +377,15 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions) -> Di
     scene : Scene
         The acceptance limit (censoring) and the seed.
     options : FitOptions
+    pooled : PooledOrders, optional
+        :func:`pool_interference_orders` on these facets: its thickness mixture is reused
+        where it fitted one to them (the same samples and seed give the same fit), and its
+        moves are recorded (``info["order_moves"]``).
     """
     cens_frac = _censored_fraction(joint)
-    tfit, tj = _joint_thickness(joint, roi, options, scene)
+    tfit, tj = _joint_thickness(joint, roi, options, scene, pooled)
+    if tfit is not None and pooled is not None:
+        tfit.info["order_moves"] = [m.to_json() for m in pooled.moves]
     nfit, nj = _joint_ndf(joint, model, cens_frac, scene.max_tilt_deg, options, scene.seed)
     return Distributions(tfit, nfit, tj, nj, *_roi_flags(roi, options))
 

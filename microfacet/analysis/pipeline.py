@@ -34,6 +34,7 @@ from .colour_image import measure_colour, no_colour_message
 from .consistency import mixture_map_check, roi_pixel_check
 from .distributions import (
     Distributions,
+    PooledOrders,
     fit_joint_distributions,
     fit_seed_distributions,
     pool_interference_orders,
@@ -301,14 +302,14 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
             else:
                 (joint, roi, readings), flat = facets(colour, roi), flat_ref
             model = model.with_exposure(joint.exposure)
-            joint, moves = _order_moves(joint, geometry, colour, roi, model, options, scene)
+            pooled = _order_moves(joint, geometry, colour, roi, model, options, scene)
+            joint = pooled.joint
         with timer.stage(Stage.TILT):
             pixels = joint.pixels = joint_pixel_tilts(joint, colour, model, grid, options.tilt)
         with timer.stage(Stage.MIXTURES):
-            dist = fit_joint_distributions(joint, roi, model, scene, options.fits)
+            dist = fit_joint_distributions(joint, roi, model, scene, options.fits,
+                                           pooled=pooled)
             dist.exposure_readings = readings
-            if dist.thickness is not None:
-                dist.thickness.info["order_moves"] = [m.to_json() for m in moves]
         with timer.stage(Stage.SELF_CHECK):
             check = _self_check(st, focus, joint, scene, options,
                                 cells=lambda crop: bootstrap_labels(
@@ -334,7 +335,7 @@ def _order_moves(joint, geometry, colour, roi, model, options, scene):
     """The facets of a component that is another read in a neighbouring interference order,
     in that order (:func:`~.distributions.pool_interference_orders`, ``fits.order_moves``)."""
     if options.fits.order_moves == "off":
-        return joint, []
+        return PooledOrders(joint)
     return pool_interference_orders(
         joint, lambda j, moved, centre: facets_in_other_order(
             j, geometry, colour, roi, model, options.joint, moved=moved, centre_nm=centre),

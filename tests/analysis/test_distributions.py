@@ -243,13 +243,18 @@ def test_a_population_split_between_orders_is_pooled_into_one():
     ok, _, regions = _thickness_samples(joint, OPTIONS)
     before = _thickness_fit(joint, ok, regions, OPTIONS, 0)
     assert before.n_components == 2
-    after, moves = pool_interference_orders(joint, _resolve_at(np.zeros(400, bool)),
-                                            period_nm=111.0, window_nm=50.0, options=OPTIONS)
+    pooled = pool_interference_orders(joint, _resolve_at(np.zeros(400, bool)),
+                                      period_nm=111.0, window_nm=50.0, options=OPTIONS)
+    moves, after = pooled.moves, pooled.joint
     assert len(moves) == 1 and moves[0].facets == int(up.sum())
     assert moves[0].to_nm == pytest.approx(52.0, abs=0.5)
     assert np.all(np.abs(after.thickness.thickness_nm - 52.0) < 5.0)
     ok, _, regions = _thickness_samples(after, OPTIONS)
-    assert _thickness_fit(after, ok, regions, OPTIONS, 0).n_components == 1
+    refit = _thickness_fit(after, ok, regions, OPTIONS, 0)
+    assert refit.n_components == 1
+    # the last round's mixture is of the returned facets: the mixture stage reuses it
+    assert pooled.fit.mixture.components == refit.mixture.components
+    np.testing.assert_array_equal(pooled.samples[0], ok)
 
 
 def test_an_order_move_most_facets_refuse_is_not_made():
@@ -271,14 +276,13 @@ def test_an_order_move_most_facets_refuse_is_not_made():
                              margin_de=1.0, min_separation_nm=61.0)
     assert proposed is not None and proposed.from_nm > 150          # proposed, then refused
     keep = up & (np.cumsum(up) % 3 != 0)               # two thirds of them keep their order
-    after, moves = pool_interference_orders(joint, _resolve_at(keep), period_nm=111.0,
-                                            window_nm=50.0, options=OPTIONS)
-    assert moves == []
-    np.testing.assert_array_equal(after.thickness.thickness_nm, joint.thickness.thickness_nm)
+    pooled = pool_interference_orders(joint, _resolve_at(keep), period_nm=111.0,
+                                      window_nm=50.0, options=OPTIONS)
+    assert pooled.moves == [] and pooled.joint is joint
     # nor into (or out of) a component as wide as an order's window: no order to move to
-    wide, _ = pool_interference_orders(joint, _resolve_at(np.zeros(400, bool)),
-                                       period_nm=111.0, window_nm=1.0, options=OPTIONS)
-    np.testing.assert_array_equal(wide.thickness.thickness_nm, joint.thickness.thickness_nm)
+    wide = pool_interference_orders(joint, _resolve_at(np.zeros(400, bool)),
+                                    period_nm=111.0, window_nm=1.0, options=OPTIONS)
+    assert wide.moves == [] and wide.joint is joint
 
 
 @pytest.mark.slow
@@ -292,8 +296,9 @@ def test_an_order_move_records_what_moved_and_is_never_undone():
 
     joint, up = _split_joint(n_up=240, gap_down=0.5, gap_up=(0.3, 0.3))
     keep = up & (np.cumsum(up) <= 0.4 * up.sum())      # 40 % of them keep their order
-    after, moves = pool_interference_orders(joint, _resolve_at(keep), period_nm=111.0,
-                                            window_nm=50.0, options=OPTIONS)
+    pooled = pool_interference_orders(joint, _resolve_at(keep), period_nm=111.0,
+                                      window_nm=50.0, options=OPTIONS)
+    moves, after = pooled.moves, pooled.joint
     assert len(moves) == 1 and moves[0].to_nm < 60 < moves[0].from_nm
     went = up & ~keep
     assert moves[0].facets == int(went.sum())
