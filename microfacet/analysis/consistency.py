@@ -36,8 +36,8 @@ import numpy as np
 from .sampling import weighted_median
 
 __all__ = ["MapCheck", "OrderMove", "candidate_alias", "component_orders",
-           "distinct_populations", "mixture_map_check", "order_alias_of", "order_move",
-           "roi_pixel_check"]
+           "distinct_populations", "mixture_map_check", "nearest_component", "order_alias_of",
+           "order_move", "roi_pixel_check"]
 
 #: The per-pixel map's error floor (nm) each component is widened by: the thickness per true
 #: region errs by a median 0.6-0.8 nm on the generalization sweep (docs/accuracy.md).
@@ -206,25 +206,41 @@ def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguo
     return out
 
 
+def nearest_component(mixture, values_nm, *, exclude=None) -> np.ndarray:
+    """Per value, the index of the component of ``mixture`` it lies on: the nearest in SD
+    units, where within :data:`ALIAS_SD` of its SD and :data:`MAP_FLOOR_NM` twice, in
+    quadrature; -1 for none (or NaN). ``exclude``: a component index never chosen.
+
+    >>> from microfacet.core.distributions import ThicknessMixture
+    >>> m = ThicknessMixture([(0.8, 250.0, 1.0), (0.2, 140.0, 1.0)])
+    >>> nearest_component(m, [251.5, 260.0, 139.0, np.nan]).tolist()   # by mean: 140, 250
+    [1, -1, 0, -1]
+    """
+    comps = mixture.components
+    mu = np.array([c[1] for c in comps])
+    sd = np.sqrt(np.array([c[2] for c in comps]) ** 2 + 2.0 * MAP_FLOOR_NM ** 2)
+    v = np.atleast_1d(np.asarray(values_nm, dtype=np.float64))
+    with np.errstate(invalid="ignore"):
+        zz = np.abs(v[:, None] - mu) / sd
+    if exclude is not None:
+        zz[:, exclude] = np.inf
+    j = np.argmin(np.nan_to_num(zz, nan=np.inf), axis=1)
+    on = np.isfinite(v) & (zz[np.arange(v.size), j] <= ALIAS_SD)
+    return np.where(on, j, -1)
+
+
 def order_alias_of(mixture, other_nm, *, exclude=None) -> float | None:
     """The mean of the component of ``mixture`` that a runner-up order's thickness
-    ``other_nm`` lies on (within :data:`ALIAS_SD` of its SD and :data:`MAP_FLOOR_NM` twice,
-    in quadrature), other than component ``exclude`` (an index into the components, which
-    are ordered by mean); None if none.
+    ``other_nm`` lies on (:func:`nearest_component`), other than component ``exclude`` (an
+    index into the components, which are ordered by mean); None if none.
 
     >>> from microfacet.core.distributions import ThicknessMixture
     >>> m = ThicknessMixture([(0.8, 250.0, 1.0), (0.2, 140.0, 1.0)])
     >>> order_alias_of(m, 251.5), order_alias_of(m, 260.0), order_alias_of(m, 251.5, exclude=1)
     (250.0, None, None)
     """
-    comps = mixture.components
-    mu = np.array([c[1] for c in comps])
-    sd = np.sqrt(np.array([c[2] for c in comps]) ** 2 + MAP_FLOOR_NM ** 2)
-    zz = np.abs(float(other_nm) - mu) / np.sqrt(sd ** 2 + MAP_FLOOR_NM ** 2)
-    if exclude is not None:
-        zz[exclude] = np.inf
-    j = int(np.argmin(zz))
-    return float(mu[j]) if zz[j] <= ALIAS_SD else None
+    j = int(nearest_component(mixture, other_nm, exclude=exclude)[0])
+    return float(mixture.components[j][1]) if j >= 0 else None
 
 
 def candidate_alias(mixture, other_nm, gap_de, weights, misfit_de):

@@ -39,7 +39,7 @@ from .consistency import (
     candidate_alias,
     component_orders,
     distinct_populations,
-    order_alias_of,
+    nearest_component,
     order_move,
 )
 from .identification import (
@@ -113,16 +113,18 @@ def _censored_fraction(joint) -> np.ndarray:
                         minlength=joint.area_px.size) / np.maximum(joint.area_px, 1))
 
 
-def _thickness_samples(joint, options):
+def _thickness_samples(joint, options, cens_frac=None):
     """The facets that carry a thickness sample, those the film does not explain, and the
-    number of independent thickness regions among the samples."""
+    number of independent thickness regions among the samples; ``cens_frac``:
+    :func:`_censored_fraction` of ``joint``, where the caller has it."""
     th = joint.thickness
     # Facets whose colour the film model does not explain (dust, pit floors, mixed or dark
     # facets: ΔE a robust outlier among the facets') and censored (dark) facets carry no
     # thickness: they are left out of the mixture, and counted.
     unexplained = unexplained_facets(th.delta_e, options.unexplained_mads)
     ok = (np.isfinite(th.thickness_nm) & (joint.area_px > 0)
-          & (_censored_fraction(joint) < CENSORED_FACET_FRACTION) & ~unexplained)
+          & ((_censored_fraction(joint) if cens_frac is None else cens_frac)
+             < CENSORED_FACET_FRACTION) & ~unexplained)
     regions = (thickness_regions(joint.facets, np.where(ok, th.thickness_nm, np.nan),
                                  th.sigma_nm) if ok.sum() >= 2 else None)
     return ok, unexplained, regions
@@ -202,8 +204,9 @@ def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: F
     """
     moves = []
     done = np.zeros(joint.area_px.shape, bool)      # a facet moves once: no move undoes one
+    cens_frac = _censored_fraction(joint)           # the moves change no facet's darkness
     for _ in range(MAX_ORDER_MOVES):
-        samples = _thickness_samples(joint, options)
+        samples = _thickness_samples(joint, options, cens_frac)
         ok, _, regions = samples
         if regions is None:
             break
@@ -230,19 +233,20 @@ def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: F
 
 def _on_component(thickness_nm, mixture, mean_nm) -> np.ndarray:
     """Samples that lie on the component of ``mixture`` with mean ``mean_nm``
-    (:func:`~.consistency.order_alias_of`)."""
-    return np.array([np.isfinite(t) and order_alias_of(mixture, t) == mean_nm
-                     for t in np.asarray(thickness_nm, dtype=np.float64)], bool)
+    (:func:`~.consistency.nearest_component`)."""
+    k = [c[1] for c in mixture.components].index(mean_nm)
+    return nearest_component(mixture, thickness_nm) == k
 
 
-def _joint_thickness(joint, roi, options, scene, pooled: PooledOrders | None = None):
+def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders | None = None):
     """The thickness mixture of the facets, and its judgement; each candidate population
     with the side of the square field (µm) that would decide it. ``pooled``: the samples and
     mixture :func:`pool_interference_orders` fitted to these facets, where it did."""
     th = joint.thickness
     area = joint.area_px.astype(np.float64)
     ready = pooled is not None and pooled.joint is joint and pooled.fit is not None
-    ok, unexplained, regions = pooled.samples if ready else _thickness_samples(joint, options)
+    ok, unexplained, regions = (pooled.samples if ready
+                                else _thickness_samples(joint, options, cens_frac))
     if regions is None:
         return None, NO_SAMPLES["thickness"]
     fit = pooled.fit if ready else _thickness_fit(joint, ok, regions, options, scene.seed)
@@ -306,7 +310,8 @@ def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed):
     mean_area = float(area[use].mean()) if use.any() else float(area.mean())
     # The facets seen without a plane (too little texture for one) are not past the limit
     # either: the planes sample the seen film, so the censored share is of all of it
-    # (counted against the planes alone, it read 0.29 on a scene with 0.05 past the limit).
+    # (counted against the planes alone, it read 0.29 on a sweep scene with no facet past
+    # the limit: docs/accuracy.md).
     # Seen: not censored, and at least half the facet's pixels usable film (not dust or
     # shadow, whose tilt is as unknown as the planes' absence says nothing of).
     seen_all = float(area[_seen_facets(joint, cens_frac) | use].sum())
@@ -383,7 +388,7 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
         moves are recorded (``info["order_moves"]``).
     """
     cens_frac = _censored_fraction(joint)
-    tfit, tj = _joint_thickness(joint, roi, options, scene, pooled)
+    tfit, tj = _joint_thickness(joint, roi, options, scene, cens_frac, pooled)
     if tfit is not None and pooled is not None:
         tfit.info["order_moves"] = [m.to_json() for m in pooled.moves]
     nfit, nj = _joint_ndf(joint, model, cens_frac, scene.max_tilt_deg, options, scene.seed)

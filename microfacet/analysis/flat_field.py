@@ -58,14 +58,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..colour.colorimetry import lab_to_xyz
 from ..colour.transfer import srgb_decode, srgb_encode
 from ..core.errors import InputError
-from ..core.lazy import load
 from .identification import unexplained_facets
 from .mask import steep_facet_mask
+from .planes import TUKEY_C
 from .white_balance import balanced_lab
-
-ndimage = load("scipy.ndimage")
 
 __all__ = ["MAX_ROUNDS", "ROUND_TOLERANCE", "FlatField", "estimate_flat_field",
            "facet_brightness", "flat_fielded", "reference_flat_field"]
@@ -77,8 +76,8 @@ N_TERMS = (5, 6, 7)
 MIN_FACETS = 30
 #: Fewest usable pixels of a facet for its mean brightness to count.
 MIN_FACET_PIXELS = 10
-#: Biweight tuning constant (95 % efficiency for Gaussian residuals) and IRLS rounds.
-BIWEIGHT_C = 4.685
+#: IRLS rounds of the biweight (its constant the planes' :data:`~.planes.TUKEY_C`: 95 %
+#: efficiency for Gaussian residuals).
 ROUNDS = 10
 #: Rounds of estimate and refit at most (the facets' thicknesses absorb part of a field not
 #: yet corrected, so one round finds 50-90 % of it), and the corner-loss change below which
@@ -225,10 +224,10 @@ def _log_field(c, u, v):
     return out
 
 
-def _y_of_l(lightness):
-    """Relative luminance Y/Yn of CIE L* (the inverse of L*)."""
-    f = (np.asarray(lightness, np.float64) + 16.0) / 116.0
-    return np.where(f > 6.0 / 29.0, f ** 3, 3.0 * (6.0 / 29.0) ** 2 * (f - 4.0 / 29.0))
+def _luminance(lab):
+    """Relative luminance Y/Yn of CIELAB rows (N, 3), float64: the Y of
+    :func:`~microfacet.colour.colorimetry.lab_to_xyz`, which depends on L* alone."""
+    return lab_to_xyz(np.asarray(lab, np.float64))[..., 1]
 
 
 def _biweight_fit(a, y, w):
@@ -242,7 +241,7 @@ def _biweight_fit(a, y, w):
         c = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
         r = y - a @ c
         s = 1.4826 * float(np.median(np.abs(r))) + 1e-9
-        z = r / (BIWEIGHT_C * s)
+        z = r / (TUKEY_C * s)
         wt = w * np.where(np.abs(z) < 1.0, (1.0 - z * z) ** 2, 0.0)
     return c, y - a @ c, s, wt
 
@@ -272,14 +271,14 @@ def facet_brightness(joint, lab, model, *, unexplained_mads):
     labels = joint.facets
     S = int(labels.max()) + 1
     lb = labels.ravel()
-    lightness = np.asarray(lab[..., 0], np.float64).ravel()
-    ok_px = np.asarray(joint.usable, bool).ravel() & np.isfinite(lightness)
+    lab_px = np.asarray(lab).reshape(-1, 3)
+    ok_px = np.asarray(joint.usable, bool).ravel() & np.isfinite(lab_px[:, 0])
     n = np.bincount(lb[ok_px], minlength=S).astype(np.float64)
-    y_obs = np.bincount(lb[ok_px], weights=_y_of_l(lightness[ok_px]), minlength=S) \
+    y_obs = np.bincount(lb[ok_px], weights=_luminance(lab_px[ok_px]), minlength=S) \
         / np.maximum(n, 1.0)
     ft = joint.thickness
     t_lo, t_hi = model.theta_range_deg
-    y_mod = _y_of_l(model.lab(np.clip(joint.prior_deg, t_lo, t_hi), ft.thickness_nm)[..., 0])
+    y_mod = _luminance(model.lab(np.clip(joint.prior_deg, t_lo, t_hi), ft.thickness_nm))
     area = np.bincount(lb, minlength=S).astype(np.float64)
     h, w = labels.shape
     yy, xx = np.mgrid[0:h, 0:w]
