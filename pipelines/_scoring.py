@@ -114,6 +114,40 @@ def true_population_count(populations, *, min_area_fraction=0.02):
     return sum(1 for q in populations if q["area_fraction"] >= min_area_fraction)
 
 
+def mean_coverage(components, uncertainty, populations, *, gate_nm=15.0, min_area_fraction=0.02):
+    """How the thickness components' means and their reported 1σ (summary.json
+    ``thickness.mixture.components`` and ``mean_uncertainty``) cover the true populations'
+    means: components and true populations (at least ``min_area_fraction`` of the area)
+    paired one to one, closest first, within ``gate_nm``; per pair the error and the σ.
+
+    Returns ``{"pairs": n, "within_2sigma": k, "errors_nm": [...], "sigmas_nm": [...]}``
+    (pairs whose σ is unknown count as not within).
+
+    >>> comps = [{"mean_nm": 100.4}, {"mean_nm": 131.0}, {"mean_nm": 300.0}]
+    >>> unc = [{"sigma_nm": 0.5}, {"sigma_nm": 0.2}, {"sigma_nm": 1.0}]
+    >>> pops = [{"mean_nm": 100.0, "area_fraction": 0.5}, {"mean_nm": 130.0,
+    ...          "area_fraction": 0.5}]
+    >>> c = mean_coverage(comps, unc, pops)
+    >>> c["pairs"], c["within_2sigma"], c["errors_nm"]
+    (2, 1, [0.4, 1.0])
+    """
+    mu = [c["mean_nm"] for c in components]
+    sig = [u.get("sigma_nm") for u in (uncertainty or [{}] * len(mu))]
+    true = [q["mean_nm"] for q in populations if q["area_fraction"] >= min_area_fraction]
+    cand = sorted((abs(m - t), i, j) for i, m in enumerate(mu) for j, t in enumerate(true)
+                  if abs(m - t) <= gate_nm)
+    used_c, used_t, errs, sigs = set(), set(), [], []
+    for d, i, j in cand:
+        if i in used_c or j in used_t:
+            continue
+        used_c.add(i)
+        used_t.add(j)
+        errs.append(round(mu[i] - true[j], 4))
+        sigs.append(sig[i])
+    within = sum(1 for e, s in zip(errs, sigs) if s is not None and abs(e) <= 2.0 * s)
+    return {"pairs": len(errs), "within_2sigma": within, "errors_nm": errs, "sigmas_nm": sigs}
+
+
 def truncated_w1(grid, pdf, samples, limit):
     """W1 between a density on ``grid`` and a sample, both truncated to [grid[0], limit].
 
@@ -311,6 +345,9 @@ TARGETS = (
      "populations_ok_candidates", "–", None),
     ("scenes with a reported candidate where the count was already right (spurious)",
      "candidates_spurious", "–", None),
+    ("true population means within 2σ of their component's (pairs within 15 nm)",
+     "mean_within_2sigma", "–", None),
+    ("… the components' mean 1σ, median over scenes (nm)", "mean_sigma_median_nm", "–", None),
     ("scenes where the analysis says the interference order is not established",
      "order_not_established", "–", None),
     ("scenes read in a wrong interference order (region median error > 20 nm)",
@@ -352,6 +389,14 @@ def _int(v, default):
     return default if default is None else int(row_number(default))
 
 
+def _coverage(rows) -> float:
+    """The share of the true population means within 2σ of their component's, over rows
+    whose analysis reported a σ (NaN: none did, e.g. the seed mode)."""
+    pairs = float(np.nansum([row_number(r.get("mean_pairs")) for r in rows] or [0.0]))
+    within = float(np.nansum([row_number(r.get("mean_within_2sigma")) for r in rows] or [0.0]))
+    return within / pairs if pairs else math.nan
+
+
 def summarize(rows):
     """The summary scores of one mode's per-scene rows (keys of :data:`TARGETS`).
 
@@ -377,6 +422,9 @@ def summarize(rows):
             _int(r.get("pops_distinct"), r.get("pops_found")) + int(r.get("pops_candidates")
                                                                     or 0) == r["pops_true"]
             if r.get("pops_found") is not None else False for r in ok),
+        "mean_within_2sigma": _coverage([r for r in ok
+                                         if np.isfinite(row_number(r.get("mean_sigma_nm")))]),
+        "mean_sigma_median_nm": finite_median(r.get("mean_sigma_nm") for r in ok),
         "candidates_spurious": sum(1 for r in ok if int(r.get("pops_candidates") or 0) > 0
                                    and r.get("pops_found") == r.get("pops_true")),
         "order_not_established": sum(1 for r in ok if truthy(r.get("order_flagged"))),

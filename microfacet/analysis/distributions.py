@@ -238,10 +238,12 @@ def _on_component(thickness_nm, mixture, mean_nm) -> np.ndarray:
     return nearest_component(mixture, thickness_nm) == k
 
 
-def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders | None = None):
+def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders | None = None,
+                     gain_shifts_nm=None):
     """The thickness mixture of the facets, and its judgement; each candidate population
-    with the side of the square field (µm) that would decide it. ``pooled``: the samples and
-    mixture :func:`pool_interference_orders` fitted to these facets, where it did."""
+    with the side of the square field (µm) that would decide it, each component's mean with
+    its uncertainty (:func:`mean_uncertainty`). ``pooled``: the samples and mixture
+    :func:`pool_interference_orders` fitted to these facets, where it did."""
     th = joint.thickness
     area = joint.area_px.astype(np.float64)
     ready = pooled is not None and pooled.joint is joint and pooled.fit is not None
@@ -252,6 +254,9 @@ def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders
     fit = pooled.fit if ready else _thickness_fit(joint, ok, regions, options, scene.seed)
     _describe_candidates(fit, regions, th, area, ok,
                          joint.facets.size * float(np.prod(scene.pixel_size_um)))
+    fit.info["mean_uncertainty"] = mean_uncertainty(
+        fit.mixture, regions, np.where(ok, th.thickness_nm, np.nan), area,
+        sd_floor_nm=options.thickness_sd_floor_nm, gain_shifts_nm=gain_shifts_nm)
     a_t = area[ok].sum()
     edge = float(area[ok & th.at_window_edge].sum() / a_t)
     amb = ok & ambiguous_order(th.delta_e_other_order - th.delta_e, options.ambiguous_order_de)
@@ -267,6 +272,90 @@ def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders
                      "order_ambiguous_fraction": other})
     return fit, thickness_judgement(roi, options, edge_fraction=edge,
                                     other_order_fraction=other)
+
+
+def mean_uncertainty(mixture, regions, thickness_nm, area, *, sd_floor_nm,
+                     gain_shifts_nm=None) -> list:
+    """Each component's mean with its 1-σ uncertainty, the systematic part included.
+
+    * **Sampling**: the component's SD over the independent regions it rests on, ``sd /
+      √n`` with ``n`` the area-weighted (Kish) count of the thickness regions that lie on
+      it (:func:`~.consistency.nearest_component`), and the regions' own errors. A
+      component whose SD sits at the floor (too few regions for a spread) takes the
+      area-weighted RMS SD of the others as its spread (``spread_measured`` false); none
+      measured: the sampling part is unknown (None). The regions' own errors add in
+      quadrature.
+    * **White balance**, shared by every facet: the area-weighted mean move of the
+      component's facets when the R gain, then the B gain, is off by its own 1σ
+      (``gain_shifts_nm``: :func:`~.joint.gain_thickness_shifts` at
+      :meth:`~.white_balance.WhiteBalance.log_gain_sigma`), the two in quadrature. None:
+      not known (no estimate of the gains, ``optics.white_balance = "off"``).
+
+    Parameters
+    ----------
+    mixture : ThicknessMixture
+    regions : Regions
+        The samples' thickness regions (:func:`~.sampling.thickness_regions`).
+    thickness_nm, area : ndarray, shape (S,)
+        Each facet's thickness (NaN: not a sample) and area (px).
+    sd_floor_nm : float
+        The mixture's SD floor (``fits.thickness_sd_floor_nm``): a component at it has no
+        measured spread.
+    gain_shifts_nm : ndarray, shape (2, S), optional
+
+    Returns
+    -------
+    list of dict
+        Per component (in the order of ``mixture.components``): ``sigma_nm`` (the parts in
+        quadrature; None where the sampling part is unknown), ``sampling_nm``,
+        ``white_balance_nm``, ``regions`` (the Kish count) and ``spread_measured``.
+
+    Examples
+    --------
+    >>> from microfacet.core.distributions import ThicknessMixture
+    >>> from microfacet.analysis.sampling import Regions
+    >>> m = ThicknessMixture([(0.5, 100.0, 2.0), (0.5, 140.0, 0.1)])
+    >>> r = Regions(np.arange(5), np.array([98.0, 100.0, 102.0, 99.5, 140.0]),
+    ...             np.full(5, 0.2), np.full(5, 100), 0.0)
+    >>> d = np.array([98.0, 100.0, 102.0, 99.5, 140.0])
+    >>> u = mean_uncertainty(m, r, d, np.full(5, 100), sd_floor_nm=0.1,
+    ...                      gain_shifts_nm=np.full((2, 5), 0.3))
+    >>> [(x["sampling_nm"], x["white_balance_nm"], x["regions"]) for x in u]
+    [(1.005, 0.4243, 4.0), (2.01, 0.4243, 1.0)]
+    """
+    comps = mixture.components
+    sd = np.array([c[2] for c in comps])
+    on_r = nearest_component(mixture, regions.value)
+    at_floor = sd <= sd_floor_nm * 1.0001
+    w = np.array([c[0] for c in comps])
+    spread = (float(np.sqrt(np.average(sd[~at_floor] ** 2, weights=w[~at_floor])))
+              if (~at_floor).any() else None)
+    on_f = nearest_component(mixture, thickness_nm)
+    out = []
+    for k in range(len(comps)):
+        a = regions.area[on_r == k].astype(np.float64)
+        n = float(a.sum() ** 2 / np.sum(a * a)) if a.size and a.sum() > 0 else 1.0
+        own = (float(np.sum((a * regions.sigma[on_r == k]) ** 2) / a.sum() ** 2)
+               if a.size and a.sum() > 0 else 0.0)
+        s_k = spread if at_floor[k] else float(sd[k])
+        samp = None if s_k is None else math.sqrt(s_k ** 2 / n + own)
+        wb = None
+        if gain_shifts_nm is not None:
+            f = (on_f == k) & np.all(np.isfinite(gain_shifts_nm), axis=0)
+            if f.any():
+                wb = float(np.hypot(*np.average(gain_shifts_nm[:, f], axis=1,
+                                                weights=area[f])))
+        parts = [samp, wb]
+        total = (None if samp is None
+                 else math.sqrt(sum(p ** 2 for p in parts if p is not None)))
+        out.append({"sigma_nm": _round(total), "sampling_nm": _round(samp),
+                    "white_balance_nm": _round(wb), "regions": round(n, 2),
+                    "spread_measured": not bool(at_floor[k])})
+    return out
+
+
+def _round(v):
+    return None if v is None else round(float(v), 4)
 
 
 def _describe_candidates(fit, regions, th, area, ok, field_um2) -> None:
@@ -369,7 +458,8 @@ def _dome_share(dome, pl, use, area) -> float | None:
 
 
 def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
-                            pooled: PooledOrders | None = None) -> Distributions:
+                            pooled: PooledOrders | None = None,
+                            gain_shifts_nm=None) -> Distributions:
     """Thickness mixture and NDF of a :class:`~.joint.JointResult`, with identification.
 
     Parameters
@@ -386,9 +476,13 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
         :func:`pool_interference_orders` on these facets: its thickness mixture is reused
         where it fitted one to them (the same samples and seed give the same fit), and its
         moves are recorded (``info["order_moves"]``).
+    gain_shifts_nm : ndarray, shape (2, S), optional
+        Each facet's thickness move for a 1σ error of the R and B gains
+        (:func:`~.joint.gain_thickness_shifts`): the white-balance part of the components'
+        mean uncertainty (``info["mean_uncertainty"]``, :func:`mean_uncertainty`).
     """
     cens_frac = _censored_fraction(joint)
-    tfit, tj = _joint_thickness(joint, roi, options, scene, cens_frac, pooled)
+    tfit, tj = _joint_thickness(joint, roi, options, scene, cens_frac, pooled, gain_shifts_nm)
     if tfit is not None and pooled is not None:
         tfit.info["order_moves"] = [m.to_json() for m in pooled.moves]
     nfit, nj = _joint_ndf(joint, model, cens_frac, scene.max_tilt_deg, options, scene.seed)

@@ -39,6 +39,7 @@ import numpy as np
 
 from ..core.pixels import pixel_area_side
 from .facet_thickness import (
+    FacetColours,
     FacetImage,
     FacetThickness,
     facet_thickness,
@@ -50,10 +51,11 @@ from .roi import EXPOSURE_DISTINCT
 from .sampling import weighted_median
 from .segmentation import segment_facets
 from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
+from .white_balance import rebalanced_lab
 
 __all__ = ["ExposureReadings", "FacetGeometry", "JointResult", "Segmented", "bootstrap_labels",
-           "facet_geometry", "facet_labels", "facets_at_exposure_readings",
-           "facets_in_other_order", "joint_pixel_tilts"]
+           "facet_colours", "facet_geometry", "facet_labels", "facets_at_exposure_readings",
+           "facets_in_other_order", "gain_thickness_shifts", "joint_pixel_tilts"]
 
 log = logging.getLogger(__name__)
 
@@ -359,6 +361,55 @@ def facets_in_other_order(joint: JointResult, geometry: FacetGeometry, colour, r
                           for f in dataclasses.fields(FacetThickness)))
     return dataclasses.replace(joint, thickness=ft, colour_sigma_de=_colour_sigma(
         image, ft, geometry.tilt_deg, model, colour.noise_de))
+
+
+def facet_colours(geometry: FacetGeometry, colour, roi, options: JointOptions) -> FacetColours:
+    """The colour evidence of ``geometry``'s facets
+    (:meth:`~.facet_thickness.FacetImage.colours`)."""
+    return _facet_image(geometry, colour, roi, options).colours()
+
+
+def gain_thickness_shifts(colours: FacetColours, thickness_nm, tilt_deg, model,
+                          options: JointOptions, *, log_gain_rb, illuminant) -> np.ndarray:
+    """Per facet, how far its thickness moves (nm) when its colours are balanced with the R
+    gain, then the B gain, larger by ``exp(log_gain_rb)``
+    (:func:`~.white_balance.rebalanced_lab`).
+
+    Each facet is solved again about ``thickness_nm`` (in its own order, ±
+    ``options.order_window_fraction`` periods) at ``tilt_deg``, as is and moved, both at
+    ``options.exposure_thickness_step_nm``, so that the difference carries no search step.
+
+    Parameters
+    ----------
+    colours : FacetColours
+        The facets' mean Lab (:func:`facet_colours`).
+    thickness_nm, tilt_deg : ndarray, shape (S,)
+        Each facet's thickness (NaN: none) and the tilt it was solved at.
+    model : FilmColourModel
+        At the facets' exposure.
+    options : JointOptions
+    log_gain_rb : (float, float)
+        The R and B moves of the log gains.
+    illuminant : str
+
+    Returns
+    -------
+    ndarray, shape (2, S)
+        The R and B moves (nm); NaN where a facet has no thickness.
+    """
+    cols = dataclasses.replace(colours, roi_thickness_nm=np.asarray(thickness_nm, np.float64))
+
+    def solve(lab):
+        return facet_thickness(dataclasses.replace(cols, mean_lab=lab), tilt_deg, model,
+                               options, thorough=False).thickness_nm
+
+    base = solve(cols.mean_lab)
+    out = np.full((2, base.size), np.nan)
+    for c in (0, 1):
+        step = np.zeros(2)
+        step[c] = log_gain_rb[c]
+        out[c] = solve(rebalanced_lab(cols.mean_lab, step, illuminant=illuminant)) - base
+    return out
 
 
 @dataclass(frozen=True)

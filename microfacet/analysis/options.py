@@ -275,9 +275,11 @@ class OpticsOptions(Options):
         None, help="scale from the model's linear sRGB to the image's (stack.json's, else "
                    "estimated)", kind=float, low=0, low_exclusive=True, cli=True, metavar="E")
     white_balance: str = option(
-        "off", help="the camera's white balance without a reference: `off` takes the image "
-                    "as balanced; `report` also estimates the R and B gains from the film's "
-                    "colours into summary.json; `apply` corrects each gain the estimate calls "
+        "report", help="the camera's white balance without a reference: `off` takes the "
+                    "image as balanced; `report` (the default) also estimates the R and B "
+                    "gains from the film's colours into summary.json, warns where they look "
+                    "off and carries their uncertainty into the thickness means'; `apply` "
+                    "corrects each gain the estimate calls "
                     "determined (experimental: not yet within 2 percent on the sweep, "
                     "docs/accuracy.md); a reference (`white_reference`, stack.json's "
                     "white_balance or white_reference) is always applied",

@@ -51,10 +51,12 @@ from .identification import analysis_warnings, mean_plane_tilt_deg, self_check_j
 from .iso25178 import areal_parameters
 from .joint import (
     bootstrap_labels,
+    facet_colours,
     facet_geometry,
     facet_labels,
     facets_at_exposure_readings,
     facets_in_other_order,
+    gain_thickness_shifts,
     joint_pixel_tilts,
 )
 from .options import AnalysisOptions, Scene, scene_of
@@ -307,8 +309,10 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         with timer.stage(Stage.TILT):
             pixels = joint.pixels = joint_pixel_tilts(joint, colour, model, grid, options.tilt)
         with timer.stage(Stage.MIXTURES):
-            dist = fit_joint_distributions(joint, roi, model, scene, options.fits,
-                                           pooled=pooled)
+            dist = fit_joint_distributions(
+                joint, roi, model, scene, options.fits, pooled=pooled,
+                gain_shifts_nm=_gain_shifts(joint, geometry, colour, roi, model, options,
+                                            scene, wb))
             dist.exposure_readings = readings
         with timer.stage(Stage.SELF_CHECK):
             check = _self_check(st, focus, joint, scene, options,
@@ -329,6 +333,18 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
     return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
                           dist, dict(timer.timings), check, wb,
                           flat if options.mode == "joint" else flat_ref)
+
+
+def _gain_shifts(joint, geometry, colour, roi, model, options, scene, wb):
+    """Each facet's thickness move for a 1σ error of the R and B gains
+    (:func:`~.joint.gain_thickness_shifts` at :meth:`~.white_balance.WhiteBalance.log_gain_sigma`);
+    None where the gains' error is not known."""
+    sigma = wb.log_gain_sigma()
+    if sigma is None:
+        return None
+    return gain_thickness_shifts(facet_colours(geometry, colour, roi, options.joint),
+                                 joint.thickness.thickness_nm, geometry.tilt_deg, model,
+                                 options.joint, log_gain_rb=sigma, illuminant=scene.illuminant)
 
 
 def _order_moves(joint, geometry, colour, roi, model, options, scene):

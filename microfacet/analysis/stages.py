@@ -58,7 +58,8 @@ class Stage(enum.Enum):
                          "analysis.distributions.fit_joint_distributions / "
                          "fit_seed_distributions",
                          "`Distributions`: thickness mixture and NDF, each judged identified "
-                         "or not")
+                         "or not; each thickness mean's 1σ with the white balance's part "
+                         "(`analysis.joint.gain_thickness_shifts`)")
     SELF_CHECK = StageInfo("self_check", "self-check", 0.5,
                            "analysis.self_check.self_check_ndf",
                            "`SelfCheck`: recovered/injected RMS slope of known facet slopes "

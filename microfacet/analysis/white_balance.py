@@ -35,8 +35,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..colour.colorimetry import xyz_to_lab
-from ..colour.srgb import image_white_xyz, linear_srgb_to_xyz, model_xyz_to_linear_srgb
+from ..colour.colorimetry import lab_to_xyz, xyz_to_lab
+from ..colour.srgb import (
+    image_white_xyz,
+    linear_srgb_to_xyz,
+    model_xyz_to_linear_srgb,
+    xyz_to_linear_srgb,
+)
 from ..colour.transfer import srgb_decode
 from ..core.errors import InputError
 from ..core.lazy import load
@@ -44,7 +49,8 @@ from .search import parabola
 
 ndimage = load("scipy.ndimage")
 
-__all__ = ["WhiteBalance", "balanced_lab", "estimate_white_balance", "reference_gains"]
+__all__ = ["WhiteBalance", "balanced_lab", "estimate_white_balance", "rebalanced_lab",
+           "reference_gains"]
 
 #: The gains searched: log gain in ±LOG_RANGE (about 0.82-1.22), a coarse grid then a fine
 #: one about its best.
@@ -61,6 +67,9 @@ PIXEL_FREEDOM_NM = 3.0
 #: gains are determined.
 BOOTSTRAP = 64
 DETERMINED_LOG_SD = 0.01
+#: 1σ of a reference's log gains (a white standard's or stack.json's): the neutrality of the
+#: standard and the light's drift between it and the stack, taken as 1 % (not measured here).
+REFERENCE_LOG_SD = 0.01
 
 
 @dataclass(frozen=True)
@@ -120,6 +129,34 @@ class WhiteBalance:
             return self
         return dataclasses.replace(self, determined=(False, False), withdrawn=reason)
 
+    def log_gain_sigma(self) -> tuple | None:
+        """1σ of the log R and B gains the colours were corrected with, as far as the
+        scene tells: a reference's :data:`REFERENCE_LOG_SD`; a gain taken from the estimate,
+        the estimate's spread σ; a gain left at the image's own (1, the image taken as
+        balanced), the RMS distance of the truth from it given the estimate,
+        √(ln² g + σ²) (with σ = :data:`LOG_RANGE` where the estimate has none: its best
+        lies at the search's edge). None without an estimate (``white_balance = "off"``).
+
+        >>> wb = WhiteBalance(estimate_rgb=(1.03, 1.0, 0.96), estimate_sigma=(0.04, 0.01),
+        ...                   determined=(False, True))
+        >>> [round(v, 4) for v in wb.log_gain_sigma()]
+        [0.0497, 0.042]
+        >>> WhiteBalance(source="stack.json").log_gain_sigma()
+        (0.01, 0.01)
+        """
+        if self.applied and self.source != "estimated":
+            return (REFERENCE_LOG_SD, REFERENCE_LOG_SD)
+        if self.estimate_rgb is None:
+            return None
+        out = []
+        for g, sd, used in zip((self.estimate_rgb[0], self.estimate_rgb[2]),
+                               self.estimate_sigma or (None, None),
+                               self.determined or (False, False)):
+            sd = sd if sd is not None and math.isfinite(sd) else LOG_RANGE
+            taken = self.source == "estimated" and used
+            out.append(float(sd if taken else math.hypot(math.log(g), sd)))
+        return tuple(out)
+
     def to_dict(self) -> dict:
         """summary.json's ``white_balance``."""
         return {"gains_rgb": [float(g) for g in self.gains_rgb], "source": self.source,
@@ -148,6 +185,24 @@ def balanced_lab(encoded, gains_rgb, *, illuminant, linear=False) -> np.ndarray:
     lin = (a if linear else srgb_decode(a)) / np.asarray(gains_rgb, np.float32)
     xyz = linear_srgb_to_xyz(lin, illuminant=illuminant)
     return xyz_to_lab(xyz, white=image_white_xyz(illuminant=illuminant)).astype(np.float32)
+
+
+def rebalanced_lab(lab, log_gain_rb, *, illuminant) -> np.ndarray:
+    """CIELAB of colours balanced with R and B gains larger by ``exp(log_gain_rb)``:
+    ``lab`` (shape (..., 3), as :func:`balanced_lab` gives it) back to linear sRGB, R and B
+    divided by those factors, and to Lab again.
+
+    >>> lab = balanced_lab(np.array([[0.6, 0.5, 0.4]]), (1.0, 1.0, 1.0), illuminant="D65")
+    >>> twice = balanced_lab(np.array([[0.6, 0.5, 0.4]]), (1.1, 1.0, 0.9), illuminant="D65")
+    >>> bool(np.allclose(rebalanced_lab(lab, (np.log(1.1), np.log(0.9)), illuminant="D65"),
+    ...                  twice, atol=1e-3))
+    True
+    """
+    white = image_white_xyz(illuminant=illuminant)
+    rgb = xyz_to_linear_srgb(lab_to_xyz(np.asarray(lab, np.float64), white=white),
+                             illuminant=illuminant)
+    rgb = rgb * np.exp(-np.array([log_gain_rb[0], 0.0, log_gain_rb[1]]))
+    return xyz_to_lab(linear_srgb_to_xyz(rgb, illuminant=illuminant), white=white)
 
 
 def reference_gains(encoded, *, where: str, linear: bool = False) -> tuple:

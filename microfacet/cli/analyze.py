@@ -72,10 +72,16 @@ def json_summary(out: Path) -> dict:
             **{k: res.get(k) for k in JSON_KEYS}}
 
 
+def _plus_minus(u) -> str:
+    """`` ± σ`` of a component's mean (``mean_uncertainty``), or nothing where unknown."""
+    return "" if not u or u.get("sigma_nm") is None else f" ± {u['sigma_nm']:.1f}"
+
+
 def _text_summary(result, out: Path, elapsed_s: float) -> str:
     dist = result.distributions
     fit = dist.thickness
-    comps = ", ".join(f"{m:.1f} nm ({100 * w:.0f}%)" for w, m, _ in fit.mixture.components) \
+    comps = ", ".join(f"{m:.1f}{_plus_minus(u)} nm ({100 * w:.0f}%)" for (w, m, _), u in zip(
+        fit.mixture.components, fit.info.get("mean_uncertainty") or [None] * 99)) \
         if fit else "none"
     lobes = ", ".join(f"{s:.1f}° ({100 * w:.0f}%)" for w, s in dist.ndf.mixture.components) \
         if dist.ndf else "none"

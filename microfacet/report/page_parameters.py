@@ -34,7 +34,9 @@ def parameter_tables(results_dir) -> dict:
     Returns
     -------
     dict
-        ``"thickness"`` (header ``component, weight, mean (nm), SD (nm)``), ``"ndf"``
+        ``"thickness"`` (header ``component, weight, mean (nm), mean 1σ (nm), SD (nm)``:
+        the mean's uncertainty with its white-balance part, summary.json
+        ``thickness.mixture.mean_uncertainty``, "—" where unknown), ``"ndf"``
         (``lobe, weight, slope SD (°), tan(slope SD), Beckmann α``), ``"analysis"`` and
         ``"run"`` (``quantity, value`` pairs: versions, missing files), ``"iso25178"``
         (``parameter, value``: Sq, Sa, Sdq, Sdr by their ISO 25178-2 names, the reference
@@ -52,15 +54,19 @@ def parameter_tables(results_dir) -> dict:
     Examples
     --------
     >>> parameter_tables("results/sample1")["thickness"]["rows"][0]  # doctest: +SKIP
-    ['1', '0.085', '108.0', '1.28']
+    ['1', '0.085', '108.0', '0.95', '1.28']
     """
     ctx = results_dir if isinstance(results_dir, Context) else Context.open(results_dir)
     out = {}
     rows = []
     if ctx.thick is not None:
+        unc = ctx.res.get("thickness", "mixture", "mean_uncertainty") or []
         for i, (w, m, s) in enumerate(ctx.thick.components):
-            rows.append([f"{i + 1}", f"{w:.3f}", f"{m:.1f}", f"{s:.2f}"])
-    out["thickness"] = {"header": ["component", "weight", "mean (nm)", "SD (nm)"],
+            u = unc[i] if i < len(unc) else {}
+            rows.append([f"{i + 1}", f"{w:.3f}", f"{m:.1f}", fmt(u.get("sigma_nm"), ".2f"),
+                         f"{s:.2f}"])
+    out["thickness"] = {"header": ["component", "weight", "mean (nm)", "mean 1σ (nm)",
+                                   "SD (nm)"],
                         "rows": rows, "note": _fit_note(ctx, "thickness", ctx.thick)}
     rows = []
     if ctx.ndf is not None:
@@ -91,7 +97,7 @@ def draw(pg, ctx):
     y = pg.top - 0.05
     for key, title, widths in (
             ("thickness", "oxide thickness: Gaussian mixture components",
-             [0.2, 0.2, 0.3, 0.3]),
+             [0.17, 0.16, 0.22, 0.25, 0.2]),
             ("ndf", "facet normals: zero-mean Gaussian-slope (Beckmann) lobes",
              [0.12, 0.17, 0.27, 0.2, 0.24])):
         t = tables[key]

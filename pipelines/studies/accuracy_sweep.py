@@ -278,6 +278,7 @@ def score_scene(results: Path, truth: Path, res=None) -> dict:
         facet_tilts,
         height_coverage,
         lobe_rms_ratio,
+        mean_coverage,
         ndf_identified,
         ndf_w1_deg,
         past_limit_fraction,
@@ -297,7 +298,15 @@ def score_scene(results: Path, truth: Path, res=None) -> dict:
     used = ~mask if mask is not None else np.ones(est.shape, bool)
     floor = colour_floor_de(res.image("all_in_focus"), truth_img, used)
     de = res.get("delta_e", "mean")
+    cov = mean_coverage(res.get("thickness", "mixture", "components") or [],
+                        res.get("thickness", "mixture", "mean_uncertainty"),
+                        meta["populations"])
     return {"region_mae_nm": reg["mae_nm"], "region_median_ae_nm": reg["median_ae_nm"],
+            "mean_pairs": cov["pairs"], "mean_within_2sigma": cov["within_2sigma"],
+            "mean_abs_error_nm": (float(np.median(np.abs(cov["errors_nm"])))
+                                  if cov["pairs"] else math.nan),
+            "mean_sigma_nm": (float(np.median([s for s in cov["sigmas_nm"] if s is not None]))
+                              if any(s is not None for s in cov["sigmas_nm"]) else math.nan),
             "regions_scored": reg["n_scored"], "regions_true": reg["n_regions"],
             "pops_true": true_population_count(meta["populations"]),
             "pops_found": len(thick.components) if thick else 0,
@@ -423,7 +432,8 @@ COLUMNS = ["name", "mode", "seed", "world", "relief_file", "status", "reason", "
            "thickness_means_nm", "thickness_span_nm", "lobes_deg", "region_mae_nm",
            "region_median_ae_nm", "regions_scored", "regions_true", "pops_found", "pops_distinct",
            "pops_candidates",
-           "pops_true",
+           "pops_true", "mean_pairs", "mean_within_2sigma", "mean_abs_error_nm",
+           "mean_sigma_nm",
            "lobes_found", "lobes_true", "identified", "ndf_w1_deg", "lobe_rms_ratio",
            "censored_fraction", "past_limit_fraction", "height_coverage", "de_mean", "de_floor",
            "de_excess", "masked_fraction", "order_wrong", "order_flagged", "exposure_error",
@@ -462,7 +472,8 @@ def summary_table(summaries) -> str:
         for s in summaries.values():
             v = s[key]
             txt = ("n/a" if not np.isfinite(v) else f"{100 * v:.0f} %" if "%" in target
-                   or key.endswith(("_ok", "_all", "_textured", "_candidates", "_distinct"))
+                   or key.endswith(("_ok", "_all", "_textured", "_candidates", "_distinct",
+                                    "_2sigma"))
                    else str(v) if isinstance(v, int) else fmt(v))
             if ok is not None and np.isfinite(v):
                 txt += " ✓" if ok(v) else " ✗"

@@ -305,3 +305,59 @@ def test_an_order_move_records_what_moved_and_is_never_undone():
     assert moves[0].area_share == pytest.approx(went.sum() / up.sum())
     t = after.thickness.thickness_nm
     assert np.all(np.abs(t[went] - 52.0) < 5.0) and np.all(t[keep] > 150)
+
+
+# ------------------------------------------------------------------ mean_uncertainty
+
+
+def _mean_unc(sd=(2.0, 3.0), region_values=(99.0, 101.0, 98.0, 102.0, 139.0, 141.0),
+              areas=None, sigma=0.0, shifts=None, floor=0.1):
+    from microfacet.analysis.distributions import mean_uncertainty
+    from microfacet.analysis.sampling import Regions
+    from microfacet.core.distributions import ThicknessMixture
+
+    v = np.asarray(region_values, float)
+    a = np.full(v.size, 100.0) if areas is None else np.asarray(areas, float)
+    mix = ThicknessMixture([(0.6, 100.0, sd[0]), (0.4, 140.0, sd[1])])
+    regions = Regions(np.arange(v.size), v, np.full(v.size, sigma), a, 0.0)
+    return mean_uncertainty(mix, regions, v, a, sd_floor_nm=floor, gain_shifts_nm=shifts)
+
+
+def test_a_components_mean_is_uncertain_by_its_spread_over_its_regions():
+    """Equal regions: sd/√n; unequal areas count as their Kish number; the regions' own
+    errors add in quadrature (area-weighted mean of independent errors)."""
+    u = _mean_unc()
+    assert [x["regions"] for x in u] == [4.0, 2.0]
+    assert [x["sampling_nm"] for x in u] == pytest.approx([2.0 / 2.0, 3.0 / np.sqrt(2.0)],
+                                                          abs=1e-4)
+    u = _mean_unc(areas=[300, 100, 100, 100, 100, 100])
+    n = 600.0 ** 2 / (300 ** 2 + 3 * 100 ** 2)
+    assert u[0]["regions"] == pytest.approx(n, abs=0.01)
+    assert u[0]["sampling_nm"] == pytest.approx(2.0 / np.sqrt(n), abs=1e-3)
+    u = _mean_unc(sigma=1.0)                                  # 4 equal regions ± 1 nm each
+    assert u[0]["sampling_nm"] == pytest.approx(np.sqrt(1.0 + 1.0 / 4.0), abs=1e-4)
+    assert u[0]["white_balance_nm"] is None and u[0]["sigma_nm"] == u[0]["sampling_nm"]
+
+
+def test_a_component_without_a_measured_spread_takes_the_others():
+    """At the SD floor (one region) the spread of the measured components stands in, and
+    is said not measured; with none measured the sampling part is unknown."""
+    u = _mean_unc(sd=(2.0, 0.1), region_values=(99.0, 101.0, 98.0, 102.0, 140.0))
+    assert [x["spread_measured"] for x in u] == [True, False]
+    assert u[1]["sampling_nm"] == pytest.approx(2.0, abs=1e-4)      # one region, SD 2
+    u = _mean_unc(sd=(0.1, 0.1), region_values=(100.0, 140.0))
+    assert [x["sampling_nm"] for x in u] == [None, None]
+    assert [x["sigma_nm"] for x in u] == [None, None]
+
+
+def test_the_white_balance_part_is_the_components_facets_move():
+    """The area-weighted mean move of each component's facets, R and B in quadrature;
+    facets off every component do not count."""
+    v = [99.0, 101.0, 98.0, 102.0, 139.0, 141.0, 500.0]
+    shifts = np.array([[0.2, 0.4, 0.2, 0.4, -1.0, -1.0, 50.0],
+                       [0.0, 0.0, 0.0, 0.0, 0.5, 0.5, 50.0]])
+    u = _mean_unc(region_values=v, areas=[100, 100, 100, 100, 100, 300, 100], shifts=shifts)
+    assert u[0]["white_balance_nm"] == pytest.approx(0.3, abs=1e-4)
+    assert u[1]["white_balance_nm"] == pytest.approx(np.hypot(1.0, 0.5), abs=1e-4)
+    assert u[1]["sigma_nm"] == pytest.approx(np.hypot(u[1]["sampling_nm"], np.hypot(1.0, 0.5)),
+                                             abs=1e-3)

@@ -240,3 +240,51 @@ def test_facets_solved_again_in_another_order_keep_the_one_that_fits_far_better(
     kept = np.abs(up.thickness_nm[half] - d[half]) <= 2.0
     assert kept.mean() > 0.75                                 # measured: 0.84
     assert np.all(np.isfinite(up.thickness_nm[half]))
+
+
+@pytest.mark.slow
+def test_gain_shifts_predict_the_move_of_a_camera_balanced_otherwise(tmp_path):
+    """joint.gain_thickness_shifts against the renderer's white balance: a stack whose camera
+    multiplies R and B by 1.08 and 0.93, analysed with those gains given (stack.json), has
+    its facets solved again from the same pixels balanced with gains of 1; each facet moves
+    as the shifts at log gains -ln 1.08 and -ln 0.93 (R and B in turn, added) predict."""
+    from microfacet.analysis.facet_thickness import facet_thickness
+    from microfacet.analysis.joint import FacetGeometry, facet_colours, gain_thickness_shifts
+    from microfacet.analysis.white_balance import balanced_lab
+
+    gains = (1.08, 1.0, 0.93)
+    path = tmp_path / "wb"
+    generate_stack(path, preset("nd", height_px=96, width_px=96, n_slices=N_SLICES, seed=4,
+                                white_balance_gains=gains))
+    meta = json.loads((path / "stack.json").read_text())
+    meta["white_balance"] = list(gains)
+    (path / "stack.json").write_text(json.dumps(meta))
+    r = analyse_stack(path, AnalysisOptions(mode="joint").replace(joint={"flat_field": "off"}))
+    assert r.white_balance.source == "stack.json"
+    j, opts, il = r.joint, r.options.joint, r.scene.illuminant
+    g = FacetGeometry(j.facets, j.planes, j.evidence_planes, j.area_px,
+                      facet_edge_distance(j.facets), j.prior_deg, j.prior_sigma_deg,
+                      j.dome_ms_slope)
+    d = j.thickness.thickness_nm
+    cols = facet_colours(g, r.colour, r.roi, opts)
+    plain = dataclasses.replace(r.colour, lab=balanced_lab(r.colour.encoded, (1.0, 1.0, 1.0),
+                                                           illuminant=il))
+
+    def solved(c):                       # about d, at the step the shifts are solved at
+        return facet_thickness(dataclasses.replace(c, roi_thickness_nm=d), j.prior_deg,
+                               r.model, opts, thorough=False).thickness_nm
+
+    actual = solved(facet_colours(g, plain, r.roi, opts)) - solved(cols)
+    sh = gain_thickness_shifts(cols, d, j.prior_deg, r.model, opts,
+                               log_gain_rb=(-np.log(gains[0]), -np.log(gains[2])),
+                               illuminant=il)
+    zero = gain_thickness_shifts(cols, d, j.prior_deg, r.model, opts, log_gain_rb=(0.0, 0.0),
+                                 illuminant=il)
+    assert np.nanmax(np.abs(zero)) < 1e-3
+    predicted = sh[0] + sh[1]
+    ok = np.isfinite(actual) & np.isfinite(predicted) & (j.area_px > 20)
+    scale = np.median(np.abs(actual[ok]))
+    assert ok.sum() > 50 and scale > 0.2                      # the gains do move them
+    err = np.abs(predicted[ok] - actual[ok])
+    assert np.median(err) < 0.1 * scale                       # measured: 0.03 x
+    assert np.percentile(err, 90) < 0.3 * scale               # measured: 0.18 x

@@ -119,8 +119,48 @@ def test_stack_json_gains_are_checked_and_used(tmp_path):
     (tmp_path / "s" / "stack.json").write_text(json.dumps({**meta,
                                                            "white_balance": [2.24, 2.0, 1.8]}))
     st = read_stack(tmp_path / "s")
-    wb = choose_white_balance(st, None, None, None, None, OpticsOptions(), illuminant="D65")
+    wb = choose_white_balance(st, None, None, None, None, OpticsOptions(white_balance="off"),
+                              illuminant="D65")
     assert wb.source == "stack.json" and wb.gains_rgb == pytest.approx(GAINS)
     (tmp_path / "s" / "stack.json").write_text(json.dumps({**meta, "white_balance": [1, 0]}))
     with pytest.raises(InputError, match="key 'white_balance': must be a list of 3 numbers"):
         read_stack(tmp_path / "s")
+
+
+@pytest.mark.parametrize("wb, expected", [
+    # a reference's gains: its assumed 1 %
+    (WhiteBalance(gains_rgb=GAINS, source="stack.json"), (0.01, 0.01)),
+    (WhiteBalance(gains_rgb=GAINS, source="white reference w.png",
+                  estimate_rgb=(1.3, 1.0, 0.7), estimate_sigma=(0.2, 0.2)), (0.01, 0.01)),
+    # not applied: the truth's RMS distance from gains of 1, given the estimate
+    (WhiteBalance(estimate_rgb=(1.1, 1.0, 0.95), estimate_sigma=(0.02, 0.03),
+                  determined=(False, False)),
+     (float(np.hypot(np.log(1.1), 0.02)), float(np.hypot(np.log(0.95), 0.03)))),
+    # applied where determined: its spread; the other gain left at 1
+    (WhiteBalance(gains_rgb=(1.1, 1.0, 1.0), source="estimated", estimate_rgb=(1.1, 1.0, 0.95),
+                  estimate_sigma=(0.005, 0.03), determined=(True, False)),
+     (0.005, float(np.hypot(np.log(0.95), 0.03)))),
+    # an estimate at the search's edge has no spread: the search's half-range stands in
+    (WhiteBalance(estimate_rgb=(1.0, 1.0, 1.0), estimate_sigma=(None, 0.01),
+                  determined=(False, False)), (0.2, 0.01)),
+    (WhiteBalance(), None),                                   # white_balance = "off"
+])
+def test_the_gains_uncertainty_the_thickness_means_carry(wb, expected):
+    got = wb.log_gain_sigma()
+    assert got == (None if expected is None else pytest.approx(expected, abs=1e-12))
+
+
+def test_rebalanced_colours_are_those_balanced_with_the_larger_gains():
+    """rebalanced_lab moves Lab the way balancing the encoded image with gains larger by
+    exp(δ) does, for colours across the gamut and both signs of δ."""
+    from microfacet.analysis.white_balance import rebalanced_lab
+
+    rng = np.random.default_rng(3)
+    img = rng.uniform(0.05, 0.9, size=(200, 3)).astype(np.float32)
+    for d_r, d_b in ((0.05, 0.0), (0.0, -0.08), (-0.1, 0.12)):
+        want = balanced_lab(img, (np.exp(d_r), 1.0, np.exp(d_b)), illuminant="D65")
+        got = rebalanced_lab(balanced_lab(img, (1.0, 1.0, 1.0), illuminant="D65"),
+                             (d_r, d_b), illuminant="D65")
+        np.testing.assert_allclose(got, want, atol=2e-3)
+        moved = np.abs(got - balanced_lab(img, (1.0, 1.0, 1.0), illuminant="D65")).max()
+        assert moved > 0.5                                    # the gains do move the colours

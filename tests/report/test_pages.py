@@ -56,9 +56,11 @@ def test_parameter_table_matches_summary(results, report, pdf_text):
     t = parameter_tables(results)
     comps = summary["thickness"]["mixture"]["components"]
     assert len(comps) >= 2
+    unc = summary["thickness"]["mixture"]["mean_uncertainty"]
+    assert len(unc) == len(comps) and all(u["sigma_nm"] > 0 for u in unc)
     assert t["thickness"]["rows"] == [
-        [str(i + 1), f"{c['weight']:.3f}", f"{c['mean_nm']:.1f}", f"{c['sd_nm']:.2f}"]
-        for i, c in enumerate(comps)]
+        [str(i + 1), f"{c['weight']:.3f}", f"{c['mean_nm']:.1f}", f"{u['sigma_nm']:.2f}",
+         f"{c['sd_nm']:.2f}"] for i, (c, u) in enumerate(zip(comps, unc))]
     lobes = summary["ndf"]["mixture"]["components"]
     assert [r[:3] for r in t["ndf"]["rows"]] == [
         [str(i + 1), f"{c['weight']:.3f}", f"{c['sd_deg']:.2f}"] for i, c in enumerate(lobes)]
