@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.lazy import load
 from .consistency import (
     ALIAS_SD,
     MOVE_MIN_SHARE,
@@ -59,9 +60,13 @@ from .ndf_fit import fit_ndf_mixture, width_relative_error
 from .options import FitOptions
 from .planes import deconvolved_rms_slope
 from .sampling import thickness_regions
+from .segmentation import neighbour_pairs
 
 __all__ = ["Distributions", "PooledOrders", "fit_joint_distributions",
            "fit_seed_distributions", "pool_interference_orders"]
+
+sparse = load("scipy.sparse")
+csgraph = load("scipy.sparse.csgraph")
 
 #: A facet more than this fraction of whose pixels are dark is censored (tilted past the
 #: acceptance): it carries neither a thickness nor a measured tilt.
@@ -256,7 +261,8 @@ def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders
                          joint.facets.size * float(np.prod(scene.pixel_size_um)))
     fit.info["mean_uncertainty"] = mean_uncertainty(
         fit.mixture, regions, np.where(ok, th.thickness_nm, np.nan), area,
-        sd_floor_nm=options.thickness_sd_floor_nm, gain_shifts_nm=gain_shifts_nm)
+        touching=touching_regions(joint.facets, regions.patch_region),
+        gain_shifts_nm=gain_shifts_nm)
     a_t = area[ok].sum()
     edge = float(area[ok & th.at_window_edge].sum() / a_t)
     amb = ok & ambiguous_order(th.delta_e_other_order - th.delta_e, options.ambiguous_order_de)
@@ -274,22 +280,30 @@ def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders
                                     other_order_fraction=other)
 
 
-def mean_uncertainty(mixture, regions, thickness_nm, area, *, sd_floor_nm,
+#: Fewest separate (not touching) groups of regions (:func:`mean_uncertainty`) over which a
+#: component's SD measures its population's spread.
+MIN_SPREAD_GROUPS = 2
+
+
+def mean_uncertainty(mixture, regions, thickness_nm, area, *, touching=None,
                      gain_shifts_nm=None) -> list:
     """Each component's mean with its 1-σ uncertainty, the systematic part included.
 
-    * **Sampling**: the component's SD over the independent regions it rests on, ``sd /
-      √n`` with ``n`` the area-weighted (Kish) count of the thickness regions that lie on
-      it (:func:`~.consistency.nearest_component`), and the regions' own errors. A
-      component whose SD sits at the floor (too few regions for a spread) takes the
-      area-weighted RMS SD of the others as its spread (``spread_measured`` false); none
-      measured: the sampling part is unknown (None). The regions' own errors add in
-      quadrature.
+    * **Sampling**: the component's SD over the regions it rests on, ``sd / √n``, ``n`` the
+      area-weighted (Kish) count of the thickness regions on it
+      (:func:`~.sampling.thickness_regions`, whose count errs high: a true region split
+      where noise steps between patches counts more than once; on the generalization
+      sweep 2σ still covers 92–95 % of the true means, docs/accuracy.md). Its SD measures
+      the population's spread only over separate regions: where the regions on it form
+      fewer than :data:`MIN_SPREAD_GROUPS` groups that do not touch (``touching``: one
+      region, or pieces of one), the area-weighted RMS SD of the measured components
+      stands in (``spread_measured`` false); none measured, the sampling part is unknown
+      (None). The regions' own errors add in quadrature.
     * **White balance**, shared by every facet: the area-weighted mean move of the
       component's facets when the R gain, then the B gain, is off by its own 1σ
       (``gain_shifts_nm``: :func:`~.joint.gain_thickness_shifts` at
       :meth:`~.white_balance.WhiteBalance.log_gain_sigma`), the two in quadrature. None:
-      not known (no estimate of the gains, ``optics.white_balance = "off"``).
+      not known (no estimate of the gains).
 
     Parameters
     ----------
@@ -298,9 +312,8 @@ def mean_uncertainty(mixture, regions, thickness_nm, area, *, sd_floor_nm,
         The samples' thickness regions (:func:`~.sampling.thickness_regions`).
     thickness_nm, area : ndarray, shape (S,)
         Each facet's thickness (NaN: not a sample) and area (px).
-    sd_floor_nm : float
-        The mixture's SD floor (``fits.thickness_sd_floor_nm``): a component at it has no
-        measured spread.
+    touching : ndarray of int, shape (P, 2), optional
+        Pairs of regions (indices into ``regions``) that touch in the image.
     gain_shifts_nm : ndarray, shape (2, S), optional
 
     Returns
@@ -308,50 +321,76 @@ def mean_uncertainty(mixture, regions, thickness_nm, area, *, sd_floor_nm,
     list of dict
         Per component (in the order of ``mixture.components``): ``sigma_nm`` (the parts in
         quadrature; None where the sampling part is unknown), ``sampling_nm``,
-        ``white_balance_nm``, ``regions`` (the Kish count) and ``spread_measured``.
+        ``white_balance_nm``, ``regions`` (the Kish count of its regions; 0: none lies on
+        it), ``groups`` (separate groups of them) and ``spread_measured``.
 
     Examples
     --------
     >>> from microfacet.core.distributions import ThicknessMixture
     >>> from microfacet.analysis.sampling import Regions
     >>> m = ThicknessMixture([(0.5, 100.0, 2.0), (0.5, 140.0, 0.1)])
-    >>> r = Regions(np.arange(5), np.array([98.0, 100.0, 102.0, 99.5, 140.0]),
-    ...             np.full(5, 0.2), np.full(5, 100), 0.0)
     >>> d = np.array([98.0, 100.0, 102.0, 99.5, 140.0])
-    >>> u = mean_uncertainty(m, r, d, np.full(5, 100), sd_floor_nm=0.1,
-    ...                      gain_shifts_nm=np.full((2, 5), 0.3))
+    >>> r = Regions(np.arange(5), d, np.full(5, 0.2), np.full(5, 100), 0.0)
+    >>> u = mean_uncertainty(m, r, d, np.full(5, 100), gain_shifts_nm=np.full((2, 5), 0.3))
     >>> [(x["sampling_nm"], x["white_balance_nm"], x["regions"]) for x in u]
     [(1.005, 0.4243, 4.0), (2.01, 0.4243, 1.0)]
+    >>> u = mean_uncertainty(m, r, d, np.full(5, 100), touching=np.array([[0, 1], [1, 2],
+    ...                                                                     [2, 3]]))
+    >>> u[0]["groups"], u[0]["spread_measured"], u[0]["sampling_nm"]   # pieces of one
+    (1, False, None)
     """
     comps = mixture.components
     sd = np.array([c[2] for c in comps])
-    on_r = nearest_component(mixture, regions.value)
-    at_floor = sd <= sd_floor_nm * 1.0001
     w = np.array([c[0] for c in comps])
-    spread = (float(np.sqrt(np.average(sd[~at_floor] ** 2, weights=w[~at_floor])))
-              if (~at_floor).any() else None)
+    on_r = nearest_component(mixture, regions.value)
+    group = _region_groups(on_r, touching)
+    ra = regions.area.astype(np.float64)
+    counts = []
+    for k in range(len(comps)):
+        a = ra[(on_r == k) & (ra > 0)]
+        counts.append((float(a.sum() ** 2 / np.sum(a * a)) if a.size else 0.0,
+                       np.unique(group[(on_r == k) & (ra > 0)]).size))
+    measured = np.array([g >= MIN_SPREAD_GROUPS for _, g in counts])
+    spread = (float(np.sqrt(np.average(sd[measured] ** 2, weights=w[measured])))
+              if measured.any() else None)
     on_f = nearest_component(mixture, thickness_nm)
     out = []
-    for k in range(len(comps)):
-        a = regions.area[on_r == k].astype(np.float64)
-        n = float(a.sum() ** 2 / np.sum(a * a)) if a.size and a.sum() > 0 else 1.0
-        own = (float(np.sum((a * regions.sigma[on_r == k]) ** 2) / a.sum() ** 2)
-               if a.size and a.sum() > 0 else 0.0)
-        s_k = spread if at_floor[k] else float(sd[k])
-        samp = None if s_k is None else math.sqrt(s_k ** 2 / n + own)
+    for k, (n, groups) in enumerate(counts):
+        a, sg = ra[on_r == k], regions.sigma[on_r == k]
+        own = float(np.sum((a * sg) ** 2) / a.sum() ** 2) if a.sum() > 0 else 0.0
+        s_k = float(sd[k]) if measured[k] else spread
+        samp = None if s_k is None else math.sqrt(s_k ** 2 / max(n, 1.0) + own)
         wb = None
         if gain_shifts_nm is not None:
             f = (on_f == k) & np.all(np.isfinite(gain_shifts_nm), axis=0)
             if f.any():
                 wb = float(np.hypot(*np.average(gain_shifts_nm[:, f], axis=1,
                                                 weights=area[f])))
-        parts = [samp, wb]
-        total = (None if samp is None
-                 else math.sqrt(sum(p ** 2 for p in parts if p is not None)))
+        total = None if samp is None else math.hypot(samp, wb or 0.0)
         out.append({"sigma_nm": _round(total), "sampling_nm": _round(samp),
                     "white_balance_nm": _round(wb), "regions": round(n, 2),
-                    "spread_measured": not bool(at_floor[k])})
+                    "groups": int(groups), "spread_measured": bool(measured[k])})
     return out
+
+
+def _region_groups(component, touching) -> np.ndarray:
+    """Per region, its group: regions of one component (``component``, -1: none) joined
+    through the touching pairs between them (connected components)."""
+    R = component.size
+    if touching is None or len(touching) == 0:
+        return np.arange(R)
+    t = np.asarray(touching, dtype=np.int64)
+    same = (component[t[:, 0]] == component[t[:, 1]]) & (component[t[:, 0]] >= 0)
+    t = t[same]
+    graph = sparse.coo_matrix((np.ones(len(t)), (t[:, 0], t[:, 1])), shape=(R, R))
+    return csgraph.connected_components(graph, directed=False)[1]
+
+
+def touching_regions(labels, patch_region) -> np.ndarray:
+    """Pairs of regions (indices, shape (P, 2)) whose patches touch in ``labels``
+    (4-connectivity; patches without a region, -1, take no part)."""
+    pairs = neighbour_pairs(np.asarray(patch_region)[labels] + 1)
+    return pairs[pairs[:, 0] > 0] - 1
 
 
 def _round(v):

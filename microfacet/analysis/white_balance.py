@@ -134,8 +134,8 @@ class WhiteBalance:
         scene tells: a reference's :data:`REFERENCE_LOG_SD`; a gain taken from the estimate,
         the estimate's spread σ; a gain left at the image's own (1, the image taken as
         balanced), the RMS distance of the truth from it given the estimate,
-        √(ln² g + σ²) (with σ = :data:`LOG_RANGE` where the estimate has none: its best
-        lies at the search's edge). None without an estimate (``white_balance = "off"``).
+        √(ln² g + σ²) (with σ = :data:`LOG_RANGE` where the estimate's is not finite).
+        None without an estimate (``white_balance = "off"``, or too few tiles for one).
 
         >>> wb = WhiteBalance(estimate_rgb=(1.03, 1.0, 0.96), estimate_sigma=(0.04, 0.01),
         ...                   determined=(False, True))
@@ -151,9 +151,9 @@ class WhiteBalance:
         out = []
         for g, sd, used in zip((self.estimate_rgb[0], self.estimate_rgb[2]),
                                self.estimate_sigma or (None, None),
-                               self.determined or (False, False)):
+                               (self.gains_rgb[0], self.gains_rgb[2])):
             sd = sd if sd is not None and math.isfinite(sd) else LOG_RANGE
-            taken = self.source == "estimated" and used
+            taken = self.source == "estimated" and used != 1.0     # withdraw() keeps them
             out.append(float(sd if taken else math.hypot(math.log(g), sd)))
         return tuple(out)
 

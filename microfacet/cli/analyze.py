@@ -85,6 +85,9 @@ def _text_summary(result, out: Path, elapsed_s: float) -> str:
         if fit else "none"
     lobes = ", ".join(f"{s:.1f}° ({100 * w:.0f}%)" for w, s in dist.ndf.mixture.components) \
         if dist.ndf else "none"
+    unc = (fit.info.get("mean_uncertainty") or []) if fit else []
+    if any(u.get("sigma_nm") is not None and u.get("white_balance_nm") is None for u in unc):
+        comps += " (± without the white balance's part: no estimate of the gains)"
     if fit is not None and not dist.thickness_judgement.identified:
         comps += " -- NOT IDENTIFIED"
     if result.self_check is not None and dist.ndf:

@@ -311,7 +311,7 @@ def test_an_order_move_records_what_moved_and_is_never_undone():
 
 
 def _mean_unc(sd=(2.0, 3.0), region_values=(99.0, 101.0, 98.0, 102.0, 139.0, 141.0),
-              areas=None, sigma=0.0, shifts=None, floor=0.1):
+              areas=None, sigma=0.0, shifts=None, touching=None):
     from microfacet.analysis.distributions import mean_uncertainty
     from microfacet.analysis.sampling import Regions
     from microfacet.core.distributions import ThicknessMixture
@@ -320,7 +320,7 @@ def _mean_unc(sd=(2.0, 3.0), region_values=(99.0, 101.0, 98.0, 102.0, 139.0, 141
     a = np.full(v.size, 100.0) if areas is None else np.asarray(areas, float)
     mix = ThicknessMixture([(0.6, 100.0, sd[0]), (0.4, 140.0, sd[1])])
     regions = Regions(np.arange(v.size), v, np.full(v.size, sigma), a, 0.0)
-    return mean_uncertainty(mix, regions, v, a, sd_floor_nm=floor, gain_shifts_nm=shifts)
+    return mean_uncertainty(mix, regions, v, a, touching=touching, gain_shifts_nm=shifts)
 
 
 def test_a_components_mean_is_uncertain_by_its_spread_over_its_regions():
@@ -340,14 +340,44 @@ def test_a_components_mean_is_uncertain_by_its_spread_over_its_regions():
 
 
 def test_a_component_without_a_measured_spread_takes_the_others():
-    """At the SD floor (one region) the spread of the measured components stands in, and
-    is said not measured; with none measured the sampling part is unknown."""
+    """On one region the spread of the measured components stands in, and is said not
+    measured; with none measured the sampling part is unknown. An SD at the floor over
+    several separate regions is a measured (small) spread."""
     u = _mean_unc(sd=(2.0, 0.1), region_values=(99.0, 101.0, 98.0, 102.0, 140.0))
     assert [x["spread_measured"] for x in u] == [True, False]
     assert u[1]["sampling_nm"] == pytest.approx(2.0, abs=1e-4)      # one region, SD 2
     u = _mean_unc(sd=(0.1, 0.1), region_values=(100.0, 140.0))
     assert [x["sampling_nm"] for x in u] == [None, None]
     assert [x["sigma_nm"] for x in u] == [None, None]
+    u = _mean_unc(sd=(2.0, 0.1), region_values=(99.0, 101.0, 140.0, 140.05))
+    assert u[1]["spread_measured"] and u[1]["sampling_nm"] == pytest.approx(0.1 / np.sqrt(2),
+                                                                             abs=1e-4)
+
+
+def test_a_component_on_pieces_of_one_region_has_no_measured_spread():
+    """Regions of one component that touch may be one true region split by noise: their
+    SD is no measure of the population's spread until two separate groups exist; touching
+    regions of two components stay apart; the count of regions is not merged."""
+    u = _mean_unc(touching=np.array([[0, 1], [1, 2], [2, 3], [4, 5]]))
+    assert [x["groups"] for x in u] == [1, 1]
+    assert [x["spread_measured"] for x in u] == [False, False]
+    assert [x["sampling_nm"] for x in u] == [None, None]
+    u = _mean_unc(touching=np.array([[0, 1], [2, 3]]))
+    assert [x["groups"] for x in u] == [2, 2] and all(x["spread_measured"] for x in u)
+    assert u[0]["regions"] == pytest.approx(4.0)
+    assert u[0]["sampling_nm"] == pytest.approx(1.0, abs=1e-4)
+    u = _mean_unc(touching=np.array([[3, 4]]))                      # 102 nm beside 139 nm
+    assert [x["groups"] for x in u] == [4, 2]
+
+
+def test_touching_regions_from_the_facet_labels():
+    from microfacet.analysis.distributions import touching_regions
+
+    labels = np.array([[0, 0, 1, 2],
+                       [0, 0, 1, 2],
+                       [3, 3, 3, 2]])
+    pairs = touching_regions(labels, np.array([0, 0, 1, -1]))        # facet 3 has none
+    assert pairs.tolist() == [[0, 1]]
 
 
 def test_the_white_balance_part_is_the_components_facets_move():

@@ -140,8 +140,12 @@ def test_stack_json_gains_are_checked_and_used(tmp_path):
     (WhiteBalance(gains_rgb=(1.1, 1.0, 1.0), source="estimated", estimate_rgb=(1.1, 1.0, 0.95),
                   estimate_sigma=(0.005, 0.03), determined=(True, False)),
      (0.005, float(np.hypot(np.log(0.95), 0.03)))),
-    # an estimate at the search's edge has no spread: the search's half-range stands in
-    (WhiteBalance(estimate_rgb=(1.0, 1.0, 1.0), estimate_sigma=(None, 0.01),
+    # ... and still so once withdrawn (the thickness not identified): the gain was applied
+    (WhiteBalance(gains_rgb=(1.1, 1.0, 1.0), source="estimated", estimate_rgb=(1.1, 1.0, 0.95),
+                  estimate_sigma=(0.005, 0.03), determined=(True, False)).withdraw("x"),
+     (0.005, float(np.hypot(np.log(0.95), 0.03)))),
+    # an estimate without a finite spread: the search's half-range stands in
+    (WhiteBalance(estimate_rgb=(1.0, 1.0, 1.0), estimate_sigma=(float("inf"), 0.01),
                   determined=(False, False)), (0.2, 0.01)),
     (WhiteBalance(), None),                                   # white_balance = "off"
 ])
