@@ -93,7 +93,7 @@ def tile_scores(stack, tiles):
 def run(*, quick: bool, out: Path, stack="", size=992, slices=40, tiles="1024,512") -> str:
     if not Path("/proc/self/clear_refs").exists():
         raise SystemExit("speed-memory needs Linux /proc (VmHWM reset)")
-    tile_list = [int(t) for t in tiles.split(",") if t]
+    tile_list = [int(t) for t in (tiles or "").split(",") if t]   # `--set tiles=`: None
     if quick:
         size, slices, tile_list = min(size, 128), min(slices, 8), [64]
     if not stack:
