@@ -444,7 +444,8 @@ def _white_balance_warning(wb) -> Reason | None:
     gains = ", ".join(f"{n} x{g:.3f} (+-{100 * s:.1f} %)" for n, g, s in off)
     return Reason("white_balance_suspect", f"the film's colours ask for white-balance gains "
                   f"{gains}: the image may not be balanced for the illuminant, or the film "
-                  f"model does not fit it; a white reference settles it", "optics.white_reference")
+                  f"model does not fit it; a white or bare-substrate reference settles it",
+                  "optics.white_reference")
 
 
 def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,

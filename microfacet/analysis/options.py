@@ -281,12 +281,18 @@ class OpticsOptions(Options):
                     "off and carries their uncertainty into the thickness means'; `apply` "
                     "corrects each gain the estimate calls "
                     "determined (experimental: not yet within 2 percent on the sweep, "
-                    "docs/accuracy.md); a reference (`white_reference`, stack.json's "
-                    "white_balance or white_reference) is always applied",
+                    "docs/accuracy.md); a reference (`white_reference`, `substrate_reference`, "
+                    "stack.json's white_balance, white_reference or substrate_reference) is "
+                    "always applied",
         choices=("off", "report", "apply"), cli=True)
     white_reference: str | None = option(
         None, help="an image of a white standard taken with the stack's camera settings: its "
                    "R, G, B set the white balance", kind=str, cli=True, metavar="FILE")
+    substrate_reference: str | None = option(
+        None, help="an image of the bare substrate (the metal without its film, a flat area "
+                   "facing the objective) taken with the stack's camera settings and light: "
+                   "its R, G, B over the model's colour of that metal set the white balance "
+                   "(a white reference wins over it)", kind=str, cli=True, metavar="FILE")
     flat_reference: str | None = option(
         None, help="an image of an even, featureless target (a mirror, a white standard or a "
                    "clean blank field) through the stack's optics and light: its smoothed "

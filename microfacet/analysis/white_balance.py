@@ -16,9 +16,10 @@ Measured on the generalization sweep (docs/accuracy.md): this σ covers the erro
 |error|/σ 0.6), and at 256 × 256 px it is 1–15 %, so the gains are rarely determined to 1 %
 without a reference.
 
-A reference wins over the estimate: ``white_balance`` gains in stack.json, or a
-``white_reference`` image of a white standard (its mean linear R, G, B, divided by G, are
-the gains).
+A reference wins over the estimate: ``white_balance`` gains in stack.json, a
+``white_reference`` image of a white standard (its median linear R, G, B, divided by G, are
+the gains), or a ``substrate_reference`` image of the bare metal (the same over the model's
+colour of that metal: :func:`substrate_gains`).
 
 Examples
 --------
@@ -42,6 +43,7 @@ from ..colour.srgb import (
     model_xyz_to_linear_srgb,
     xyz_to_linear_srgb,
 )
+from ..colour.table import direct_xyz
 from ..colour.transfer import srgb_decode
 from ..core.errors import InputError
 from ..core.lazy import load
@@ -50,7 +52,7 @@ from .search import parabola
 ndimage = load("scipy.ndimage")
 
 __all__ = ["WhiteBalance", "balanced_lab", "estimate_white_balance", "rebalanced_lab",
-           "reference_gains"]
+           "reference_gains", "substrate_colour_rgb", "substrate_gains"]
 
 #: The gains searched: log gain in ±LOG_RANGE (about 0.82-1.22), a coarse grid then a fine
 #: one about its best.
@@ -205,21 +207,49 @@ def rebalanced_lab(lab, log_gain_rb, *, illuminant) -> np.ndarray:
     return xyz_to_lab(linear_srgb_to_xyz(rgb, illuminant=illuminant), white=white)
 
 
+def _reference_rgb(encoded, *, where: str, linear: bool, what: str) -> np.ndarray:
+    """The median linear R, G, B of a reference image's pixels that are neither dark nor
+    clipped (encoded sRGB in [0, 1], (H, W, 3); ``linear``: linear sRGB)."""
+    a = np.asarray(encoded, dtype=np.float32)
+    if a.ndim != 3 or a.shape[-1] != 3:
+        raise InputError(f"{where}: a {what} must be an RGB image, got shape {a.shape}")
+    lin = (a if linear else srgb_decode(a)).reshape(-1, 3)
+    ok = np.all((lin > 0.02) & (a.reshape(-1, 3) < 0.995), axis=1)
+    if ok.sum() < 16:
+        raise InputError(f"{where}: the {what} has too few pixels that are neither dark nor "
+                         f"clipped ({int(ok.sum())})")
+    return np.median(lin[ok], axis=0)
+
+
 def reference_gains(encoded, *, where: str, linear: bool = False) -> tuple:
     """The gains of a white-standard image (encoded sRGB in [0, 1], (H, W, 3); ``linear``:
     linear sRGB, as a ``linear-sRGB`` stack's): the median linear R, G, B over its unclipped
     pixels, divided by G."""
-    a = np.asarray(encoded, dtype=np.float32)
-    if a.ndim != 3 or a.shape[-1] != 3:
-        raise InputError(f"{where}: a white reference must be an RGB image, got shape "
-                         f"{a.shape}")
-    lin = (a if linear else srgb_decode(a)).reshape(-1, 3)
-    ok = np.all((lin > 0.02) & (a.reshape(-1, 3) < 0.995), axis=1)
-    if ok.sum() < 16:
-        raise InputError(f"{where}: the white reference has too few pixels that are neither "
-                         f"dark nor clipped ({int(ok.sum())})")
-    m = np.median(lin[ok], axis=0)
+    m = _reference_rgb(encoded, where=where, linear=linear, what="white reference")
     return tuple(float(v) for v in m / m[1])
+
+
+def substrate_colour_rgb(model) -> np.ndarray:
+    """Linear sRGB (relative) of ``model``'s bare substrate, the metal without its film, at
+    normal incidence: what a white-balanced camera records of it."""
+    t = model.table
+    xyz = direct_xyz(0.0, 0.0, spectral_step_nm=t.spectral_step_nm, film=t.film,
+                     substrate=t.substrate, illuminant=t.illuminant, observer=t.observer)
+    return np.asarray(model_xyz_to_linear_srgb(xyz, white=model.white, illuminant=t.illuminant,
+                                               observer=t.observer), dtype=np.float64)
+
+
+def substrate_gains(encoded, model, *, where: str, linear: bool = False) -> tuple:
+    """The gains of an image of the bare substrate (the metal without its film, a flat area
+    facing the objective, taken with the stack's camera settings and light): its median
+    linear R, G, B over the model's colour of that metal (:func:`substrate_colour_rgb`),
+    divided by G. Unlike a white standard the metal is not neutral (titanium is a warm
+    grey), so its own colour is divided out; its optical constants are the model's
+    (``optics.substrate``).
+    """
+    m = _reference_rgb(encoded, where=where, linear=linear, what="substrate reference")
+    g = m / substrate_colour_rgb(model)
+    return tuple(float(v) for v in g / g[1])
 
 
 # ----------------------------------------------------------------------------- estimate
@@ -360,15 +390,22 @@ def estimate_white_balance(encoded, tilt_deg, usable, model, *, illuminant, seed
 
 
 # ------------------------------------------------------------------------------ choice
-def _given_gains(stack, options, where_option: str):
+def _given_gains(stack, options, model):
     """The reference's gains and its name, or None: ``white_reference`` (the option, then
-    stack.json's), then stack.json's ``white_balance``."""
+    stack.json's), then ``substrate_reference`` (likewise), then stack.json's
+    ``white_balance``."""
+    linear = stack.color_space == "linear-sRGB"
     ref = stack.read_reference("white_reference", options.white_reference,
-                               where_given=where_option)
+                               where_given="white_reference")
     if ref is not None:
         img, name, where = ref
-        return (reference_gains(img, where=where, linear=stack.color_space == "linear-sRGB"),
-                f"white reference {name}")
+        return reference_gains(img, where=where, linear=linear), f"white reference {name}"
+    ref = stack.read_reference("substrate_reference", options.substrate_reference,
+                               where_given="substrate_reference")
+    if ref is not None:
+        img, name, where = ref
+        return (substrate_gains(img, model, where=where, linear=linear),
+                f"substrate reference {name}")
     given = stack.meta.get("white_balance")      # 3 numbers > 0: the schema checked it
     if given is None:
         return None
@@ -383,9 +420,10 @@ def choose_white_balance(stack, encoded, tilt_deg, usable, model, options, *, il
     (:func:`estimate_white_balance`); else none. The estimate is made with ``"report"`` and
     ``"apply"``.
 
-    ``options`` is the ``optics`` section (``white_balance``, ``white_reference``).
+    ``options`` is the ``optics`` section (``white_balance``, ``white_reference``,
+    ``substrate_reference``).
     """
-    given = _given_gains(stack, options, "white_reference")
+    given = _given_gains(stack, options, model)
     est = (estimate_white_balance(encoded, tilt_deg, usable, model, illuminant=illuminant,
                                   seed=seed)
            if options.white_balance in ("report", "apply") else WhiteBalance())

@@ -444,7 +444,7 @@ def stack_fields(root: Path, meta: dict, jpath: Path, limits: Limits, *,
     checked_values(meta, c.where, _names_files)
     export = _export(c)
     c.series = _series(c, values["series"])
-    for key in ("white_reference", "flat_reference"):
+    for key in ("white_reference", "substrate_reference", "flat_reference"):
         if c.has(key):
             image_info(_file(c, key), c.where(key))
     files = {"slices": (), "tiff": None}

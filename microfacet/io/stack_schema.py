@@ -215,6 +215,10 @@ SPECS = {s.name: s for s in (
     KeySpec("white_reference", **_PATH, doc="an image of a white standard taken with the "
             "stack's camera settings: its linear R, G, B over G are the gains; "
             "`--white-reference` overrides it"),
+    KeySpec("substrate_reference", **_PATH, doc="an image of the bare substrate (the metal "
+            "without its film, a flat area facing the objective) taken with the stack's camera "
+            "settings and light: its linear R, G, B over the model's colour of that metal are "
+            "the gains (`white_reference` wins over it); `--substrate-reference` overrides it"),
     KeySpec("flat_reference", **_PATH, doc="an image of an even, featureless target (a "
             "mirror, a white standard or a clean blank field) through the stack's optics and "
             "light: its smoothed brightness, 1 at the centre, is the flat field the colours "

@@ -72,7 +72,27 @@ def scenes(tmp_path_factory):
     white = srgb_encode(np.full((16, 16, 3), 0.7, np.float32) * np.float32(GAINS),
                         dtype=np.uint8)
     write_image(root / "unbalanced" / "white.png", white)
+    bare = srgb_encode(np.broadcast_to(0.9 * _bare_titanium_rgb() * np.float32(GAINS),
+                                       (16, 16, 3)).astype(np.float32), dtype=np.uint8)
+    write_image(root / "unbalanced" / "substrate.png", bare)
     return root
+
+
+def _bare_titanium_rgb():
+    """Linear sRGB of bare titanium (Johnson & Christy) at normal incidence under D65, from
+    Fresnel's |(1 - n)/(1 + n)|² through colour-science's colorimetry: independent of the
+    package's film model and tables."""
+    import colour
+
+    from microfacet.optics.constants import resolve_index
+    wl = np.arange(380.0, 781.0, 5.0)
+    n = resolve_index("Ti_JohnsonChristy1974", wl)
+    sd = colour.SpectralDistribution(dict(zip(wl, np.abs((1 - n) / (1 + n)) ** 2)))
+    shape = colour.SpectralShape(380, 780, 5)
+    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(shape)
+    d65 = colour.SDS_ILLUMINANTS["D65"].copy().align(shape)
+    xyz = colour.sd_to_XYZ(sd, cmfs=cmfs, illuminant=d65, method="Integration") / 100.0
+    return np.asarray(colour.XYZ_to_sRGB(xyz, apply_cctf_encoding=False), np.float32)
 
 
 def _thickness(path, **optics):
@@ -168,3 +188,49 @@ def test_rebalanced_colours_are_those_balanced_with_the_larger_gains():
         np.testing.assert_allclose(got, want, atol=2e-3)
         moved = np.abs(got - balanced_lab(img, (1.0, 1.0, 1.0), illuminant="D65")).max()
         assert moved > 0.5                                    # the gains do move the colours
+
+
+def test_a_bare_substrate_image_gives_the_gains():
+    """substrate_gains divides the metal's own colour out: an image of bare titanium through
+    a camera's (1.12, 1, 0.90), 8-bit and noisy, gives those gains to 1 %, where taking it for a
+    white standard would be 6-7 % off (titanium is a warm grey)."""
+    from microfacet.analysis.white_balance import substrate_gains
+    from microfacet.colour.model import FilmColourModel
+    from microfacet.colour.table import build_colour_table
+
+    model = FilmColourModel(build_colour_table(thickness_range_nm=(0.0, 50.0),
+                                               theta_range_deg=(0.0, 10.0)))
+    rng = np.random.default_rng(5)
+    lin = 0.8 * _bare_titanium_rgb() * np.float32(GAINS)
+    img = srgb_encode(np.clip(lin + rng.normal(0, 0.01, (32, 32, 3)), 0, 1).astype(np.float32),
+                      dtype=np.uint8).astype(np.float32) / 255.0
+    got = substrate_gains(img, model, where="substrate_reference")
+    np.testing.assert_allclose(got, GAINS, rtol=0.01)
+    as_white = reference_gains(img, where="white_reference")
+    assert abs(as_white[0] / GAINS[0] - 1.0) > 0.05 and abs(as_white[2] / GAINS[2] - 1.0) > 0.05
+    with pytest.raises(InputError, match="substrate_reference: the substrate reference has too "
+                                         "few pixels"):
+        substrate_gains(np.zeros((8, 8, 3), np.float32), model, where="substrate_reference")
+
+
+@pytest.mark.slow
+def test_a_substrate_reference_makes_the_unbalanced_scene_read_as_the_balanced_one(scenes):
+    """A bare-titanium field through the same camera, as the option and as stack.json's
+    substrate_reference: the unbalanced scene's thickness is the balanced one's (median
+    |Δ| < 0.3 nm); a white reference given too wins over it."""
+    t_bal, _ = _thickness(scenes / "balanced")
+    ref = str(scenes / "unbalanced" / "substrate.png")
+    t_sub, wb_sub = _thickness(scenes / "unbalanced", substrate_reference=ref)
+    ok = np.isfinite(t_bal) & np.isfinite(t_sub)
+    assert wb_sub.source == "substrate reference substrate.png"
+    np.testing.assert_allclose(wb_sub.gains_rgb, GAINS, rtol=0.01)
+    assert float(np.median(np.abs(t_sub[ok] - t_bal[ok]))) < 0.3
+    meta = json.loads((scenes / "unbalanced" / "stack.json").read_text())
+    copy = scenes / "with-substrate-key"
+    shutil.copytree(scenes / "unbalanced", copy)
+    (copy / "stack.json").write_text(json.dumps({**meta, "substrate_reference": "substrate.png"}))
+    t_key, wb_key = _thickness(copy)
+    assert wb_key.source == "substrate reference substrate.png"
+    np.testing.assert_array_equal(t_key, t_sub)
+    _, wb_both = _thickness(copy, white_reference=str(copy / "white.png"))
+    assert wb_both.source == "white reference white.png"
