@@ -293,6 +293,10 @@ class OpticsOptions(Options):
                    "facing the objective) taken with the stack's camera settings and light: "
                    "its R, G, B over the model's colour of that metal set the white balance "
                    "(a white reference wins over it)", kind=str, cli=True, metavar="FILE")
+    substrate_oxide_nm: float = option(
+        3.0, help="native oxide on the bare substrate of `substrate_reference` (titanium in "
+                  "air: a few nm, each moving its colour by about 1 percent; its +-1.5 nm "
+                  "enter the gains' uncertainty)", unit="nm", low=0, high=20, cli=True)
     flat_reference: str | None = option(
         None, help="an image of an even, featureless target (a mirror, a white standard or a "
                    "clean blank field) through the stack's optics and light: its smoothed "

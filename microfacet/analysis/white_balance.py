@@ -52,7 +52,8 @@ from .search import parabola
 ndimage = load("scipy.ndimage")
 
 __all__ = ["WhiteBalance", "balanced_lab", "estimate_white_balance", "rebalanced_lab",
-           "reference_gains", "substrate_colour_rgb", "substrate_gains"]
+           "reference_gains", "substrate_colour_rgb", "substrate_gain_sigma",
+           "substrate_gains"]
 
 #: The gains searched: log gain in ±LOG_RANGE (about 0.82-1.22), a coarse grid then a fine
 #: one about its best.
@@ -100,6 +101,9 @@ class WhiteBalance:
     withdrawn : str or None
         Why the analysis no longer calls the estimate determined, where it did before
         (:meth:`withdraw`).
+    reference_sigma : tuple of 2 float or None
+        1σ of a reference's log R and B gains where it knows its own (a bare-substrate
+        reference: :func:`substrate_gain_sigma`); None: :data:`REFERENCE_LOG_SD`.
     """
 
     gains_rgb: tuple = (1.0, 1.0, 1.0)
@@ -110,6 +114,7 @@ class WhiteBalance:
     misfit_gain: float | None = None
     tiles: int = 0
     withdrawn: str | None = None
+    reference_sigma: tuple | None = None
 
     @property
     def applied(self) -> bool:
@@ -133,9 +138,10 @@ class WhiteBalance:
 
     def log_gain_sigma(self) -> tuple | None:
         """1σ of the log R and B gains the colours were corrected with, as far as the
-        scene tells: a reference's :data:`REFERENCE_LOG_SD`; a gain taken from the estimate,
-        the estimate's spread σ; a gain left at the image's own (1, the image taken as
-        balanced), the RMS distance of the truth from it given the estimate,
+        scene tells: a reference's (``reference_sigma``, else :data:`REFERENCE_LOG_SD`); a
+        gain taken from the estimate, the estimate's spread σ; a gain left at the image's
+        own (1, the image taken as balanced), the RMS distance of the truth from it given
+        the estimate,
         √(ln² g + σ²) (with σ = :data:`LOG_RANGE` where the estimate's is not finite).
         None without an estimate (``white_balance = "off"``, or too few tiles for one).
 
@@ -147,7 +153,7 @@ class WhiteBalance:
         (0.01, 0.01)
         """
         if self.applied and self.source != "estimated":
-            return (REFERENCE_LOG_SD, REFERENCE_LOG_SD)
+            return self.reference_sigma or (REFERENCE_LOG_SD, REFERENCE_LOG_SD)
         if self.estimate_rgb is None:
             return None
         out = []
@@ -169,7 +175,9 @@ class WhiteBalance:
              "determined_rb": None if self.determined is None
              else [bool(v) for v in self.determined],
              "misfit_gain": self.misfit_gain,
-             "tiles": int(self.tiles), "determined_withdrawn": self.withdrawn}
+             "tiles": int(self.tiles), "determined_withdrawn": self.withdrawn,
+             "reference_sigma_rb": None if self.reference_sigma is None
+             else [float(v) for v in self.reference_sigma]}
 
 
 def balanced_lab(encoded, gains_rgb, *, illuminant, linear=False) -> np.ndarray:
@@ -229,27 +237,49 @@ def reference_gains(encoded, *, where: str, linear: bool = False) -> tuple:
     return tuple(float(v) for v in m / m[1])
 
 
-def substrate_colour_rgb(model) -> np.ndarray:
-    """Linear sRGB (relative) of ``model``'s bare substrate, the metal without its film, at
-    normal incidence: what a white-balanced camera records of it."""
+#: The native oxide of a bare-substrate reference: titanium in air grows a few nm of TiO2
+#: (2.6 ± 0.3 nm on evaporated films after a day in room air, ellipsometry and resistivity;
+#: thicker with time and handling), and each nm moves the metal's R/G by ~0.5 % and B/G by
+#: ~1 % (:func:`substrate_colour_rgb`): the reference's colour is taken at this thickness,
+#: and the spread adds to its gains' σ (:func:`substrate_gain_sigma`).
+NATIVE_OXIDE_NM = 3.0
+NATIVE_OXIDE_SD_NM = 1.5
+
+
+def substrate_colour_rgb(model, *, oxide_nm=NATIVE_OXIDE_NM) -> np.ndarray:
+    """Linear sRGB (relative) of ``model``'s substrate metal with ``oxide_nm`` of the model's
+    film on it (its native oxide), at normal incidence: what a white-balanced camera records
+    of bare metal."""
     t = model.table
-    xyz = direct_xyz(0.0, 0.0, spectral_step_nm=t.spectral_step_nm, film=t.film,
+    xyz = direct_xyz(0.0, float(oxide_nm), spectral_step_nm=t.spectral_step_nm, film=t.film,
                      substrate=t.substrate, illuminant=t.illuminant, observer=t.observer)
     return np.asarray(model_xyz_to_linear_srgb(xyz, white=model.white, illuminant=t.illuminant,
                                                observer=t.observer), dtype=np.float64)
 
 
-def substrate_gains(encoded, model, *, where: str, linear: bool = False) -> tuple:
+def substrate_gains(encoded, model, *, where: str, linear: bool = False,
+                    oxide_nm=NATIVE_OXIDE_NM) -> tuple:
     """The gains of an image of the bare substrate (the metal without its film, a flat area
     facing the objective, taken with the stack's camera settings and light): its median
-    linear R, G, B over the model's colour of that metal (:func:`substrate_colour_rgb`),
-    divided by G. Unlike a white standard the metal is not neutral (titanium is a warm
-    grey), so its own colour is divided out; its optical constants are the model's
-    (``optics.substrate``).
+    linear R, G, B over the model's colour of that metal with its native oxide
+    (:func:`substrate_colour_rgb`), divided by G. Unlike a white standard the metal is not
+    neutral (titanium is a warm grey), so its own colour is divided out; its optical
+    constants are the model's (``optics.substrate``).
     """
     m = _reference_rgb(encoded, where=where, linear=linear, what="substrate reference")
-    g = m / substrate_colour_rgb(model)
+    g = m / substrate_colour_rgb(model, oxide_nm=oxide_nm)
     return tuple(float(v) for v in g / g[1])
+
+
+def substrate_gain_sigma(model, *, oxide_nm=NATIVE_OXIDE_NM,
+                         oxide_sd_nm=NATIVE_OXIDE_SD_NM) -> tuple:
+    """1σ of the log R and B gains from a bare-substrate reference: the native oxide's
+    spread (half the change of the metal's log R/G and B/G between ``oxide_nm`` ± its SD),
+    and :data:`REFERENCE_LOG_SD`, in quadrature."""
+    lo, hi = (substrate_colour_rgb(model, oxide_nm=max(0.0, oxide_nm + s * oxide_sd_nm))
+              for s in (-1.0, 1.0))
+    half = 0.5 * np.abs(np.log((hi / hi[1]) / (lo / lo[1])))
+    return tuple(float(math.hypot(h, REFERENCE_LOG_SD)) for h in (half[0], half[2]))
 
 
 # ----------------------------------------------------------------------------- estimate
@@ -391,26 +421,28 @@ def estimate_white_balance(encoded, tilt_deg, usable, model, *, illuminant, seed
 
 # ------------------------------------------------------------------------------ choice
 def _given_gains(stack, options, model):
-    """The reference's gains and its name, or None: ``white_reference`` (the option, then
-    stack.json's), then ``substrate_reference`` (likewise), then stack.json's
-    ``white_balance``."""
+    """The reference's gains, its name and its gains' σ (None: :data:`REFERENCE_LOG_SD`), or
+    None: ``white_reference`` (the option, then stack.json's), then ``substrate_reference``
+    (likewise), then stack.json's ``white_balance``."""
     linear = stack.color_space == "linear-sRGB"
     ref = stack.read_reference("white_reference", options.white_reference,
                                where_given="white_reference")
     if ref is not None:
         img, name, where = ref
-        return reference_gains(img, where=where, linear=linear), f"white reference {name}"
+        return (reference_gains(img, where=where, linear=linear), f"white reference {name}",
+                None)
     ref = stack.read_reference("substrate_reference", options.substrate_reference,
                                where_given="substrate_reference")
     if ref is not None:
         img, name, where = ref
-        return (substrate_gains(img, model, where=where, linear=linear),
-                f"substrate reference {name}")
+        ox = options.substrate_oxide_nm
+        return (substrate_gains(img, model, where=where, linear=linear, oxide_nm=ox),
+                f"substrate reference {name}", substrate_gain_sigma(model, oxide_nm=ox))
     given = stack.meta.get("white_balance")      # 3 numbers > 0: the schema checked it
     if given is None:
         return None
     g = np.asarray(given, dtype=np.float64)
-    return tuple(float(v) for v in g / g[1]), "stack.json"
+    return tuple(float(v) for v in g / g[1]), "stack.json", None
 
 
 def choose_white_balance(stack, encoded, tilt_deg, usable, model, options, *, illuminant,
@@ -428,7 +460,8 @@ def choose_white_balance(stack, encoded, tilt_deg, usable, model, options, *, il
                                   seed=seed)
            if options.white_balance in ("report", "apply") else WhiteBalance())
     if given is not None:
-        return dataclasses.replace(est, gains_rgb=given[0], source=given[1])
+        return dataclasses.replace(est, gains_rgb=given[0], source=given[1],
+                                   reference_sigma=given[2])
     if (options.white_balance != "apply" or est.estimate_rgb is None
             or not any(est.determined)):
         return est

@@ -78,16 +78,20 @@ def scenes(tmp_path_factory):
     return root
 
 
-def _bare_titanium_rgb():
-    """Linear sRGB of bare titanium (Johnson & Christy) at normal incidence under D65, from
-    Fresnel's |(1 - n)/(1 + n)|² through colour-science's colorimetry: independent of the
-    package's film model and tables."""
+def _bare_titanium_rgb(oxide_nm=3.0):
+    """Linear sRGB of titanium (Johnson & Christy) with ``oxide_nm`` of amorphous TiO2 (its
+    native oxide) at normal incidence under D65, from tmm's reflectance through
+    colour-science's colorimetry: independent of the package's film model and tables."""
     import colour
+    import tmm
 
     from microfacet.optics.constants import resolve_index
     wl = np.arange(380.0, 781.0, 5.0)
-    n = resolve_index("Ti_JohnsonChristy1974", wl)
-    sd = colour.SpectralDistribution(dict(zip(wl, np.abs((1 - n) / (1 + n)) ** 2)))
+    n_film = resolve_index("TiO2_Jolivet2023_amorphous", wl)
+    n_ti = resolve_index("Ti_JohnsonChristy1974", wl)
+    R = [tmm.coh_tmm("s", [1.0, a, b], [np.inf, oxide_nm, np.inf], 0.0, w)["R"]
+         for a, b, w in zip(n_film, n_ti, wl)]
+    sd = colour.SpectralDistribution(dict(zip(wl, R)))
     shape = colour.SpectralShape(380, 780, 5)
     cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(shape)
     d65 = colour.SDS_ILLUMINANTS["D65"].copy().align(shape)
@@ -190,20 +194,28 @@ def test_rebalanced_colours_are_those_balanced_with_the_larger_gains():
         assert moved > 0.5                                    # the gains do move the colours
 
 
-def test_a_bare_substrate_image_gives_the_gains():
-    """substrate_gains divides the metal's own colour out: an image of bare titanium through
-    a camera's (1.12, 1, 0.90), 8-bit and noisy, gives those gains to 1 %, where taking it for a
-    white standard would be 6-7 % off (titanium is a warm grey)."""
-    from microfacet.analysis.white_balance import substrate_gains
+def _model():
     from microfacet.colour.model import FilmColourModel
     from microfacet.colour.table import build_colour_table
+    return FilmColourModel(build_colour_table(thickness_range_nm=(0.0, 50.0),
+                                              theta_range_deg=(0.0, 10.0)))
 
-    model = FilmColourModel(build_colour_table(thickness_range_nm=(0.0, 50.0),
-                                               theta_range_deg=(0.0, 10.0)))
-    rng = np.random.default_rng(5)
-    lin = 0.8 * _bare_titanium_rgb() * np.float32(GAINS)
-    img = srgb_encode(np.clip(lin + rng.normal(0, 0.01, (32, 32, 3)), 0, 1).astype(np.float32),
-                      dtype=np.uint8).astype(np.float32) / 255.0
+
+def _bare_image(oxide_nm=3.0, seed=5):
+    rng = np.random.default_rng(seed)
+    lin = 0.8 * _bare_titanium_rgb(oxide_nm) * np.float32(GAINS)
+    return srgb_encode(np.clip(lin + rng.normal(0, 0.01, (32, 32, 3)), 0, 1).astype(np.float32),
+                       dtype=np.uint8).astype(np.float32) / 255.0
+
+
+def test_a_bare_substrate_image_gives_the_gains():
+    """substrate_gains divides the metal's own colour out: an image of titanium with its
+    native 3 nm of oxide through a camera's (1.12, 1, 0.90), 8-bit and noisy, gives those
+    gains to 1 %, where taking it for a white standard would be 8-10 % off (titanium is a
+    warm grey)."""
+    from microfacet.analysis.white_balance import substrate_gains
+
+    model, img = _model(), _bare_image()
     got = substrate_gains(img, model, where="substrate_reference")
     np.testing.assert_allclose(got, GAINS, rtol=0.01)
     as_white = reference_gains(img, where="white_reference")
@@ -211,6 +223,22 @@ def test_a_bare_substrate_image_gives_the_gains():
     with pytest.raises(InputError, match="substrate_reference: the substrate reference has too "
                                          "few pixels"):
         substrate_gains(np.zeros((8, 8, 3), np.float32), model, where="substrate_reference")
+
+
+@pytest.mark.parametrize("oxide_nm", [1.5, 4.5])
+def test_a_native_oxide_off_the_assumed_is_inside_the_gains_sigma(oxide_nm):
+    """A reference whose native oxide is 1.5 nm off the assumed 3 nm gives gains off by
+    about the σ substrate_gain_sigma reports (within 2σ, and more than 0.4σ: the σ is not
+    idle), and ``substrate_oxide_nm`` set to the truth takes the error away."""
+    from microfacet.analysis.white_balance import substrate_gain_sigma, substrate_gains
+
+    model, img = _model(), _bare_image(oxide_nm)
+    sig = substrate_gain_sigma(model)
+    got = substrate_gains(img, model, where="substrate_reference")
+    err = np.abs(np.log(np.array([got[0], got[2]]) / np.array([GAINS[0], GAINS[2]])))
+    assert np.all(err <= 2.0 * np.array(sig)) and np.all(err > 0.4 * np.array(sig)), (err, sig)
+    right = substrate_gains(img, model, where="substrate_reference", oxide_nm=oxide_nm)
+    np.testing.assert_allclose(right, GAINS, rtol=0.01)
 
 
 @pytest.mark.slow
