@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import time
 from pathlib import Path
@@ -70,7 +71,10 @@ STUDY = Study(
              "jobs": (0, "local worker processes (0: the batch's default)"),
              "scheduler": ("", "Dask scheduler address"),
              "work": ("", "folder for the stacks and results (default out/work); reused: "
-                          "the sweep resumes")},
+                          "the sweep resumes"),
+             "reference": ("none", "none, or substrate: every session also has a field of the "
+                                   "bare metal through its camera (native oxide drawn in 2-5 "
+                                   "nm), given as stack.json's substrate_reference")},
     doc_files={"generalization.csv": "docs/data/generalization.csv",
                "generalization.png": "docs/img/generalization.png"},
 )
@@ -393,17 +397,63 @@ def scene_row(name, p, on, truth: Path) -> dict:
     return row
 
 
-def run_mode(mode, plan, gen, work: Path, jobs, scheduler):
-    """Analyse the generated stacks in ``mode`` and score them: one row per scene."""
+#: The native oxide of the sweep's bare-substrate references (nm): drawn uniform in this
+#: range, about the analysis' assumed 3 nm (``optics.substrate_oxide_nm``).
+REFERENCE_OXIDE_NM = (2.0, 5.0)
+
+
+def _link_or_copy(a, b):
+    try:
+        os.link(a, b)
+    except OSError:
+        shutil.copy2(a, b)
+
+
+def substrate_session(work: Path, name: str, p, seed: int) -> Path:
+    """``work/stacks-substrate/NAME``: the stack (its slices linked) with a 64 px
+    field of the bare substrate, its native oxide drawn in :data:`REFERENCE_OXIDE_NM`,
+    through the scene's camera (white balance, noise, 8-bit sRGB; the scene's exposure, or
+    less where that would clip) named by stack.json's ``substrate_reference``."""
+    from microfacet.colour.table import build_colour_table
+    from microfacet.colour.transfer import srgb_encode
+    from microfacet.forward.synth import apply_sensor
+    from microfacet.io.images import write_image
+
+    src, dst = work / "stacks" / name, work / "stacks-substrate" / name
+    shutil.rmtree(dst, ignore_errors=True)
+    # hard links where the file system has them (a symlinked folder escapes the stack's)
+    shutil.copytree(src / "slices", dst / "slices", copy_function=_link_or_copy)
+    rng = np.random.default_rng([seed, 23])
+    oxide = float(rng.uniform(*REFERENCE_OXIDE_NM))
+    table = build_colour_table(thickness_range_nm=(0.0, 10.0), theta_range_deg=(0.0, 1.0),
+                               film=p.film, substrate=p.substrate, illuminant=p.illuminant)
+    rgb = table.linear_rgb_at(0.0, oxide) * np.asarray(p.white_balance_gains)
+    rgb = rgb * min(p.exposure, 0.85 / float(np.max(rgb)))   # exposed not to clip
+    img = apply_sensor(np.broadcast_to(rgb, (64, 64, 3)).astype(np.float32), p, rng)
+    write_image(dst / "substrate.png", srgb_encode(img, dtype=np.uint8))
+    meta = json.loads((src / "stack.json").read_text())
+    (dst / "stack.json").write_text(json.dumps({**meta, "substrate_reference": "substrate.png"}))
+    (dst / "reference.json").write_text(json.dumps({"native_oxide_nm": oxide}))
+    return dst
+
+
+def run_mode(mode, plan, gen, work: Path, jobs, scheduler, reference="none"):
+    """Analyse the generated stacks in ``mode`` (with ``reference = "substrate"``, each with
+    a bare-substrate field: :func:`substrate_session`) and score them: one row per scene."""
     from microfacet.analysis.options import AnalysisOptions
     from microfacet.workflow.batch import run_batch
 
     todo = [name for name, _, _ in plan if not gen[name][1]]
-    stacks = [work / "stacks" / name for name in todo]
+    params = {name: p for name, p, _ in plan}
+    stacks = [work / "stacks" / name if reference == "none"
+              else substrate_session(work, name, params[name], i)
+              for i, name in enumerate(todo)]
     brows = {}
     if stacks:
         try:
-            res = run_batch(stacks, work / "results" / mode, jobs=jobs or None,
+            res = run_batch(stacks, work / "results" / (mode if reference == "none"
+                                                         else f"{mode}-{reference}"),
+                            jobs=jobs or None,
                             scheduler=scheduler or None,
                             options=AnalysisOptions(mode=mode).replace(
                                 optics={"white_balance": "report"}), report=False)
@@ -559,7 +609,7 @@ def plot(rows, path: Path) -> None:
     save_figure(fig, path)
 
 
-def sweep(*, n, seed, size, slices, modes, jobs, scheduler, work: Path):
+def sweep(*, n, seed, size, slices, modes, jobs, scheduler, work: Path, reference="none"):
     """Draw, generate, analyse and score the scenes: ``(rows, summaries, header)``."""
     from pipelines._scoring import summarize
 
@@ -570,7 +620,7 @@ def sweep(*, n, seed, size, slices, modes, jobs, scheduler, work: Path):
     rows, summaries, t_an = [], {}, {}
     for mode in modes:
         t1 = time.perf_counter()
-        mrows = run_mode(mode, plan, gen, work, jobs, scheduler)
+        mrows = run_mode(mode, plan, gen, work, jobs, scheduler, reference)
         t_an[mode] = time.perf_counter() - t1
         rows += mrows
         summaries[mode] = summarize(mrows)
@@ -592,14 +642,17 @@ def sweep(*, n, seed, size, slices, modes, jobs, scheduler, work: Path):
 
 
 def run(*, quick: bool, out: Path, n=30, seed=0, size="256x256", slices=16, mode="both",
-        jobs=0, scheduler="", work="") -> str:
+        jobs=0, scheduler="", work="", reference="none") -> str:
     hw = tuple(int(v) for v in size.lower().split("x"))
     if quick:
         n, hw, slices, jobs = min(n, 2), (64, 64), min(slices, 6), jobs or 1
     modes = ["joint", "seed"] if mode == "both" else [mode]
     work = Path(work) if work else out / "work"
+    if reference not in ("none", "substrate"):
+        raise SystemExit(f"accuracy-sweep: reference: none or substrate, got {reference!r}")
     rows, summaries, header = sweep(n=n, seed=seed, size=hw, slices=slices, modes=modes,
-                                    jobs=jobs, scheduler=scheduler, work=work)
+                                    jobs=jobs, scheduler=scheduler, work=work,
+                                    reference=reference)
     csv_path = write_csv(out / "generalization.csv", rows, COLUMNS)
     plot(rows, out / "generalization.png")
     note("\n" + per_scene_table(rows) + "\n")
