@@ -124,13 +124,19 @@ def test_a_white_reference_makes_the_unbalanced_scene_read_as_the_balanced_one(s
     err_raw = float(np.median(np.abs(t_raw[ok] - t_bal[ok])))
     assert err_ref < 0.3 < err_raw, (err_ref, err_raw)
     # the same through stack.json
-    meta = json.loads((scenes / "unbalanced" / "stack.json").read_text())
-    copy = scenes / "with-key"
-    shutil.copytree(scenes / "unbalanced", copy)
-    (copy / "stack.json").write_text(json.dumps({**meta, "white_reference": "white.png"}))
-    t_key, wb_key = _thickness(copy)
+    _, t_key, wb_key = _through_stack_json(scenes, "white_reference", "white.png")
     assert wb_key.source == "white reference white.png"
     np.testing.assert_array_equal(t_key, t_ref)
+
+
+def _through_stack_json(scenes, key, file):
+    """The unbalanced scene copied with stack.json's ``key`` naming ``file``, analysed:
+    ``(folder, thickness, white balance)``."""
+    meta = json.loads((scenes / "unbalanced" / "stack.json").read_text())
+    copy = scenes / f"with-{key}"
+    shutil.copytree(scenes / "unbalanced", copy)
+    (copy / "stack.json").write_text(json.dumps({**meta, key: file}))
+    return (copy, *_thickness(copy))
 
 
 def test_stack_json_gains_are_checked_and_used(tmp_path):
@@ -253,11 +259,7 @@ def test_a_substrate_reference_makes_the_unbalanced_scene_read_as_the_balanced_o
     assert wb_sub.source == "substrate reference substrate.png"
     np.testing.assert_allclose(wb_sub.gains_rgb, GAINS, rtol=0.01)
     assert float(np.median(np.abs(t_sub[ok] - t_bal[ok]))) < 0.3
-    meta = json.loads((scenes / "unbalanced" / "stack.json").read_text())
-    copy = scenes / "with-substrate-key"
-    shutil.copytree(scenes / "unbalanced", copy)
-    (copy / "stack.json").write_text(json.dumps({**meta, "substrate_reference": "substrate.png"}))
-    t_key, wb_key = _thickness(copy)
+    copy, t_key, wb_key = _through_stack_json(scenes, "substrate_reference", "substrate.png")
     assert wb_key.source == "substrate reference substrate.png"
     np.testing.assert_array_equal(t_key, t_sub)
     _, wb_both = _thickness(copy, white_reference=str(copy / "white.png"))
