@@ -388,8 +388,9 @@ def _region_groups(component, touching) -> np.ndarray:
 
 def touching_regions(labels, patch_region) -> np.ndarray:
     """Pairs of regions (indices, shape (P, 2)) whose patches touch in ``labels``
-    (4-connectivity; patches without a region, -1, take no part)."""
-    pairs = neighbour_pairs(np.asarray(patch_region)[labels] + 1)
+    (4-connectivity; patches without a region, -1, take no part). The region image is
+    int32 (4 B/px)."""
+    pairs = neighbour_pairs((np.asarray(patch_region) + 1).astype(np.int32)[labels])
     return pairs[pairs[:, 0] > 0] - 1
 
 
