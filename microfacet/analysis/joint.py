@@ -343,15 +343,19 @@ def _facets_in_colour(g: FacetGeometry, colour, roi, model, scene, options: Join
 
 
 def facets_in_other_order(joint: JointResult, geometry: FacetGeometry, colour, roi, model,
-                          options: JointOptions, *, moved, centre_nm) -> JointResult:
+                          options: JointOptions, *, moved, centre_nm,
+                          colours: FacetColours | None = None) -> JointResult:
     """``joint`` with the facets ``moved`` (bool, shape (S,)) solved again in the
     interference order about ``centre_nm`` (per facet) instead of their ROI's, the others
     kept; their colour errors follow (:func:`~.consistency.order_move` says which facets).
     ``model`` is at ``joint``'s exposure; a facet whose old order still fits better by more
-    than ``options.order_switch_de`` keeps it (:func:`~.facet_thickness.facet_thickness`)."""
+    than ``options.order_switch_de`` keeps it (:func:`~.facet_thickness.facet_thickness`).
+    ``colours``: :func:`facet_colours` of the same facets, colours and ROIs, where the caller
+    has them (each round of order moves would average the image again)."""
     image = _facet_image(geometry, colour, roi, options)
     moved = np.asarray(moved, bool)
-    cols = dataclasses.replace(image.colours(), roi_thickness_nm=np.where(
+    cols = dataclasses.replace(image.colours() if colours is None else colours,
+                               roi_thickness_nm=np.where(
         moved, np.asarray(centre_nm, dtype=np.float64), np.nan))
     new = facet_thickness(cols, geometry.tilt_deg, model, options,
                           tilt_sigma_deg=geometry.tilt_sigma_deg, noise_de=colour.noise_de,

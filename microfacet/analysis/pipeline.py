@@ -304,15 +304,15 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
             else:
                 (joint, roi, readings), flat = facets(colour, roi), flat_ref
             model = model.with_exposure(joint.exposure)
-            pooled = _order_moves(joint, geometry, colour, roi, model, options, scene)
+            cols = facet_colours(geometry, colour, roi, options.joint)   # the colours are final
+            pooled = _order_moves(joint, geometry, colour, roi, model, options, scene, cols)
             joint = pooled.joint
         with timer.stage(Stage.TILT):
             pixels = joint.pixels = joint_pixel_tilts(joint, colour, model, grid, options.tilt)
         with timer.stage(Stage.MIXTURES):
             dist = fit_joint_distributions(
                 joint, roi, model, scene, options.fits, pooled=pooled,
-                gain_shifts_nm=_gain_shifts(joint, geometry, colour, roi, model, options,
-                                            scene, wb))
+                gain_shifts_nm=_gain_shifts(joint, geometry, cols, model, options, scene, wb))
             dist.exposure_readings = readings
         with timer.stage(Stage.SELF_CHECK):
             check = _self_check(st, focus, joint, scene, options,
@@ -335,26 +335,28 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                           flat if options.mode == "joint" else flat_ref)
 
 
-def _gain_shifts(joint, geometry, colour, roi, model, options, scene, wb):
+def _gain_shifts(joint, geometry, cols, model, options, scene, wb):
     """Each facet's thickness move for a 1σ error of the R and B gains
-    (:func:`~.joint.gain_thickness_shifts` at :meth:`~.white_balance.WhiteBalance.log_gain_sigma`);
-    None where the gains' error is not known."""
+    (:func:`~.joint.gain_thickness_shifts` at :meth:`~.white_balance.WhiteBalance.log_gain_sigma`;
+    ``cols``: the facets' colours, :func:`~.joint.facet_colours`); None where the gains' error
+    is not known."""
     sigma = wb.log_gain_sigma()
     if sigma is None:
         return None
-    return gain_thickness_shifts(facet_colours(geometry, colour, roi, options.joint),
-                                 joint.thickness.thickness_nm, geometry.tilt_deg, model,
+    return gain_thickness_shifts(cols, joint.thickness.thickness_nm, geometry.tilt_deg, model,
                                  options.joint, log_gain_rb=sigma, illuminant=scene.illuminant)
 
 
-def _order_moves(joint, geometry, colour, roi, model, options, scene):
+def _order_moves(joint, geometry, colour, roi, model, options, scene, cols):
     """The facets of a component that is another read in a neighbouring interference order,
-    in that order (:func:`~.distributions.pool_interference_orders`, ``fits.order_moves``)."""
+    in that order (:func:`~.distributions.pool_interference_orders`, ``fits.order_moves``);
+    ``cols``: the facets' colours (:func:`~.joint.facet_colours`), shared by every round."""
     if options.fits.order_moves == "off":
         return PooledOrders(joint)
     return pool_interference_orders(
         joint, lambda j, moved, centre: facets_in_other_order(
-            j, geometry, colour, roi, model, options.joint, moved=moved, centre_nm=centre),
+            j, geometry, colour, roi, model, options.joint, moved=moved, centre_nm=centre,
+            colours=cols),
         period_nm=model.period_nm,
         window_nm=options.joint.order_window_fraction * model.period_nm, options=options.fits,
         seed=scene.seed)

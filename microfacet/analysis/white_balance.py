@@ -141,8 +141,8 @@ class WhiteBalance:
         scene tells: a reference's (``reference_sigma``, else :data:`REFERENCE_LOG_SD`); a
         gain taken from the estimate, the estimate's spread σ; a gain left at the image's
         own (1, the image taken as balanced), the RMS distance of the truth from it given
-        the estimate,
-        √(ln² g + σ²) (with σ = :data:`LOG_RANGE` where the estimate's is not finite).
+        the estimate, √(ln² g + σ²) (with σ = :data:`LOG_RANGE` where the estimate's is not
+        finite).
         None without an estimate (``white_balance = "off"``, or too few tiles for one).
 
         >>> wb = WhiteBalance(estimate_rgb=(1.03, 1.0, 0.96), estimate_sigma=(0.04, 0.01),

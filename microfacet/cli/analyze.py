@@ -80,12 +80,12 @@ def _plus_minus(u) -> str:
 def _text_summary(result, out: Path, elapsed_s: float) -> str:
     dist = result.distributions
     fit = dist.thickness
-    comps = ", ".join(f"{m:.1f}{_plus_minus(u)} nm ({100 * w:.0f}%)" for (w, m, _), u in zip(
-        fit.mixture.components, fit.info.get("mean_uncertainty") or [None] * 99)) \
+    unc = (fit.info.get("mean_uncertainty") or []) if fit else []
+    comps = ", ".join(f"{m:.1f}{_plus_minus(unc[i] if i < len(unc) else None)} nm "
+                      f"({100 * w:.0f}%)" for i, (w, m, _) in enumerate(fit.mixture.components)) \
         if fit else "none"
     lobes = ", ".join(f"{s:.1f}° ({100 * w:.0f}%)" for w, s in dist.ndf.mixture.components) \
         if dist.ndf else "none"
-    unc = (fit.info.get("mean_uncertainty") or []) if fit else []
     if any(u.get("sigma_nm") is not None and u.get("white_balance_nm") is None for u in unc):
         comps += " (± without the white balance's part: no estimate of the gains)"
     if fit is not None and not dist.thickness_judgement.identified:

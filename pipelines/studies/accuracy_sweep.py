@@ -32,6 +32,7 @@ stderr.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -302,11 +303,16 @@ def score_scene(results: Path, truth: Path, res=None) -> dict:
     used = ~mask if mask is not None else np.ones(est.shape, bool)
     floor = colour_floor_de(res.image("all_in_focus"), truth_img, used)
     de = res.get("delta_e", "mean")
-    cov = mean_coverage(res.get("thickness", "mixture", "components") or [],
-                        res.get("thickness", "mixture", "mean_uncertainty"),
-                        meta["populations"])
+    comps = res.get("thickness", "mixture", "components") or []
+    unc = res.get("thickness", "mixture", "mean_uncertainty") or []
+    cov = mean_coverage(comps, unc, meta["populations"])
+    samp = mean_coverage(comps, [{"sigma_nm": u.get("sampling_nm")} for u in unc],
+                         meta["populations"])
+    wb_parts = [u["white_balance_nm"] for u in unc if u.get("white_balance_nm") is not None]
     return {"region_mae_nm": reg["mae_nm"], "region_median_ae_nm": reg["median_ae_nm"],
             "mean_pairs": cov["pairs"], "mean_within_2sigma": cov["within_2sigma"],
+            "mean_within_2sigma_sampling": samp["within_2sigma"],
+            "mean_wb_part_nm": float(np.median(wb_parts)) if wb_parts else math.nan,
             "mean_abs_error_nm": (float(np.median(np.abs(cov["errors_nm"])))
                                   if cov["pairs"] else math.nan),
             "mean_sigma_nm": (float(np.median([s for s in cov["sigmas_nm"] if s is not None]))
@@ -409,12 +415,20 @@ def _link_or_copy(a, b):
         shutil.copy2(a, b)
 
 
+@functools.lru_cache(maxsize=None)
+def _bare_table(film, substrate, illuminant):
+    """The forward model's colour table of thin films on ``substrate`` (0-10 nm, normal
+    incidence), once per optical-constant set: building one takes about a second."""
+    from microfacet.colour.table import build_colour_table
+    return build_colour_table(thickness_range_nm=(0.0, 10.0), theta_range_deg=(0.0, 1.0),
+                              film=film, substrate=substrate, illuminant=illuminant)
+
+
 def substrate_session(work: Path, name: str, p, seed: int) -> Path:
     """``work/stacks-substrate/NAME``: the stack (its slices linked) with a 64 px
     field of the bare substrate, its native oxide drawn in :data:`REFERENCE_OXIDE_NM`,
     through the scene's camera (white balance, noise, 8-bit sRGB; the scene's exposure, or
     less where that would clip) named by stack.json's ``substrate_reference``."""
-    from microfacet.colour.table import build_colour_table
     from microfacet.colour.transfer import srgb_encode
     from microfacet.forward.synth import apply_sensor
     from microfacet.io.images import write_image
@@ -425,9 +439,8 @@ def substrate_session(work: Path, name: str, p, seed: int) -> Path:
     shutil.copytree(src / "slices", dst / "slices", copy_function=_link_or_copy)
     rng = np.random.default_rng([seed, 23])
     oxide = float(rng.uniform(*REFERENCE_OXIDE_NM))
-    table = build_colour_table(thickness_range_nm=(0.0, 10.0), theta_range_deg=(0.0, 1.0),
-                               film=p.film, substrate=p.substrate, illuminant=p.illuminant)
-    rgb = table.linear_rgb_at(0.0, oxide) * np.asarray(p.white_balance_gains)
+    rgb = (_bare_table(p.film, p.substrate, p.illuminant).linear_rgb_at(0.0, oxide)
+           * np.asarray(p.white_balance_gains))
     rgb = rgb * min(p.exposure, 0.85 / float(np.max(rgb)))   # exposed not to clip
     img = apply_sensor(np.broadcast_to(rgb, (64, 64, 3)).astype(np.float32), p, rng)
     write_image(dst / "substrate.png", srgb_encode(img, dtype=np.uint8))
@@ -482,8 +495,8 @@ COLUMNS = ["name", "mode", "seed", "world", "relief_file", "status", "reason", "
            "thickness_means_nm", "thickness_span_nm", "lobes_deg", "region_mae_nm",
            "region_median_ae_nm", "regions_scored", "regions_true", "pops_found", "pops_distinct",
            "pops_candidates",
-           "pops_true", "mean_pairs", "mean_within_2sigma", "mean_abs_error_nm",
-           "mean_sigma_nm",
+           "pops_true", "mean_pairs", "mean_within_2sigma", "mean_within_2sigma_sampling",
+           "mean_abs_error_nm", "mean_sigma_nm", "mean_wb_part_nm",
            "lobes_found", "lobes_true", "identified", "ndf_w1_deg", "lobe_rms_ratio",
            "censored_fraction", "past_limit_fraction", "height_coverage", "de_mean", "de_floor",
            "de_excess", "masked_fraction", "order_wrong", "order_flagged", "exposure_error",
