@@ -54,7 +54,8 @@ from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
 from .white_balance import rebalanced_lab
 
 __all__ = ["ExposureReadings", "FacetGeometry", "JointResult", "Segmented", "bootstrap_labels",
-           "facet_colours", "facet_geometry", "facet_labels", "facets_at_exposure_readings",
+           "facet_colours", "facet_geometry", "facet_image", "facet_labels",
+           "facets_at_exposure_readings",
            "facets_in_other_order", "gain_thickness_shifts", "joint_pixel_tilts"]
 
 log = logging.getLogger(__name__)
@@ -314,7 +315,7 @@ def facet_geometry(seg: Segmented, scene, options: JointOptions) -> FacetGeometr
     return FacetGeometry(facets, planes, ev_planes, area, dist, tilt_f, tsig_f, dome)
 
 
-def _facet_image(g: FacetGeometry, colour, roi, options: JointOptions) -> FacetImage:
+def facet_image(g: FacetGeometry, colour, roi, options: JointOptions) -> FacetImage:
     """The colour image as ``g``'s facets, with ``roi``'s thickness per pixel."""
     thick_roi_px = roi.thickness_nm[roi.index_map(colour.lab.shape[:2])]
     usable = ~colour.mask.mask & np.isfinite(thick_roi_px)
@@ -326,7 +327,7 @@ def _facets_in_colour(g: FacetGeometry, colour, roi, model, scene, options: Join
                       ) -> JointResult:
     """The exposure refined on the facets, their thickness and colour error, at one
     exposure reading (``roi``'s, ``model``'s)."""
-    image = _facet_image(g, colour, roi, options)
+    image = facet_image(g, colour, roi, options)
     usable, fitted = image.usable, g.planes.fitted
     if scene.estimate_exposure:
         model = model.with_exposure(refine_exposure_on_facets(
@@ -342,29 +343,29 @@ def _facets_in_colour(g: FacetGeometry, colour, roi, model, scene, options: Join
                        g.evidence_planes, g.dome)
 
 
-def facets_in_other_order(joint: JointResult, geometry: FacetGeometry, colour, roi, model,
+def facets_in_other_order(joint: JointResult, image: FacetImage, colour, model,
                           options: JointOptions, *, moved, centre_nm,
                           colours: FacetColours | None = None) -> JointResult:
     """``joint`` with the facets ``moved`` (bool, shape (S,)) solved again in the
     interference order about ``centre_nm`` (per facet) instead of their ROI's, the others
-    kept; their colour errors follow (:func:`~.consistency.order_move` says which facets).
+    kept, each at its tilt (``joint.prior_deg``); their colour errors follow
+    (:func:`~.consistency.order_move` says which facets). ``image``: :func:`facet_image` of
+    ``joint``'s facets, ``colour`` (its noise) and ROIs; ``colours``: ``image.colours()``,
+    where the caller has them (each round of order moves would average the image again).
     ``model`` is at ``joint``'s exposure; a facet whose old order still fits better by more
-    than ``options.order_switch_de`` keeps it (:func:`~.facet_thickness.facet_thickness`).
-    ``colours``: :func:`facet_colours` of the same facets, colours and ROIs, where the caller
-    has them (each round of order moves would average the image again)."""
-    image = _facet_image(geometry, colour, roi, options)
+    than ``options.order_switch_de`` keeps it (:func:`~.facet_thickness.facet_thickness`)."""
     moved = np.asarray(moved, bool)
     cols = dataclasses.replace(image.colours() if colours is None else colours,
                                roi_thickness_nm=np.where(
-        moved, np.asarray(centre_nm, dtype=np.float64), np.nan))
-    new = facet_thickness(cols, geometry.tilt_deg, model, options,
-                          tilt_sigma_deg=geometry.tilt_sigma_deg, noise_de=colour.noise_de,
+                                   moved, np.asarray(centre_nm, dtype=np.float64), np.nan))
+    new = facet_thickness(cols, joint.prior_deg, model, options,
+                          tilt_sigma_deg=joint.prior_sigma_deg, noise_de=colour.noise_de,
                           block_noise=(colour.block_noise_de, colour.block_px))
     old = joint.thickness
     ft = FacetThickness(*(np.where(moved, getattr(new, f.name), getattr(old, f.name))
                           for f in dataclasses.fields(FacetThickness)))
     return dataclasses.replace(joint, thickness=ft, colour_sigma_de=_colour_sigma(
-        image, ft, geometry.tilt_deg, model, colour.noise_de))
+        image, ft, joint.prior_deg, model, colour.noise_de))
 
 
 #: Half-width (nm) of the window :func:`gain_thickness_shifts` solves a facet in again: a
@@ -376,7 +377,7 @@ SHIFT_WINDOW_NM = 10.0
 def facet_colours(geometry: FacetGeometry, colour, roi, options: JointOptions) -> FacetColours:
     """The colour evidence of ``geometry``'s facets
     (:meth:`~.facet_thickness.FacetImage.colours`)."""
-    return _facet_image(geometry, colour, roi, options).colours()
+    return facet_image(geometry, colour, roi, options).colours()
 
 
 def gain_thickness_shifts(colours: FacetColours, thickness_nm, tilt_deg, model,

@@ -51,8 +51,8 @@ from .identification import analysis_warnings, mean_plane_tilt_deg, self_check_j
 from .iso25178 import areal_parameters
 from .joint import (
     bootstrap_labels,
-    facet_colours,
     facet_geometry,
+    facet_image,
     facet_labels,
     facets_at_exposure_readings,
     facets_in_other_order,
@@ -304,8 +304,9 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
             else:
                 (joint, roi, readings), flat = facets(colour, roi), flat_ref
             model = model.with_exposure(joint.exposure)
-            cols = facet_colours(geometry, colour, roi, options.joint)   # the colours are final
-            pooled = _order_moves(joint, geometry, colour, roi, model, options, scene, cols)
+            image = facet_image(geometry, colour, roi, options.joint)   # the colours are final
+            cols = image.colours()
+            pooled = _order_moves(joint, image, cols, colour, model, options, scene)
             joint = pooled.joint
         with timer.stage(Stage.TILT):
             pixels = joint.pixels = joint_pixel_tilts(joint, colour, model, grid, options.tilt)
@@ -338,8 +339,8 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
 def _gain_shifts(joint, geometry, cols, model, options, scene, wb):
     """Each facet's thickness move for a 1σ error of the R and B gains
     (:func:`~.joint.gain_thickness_shifts` at :meth:`~.white_balance.WhiteBalance.log_gain_sigma`;
-    ``cols``: the facets' colours, :func:`~.joint.facet_colours`); None where the gains' error
-    is not known."""
+    ``cols``: the facets' colours, :meth:`~.facet_thickness.FacetImage.colours`); None where
+    the gains' error is not known."""
     sigma = wb.log_gain_sigma()
     if sigma is None:
         return None
@@ -347,15 +348,16 @@ def _gain_shifts(joint, geometry, cols, model, options, scene, wb):
                                  options.joint, log_gain_rb=sigma, illuminant=scene.illuminant)
 
 
-def _order_moves(joint, geometry, colour, roi, model, options, scene, cols):
+def _order_moves(joint, image, cols, colour, model, options, scene):
     """The facets of a component that is another read in a neighbouring interference order,
     in that order (:func:`~.distributions.pool_interference_orders`, ``fits.order_moves``);
-    ``cols``: the facets' colours (:func:`~.joint.facet_colours`), shared by every round."""
+    ``image`` and ``cols``: the facets' image and colours (:func:`~.joint.facet_image`),
+    shared by every round."""
     if options.fits.order_moves == "off":
         return PooledOrders(joint)
     return pool_interference_orders(
         joint, lambda j, moved, centre: facets_in_other_order(
-            j, geometry, colour, roi, model, options.joint, moved=moved, centre_nm=centre,
+            j, image, colour, model, options.joint, moved=moved, centre_nm=centre,
             colours=cols),
         period_nm=model.period_nm,
         window_nm=options.joint.order_window_fraction * model.period_nm, options=options.fits,

@@ -215,7 +215,7 @@ def test_facets_solved_again_in_another_order_keep_the_one_that_fits_far_better(
     thickness as the centre, they come back where they were (within the final step); moved
     one colour period up, where their colour fits far worse (a clear nd fixture), the
     whole-range scan returns most to their own order."""
-    from microfacet.analysis.joint import FacetGeometry, facets_in_other_order
+    from microfacet.analysis.joint import FacetGeometry, facet_image, facets_in_other_order
     from microfacet.analysis.planes import facet_edge_distance
 
     r = nd["result"]
@@ -228,7 +228,8 @@ def test_facets_solved_again_in_another_order_keep_the_one_that_fits_far_better(
     half = has & (np.arange(d.size) % 2 == 0)
 
     def again(centre):
-        return facets_in_other_order(j, g, r.colour, r.roi, r.model, r.options.joint,
+        return facets_in_other_order(j, facet_image(g, r.colour, r.roi, r.options.joint),
+                                     r.colour, r.model, r.options.joint,
                                      moved=half, centre_nm=centre).thickness
 
     same = again(d)
