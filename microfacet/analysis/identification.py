@@ -35,8 +35,8 @@ from ..core.errors import plain_params, render_params
 from .options import FitOptions
 
 __all__ = ["Judgement", "Reason", "analysis_warnings", "colour_tilt_contrast",
-           "mean_plane_tilt_deg", "ndf_judgement", "order_check", "seed_ndf_judgement",
-           "self_check_judgement", "thickness_judgement"]
+           "gains_unconstrained", "mean_plane_tilt_deg", "ndf_judgement", "order_check",
+           "seed_ndf_judgement", "self_check_judgement", "thickness_judgement"]
 
 #: Mean ΔE00 of pure noise of σ per Lab component, E|N(0, σ²I₃)| = 2·sqrt(2/π)·σ: the
 #: image's noise floor of the mean ΔE00 is this × ``noise_de``.
@@ -325,7 +325,25 @@ def _spike_warning(fit) -> Reason | None:
 ORDER_AMBIGUOUS_AREA = 0.05
 
 
-def order_check(dist, *, delta_e_median, noise_de, options: FitOptions) -> dict:
+def gains_unconstrained(wb) -> bool:
+    """Whether the scene leaves the camera's white balance free: no reference gives the
+    gains, and the scene's own estimate (:func:`~.white_balance.estimate_white_balance`)
+    has an unbounded spread on R or B (its misfit has no minimum to measure: one film
+    colour, where a gain and a thickness trade off). ``wb``: a
+    :class:`~.white_balance.WhiteBalance` or None.
+
+    >>> from microfacet.analysis.white_balance import WhiteBalance
+    >>> free = WhiteBalance(estimate_rgb=(0.9, 1.0, 0.89), estimate_sigma=(math.inf, 0.3))
+    >>> gains_unconstrained(free), gains_unconstrained(WhiteBalance(source="stack.json"))
+    (True, False)
+    """
+    if wb is None or wb.source != "none" or wb.estimate_rgb is None or not wb.estimate_sigma:
+        return False
+    return not all(math.isfinite(s) for s in wb.estimate_sigma)
+
+
+def order_check(dist, *, delta_e_median, noise_de, options: FitOptions,
+                white_balance=None) -> dict:
     """Whether the thicknesses' interference order is established, and if not why.
 
     The order is what the colours decide least firmly (orders ~110 nm apart can give close
@@ -334,9 +352,12 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions) -> dict:
     facets' area has such a runner-up, where the film model does not explain the colours
     (median ΔE00 more than ``options.excess_delta_e`` above its noise floor: the least-ΔE
     order of a model that does not fit is no evidence; on the generalization sweep a scene
-    with unbalanced colours was read ~110 nm off so, with no ambiguity), or where the
-    thickness is not identified. Returns ``{"established": bool, "reasons": [str]}``
-    (summary.json ``thickness.order``).
+    with unbalanced colours was read ~110 nm off so, with no ambiguity), where the scene
+    leaves the white balance free and no reference gives it (``white_balance``:
+    :func:`gains_unconstrained`; the order then rests on the image being balanced: on an
+    independent draw of the sweep a one-colour scene with R × 1.14, B × 0.91 was read
+    241 nm off so, with no ambiguity), or where the thickness is not identified. Returns
+    ``{"established": bool, "reasons": [str]}`` (summary.json ``thickness.order``).
     """
     why = []
     if int(dist.roi_ambiguous.sum()):
@@ -352,6 +373,9 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions) -> dict:
     if floor is not None:
         why.append(f"the film model does not explain the colours (median dE00 "
                    f"{delta_e_median:.2f}, noise floor {floor:.2f})")
+    if gains_unconstrained(white_balance):
+        why.append("the colours leave the white balance free and no reference gives it: the "
+                   "order rests on the image being balanced")
     for a in _aliases(dist.thickness):
         why.append(f"the {a[0]:.1f} nm component may be the {a[1]:.1f} nm one read in "
                    f"another order")
@@ -433,7 +457,15 @@ def _candidate_warning(fit) -> Reason | None:
 
 
 def _white_balance_warning(wb) -> Reason | None:
-    """The colours look unbalanced: an estimate, no reference, a gain off 1 by > 3σ, > 3 %."""
+    """The colours leave the gains free (:func:`gains_unconstrained`), or look unbalanced:
+    an estimate, no reference, a gain off 1 by > 3σ, > 3 %."""
+    if gains_unconstrained(wb):
+        return Reason("white_balance_free", "the film's colours do not fix the white balance "
+                      "(one film colour: a gain and a thickness trade off) and no reference "
+                      "gives it, so the thickness and its interference order rest on the "
+                      "image being balanced for the illuminant; a white or bare-substrate "
+                      "reference (`optics.white_reference`, `optics.substrate_reference`) "
+                      "settles it", "optics.white_reference")
     if wb is None or wb.estimate_rgb is None or wb.source != "none" or not wb.estimate_sigma:
         return None
     off = [(name, g, s) for name, g, s in (("R", wb.estimate_rgb[0], wb.estimate_sigma[0]),

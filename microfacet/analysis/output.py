@@ -224,7 +224,8 @@ def _thickness_section(r) -> ThicknessSection:
                     "runner_up_delta_e": float(roi.runner_up_delta_e[i])}
                    for i in np.flatnonzero(dist.roi_ambiguous)]),
         order=order_check(dist, delta_e_median=r.delta_e_stats["median"],
-                          noise_de=r.colour.noise_de, options=r.options.fits))
+                          noise_de=r.colour.noise_de, options=r.options.fits,
+                          white_balance=r.white_balance))
 
 
 def _ndf_section(r) -> NdfSection:

@@ -5,6 +5,7 @@ test_distributions.py."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import SimpleNamespace as NS
 
@@ -505,3 +506,31 @@ def test_two_exposures_that_fit_alike_leave_the_order_undecided():
     d.exposure_readings = ExposureReadings((0.31, 0.99), (3.25, 0.83), 1, False)
     assert order_check(d, delta_e_median=1.0, noise_de=1.0, options=OPTIONS)["established"]
     assert _warn(d) == []
+
+
+def test_gains_the_colours_leave_free_leave_the_order_unestablished():
+    """No reference and an estimate whose spread is unbounded (one film colour): the order
+    rests on the image being balanced, so it is not established, and a warning names the
+    references that settle it; a reference, or an estimate with a finite spread, does not."""
+    from microfacet.analysis.identification import order_check
+    from microfacet.analysis.white_balance import WhiteBalance
+
+    free = WhiteBalance(estimate_rgb=(0.89, 1.0, 0.89), estimate_sigma=(math.inf, math.inf),
+                        determined=(False, False))
+
+    def check(wb):
+        return order_check(_dist(), delta_e_median=1.0, noise_de=1.0, options=OPTIONS,
+                           white_balance=wb)
+
+    out = check(free)
+    assert not out["established"] and out["reasons"] == [
+        "the colours leave the white balance free and no reference gives it: the order "
+        "rests on the image being balanced"]
+    w = [r for r in analysis_warnings(_dist(), delta_e_median=1.0, noise_de=1.0,
+                                      mean_plane_tilt=None, options=OPTIONS, white_balance=free)
+         if r.code == "white_balance_free"]
+    assert len(w) == 1 and w[0].parameter == "optics.white_reference"
+    assert "`optics.substrate_reference`" in w[0].text
+    for wb in (None, WhiteBalance(), dataclasses.replace(free, source="stack.json"),
+               dataclasses.replace(free, estimate_sigma=(0.2, 0.3))):
+        assert check(wb)["established"]

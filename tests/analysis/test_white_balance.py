@@ -5,6 +5,7 @@ balance analysed with its white reference like the same scene without one."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 
@@ -264,3 +265,43 @@ def test_a_substrate_reference_makes_the_unbalanced_scene_read_as_the_balanced_o
     np.testing.assert_array_equal(t_key, t_sub)
     _, wb_both = _thickness(copy, white_reference=str(copy / "white.png"))
     assert wb_both.source == "white reference white.png"
+
+
+def _film_image(model, thickness_nm, tilt_deg, rng, *, gains=GAINS, noise=0.01):
+    """Encoded sRGB of the film at ``thickness_nm`` and ``tilt_deg`` per pixel through
+    ``gains``, exposure 0.8, with white noise."""
+    from microfacet.colour.srgb import model_xyz_to_linear_srgb
+    lin = model_xyz_to_linear_srgb(model.xyz(tilt_deg, thickness_nm), white=model.white,
+                                   illuminant="D65") * 0.8 * np.asarray(gains)
+    enc = srgb_encode(np.clip(lin, 0.0, 1.0), dtype=np.float32)
+    return np.clip(enc + rng.normal(0.0, noise, enc.shape), 0.0, 1.0).astype(np.float32)
+
+
+@pytest.mark.slow
+def test_one_film_colour_leaves_the_gains_free_four_fix_them():
+    """A gain and a thickness trade off for one film colour: the estimate's spread is
+    unbounded and the order check is told so (:func:`gains_unconstrained`); four film
+    colours over-determine the two gains: found within 3 % (σ ~2 %), not free."""
+    from microfacet.analysis.identification import gains_unconstrained
+    from microfacet.analysis.white_balance import estimate_white_balance
+    from microfacet.colour.model import FilmColourModel
+    from microfacet.colour.table import build_colour_table
+
+    model = FilmColourModel(build_colour_table(thickness_range_nm=(0.0, 400.0),
+                                               theta_range_deg=(0.0, 30.0)))
+    rng = np.random.default_rng(1)
+    tilt = np.abs(rng.normal(0.0, 5.0, (256, 256)))
+    four = np.kron(np.array([[60.0, 120.0], [180.0, 240.0]]), np.ones((128, 128)))
+    found = {}
+    for name, d in (("one", np.full((256, 256), 85.0)), ("four", four)):
+        img = _film_image(model, d, tilt, rng)
+        found[name] = estimate_white_balance(img, tilt, np.ones(d.shape, bool), model,
+                                             illuminant="D65")
+    assert gains_unconstrained(found["one"])
+    assert not all(np.isfinite(found["one"].estimate_sigma))
+    four = found["four"]
+    assert not gains_unconstrained(four)
+    assert abs(four.estimate_rgb[0] / GAINS[0] - 1) < 0.03
+    assert abs(four.estimate_rgb[2] / GAINS[2] - 1) < 0.03
+    # a reference gives the gains: never free, whatever the estimate's spread
+    assert not gains_unconstrained(dataclasses.replace(found["one"], source="stack.json"))
