@@ -33,6 +33,7 @@ import numpy as np
 
 from ..core.errors import plain_params, render_params
 from .options import FitOptions
+from .white_balance import LOG_RANGE
 
 __all__ = ["Judgement", "Reason", "analysis_warnings", "colour_tilt_contrast",
            "gains_unconstrained", "mean_plane_tilt_deg", "ndf_judgement", "order_check",
@@ -328,18 +329,19 @@ ORDER_AMBIGUOUS_AREA = 0.05
 def gains_unconstrained(wb) -> bool:
     """Whether the scene leaves the camera's white balance free: no reference gives the
     gains, and the scene's own estimate (:func:`~.white_balance.estimate_white_balance`)
-    has an unbounded spread on R or B (its misfit has no minimum to measure: one film
-    colour, where a gain and a thickness trade off). ``wb``: a
-    :class:`~.white_balance.WhiteBalance` or None.
+    has a spread on R or B that is unbounded (its misfit has no minimum to measure: one film
+    colour, where a gain and a thickness trade off) or as wide as the gains it searches
+    (:data:`~.white_balance.LOG_RANGE`). ``wb``: a :class:`~.white_balance.WhiteBalance` or
+    None.
 
     >>> from microfacet.analysis.white_balance import WhiteBalance
-    >>> free = WhiteBalance(estimate_rgb=(0.9, 1.0, 0.89), estimate_sigma=(math.inf, 0.3))
+    >>> free = WhiteBalance(estimate_rgb=(0.9, 1.0, 0.89), estimate_sigma=(math.inf, 0.03))
     >>> gains_unconstrained(free), gains_unconstrained(WhiteBalance(source="stack.json"))
     (True, False)
     """
     if wb is None or wb.source != "none" or wb.estimate_rgb is None or not wb.estimate_sigma:
         return False
-    return not all(math.isfinite(s) for s in wb.estimate_sigma)
+    return not all(s < LOG_RANGE for s in wb.estimate_sigma)
 
 
 def order_check(dist, *, delta_e_median, noise_de, options: FitOptions,

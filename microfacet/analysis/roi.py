@@ -75,6 +75,8 @@ log = logging.getLogger(__name__)
 #: tolerance in log exposure.
 EXPOSURE_SCAN = (0.25, 4.0, 25)
 EXPOSURE_XATOL = 0.003
+#: The scan's local minima refined (the lowest first).
+EXPOSURE_STARTS = 4
 #: Blocks of the second exposure reading (a random sample of the usable ones).
 EXPOSURE_BLOCKS = 256
 #: Exposure readings closer than this relative difference are one reading.
@@ -371,15 +373,25 @@ def block_exposure_reading(colour, tilt_deg, model, options: RoiOptions, *, expo
 
 def _scan_exposure(objective) -> float:
     """The exposure minimising ``objective(log e)``: a log-spaced scan over
-    :data:`EXPOSURE_SCAN`, then a bounded refinement about its best node."""
+    :data:`EXPOSURE_SCAN`, then a bounded refinement about each of its
+    :data:`EXPOSURE_STARTS` lowest local minima, the least refined one kept.
+
+    One start at the best node is not enough: a film's ΔE rises by ~1 ΔE00 per 6 % of
+    exposure, so a basin narrower than the scan's 12 % step can lie between two nodes that
+    both read higher than another basin's node (a one-colour scene of the generalization
+    sweep: its true exposure, 0.94 at 86 nm with median ΔE00 0.61, between nodes at 1.27
+    and 1.55, lost to 1.59 at 394 nm, 0.85)."""
     lo, hi, count = EXPOSURE_SCAN
     log_grid = np.linspace(math.log(lo), math.log(hi), count)
     vals = np.array([objective(g) for g in log_grid])
-    i = int(np.argmin(vals))
-    a, b = log_grid[max(i - 1, 0)], log_grid[min(i + 1, log_grid.size - 1)]
-    opt = optimize.minimize_scalar(objective, bounds=(a, b), method="bounded",
-                                   options={"xatol": EXPOSURE_XATOL})
-    return float(math.exp(opt.x if opt.fun <= vals[i] else log_grid[i]))
+    best_x, best_f = log_grid[int(np.argmin(vals))], float(np.min(vals))
+    for i in local_minima(vals)[:EXPOSURE_STARTS]:
+        a, b = log_grid[max(i - 1, 0)], log_grid[min(i + 1, log_grid.size - 1)]
+        opt = optimize.minimize_scalar(objective, bounds=(a, b), method="bounded",
+                                       options={"xatol": EXPOSURE_XATOL})
+        if opt.fun < best_f:
+            best_x, best_f = float(opt.x), float(opt.fun)
+    return float(math.exp(best_x))
 
 
 def _block_exposure(img: "_Image", usable, model, options, rng) -> float | None:

@@ -513,7 +513,7 @@ def test_gains_the_colours_leave_free_leave_the_order_unestablished():
     rests on the image being balanced, so it is not established, and a warning names the
     references that settle it; a reference, or an estimate with a finite spread, does not."""
     from microfacet.analysis.identification import order_check
-    from microfacet.analysis.white_balance import WhiteBalance
+    from microfacet.analysis.white_balance import LOG_RANGE, WhiteBalance
 
     free = WhiteBalance(estimate_rgb=(0.89, 1.0, 0.89), estimate_sigma=(math.inf, math.inf),
                         determined=(False, False))
@@ -531,6 +531,8 @@ def test_gains_the_colours_leave_free_leave_the_order_unestablished():
          if r.code == "white_balance_free"]
     assert len(w) == 1 and w[0].parameter == "optics.white_reference"
     assert "`optics.substrate_reference`" in w[0].text
+    # a spread as wide as the gains searched (±LOG_RANGE in log) is no constraint either
+    assert not check(dataclasses.replace(free, estimate_sigma=(0.05, LOG_RANGE)))["established"]
     for wb in (None, WhiteBalance(), dataclasses.replace(free, source="stack.json"),
-               dataclasses.replace(free, estimate_sigma=(0.2, 0.3))):
+               dataclasses.replace(free, estimate_sigma=(0.05, 0.9 * LOG_RANGE))):
         assert check(wb)["established"]

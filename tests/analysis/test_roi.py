@@ -101,3 +101,26 @@ def test_masked_roi_is_nan_and_given_exposure_is_used(table, model):
     assert fit.thickness_nm[0] == pytest.approx(60.0, abs=0.2)
     assert np.isnan(fit.thickness_nm[1]) and fit.n_pixels[1] == 0
     assert not fit.exposure_estimated and fit.exposure == 1.0   # not the model's 3.0
+
+
+def test_the_exposure_scan_finds_a_basin_narrower_than_its_step():
+    """Two basins of the exposure's misfit, as on a one-colour scene read at 86 nm or at 394
+    nm (the generalization sweep's seed-4 g014): the deeper one (0.61 ΔE00 at exposure
+    0.944) lies between two scan nodes that read 1.8, the shallower one (0.85 at 1.587)
+    on a node. Refining only the best node returned 1.587; every local minimum is refined."""
+    import math
+
+    from microfacet.analysis.roi import EXPOSURE_SCAN, _scan_exposure
+
+    lo, hi, count = EXPOSURE_SCAN
+    nodes = np.exp(np.linspace(math.log(lo), math.log(hi), count))
+    assert np.min(np.abs(np.log(nodes / 0.944))) > 0.05          # between two nodes
+    assert np.min(np.abs(np.log(nodes / 1.587))) < 0.001         # on a node
+
+    def misfit(log_e):
+        return min(0.61 + 20.0 * abs(log_e - math.log(0.944)),
+                   0.85 + 20.0 * abs(log_e - math.log(1.587)))
+
+    assert _scan_exposure(misfit) == pytest.approx(0.944, rel=0.005)
+    # one basin: the same exposure as before, found by its own refinement
+    assert _scan_exposure(lambda x: abs(x - math.log(1.3))) == pytest.approx(1.3, rel=0.005)
