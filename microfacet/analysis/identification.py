@@ -339,7 +339,9 @@ def gains_unconstrained(wb) -> bool:
     >>> gains_unconstrained(free), gains_unconstrained(WhiteBalance(source="stack.json"))
     (True, False)
     """
-    if wb is None or wb.source != "none" or wb.estimate_rgb is None or not wb.estimate_sigma:
+    # "estimated": the determined gain(s) applied; a gain left at 1 may still be free
+    if (wb is None or wb.source not in ("none", "estimated") or wb.estimate_rgb is None
+            or not wb.estimate_sigma):
         return False
     return not all(s < LOG_RANGE for s in wb.estimate_sigma)
 

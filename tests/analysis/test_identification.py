@@ -533,6 +533,10 @@ def test_gains_the_colours_leave_free_leave_the_order_unestablished():
     assert "`optics.substrate_reference`" in w[0].text
     # a spread as wide as the gains searched (±LOG_RANGE in log) is no constraint either
     assert not check(dataclasses.replace(free, estimate_sigma=(0.05, LOG_RANGE)))["established"]
+    # R determined and applied, B left at 1 and free
+    applied_r = dataclasses.replace(free, gains_rgb=(1.1, 1.0, 1.0), source="estimated",
+                                    estimate_sigma=(0.005, math.inf), determined=(True, False))
+    assert not check(applied_r)["established"]
     for wb in (None, WhiteBalance(), dataclasses.replace(free, source="stack.json"),
                dataclasses.replace(free, estimate_sigma=(0.05, 0.9 * LOG_RANGE))):
         assert check(wb)["established"]
