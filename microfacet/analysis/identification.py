@@ -329,21 +329,24 @@ ORDER_AMBIGUOUS_AREA = 0.05
 def gains_unconstrained(wb) -> bool:
     """Whether the scene leaves the camera's white balance free: no reference gives the
     gains, and the scene's own estimate (:func:`~.white_balance.estimate_white_balance`)
-    has a spread on R or B that is unbounded (its misfit has no minimum to measure: one film
-    colour, where a gain and a thickness trade off) or as wide as the gains it searches
-    (:data:`~.white_balance.LOG_RANGE`). ``wb``: a :class:`~.white_balance.WhiteBalance` or
-    None.
+    has a spread on R or B that is unbounded or not a number (its misfit has no minimum to
+    measure: e.g. one film colour, where a gain and a thickness trade off) or as wide as the
+    half-range of log gains it searches (:data:`~.white_balance.LOG_RANGE`). With
+    ``white_balance = "apply"`` a gain left at 1 beside an applied one counts too. Without
+    an estimate (``white_balance = "off"``, or too few tiles for one) nothing is known, and
+    False is returned. ``wb``: a :class:`~.white_balance.WhiteBalance` or None.
 
+    >>> import dataclasses
     >>> from microfacet.analysis.white_balance import WhiteBalance
     >>> free = WhiteBalance(estimate_rgb=(0.9, 1.0, 0.89), estimate_sigma=(math.inf, 0.03))
-    >>> gains_unconstrained(free), gains_unconstrained(WhiteBalance(source="stack.json"))
+    >>> referenced = dataclasses.replace(free, source="stack.json")
+    >>> gains_unconstrained(free), gains_unconstrained(referenced)
     (True, False)
     """
-    # "estimated": the determined gain(s) applied; a gain left at 1 may still be free
-    if (wb is None or wb.source not in ("none", "estimated") or wb.estimate_rgb is None
+    if (wb is None or wb.from_reference or wb.estimate_rgb is None
             or not wb.estimate_sigma):
         return False
-    return not all(s < LOG_RANGE for s in wb.estimate_sigma)
+    return not all(math.isfinite(s) and s < LOG_RANGE for s in wb.estimate_sigma)
 
 
 def order_check(dist, *, delta_e_median, noise_de, options: FitOptions,
@@ -358,7 +361,8 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions,
     order of a model that does not fit is no evidence; on the generalization sweep a scene
     with unbalanced colours was read ~110 nm off so, with no ambiguity), where the scene
     leaves the white balance free and no reference gives it (``white_balance``:
-    :func:`gains_unconstrained`; the order then rests on the image being balanced: on an
+    :func:`gains_unconstrained`, not checked without an estimate of the gains; the order
+    then rests on the image being balanced: on an
     independent draw of the sweep a one-colour scene with R × 1.14, B × 0.91 was read
     241 nm off so, with no ambiguity), or where the thickness is not identified. Returns
     ``{"established": bool, "reasons": [str]}`` (summary.json ``thickness.order``).
@@ -464,12 +468,14 @@ def _white_balance_warning(wb) -> Reason | None:
     """The colours leave the gains free (:func:`gains_unconstrained`), or look unbalanced:
     an estimate, no reference, a gain off 1 by > 3σ, > 3 %."""
     if gains_unconstrained(wb):
-        return Reason("white_balance_free", "the film's colours do not fix the white balance "
-                      "(one film colour: a gain and a thickness trade off) and no reference "
-                      "gives it, so the thickness and its interference order rest on the "
-                      "image being balanced for the illuminant; a white or bare-substrate "
-                      "reference (`optics.white_reference`, `optics.substrate_reference`) "
-                      "settles it", "optics.white_reference")
+        return Reason("white_balance_free", f"the film's colours do not fix the white balance "
+                      f"(e.g. one film colour: a gain and a thickness trade off; they ask for R "
+                      f"x{wb.estimate_rgb[0]:.3f}, B x{wb.estimate_rgb[2]:.3f} with a spread "
+                      f"as wide as the search) and no reference gives it, so the thickness "
+                      f"and its interference order rest on the image being balanced for the "
+                      f"illuminant; a white or bare-substrate reference "
+                      f"(`optics.white_reference`, `optics.substrate_reference`) settles it",
+                      "optics.white_reference")
     if wb is None or wb.estimate_rgb is None or wb.source != "none" or not wb.estimate_sigma:
         return None
     off = [(name, g, s) for name, g, s in (("R", wb.estimate_rgb[0], wb.estimate_sigma[0]),
@@ -494,7 +500,8 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
     than ``options.excess_delta_e`` above its noise floor (:data:`MEDIAN_NOISE_FLOOR_FACTOR`
     × ``noise_de``), and a sample whose mean plane is tilted by more than
     ``options.sample_tilt_warn_fraction`` of the NDF's rms lobe width; with a white-balance
-    estimate and no reference, gains that differ from 1 by more than 3σ and 3 %.
+    estimate and no reference, gains that the colours leave free (:func:`gains_unconstrained`,
+    ``white_balance_free``) or else that differ from 1 by more than 3σ and 3 %.
 
     Parameters
     ----------

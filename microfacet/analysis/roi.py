@@ -379,13 +379,17 @@ def _scan_exposure(objective) -> float:
     One start at the best node is not enough: a film's ΔE rises by ~1 ΔE00 per 6 % of
     exposure, so a basin narrower than the scan's 12 % step can lie between two nodes that
     both read higher than another basin's node (a one-colour scene of the generalization
-    sweep: its true exposure, 0.94 at 86 nm with median ΔE00 0.61, between nodes at 1.27
-    and 1.55, lost to 1.59 at 394 nm, 0.85)."""
+    sweep: its true exposure, 0.94 at 86 nm with median ΔE00 0.61, between two nodes that
+    read 1.27 and 1.55 ΔE00, lost to 1.59 at 394 nm, 0.85). NaN values of the scan are
+    ignored (the least node of a scan with none finite is returned)."""
     lo, hi, count = EXPOSURE_SCAN
     log_grid = np.linspace(math.log(lo), math.log(hi), count)
     vals = np.array([objective(g) for g in log_grid])
-    best_x, best_f = log_grid[int(np.argmin(vals))], float(np.min(vals))
-    for i in local_minima(vals)[:EXPOSURE_STARTS]:
+    starts = local_minima(vals)
+    if starts.size == 0:
+        return float(math.exp(log_grid[int(np.argmin(vals))]))
+    best_x, best_f = log_grid[starts[0]], float(vals[starts[0]])
+    for i in starts[:EXPOSURE_STARTS]:
         a, b = log_grid[max(i - 1, 0)], log_grid[min(i + 1, log_grid.size - 1)]
         opt = optimize.minimize_scalar(objective, bounds=(a, b), method="bounded",
                                        options={"xatol": EXPOSURE_XATOL})

@@ -120,6 +120,12 @@ class WhiteBalance:
     def applied(self) -> bool:
         return self.source != "none"
 
+    @property
+    def from_reference(self) -> bool:
+        """The gains come from a reference (stack.json's, a white or substrate image), not
+        from the scene's own estimate."""
+        return self.source not in ("none", "estimated")
+
     def withdraw(self, reason: str) -> WhiteBalance:
         """The same estimate, no gain called determined, and why: the gains the film's
         colours ask for are those of the thicknesses they were read at, so where the
@@ -152,7 +158,7 @@ class WhiteBalance:
         >>> WhiteBalance(source="stack.json").log_gain_sigma()
         (0.01, 0.01)
         """
-        if self.applied and self.source != "estimated":
+        if self.from_reference:
             return self.reference_sigma or (REFERENCE_LOG_SD, REFERENCE_LOG_SD)
         if self.estimate_rgb is None:
             return None

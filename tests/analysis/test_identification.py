@@ -530,9 +530,11 @@ def test_gains_the_colours_leave_free_leave_the_order_unestablished():
                                       mean_plane_tilt=None, options=OPTIONS, white_balance=free)
          if r.code == "white_balance_free"]
     assert len(w) == 1 and w[0].parameter == "optics.white_reference"
-    assert "`optics.substrate_reference`" in w[0].text
+    assert "`optics.substrate_reference`" in w[0].text and "R x0.890, B x0.890" in w[0].text
     # a spread as wide as the gains searched (±LOG_RANGE in log) is no constraint either
     assert not check(dataclasses.replace(free, estimate_sigma=(0.05, LOG_RANGE)))["established"]
+    # a spread that is not a number is no constraint
+    assert not check(dataclasses.replace(free, estimate_sigma=(0.05, math.nan)))["established"]
     # R determined and applied, B left at 1 and free
     applied_r = dataclasses.replace(free, gains_rgb=(1.1, 1.0, 1.0), source="estimated",
                                     estimate_sigma=(0.005, math.inf), determined=(True, False))

@@ -111,6 +111,23 @@ def test_an_ambiguous_roi_is_reported_with_both_candidates(nd_analysis):
     Summary.from_json(build_summary(amb).to_json())          # the schema reads it back
 
 
+def test_gains_the_colours_leave_free_reach_the_summary(nd_analysis):
+    """The fixture's result with a white-balance estimate whose spread is unbounded and no
+    reference: summary.json's thickness.order is not established, with the reason, and the
+    warnings name the references; with its own (finite) estimate it is established."""
+    import dataclasses
+
+    from microfacet.analysis.output import build_summary
+    res = nd_analysis("joint")
+    free = dataclasses.replace(res, white_balance=dataclasses.replace(
+        res.white_balance, source="none", estimate_sigma=(float("inf"), float("inf"))))
+    order = build_summary(free).to_json()["thickness"]["order"]
+    assert not order["established"]
+    assert any("white balance free" in r for r in order["reasons"])
+    assert "white_balance_free" in [w.code for w in free.warnings]
+    assert build_summary(res).to_json()["thickness"]["order"]["established"]
+
+
 def test_the_height_sigma_covers_the_fixtures_true_errors(results):
     """``height_sigma_um.npy`` against the fixture's true height: 2σ covers ≥ 90 % of the
     reliable pixels' errors; it holds the unresolved-relief term of the map's own RMS gradient

@@ -122,5 +122,9 @@ def test_the_exposure_scan_finds_a_basin_narrower_than_its_step():
                    0.85 + 20.0 * abs(log_e - math.log(1.587)))
 
     assert _scan_exposure(misfit) == pytest.approx(0.944, rel=0.005)
-    # one basin: the same exposure as before, found by its own refinement
+    # one basin: found by its own refinement; at the scan's end: the end
     assert _scan_exposure(lambda x: abs(x - math.log(1.3))) == pytest.approx(1.3, rel=0.005)
+    assert _scan_exposure(lambda x: -x) == pytest.approx(hi, rel=0.005)
+    # NaN where the model has no colour (very low exposures here): ignored, not returned
+    assert _scan_exposure(lambda x: math.nan if x < math.log(0.3) else misfit(x)) \
+        == pytest.approx(0.944, rel=0.005)

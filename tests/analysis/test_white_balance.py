@@ -267,14 +267,14 @@ def test_a_substrate_reference_makes_the_unbalanced_scene_read_as_the_balanced_o
     assert wb_both.source == "white reference white.png"
 
 
-def _film_image(model, thickness_nm, tilt_deg, rng, *, gains=GAINS, noise=0.01):
-    """Encoded sRGB of the film at ``thickness_nm`` and ``tilt_deg`` per pixel through
-    ``gains``, exposure 0.8, with white noise."""
+def _film_image(model, thickness_nm, tilt_deg, rng):
+    """Encoded sRGB of the film at ``thickness_nm`` and ``tilt_deg`` per pixel, exposure
+    0.8, through :data:`GAINS` (:func:`_unbalanced`), with white noise of 0.01."""
     from microfacet.colour.srgb import model_xyz_to_linear_srgb
     lin = model_xyz_to_linear_srgb(model.xyz(tilt_deg, thickness_nm), white=model.white,
-                                   illuminant="D65") * 0.8 * np.asarray(gains)
-    enc = srgb_encode(np.clip(lin, 0.0, 1.0), dtype=np.float32)
-    return np.clip(enc + rng.normal(0.0, noise, enc.shape), 0.0, 1.0).astype(np.float32)
+                                   illuminant="D65") * 0.8
+    enc = _unbalanced(srgb_encode(np.clip(lin, 0.0, 1.0), dtype=np.float32))
+    return np.clip(enc + rng.normal(0.0, 0.01, enc.shape), 0.0, 1.0).astype(np.float32)
 
 
 @pytest.mark.slow
