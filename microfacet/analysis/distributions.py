@@ -292,12 +292,12 @@ def mean_uncertainty(mixture, regions, thickness_nm, area, *, touching=None,
     * **Sampling**: the component's SD over the regions it rests on, ``sd / √n``, ``n`` the
       area-weighted (Kish) count of the thickness regions on it
       (:func:`~.sampling.thickness_regions`, whose count errs high: a true region split
-      where noise steps between patches counts more than once; on the generalization
-      sweep 2σ still covers 92–95 % of the true means, docs/accuracy.md). Its SD measures
-      the population's spread only over separate regions: where the regions on it form
-      fewer than :data:`MIN_SPREAD_GROUPS` groups that do not touch (``touching``: one
-      region, or pieces of one), the area-weighted RMS SD of the measured components
-      stands in (``spread_measured`` false); none measured, the sampling part is unknown
+      where noise steps between patches counts more than once; on five draws of the
+      generalization sweep 2σ still covers 84–95 % of the true means, docs/accuracy.md).
+      Its SD measures the population's spread only over separate regions: where the regions
+      on it form fewer than :data:`MIN_SPREAD_GROUPS` groups that do not touch
+      (``touching``: one region, or pieces of one), the area-weighted RMS SD of the measured
+      components stands in (``spread_measured`` false); none measured, the sampling part is unknown
       (None). The regions' own errors add in quadrature.
     * **White balance**, shared by every facet: the area-weighted mean move of the
       component's facets when the R gain, then the B gain, is off by its own 1σ

@@ -54,8 +54,7 @@ from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
 from .white_balance import rebalanced_lab
 
 __all__ = ["ExposureReadings", "FacetGeometry", "JointResult", "Segmented", "bootstrap_labels",
-           "facet_colours", "facet_geometry", "facet_image", "facet_labels",
-           "facets_at_exposure_readings",
+           "facet_geometry", "facet_image", "facet_labels", "facets_at_exposure_readings",
            "facets_in_other_order", "gain_thickness_shifts", "joint_pixel_tilts"]
 
 log = logging.getLogger(__name__)
@@ -374,12 +373,6 @@ def facets_in_other_order(joint: JointResult, image: FacetImage, colour, model,
 SHIFT_WINDOW_NM = 10.0
 
 
-def facet_colours(geometry: FacetGeometry, colour, roi, options: JointOptions) -> FacetColours:
-    """The colour evidence of ``geometry``'s facets
-    (:meth:`~.facet_thickness.FacetImage.colours`)."""
-    return facet_image(geometry, colour, roi, options).colours()
-
-
 def gain_thickness_shifts(colours: FacetColours, thickness_nm, tilt_deg, model,
                           options: JointOptions, *, log_gain_rb, illuminant) -> np.ndarray:
     """Per facet, how far its thickness moves (nm) when its colours are balanced with the R
@@ -393,7 +386,8 @@ def gain_thickness_shifts(colours: FacetColours, thickness_nm, tilt_deg, model,
     Parameters
     ----------
     colours : FacetColours
-        The facets' mean Lab (:func:`facet_colours`).
+        The facets' mean Lab (:meth:`~.facet_thickness.FacetImage.colours` of
+        :func:`facet_image`).
     thickness_nm, tilt_deg : ndarray, shape (S,)
         Each facet's thickness (NaN: none) and the tilt it was solved at.
     model : FilmColourModel

@@ -313,7 +313,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         with timer.stage(Stage.MIXTURES):
             dist = fit_joint_distributions(
                 joint, roi, model, scene, options.fits, pooled=pooled,
-                gain_shifts_nm=_gain_shifts(joint, geometry, cols, model, options, scene, wb))
+                gain_shifts_nm=_gain_shifts(joint, cols, model, options, scene, wb))
             dist.exposure_readings = readings
         with timer.stage(Stage.SELF_CHECK):
             check = _self_check(st, focus, joint, scene, options,
@@ -336,15 +336,16 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                           flat if options.mode == "joint" else flat_ref)
 
 
-def _gain_shifts(joint, geometry, cols, model, options, scene, wb):
+def _gain_shifts(joint, cols, model, options, scene, wb):
     """Each facet's thickness move for a 1σ error of the R and B gains
-    (:func:`~.joint.gain_thickness_shifts` at :meth:`~.white_balance.WhiteBalance.log_gain_sigma`;
-    ``cols``: the facets' colours, :meth:`~.facet_thickness.FacetImage.colours`); None where
-    the gains' error is not known."""
+    (:func:`~.joint.gain_thickness_shifts` at :meth:`~.white_balance.WhiteBalance.log_gain_sigma`,
+    each facet at the tilt it was solved at, ``joint.prior_deg``; ``cols``: the facets'
+    colours, :meth:`~.facet_thickness.FacetImage.colours`); None where the gains' error is
+    not known."""
     sigma = wb.log_gain_sigma()
     if sigma is None:
         return None
-    return gain_thickness_shifts(cols, joint.thickness.thickness_nm, geometry.tilt_deg, model,
+    return gain_thickness_shifts(cols, joint.thickness.thickness_nm, joint.prior_deg, model,
                                  options.joint, log_gain_rb=sigma, illuminant=scene.illuminant)
 
 

@@ -250,7 +250,7 @@ def test_gain_shifts_predict_the_move_of_a_camera_balanced_otherwise(tmp_path):
     its facets solved again from the same pixels balanced with gains of 1; each facet moves
     as the shifts at log gains -ln 1.08 and -ln 0.93 (R and B in turn, added) predict."""
     from microfacet.analysis.facet_thickness import facet_thickness
-    from microfacet.analysis.joint import FacetGeometry, facet_colours, gain_thickness_shifts
+    from microfacet.analysis.joint import FacetGeometry, facet_image, gain_thickness_shifts
     from microfacet.analysis.white_balance import balanced_lab
 
     gains = (1.08, 1.0, 0.93)
@@ -267,7 +267,7 @@ def test_gain_shifts_predict_the_move_of_a_camera_balanced_otherwise(tmp_path):
                       facet_edge_distance(j.facets), j.prior_deg, j.prior_sigma_deg,
                       j.dome_ms_slope)
     d = j.thickness.thickness_nm
-    cols = facet_colours(g, r.colour, r.roi, opts)
+    cols = facet_image(g, r.colour, r.roi, opts).colours()
     plain = dataclasses.replace(r.colour, lab=balanced_lab(r.colour.encoded, (1.0, 1.0, 1.0),
                                                            illuminant=il))
 
@@ -275,7 +275,7 @@ def test_gain_shifts_predict_the_move_of_a_camera_balanced_otherwise(tmp_path):
         return facet_thickness(dataclasses.replace(c, roi_thickness_nm=d), j.prior_deg,
                                r.model, opts, thorough=False).thickness_nm
 
-    actual = solved(facet_colours(g, plain, r.roi, opts)) - solved(cols)
+    actual = solved(facet_image(g, plain, r.roi, opts).colours()) - solved(cols)
     sh = gain_thickness_shifts(cols, d, j.prior_deg, r.model, opts,
                                log_gain_rb=(-np.log(gains[0]), -np.log(gains[2])),
                                illuminant=il)
