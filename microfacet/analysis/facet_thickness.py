@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.lazy import load
+from ..core.threads import chunk_starts, thread_map
 from .colour_image import mean_colour_noise
 from .options import JointOptions
 from .search import coarse_to_fine, refine
@@ -33,7 +34,7 @@ optimize = load("scipy.optimize")
 
 __all__ = ["FacetThickness", "facet_thickness", "refine_exposure_on_facets"]
 
-#: Facets per chunk of the vectorised searches (bounded temporaries).
+#: Facets in flight in the vectorised searches (bounded temporaries; split over the threads).
 _CHUNK = 2048
 #: Strides of the coarse-to-fine searches: the 1 nm order window (every other nm, then the
 #: nodes next to the best), the fine scan below 1 nm, the whole-range order scan.
@@ -298,9 +299,12 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
                      None if tilt_sigma_deg is None else np.asarray(tilt_sigma_deg, np.float64),
                      block_noise)
     idx = np.flatnonzero(has)
-    for a in range(0, idx.size, _CHUNK):
-        ii = idx[a:a + _CHUNK]
+
+    def chunk(ab):
+        ii = idx[ab[0]:ab[1]]
         out[:, ii] = _chunk(model, colours, ii, tilt, options, search)
+
+    thread_map(chunk, chunk_starts(idx.size, _CHUNK))
     return FacetThickness(out[0], out[1], out[2], out[3] == 1.0,
                           colours.n_pixels.astype(np.int64), out[4], out[5])
 

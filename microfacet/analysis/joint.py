@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.pixels import pixel_area_side
+from ..core.threads import chunk_starts, thread_map
 from .facet_thickness import (
     FacetColours,
     FacetImage,
@@ -59,7 +60,7 @@ __all__ = ["ExposureReadings", "FacetGeometry", "JointResult", "Segmented", "boo
 
 log = logging.getLogger(__name__)
 
-#: Pixels per chunk of the per-facet colour misfit.
+#: Pixels in flight in the per-facet colour misfit (split over the threads).
 _CHUNK_PX = 262144
 
 
@@ -199,9 +200,11 @@ def _colour_sigma(image: FacetImage, ft: FacetThickness, tilt_f, model, noise_de
     model_f = np.full((S, 3), np.nan, np.float32)
     model_f[good] = model.lab(th[good], d_f[good])
     de = np.empty(fid.size, np.float32)
-    for a in range(0, fid.size, _CHUNK_PX):
-        de[a:a + _CHUNK_PX] = model.difference(model_f[fid[a:a + _CHUNK_PX]],
-                                               lab_flat[flat[a:a + _CHUNK_PX]])
+
+    def chunk(ab):
+        de[ab[0]:ab[1]] = model.difference(model_f[fid[ab[0]:ab[1]]], lab_flat[flat[ab[0]:ab[1]]])
+
+    thread_map(chunk, chunk_starts(fid.size, _CHUNK_PX))
     cnt = np.bincount(fid, minlength=S)
     ms = np.bincount(fid, weights=de.astype(np.float64) ** 2, minlength=S) / np.maximum(cnt, 1)
     d_lo, d_hi = model.thickness_range_nm

@@ -60,6 +60,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.lazy import load
+from ..core.threads import thread_map
 from .options import RoiOptions
 from .search import local_minima, parabola
 
@@ -470,10 +471,10 @@ class _Image:
     band: tuple | None
 
 
-def _fit_one(s, curve, img: _Image, model, options, rng):
-    """The two best minima of one ROI refined on a larger sample: ((ΔE, d), (ΔE, d))."""
+def _fit_one(s, curve, img: _Image, model, options, pick):
+    """The two best minima of one ROI refined on a larger sample (its pixels ``pick``):
+    ((ΔE, d), (ΔE, d))."""
     minima, by_band = _candidate_minima(curve, img.grid, img.band, options.order_margin_de)
-    pick = rng.choice(s.yy.size, min(options.refine_px, s.yy.size), replace=False)
     yr, xr = s.yy[pick], s.xx[pick]
     t_r, lab_r = img.tilt[yr, xr], img.lab[yr, xr]
 
@@ -532,16 +533,21 @@ def fit_roi_thickness(lab, tilt_deg, mask, model, options: RoiOptions, *, rois, 
     model = model.with_exposure(exposure)
     n = len(samples)
     curves = np.full((n, grid.size), np.nan, dtype=np.float32)
-    for i, s in enumerate(samples):
-        if s is not None:
-            curves[i] = _curve(model, s.xyz, s.lab)
     best = np.full((n, 2, 2), np.nan)
     npx = np.zeros(n, dtype=np.int64)
     img = _Image(lab, tilt, grid, band)
-    for i, s in enumerate(samples):
+    # the refinement's pixel samples drawn in ROI order, then the ROIs on the threads
+    picks = [None if s is None else rng.choice(s.yy.size, min(options.refine_px, s.yy.size),
+                                               replace=False) for s in samples]
+
+    def fit(i):
+        s = samples[i]
         if s is not None:
+            curves[i] = _curve(model, s.xyz, s.lab)
             npx[i] = s.yy.size
-            best[i] = _fit_one(s, curves[i], img, model, options, rng)
+            best[i] = _fit_one(s, curves[i], img, model, options, picks[i])
+
+    thread_map(fit, range(n))
     rows, cols, (rh, rw) = rois
     return RoiFit(row0=np.repeat(np.asarray(rows), len(cols)),
                   col0=np.tile(np.asarray(cols), len(rows)), height_px=rh, width_px=rw,

@@ -36,12 +36,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.threads import chunk_starts, thread_map
 from .options import TiltOptions
 from .search import coarse_to_fine, refine
 
 __all__ = ["TiltInversion", "TiltRows", "invert_tilt", "model_lab_rows", "seed_tilts"]
 
-#: Pixels per chunk of the search (bounded temporaries).
+#: Pixels in flight in the search (bounded temporaries; split over the threads).
 CHUNK_PX = 65536
 
 
@@ -229,13 +230,16 @@ def invert_tilt(lab_px, row_index, rows: TiltRows, theta_grid_deg, model,
     sens = _sensitivity(model, rows.lab, th[1] - th[0])
     stride = max(1, min(int(options.coarse_stride), (th.size - 1) // 2))
     d_rows = np.asarray(rows.thickness_nm, dtype=np.float64)
-    for a in range(0, n, CHUNK_PX):
-        b = min(n, a + CHUNK_PX)
+
+    def chunk(ab):
+        a, b = ab
         ri = row_index[a:b]
         out["t"][a:b], out["s"][a:b], out["w"][a:b], out["j"][a:b] = _invert_chunk(
             lab_px[a:b], ri, rows, sens, th, model, stride)
         # the exact ΔE at the solution (table interpolation at the off-grid tilt), per chunk
         out["e"][a:b] = model.delta_e(lab_px[a:b], out["t"][a:b], d_rows[ri])
+
+    thread_map(chunk, chunk_starts(n, CHUNK_PX))
     return TiltInversion(out["t"], out["s"], out["e"], out["w"], out["j"])
 
 

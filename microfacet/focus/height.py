@@ -427,6 +427,7 @@ def _fit_windows(plan: _Plan, trackers, step) -> list[WindowFit]:
                               colour=o.colour, channels=plan.slices.channels)
         fit = fit_window(tr, zs, step, interpolation=o.interpolation, shape_k=k_noise,
                          pertuz=(o.reliability == "pertuz"), window_px=px, downsample=ds)
+        tr.release_curves()          # the next window's fit runs without this one's curves
         add_relief_terms(fit, step, SIGMA_MODEL)
         fits.append(fit.upsampled(plan.slices.shape))
     return fits

@@ -115,6 +115,11 @@ class PeakTracker:
             cv2.copyTo(src, m8, self.window[j])
 
     def release_ring(self) -> None:
-        """Free the ring (after :meth:`finish`)."""
+        """Free the ring and the scan's work arrays (after :meth:`finish`)."""
         self.ring = None
-        self._d2 = None
+        self._d2 = self._mask = self._nan = None
+
+    def release_curves(self) -> None:
+        """Free what only the peak fit reads — ``window``, ``fsum``, ``d2sum`` — once it has
+        read them; ``best`` and ``best_rank`` stay."""
+        self.window = self.fsum = self.d2sum = None

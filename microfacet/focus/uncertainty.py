@@ -157,7 +157,7 @@ def fit_window(tracker, zs, step, *, interpolation, shape_k, window_px, downsamp
     uniform = n < 3 or bool(np.allclose(np.diff(zs), step, rtol=1e-6, atol=0.0))
     offsets = (np.arange(K) - r).astype(np.float32)
     sub = slice(r - 1, r + 2) if interpolation == "gauss3" else slice(0, K)
-    rows = max(1, (1 << 18) // max(1, W))
+    rows = max(1, (1 << 16) // max(1, W))
     for r0 in range(0, H, rows):
         sl = slice(r0, min(H, r0 + rows))
         br = tracker.best_rank[sl]

@@ -49,7 +49,7 @@ from pathlib import Path
 
 from ..analysis.options import AnalysisOptions
 from ..core.errors import InputError
-from ..core.threads import set_num_threads
+from ..core.threads import limit_malloc_arenas, set_num_threads
 from ..io.outdir import OutputFolder, check_output, sweep_stale
 from ..io.results import Results
 from ..io.stack import read_stack
@@ -114,6 +114,7 @@ def _analyse_one(stack: str, out: str, options, overwrite: bool, report: bool,
     """
     if threads is not None:
         set_num_threads(threads)
+        limit_malloc_arenas()
     t0 = time.perf_counter()
     row = {"stack": stack, "results": out, "worker": socket.gethostname()}
     try:

@@ -9,8 +9,11 @@ default ``out/stacks``), then, in one run on the same machine:
   per-stage ``timings_s`` of its summary.json.
 
 Ratios to the decode time of the same run are what docs/benchmarks.md quotes (this machine is
-shared and noisy); ``repeat`` keeps the fastest of several runs. How the run met the targets
-of the speed issue is said on stderr.
+shared and noisy); ``repeat`` keeps the fastest of several runs. With ``baseline`` (a git
+revision, e.g. ``HEAD~1``) the same command of that revision (a temporary worktree) runs
+interleaved with this checkout's, round by round, and the table adds its times and the ratio
+of this checkout's to them. How the run met the targets of the speed issue is said on
+stderr.
 """
 
 from __future__ import annotations
@@ -38,7 +41,8 @@ STUDY = Study(
     options={"sizes": ("1,4,12", "megapixels, comma-separated"),
              "slices": (40, "slices per stack"),
              "work": ("", "cache folder for the stacks (default out/stacks)"),
-             "repeat": (1, "runs per size (the fastest is kept)")},
+             "repeat": (1, "runs per size (the fastest is kept)"),
+             "baseline": ("", "a git revision to compare with, interleaved (e.g. HEAD~1)")},
 )
 
 #: The targets of the speed issue (docs/benchmarks.md).
@@ -80,14 +84,20 @@ def decode_time(path: Path) -> float:
     return t
 
 
-def run_analyze(path: Path, out: Path, extra=()):
-    """Wall time (s), peak RSS (MB) and summary of one ``microfacet analyze`` process."""
+def run_analyze(path: Path, out: Path, extra=(), *, checkout: Path | None = None):
+    """Wall time (s), peak RSS (MB) and summary of one ``microfacet analyze`` process (of the
+    package in ``checkout``, default the one this study imports)."""
     if out.exists():
         shutil.rmtree(out)
     cmd = [sys.executable, "-m", "microfacet", "analyze", str(path), "--out", str(out), "-q",
            "--max-megapixels", "100", "--max-stack-megapixels", "2000", *extra]
+    env = cwd = None
+    if checkout is not None:    # run from outside any checkout, that one first on the path
+        env = dict(os.environ, PYTHONPATH=str(checkout))
+        cwd = str(checkout.parent)
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env,
+                            cwd=cwd)
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     err = proc.stderr.read().decode(errors="replace")
@@ -96,6 +106,32 @@ def run_analyze(path: Path, out: Path, extra=()):
         raise SystemExit(f"analyze failed on {path}: {err.strip()}")
     summary = json.loads((out / "summary.json").read_text())
     return wall, usage.ru_maxrss / 1024.0, summary
+
+
+def baseline_checkout(revision: str, work: Path) -> Path:
+    """A worktree of ``revision`` of this repository (detached, in ``work``; made again on
+    every run), for the interleaved comparison."""
+    repo = Path(__file__).resolve().parents[2]
+    where = work / "baseline-checkout"
+    _remove_checkout(where)
+    subprocess.run(["git", "-C", str(repo), "worktree", "add", "--detach", "-f", str(where),
+                    revision], check=True, capture_output=True)
+    return where
+
+
+def _remove_checkout(where: Path) -> None:
+    repo = Path(__file__).resolve().parents[2]
+    subprocess.run(["git", "-C", str(repo), "worktree", "remove", "--force", str(where)],
+                   capture_output=True)
+    shutil.rmtree(where, ignore_errors=True)
+
+
+def _column(mp, dec, res, keys):
+    wall, rss, summary = res
+    t = summary["timings_s"]
+    h, w = summary["inputs"]["shape"]
+    return dict(mp=h * w / 1e6, decode=dec, wall=wall, rss=rss, t=t,
+                stages=sum(t.get(k, 0.0) for k in keys))
 
 
 def targets(cols) -> list:
@@ -126,46 +162,82 @@ def targets(cols) -> list:
     return lines
 
 
-def run(*, quick: bool, out: Path, sizes="1,4,12", slices=40, work="", repeat=1) -> str:
+def _measure(path, out, extra, repeat, checkouts):
+    """The fastest of ``repeat`` runs of each checkout (None: this one), interleaved."""
+    best = {c: None for c in checkouts}
+    for _ in range(max(1, repeat)):
+        for c in checkouts:
+            res = run_analyze(path, out / f"results-{path.name}{'-baseline' if c else ''}",
+                              extra, checkout=c)
+            if best[c] is None or res[0] < best[c][0]:
+                best[c] = res
+    return best
+
+
+def run(*, quick: bool, out: Path, sizes="1,4,12", slices=40, work="", repeat=1,
+        baseline="") -> str:
     mps = [float(s) for s in sizes.split(",")]
     if quick:
         mps, slices, repeat = [0.0164], min(slices, 8), 1   # 128 x 128
     work = Path(work) if work else out / "stacks"
     work.mkdir(parents=True, exist_ok=True)
+    base = baseline_checkout(baseline, work) if baseline else None
+    try:
+        cols, base_cols = _sizes(mps, slices, work, out, quick, repeat, base)
+    finally:
+        if base is not None:
+            _remove_checkout(base)
+    note(f"nd preset, {slices} slices, `microfacet analyze` in a fresh process "
+         f"(python {sys.version.split()[0]}, {os.cpu_count()} cores)"
+         + (f"; baseline {baseline} interleaved" if base else ""))
+    note("targets:\n  " + "\n  ".join(targets(cols)))
+    return _table(cols, base_cols, stages(), baseline)
+
+
+def _sizes(mps, slices, work, out, quick, repeat, base):
+    """Per size: this checkout's column and the baseline's (empty without one)."""
+    checkouts = [base, None] if base else [None]
     keys = stages()
-    cols = {}
+    cols, base_cols = {}, {}
     for mp in mps:
         path = stack_for(work, mp, slices)
         dec = decode_time(path)
-        best = None
-        for _ in range(max(1, repeat)):
-            res = run_analyze(path, out / f"results-{path.name}",
-                              ["--no-report"] if quick else ())
-            if best is None or res[0] < best[0]:
-                best = res
-        wall, rss, summary = best
-        t = summary["timings_s"]
-        h, w = summary["inputs"]["shape"]
-        cols[mp] = dict(mp=h * w / 1e6, decode=dec, wall=wall, rss=rss, t=t,
-                        stages=sum(t.get(k, 0.0) for k in keys))
-        note(f"{path.name}: decode {dec:.2f} s, analyze {wall:.1f} s, peak RSS {rss:.0f} MB")
-    note(f"nd preset, {slices} slices, `microfacet analyze` in a fresh process "
-         f"(python {sys.version.split()[0]}, {os.cpu_count()} cores)")
+        best = _measure(path, out, ["--no-report"] if quick else (), repeat, checkouts)
+        cols[mp] = _column(mp, dec, best[None], keys)
+        if base:
+            base_cols[mp] = _column(mp, dec, best[base], keys)
+        c = cols[mp]
+        note(f"{path.name}: decode {dec:.2f} s, analyze {c['wall']:.1f} s, peak RSS "
+             f"{c['rss']:.0f} MB" + (f" (baseline {base_cols[mp]['wall']:.1f} s, "
+                                      f"{base_cols[mp]['rss']:.0f} MB)" if base else ""))
+    return cols, base_cols
+
+
+def _table(cols, base_cols, keys, baseline) -> str:
     names = [f"{c['mp']:.1f} MP" if c["mp"] >= 0.1 else f"{c['mp']:.3f} MP"
              for c in cols.values()]
-    rows = [["decode the slices", *[f"{c['decode']:.2f}" for c in cols.values()],
-             *["1.0" for _ in cols]]]
-    for k in keys + ("write", "report"):
-        vals = [c["t"].get(k) for c in cols.values()]
-        rows.append([k, *["" if v is None else f"{v:.2f}" for v in vals],
-                     *["" if v is None else f"{v / c['decode']:.2f}"
-                       for v, c in zip(vals, cols.values())]])
-    rows.append(["**analysis stages**", *[f"{c['stages']:.2f}" for c in cols.values()],
-                 *[f"{c['stages'] / c['decode']:.1f}" for c in cols.values()]])
-    rows.append(["**whole command (wall)**", *[f"{c['wall']:.2f}" for c in cols.values()],
-                 *[f"{c['wall'] / c['decode']:.1f}" for c in cols.values()]])
-    rows.append(["peak RSS (MB)", *[f"{c['rss']:.0f}" for c in cols.values()],
-                 *["" for _ in cols]])
-    note("targets:\n  " + "\n  ".join(targets(cols)))
-    return md_table(["", *[f"{n} (s)" for n in names], *[f"{n} (× decode)" for n in names]],
-                    rows)
+    cs, bs = list(cols.values()), list(base_cols.values())
+
+    def row(label, get, fmt="{:.2f}"):
+        vals = [get(c) for c in cs]
+        cells = ["" if v is None else fmt.format(v) for v in vals]
+        cells += ["" if v is None else f"{v / c['decode']:.2f}" for v, c in zip(vals, cs)]
+        if bs:
+            old = [get(b) for b in bs]
+            cells += ["" if v is None else fmt.format(v) for v in old]
+            cells += ["" if (v is None or o is None or o <= 0) else f"{v / o:.2f}"
+                      for v, o in zip(vals, old)]
+        return [label, *cells]
+
+    rows = [row("decode the slices", lambda c: c["decode"])]
+    rows += [row(k, lambda c, k=k: c["t"].get(k)) for k in keys + ("write", "report")]
+    rows.append(row("**analysis stages**", lambda c: c["stages"]))
+    rows.append(row("**whole command (wall)**", lambda c: c["wall"]))
+    rss = row("peak RSS (MB)", lambda c: c["rss"], "{:.0f}")
+    rss[1 + len(cs):1 + 2 * len(cs)] = [""] * len(cs)          # no ratio to decode
+    rows.append(rss)
+    head = ["", *[f"{n} (s)" for n in names], *[f"{n} (× decode)" for n in names]]
+    if bs:
+        head += [f"{n}, {baseline} (s)" for n in names]
+        head += [f"{n}: this / {baseline}" for n in names]
+    return md_table(head, rows)

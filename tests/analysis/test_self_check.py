@@ -61,11 +61,13 @@ def test_slopes_come_back_where_every_facet_has_texture_and_not_where_none_has(f
     rich = rng.random(labels.shape).astype(np.float32)
     good = _check(focus_result, rich, labels)
     assert 0.8 <= good.transfer <= 1.25, good.to_json()
-    # smaller facets (~20 px) whose only texture is sparse dark pits (1 % of the pixels): most
-    # facets have no focus evidence of their own, and their heights are borrowed
+    # smaller facets (~20 px) whose only texture is sparse dark pits (0.5 % of the pixels):
+    # most facets have no focus evidence of their own, and their heights are borrowed (the
+    # transfer 0.59-0.72 over six noise seeds; at 1 % of the pixels it is 0.73-0.85, astride
+    # the range's edge)
     small = _voronoi((160, 160), 60, rng)
     sparse = np.full(small.shape, 0.6, np.float32)
-    sparse[rng.random(small.shape) < 0.01] = 0.1
+    sparse[rng.random(small.shape) < 0.005] = 0.1
     bad = _check(focus_result, sparse, small)
     assert not (0.8 <= bad.transfer <= 1.25), bad.to_json()
 
@@ -143,3 +145,25 @@ def test_the_width_error_carries_the_self_checks_bias_and_spread():
     assert c.width_error(None) == pytest.approx(math.sqrt(0.2 ** 2 + 0.03 ** 2), abs=1e-4)
     nothing = SelfCheck([math.nan], [math.nan], [math.nan], math.nan, math.nan, 0)
     assert math.isnan(nothing.width_error(0.04))
+
+
+def test_a_rendered_stack_is_the_same_whenever_it_is_read():
+    """RenderedStack renders a slice when it is read: the same slice on every read, the
+    slices of two seeds differ only by their noise, and without noise it is the all-at-once
+    render_focus_stack."""
+    from microfacet.analysis.self_check import RenderedStack
+
+    rng = np.random.default_rng(1)
+    tex = rng.random((32, 32)).astype(np.float32)
+    h = rng.normal(0.0, 0.3, tex.shape)
+    z = np.linspace(-1.0, 1.0, 5)
+    a = RenderedStack(tex, h, z, blur_px_per_um=2.0, noise_sd=0.01, seed=(3,))
+    b = RenderedStack(tex, h, z, blur_px_per_um=2.0, noise_sd=0.01, seed=(4,))
+    first = [a[i] for i in range(len(a))]
+    assert all(np.array_equal(first[i], a[i]) for i in reversed(range(len(a))))
+    assert not np.array_equal(a[2], b[2]) and np.abs(a[2] - b[2]).std() < 0.05
+    quiet = RenderedStack(tex, h, z, blur_px_per_um=2.0, noise_sd=0.0)
+    ref = render_focus_stack(tex, h, z, blur_px_per_um=2.0, noise_sd=0.0, rng=rng)
+    assert all(np.array_equal(quiet[i], ref[i]) for i in range(len(z)))
+    with pytest.raises(IndexError):
+        a[len(a)]

@@ -117,3 +117,39 @@ def test_command_line_reads_the_variable(monkeypatch, capsys, tmp_path):
     capsys.readouterr()
     assert cli_main.main(argv) == 2
     assert "$MICROFACET_NUM_THREADS: must be a positive integer" in capsys.readouterr().err
+
+
+def test_thread_map_keeps_order_and_bounds_the_chunks_in_flight():
+    """thread_map returns the items' results in order, on the setting's threads; the chunks
+    of chunk_starts cover the range once and shrink with the threads, so that the items in
+    flight stay at most ``in_flight``."""
+    import threading
+
+    names = set()
+
+    def work(ab):
+        names.add(threading.current_thread().name)
+        a, b = ab
+        return list(range(a, b))
+
+    for n in (1, 2, 3):
+        with threads.limited_threads(n):
+            chunks = threads.chunk_starts(1001, 100)
+            assert all(b - a <= -(-100 // n) for a, b in chunks)
+            got = threads.thread_map(work, chunks)
+        assert sum(got, []) == list(range(1001))
+    with threads.limited_threads(1):
+        names.clear()
+        threads.thread_map(work, threads.chunk_starts(10, 3))
+    assert names == {threading.current_thread().name}      # one thread: the caller's
+    assert threads.thread_map(work, []) == []
+
+
+def test_malloc_arenas_are_limited_where_glibc_allows_it():
+    """limit_malloc_arenas sets glibc's M_ARENA_MAX (True) and does nothing elsewhere
+    (False), never raising."""
+    import platform
+    import sys
+
+    glibc = sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc"
+    assert threads.limit_malloc_arenas(2) is glibc
