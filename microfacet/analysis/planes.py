@@ -179,10 +179,11 @@ def _robust_weights(labels, z, wt, pixel_size_um, S, rounds):
     sig = 1.0 / np.sqrt(w0)
     wr = w0
     for k in range(rounds):
-        # plane_moments' ten sums, over the used pixels only
-        cols = (wr, wr * x, wr * y, wr * zz, wr * x * x, wr * x * y, wr * y * y, wr * x * zz,
-                wr * y * zz, wr * zz * zz)
-        m = np.stack([np.bincount(lab, c, S) for c in cols], axis=1)
+        # plane_moments' ten sums, over the used pixels only, one weighted term at a time
+        terms = (lambda: wr, lambda: wr * x, lambda: wr * y, lambda: wr * zz,
+                 lambda: wr * x * x, lambda: wr * x * y, lambda: wr * y * y,
+                 lambda: wr * x * zz, lambda: wr * y * zz, lambda: wr * zz * zz)
+        m = np.stack([np.bincount(lab, t(), S) for t in terms], axis=1)
         a, b, _, _ = plane_from_moments(m)
         with np.errstate(invalid="ignore", divide="ignore"):
             c0 = (m[:, 3] - a * m[:, 1] - b * m[:, 2]) / m[:, 0]

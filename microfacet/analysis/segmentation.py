@@ -40,7 +40,6 @@ import numpy as np
 
 from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
-from ..core.threads import thread_map
 from .options import JointOptions
 
 measure = load("skimage.measure")
@@ -194,9 +193,9 @@ def _felzenszwalb_tiles(img, scale, slope, *, min_size, tile=None):
     """Blobs: skimage's Felzenszwalb (scale 1e-3, σ 0.5) on ``img · scale`` (and the
     ``slope`` channels, if any), tile by tile, each blob split into its 4-connected pieces
     (Felzenszwalb's may touch only diagonally). Labels 0..S-1 (int32), numbered tile by
-    tile in raster order; channels are built per tile, never for the whole image. The tiles
-    are segmented on :func:`~microfacet.core.threads.thread_map`'s threads (skimage releases
-    the GIL)."""
+    tile in raster order; channels are built per tile, never for the whole image. One tile at
+    a time: skimage's graph takes ~80 MB per 512-px tile, and two tiles on two threads saved
+    0.2 s at 1 MP for 80 MB more at the analysis' peak."""
     h, w = img.shape[:2]
     tile = FELZENSZWALB_TILE_PX if tile is None else int(tile)
     tiles = [(slice(r0, r0 + tile), slice(c0, c0 + tile))
@@ -215,7 +214,7 @@ def _felzenszwalb_tiles(img, scale, slope, *, min_size, tile=None):
     out = np.empty((h, w), np.int32)
     with warnings.catch_warnings():   # skimage warns about more than 4 channels
         warnings.filterwarnings("ignore", message=".*third dimension.*")
-        counts = thread_map(pieces, tiles)
+        counts = [pieces(sl) for sl in tiles]
     offsets = np.cumsum([0, *counts[:-1]])
     for sl, off in zip(tiles, offsets):
         out[sl] += np.int32(off)
