@@ -224,6 +224,34 @@ def _log_field(c, u, v):
     return out
 
 
+#: Pixels per chunk of the per-pixel luminance (bounded float64 temporaries).
+_CHUNK_PX = 1 << 18
+
+
+def _pixel_luminance(lab_px, idx) -> np.ndarray:
+    """:func:`_luminance` of the rows ``idx`` of ``lab_px`` (N, 3), chunk by chunk: float64
+    (len(idx),), the same values as at once."""
+    out = np.empty(idx.size)
+    for a in range(0, idx.size, _CHUNK_PX):
+        out[a:a + _CHUNK_PX] = _luminance(lab_px[idx[a:a + _CHUNK_PX]])
+    return out
+
+
+def _facet_centres(labels, S, area):
+    """Each facet's mean (u, v) (:func:`_centred`), one coordinate at a time."""
+    h, w = labels.shape
+    lb = labels.ravel()
+    x = np.tile(np.arange(w), h)
+    u = _centred(x, 0, labels.shape)[0]
+    del x
+    uc = np.bincount(lb, weights=u, minlength=S) / np.maximum(area, 1.0)
+    del u
+    y = np.repeat(np.arange(h), w)
+    v = _centred(0, y, labels.shape)[1]
+    del y
+    return uc, np.bincount(lb, weights=v, minlength=S) / np.maximum(area, 1.0)
+
+
 def _luminance(lab):
     """Relative luminance Y/Yn of CIELAB rows (N, 3), float64: the Y of
     :func:`~microfacet.colour.colorimetry.lab_to_xyz`, which depends on L* alone."""
@@ -272,19 +300,17 @@ def facet_brightness(joint, lab, model, *, unexplained_mads):
     S = int(labels.max()) + 1
     lb = labels.ravel()
     lab_px = np.asarray(lab).reshape(-1, 3)
-    ok_px = np.asarray(joint.usable, bool).ravel() & np.isfinite(lab_px[:, 0])
-    n = np.bincount(lb[ok_px], minlength=S).astype(np.float64)
-    y_obs = np.bincount(lb[ok_px], weights=_luminance(lab_px[ok_px]), minlength=S) \
+    ok_px = np.flatnonzero(np.asarray(joint.usable, bool).ravel() & np.isfinite(lab_px[:, 0]))
+    lb_ok = lb[ok_px]
+    n = np.bincount(lb_ok, minlength=S).astype(np.float64)
+    y_obs = np.bincount(lb_ok, weights=_pixel_luminance(lab_px, ok_px), minlength=S) \
         / np.maximum(n, 1.0)
+    del lb_ok
     ft = joint.thickness
     t_lo, t_hi = model.theta_range_deg
     y_mod = _luminance(model.lab(np.clip(joint.prior_deg, t_lo, t_hi), ft.thickness_nm))
     area = np.bincount(lb, minlength=S).astype(np.float64)
-    h, w = labels.shape
-    yy, xx = np.mgrid[0:h, 0:w]
-    u, v = _centred(xx.ravel(), yy.ravel(), labels.shape)
-    uc = np.bincount(lb, weights=u, minlength=S) / np.maximum(area, 1.0)
-    vc = np.bincount(lb, weights=v, minlength=S) / np.maximum(area, 1.0)
+    uc, vc = _facet_centres(labels, S, area)
     cens = np.bincount(lb, weights=np.asarray(joint.censored, np.float64).ravel(),
                        minlength=S) / np.maximum(area, 1.0)
     with np.errstate(divide="ignore", invalid="ignore"):
