@@ -103,7 +103,8 @@ def measure_colour(all_in_focus, options: MaskOptions, *, color_space, bit_depth
     if aif.ndim == 2:
         aif = np.repeat(aif[..., None], 3, axis=-1)
     enc = (srgb_encode(aif, dtype=np.float32) if color_space == "linear-sRGB"
-           else aif.astype(np.float32))
+           else aif.astype(np.float32, copy=False).view())
+    enc.flags.writeable = False      # may be the composite itself (12 bytes a pixel not copied)
     cm = colour_mask(enc, options, bit_depth=bit_depth)
     lab = srgb_to_lab(enc, illuminant=illuminant).astype(np.float32)
     noise = estimate_colour_noise(lab, cm.mask, delta_e_method=delta_e_method)
