@@ -9,6 +9,7 @@ from pathlib import Path
 
 from .. import io, workflow
 from ..analysis.stages import JOINT_ONLY, Stage
+from ..core.threads import limit_malloc_arenas
 from .options import (
     FLAGS,
     HelpFormatter,
@@ -115,6 +116,7 @@ def _skipped(args, options) -> tuple:
 def run(args) -> int:
     """The results summary goes to stdout (text, or JSON with ``--json``); logs, warnings
     and the progress bar to stderr."""
+    limit_malloc_arenas()         # before the analysis' threads start (core.threads)
     out = Path(args.out)
     opts = analysis_options(args)
     pixel_size_um, z_step_um = plain_folder_values(args)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from .. import workflow
 from ..core.errors import InputError
+from ..core.threads import limit_malloc_arenas
 from .options import HelpFormatter, add_analysis_options, analysis_options, example_epilog
 from .progress import Progress
 
@@ -74,6 +75,7 @@ def _read_list(path: str) -> list[str]:
 
 
 def run(args) -> int:
+    limit_malloc_arenas()         # an in-process batch runs the analysis' threads here
     stacks = list(args.stacks)
     if args.stacks_from:
         stacks += _read_list(args.stacks_from)

@@ -24,7 +24,7 @@ import sys
 from .. import __version__
 from ..core.errors import InputError, one_line
 from ..core.threads import ENV_VAR as THREADS_ENV_VAR
-from ..core.threads import limit_malloc_arenas, set_num_threads, threads_from_text
+from ..core.threads import set_num_threads, threads_from_text
 from .options import FLAGS
 
 #: Subcommand modules, in the order ``--help`` lists them.
@@ -160,7 +160,6 @@ def main(argv: list[str] | None = None) -> int:
         pass
     try:
         set_num_threads(threads_from_text(os.environ.get(THREADS_ENV_VAR)))
-        limit_malloc_arenas()
         return int(args.run(args) or 0)
     except KeyboardInterrupt:
         print(f"{prog}: interrupted", file=sys.stderr)

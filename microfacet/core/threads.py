@@ -138,9 +138,10 @@ def limit_malloc_arenas(n: int = 2) -> bool:
     glibc gives each new thread an arena of its own, and memory freed in an arena stays in
     the process: with :func:`thread_map`'s threads the analysis of a 1-megapixel stack peaks
     ~50 MB higher for that alone (590-600 MB against 552 MB with one arena,
-    docs/benchmarks.md). A process-wide setting, made once by the command line and the batch
-    workers before any thread starts, as :func:`set_num_threads` is; elsewhere (another C
-    library, another system) nothing is done.
+    docs/benchmarks.md). A process-wide setting, made by ``microfacet analyze``, ``microfacet
+    batch`` and the batch workers before the analysis' threads start (not for every command:
+    a renderer's own threads may want their arenas); elsewhere (another C library, another
+    system) nothing is done.
 
     Returns
     -------
