@@ -414,6 +414,8 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
     own = fit_facet_planes(sc.cells, sc.base_um, height_sigma_um=1.0, reliable=everywhere,
                            pixel_size_um=sc.pixel_yx, min_pixels=3, robust_rounds=0)
     pattern = (np.nan_to_num(own.slope_x), np.nan_to_num(own.slope_y))
+    flat = float(np.mean(pattern[0] ** 2 + pattern[1] ** 2)) < 1e-12
+    unit = None if flat else _planes(sc.cells, 1.0, sc.pixel_yx, None, pattern=pattern)
 
     def run(k):
         # run 0: the scene's own surface; run k: the injection of WIDTH_FACTORS[k - 1], each
@@ -430,13 +432,11 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
                                np.random.default_rng([c.seed, k]))
         return injected, _recovered_planes(sc, sc.base_um + injected[0], fo, joint, (c.seed, k))
 
-    flat = float(np.mean(pattern[0] ** 2 + pattern[1] ** 2)) < 1e-12
-    unit = None if flat else _planes(sc.cells, 1.0, sc.pixel_yx, None, pattern=pattern)
     runs = [run(k) for k in range(len(WIDTH_FACTORS) + 1)]
     base = runs[0][1][0]
     area = np.bincount(sc.labels.ravel()).astype(np.float64)
     inj, rec, widths, n_fac = [], [], [], 0
-    for (delta, a_cell, b_cell), (fit, _) in (r for r in runs[1:]):
+    for (delta, a_cell, b_cell), (fit, _) in runs[1:]:
         ok = _usable(fit) & _usable(base)
         n_fac = max(n_fac, int(ok.sum()))
         if ok.sum() < 3:
