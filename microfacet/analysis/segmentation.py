@@ -144,12 +144,15 @@ def neighbour_pairs(labels):
 
 def _unique_pairs(a, b):
     """Unique unordered pairs of non-negative ints as rows (i < j) sorted by (i, j): one
-    1-D sort of ``i * n + j`` keys (``np.unique(axis=0)`` sorts rows ~20× slower)."""
+    1-D sort of ``i * n + j`` keys (``np.unique(axis=0)`` sorts rows ~20× slower, and
+    numpy 2.4's ``np.unique`` of the keys, which hashes them, 15-60× slower than the sort on
+    2·10⁵-2·10⁶ keys: 0.97 s of the segmentation at 4 MP)."""
     if a.size == 0:
         return np.zeros((0, 2), np.int64)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     n = int(hi.max()) + 1
-    key = np.unique(lo * n + hi)
+    key = np.sort(lo * n + hi)
+    key = key[np.concatenate(([True], key[1:] != key[:-1]))]
     return np.stack([key // n, key % n], axis=1)
 
 
