@@ -15,6 +15,7 @@ from ..core.errors import InputError
 from ..core.lazy import load
 
 distributed = load("distributed")
+dask_config = load("dask.config")
 
 joblib = load("joblib")
 
@@ -63,6 +64,18 @@ def check_scheduler(scheduler) -> None:
                          f"port such as tcp://10.0.0.5:8786", param="scheduler")
 
 
+#: Dask configuration for the workers of a LocalCluster: Dask's nanny starts its workers with
+#: ``MALLOC_TRIM_THRESHOLD_=65536``, which makes glibc hand every freed block above 64 kB
+#: back to the system; the analysis allocates and frees large arrays all the time and ran
+#: 2.7× slower per stack in such a worker (4 stacks of 512²: 11-13.6 s against 4.3-5.9 s in
+#: a loky process or a worker without it, docs/benchmarks.md; a fixed threshold of 32 MB in
+#: the worker's environment was not enough: any fixed one stops glibc's own adjustment).
+#: Workers started by hand get the same with
+#: ``DASK_DISTRIBUTED__NANNY__PRE_SPAWN_ENVIRON='{"MALLOC_TRIM_THRESHOLD_": None}'`` in the
+#: environment of ``dask worker`` (README).
+WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+
+
 def dask_client(scheduler, timeout_s, jobs=None):
     """``(client, cluster)``: a Client of the scheduler at ``scheduler``, or of a new
     LocalCluster for ``"local"`` (``cluster`` is None for an existing scheduler)."""
@@ -80,7 +93,9 @@ def dask_client(scheduler, timeout_s, jobs=None):
         # idle worker prints its KeyboardInterrupt traceback). Their own logging (read from
         # the environment when they start) stays at errors unless -vv.
         quiet = {} if log.isEnabledFor(logging.DEBUG) else {"DASK_LOGGING__DISTRIBUTED": "error"}
-        with _environ(quiet), _ignoring_sigint():
+        # a nanny started earlier in this process left its threshold in our environment
+        quiet["MALLOC_TRIM_THRESHOLD_"] = None
+        with _environ(quiet), _ignoring_sigint(), dask_config.set(WORKER_CONFIG):
             cluster = LocalCluster(n_workers=jobs or os.cpu_count() or 1, threads_per_worker=1,
                                    processes=True, host="127.0.0.1", dashboard_address=":0")
         log.info("Dask LocalCluster at %s, dashboard %s", cluster.scheduler_address,
@@ -95,9 +110,14 @@ def dask_client(scheduler, timeout_s, jobs=None):
 
 @contextlib.contextmanager
 def _environ(values: dict):
-    """Set environment variables for the block (for the processes started in it)."""
+    """Set environment variables for the block (for the processes started in it); a value of
+    None unsets the variable."""
     saved = {k: os.environ.get(k) for k in values}
-    os.environ.update(values)
+    for k, v in values.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
     try:
         yield
     finally:

@@ -151,6 +151,32 @@ def test_scheduler_local_starts_and_closes_a_local_cluster(batch_drawer, tmp_pat
     assert row["status"] == "done" and Results.complete(row["results"])[0]
 
 
+@pytest.mark.slow
+def test_local_cluster_workers_keep_glibcs_own_trim_threshold(monkeypatch):
+    """Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536 (the analysis ran 2.7×
+    slower per stack there) and leaves it in the starting process's environment; the
+    LocalCluster of ``--scheduler local`` starts its workers without it, even after such a
+    nanny, and leaves Dask's configuration and this process's environment as they were."""
+    pytest.importorskip("distributed")
+    import os
+
+    import dask
+
+    from microfacet.workflow import executors
+
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "65536")      # as an earlier nanny leaves it
+    before = dict(dask.config.get("distributed.nanny.pre-spawn-environ"))
+    pair = executors.dask_client("local", 10, jobs=1)
+    try:
+        got = pair[0].run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
+    finally:
+        executors.close_dask(pair)
+    assert list(got.values()) == [None]
+    assert dask.config.get("distributed.nanny.pre-spawn-environ") == before
+    assert before.get("MALLOC_TRIM_THRESHOLD_") is not None     # Dask's default, restored
+    assert os.environ["MALLOC_TRIM_THRESHOLD_"] == "65536"
+
+
 def test_every_stack_is_validated_before_any_analysis(batch_drawer, tmp_path, monkeypatch,
                                                       caplog):
     from microfacet.workflow import batch as runner
