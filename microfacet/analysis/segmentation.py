@@ -201,26 +201,21 @@ def _felzenszwalb_tiles(img, scale, slope, *, min_size, tile=None):
     0.2 s at 1 MP for 80 MB more at the analysis' peak."""
     h, w = img.shape[:2]
     tile = FELZENSZWALB_TILE_PX if tile is None else int(tile)
-    tiles = [(slice(r0, r0 + tile), slice(c0, c0 + tile))
-             for r0 in range(0, h, tile) for c0 in range(0, w, tile)]
-
-    def pieces(sl):
-        part = img[sl] * np.float32(scale)
-        if slope is not None:
-            part = np.concatenate([part, slope[sl].astype(np.float32)], axis=-1)
-        blobs = segmentation.felzenszwalb(part, scale=1e-3, sigma=0.5, min_size=min_size,
-                                          channel_axis=-1)
-        found = measure.label(blobs + 1, connectivity=1, background=0)   # 1..n
-        out[sl] = found - 1                                     # numbered within the tile
-        return int(found.max())
-
     out = np.empty((h, w), np.int32)
-    with warnings.catch_warnings():   # skimage warns about more than 4 channels
-        warnings.filterwarnings("ignore", message=".*third dimension.*")
-        counts = [pieces(sl) for sl in tiles]
-    offsets = np.cumsum([0, *counts[:-1]])
-    for sl, off in zip(tiles, offsets):
-        out[sl] += np.int32(off)
+    offset = 0
+    for r0 in range(0, h, tile):
+        for c0 in range(0, w, tile):
+            sl = (slice(r0, r0 + tile), slice(c0, c0 + tile))
+            part = img[sl] * np.float32(scale)
+            if slope is not None:
+                part = np.concatenate([part, slope[sl].astype(np.float32)], axis=-1)
+            with warnings.catch_warnings():   # skimage warns about more than 4 channels
+                warnings.filterwarnings("ignore", message=".*third dimension.*")
+                blobs = segmentation.felzenszwalb(part, scale=1e-3, sigma=0.5,
+                                                  min_size=min_size, channel_axis=-1)
+            pieces = measure.label(blobs + 1, connectivity=1, background=0)  # 1..n
+            out[sl] = pieces - 1 + offset
+            offset += int(pieces.max())
     return out
 
 

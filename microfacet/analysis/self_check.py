@@ -239,6 +239,11 @@ def _crop(shape):
     return slice(r0, r0 + min(h, MAX_SIDE_PX)), slice(c0, c0 + min(w, MAX_SIDE_PX))
 
 
+def _flat(pattern) -> bool:
+    """Whether the slopes ``pattern`` (∂h/∂x, ∂h/∂y per facet) are all but zero."""
+    return float(np.mean(pattern[0] ** 2 + pattern[1] ** 2)) < 1e-12
+
+
 def _planes(labels, rms_slope, pixel_yx, rng, pattern=None):
     """Heights of planes joined at the facets' edges, with the slopes ``pattern`` (∂h/∂x,
     ∂h/∂y per facet, rows down) scaled to the RMS |∇h| ``rms_slope`` — or, where the pattern
@@ -250,7 +255,7 @@ def _planes(labels, rms_slope, pixel_yx, rng, pattern=None):
     n = np.maximum(np.bincount(labels.ravel(), minlength=S), 1)
     cy = np.bincount(labels.ravel(), y_um.ravel(), S) / n
     cx = np.bincount(labels.ravel(), x_um.ravel(), S) / n
-    if pattern is None or float(np.mean(pattern[0] ** 2 + pattern[1] ** 2)) < 1e-12:
+    if pattern is None or _flat(pattern):
         s = rms_slope / math.sqrt(2.0)
         a, b = rng.normal(0, s, S), rng.normal(0, s, S)
     else:
@@ -414,8 +419,7 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
     own = fit_facet_planes(sc.cells, sc.base_um, height_sigma_um=1.0, reliable=everywhere,
                            pixel_size_um=sc.pixel_yx, min_pixels=3, robust_rounds=0)
     pattern = (np.nan_to_num(own.slope_x), np.nan_to_num(own.slope_y))
-    flat = float(np.mean(pattern[0] ** 2 + pattern[1] ** 2)) < 1e-12
-    unit = None if flat else _planes(sc.cells, 1.0, sc.pixel_yx, None, pattern=pattern)
+    unit = None if _flat(pattern) else _planes(sc.cells, 1.0, sc.pixel_yx, None, pattern=pattern)
 
     def run(k):
         # run 0: the scene's own surface; run k: the injection of WIDTH_FACTORS[k - 1], each

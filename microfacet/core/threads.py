@@ -114,7 +114,9 @@ def thread_map(fn: Callable, items: Sequence) -> list:
 
     For numpy work on independent chunks: numpy releases the GIL inside each ufunc, so the
     chunks run concurrently. Each thread holds one chunk's temporaries, so the memory in
-    flight is that many chunks'. One thread, or one item, runs in the calling thread.
+    flight is that many chunks'. One thread, or one item, runs in the calling thread. numpy's
+    error state is the thread's own: the caller's (``np.errstate``) is carried into the
+    workers.
 
     >>> with limited_threads(1):
     ...     thread_map(lambda ab: sum(range(*ab)), chunk_starts(10, 4))
@@ -124,8 +126,16 @@ def thread_map(fn: Callable, items: Sequence) -> list:
     threads = min(num_threads(), len(items))
     if threads <= 1:
         return [fn(item) for item in items]
+    import numpy as np
+
+    err = np.geterr()
+
+    def call(item):
+        with np.errstate(**err):
+            return fn(item)
+
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        return list(pool.map(fn, items))
+        return list(pool.map(call, items))
 
 
 #: ``mallopt`` parameter number of ``M_ARENA_MAX`` (glibc's malloc.h).

@@ -36,12 +36,11 @@ References
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.threads import num_threads
+from ..core.threads import thread_map
 from .constants import optical_constants
 
 __all__ = ["fresnel_reflectance", "reflectance", "reflectance_period_nm"]
@@ -292,26 +291,14 @@ def _airy(wl, theta, d, n0, n1, n2, polarization, dtype):
 
 
 def _run_blocks(fn, shape):
-    """Call ``fn(block_index)`` over the blocks of ``shape``, in threads when it pays
-    (:func:`microfacet.core.threads.num_threads` of them)."""
+    """Call ``fn(block_index)`` over the blocks of ``shape``, in threads when it pays (4
+    blocks or more: :func:`microfacet.core.threads.thread_map`)."""
     blocks = list(_blocks(shape))
-    threads = num_threads() if len(blocks) >= 4 else 1
-    if threads == 1:
+    if len(blocks) < 4:
         for blk in blocks:
             fn(blk)
         return
-
-    # numpy releases the GIL inside each ufunc, so blocks run concurrently. The
-    # numpy error state is thread-local: carry the caller's into the workers.
-    err = np.geterr()
-
-    def call(blk):
-        with np.errstate(**err):
-            fn(blk)
-
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        for _ in pool.map(call, blocks):
-            pass
+    thread_map(fn, blocks)
 
 
 _BLOCK_ELEMENTS = 1 << 15

@@ -82,7 +82,7 @@ def test_the_library_does_not_read_the_environment(monkeypatch):
     monkeypatch.setenv(threads.ENV_VAR, "1")
     assert num_threads() == default_num_threads()
     seen = []
-    monkeypatch.setattr(thinfilm, "ThreadPoolExecutor", _recording_pool(seen))
+    monkeypatch.setattr(threads, "ThreadPoolExecutor", _recording_pool(seen))   # thread_map's
     shape = (64, 4096)                               # enough blocks to use the pool
     with limited_threads(2):
         thinfilm.reflectance(550.0, np.zeros(shape), np.full(shape, 100.0), 2.2, 2.5 + 3.3j)
@@ -153,3 +153,16 @@ def test_malloc_arenas_are_limited_where_glibc_allows_it():
 
     glibc = sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc"
     assert threads.limit_malloc_arenas(2) is glibc
+
+
+def test_thread_map_carries_the_callers_numpy_error_state():
+    """numpy's error state is each thread's own: thread_map's workers keep the caller's
+    (a division by zero raises under ``np.errstate(divide="raise")`` on any thread)."""
+    def divide(_):
+        return np.float64(1.0) / np.float64(0.0)
+
+    with threads.limited_threads(2), np.errstate(divide="raise"):
+        with pytest.raises(FloatingPointError):
+            threads.thread_map(divide, range(4))
+    with threads.limited_threads(2), np.errstate(divide="ignore"):
+        assert all(np.isinf(threads.thread_map(divide, range(4))))
