@@ -5,8 +5,9 @@
 module              concern
 ==================  ==========================================================
 ``datasets``        CMFs and illuminant spectra (colour-science's tables)
+``snapshot``        colour-science's tables and weights stored with the package
 ``colorimetry``     spectral weights, spectra → XYZ, XYZ ↔ Lab
-``adaptation``      Bradford chromatic adaptation (colour-science's)
+``adaptation``      Bradford chromatic adaptation (colour-science's operations)
 ``transfer``        the sRGB transfer functions (decode / encode)
 ``srgb``            RGB ↔ XYZ, image ↔ Lab, model colours as sRGB
 ``difference``      CIEDE2000 (fast, float32), CIE94, CIE76, ``delta_e(method=)``

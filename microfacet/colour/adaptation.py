@@ -1,10 +1,11 @@
-"""Chromatic adaptation: the Bradford transform, from colour-science.
+"""Chromatic adaptation: the Bradford transform, as colour-science computes it.
 
 A white-balanced image under an illuminant other than D65 is mapped from the sRGB white to
 that illuminant's white by a Bradford (von Kries in sharpened cone space) adaptation; the
-(3, 3) matrix is built once per illuminant, so it is colour-science's
-(``colour.adaptation.matrix_chromatic_adaptation_VonKries``), wrapped to validate its
-arguments (docs/colour-benchmarks.md).
+(3, 3) matrix is built once per illuminant with the operations of colour-science's
+``colour.adaptation.matrix_chromatic_adaptation_VonKries(..., transform="Bradford")`` (the
+same numbers, tests/colour/test_adaptation.py), written out so that the analysis does not
+import colour-science for it (~0.7 s; :mod:`microfacet.colour.snapshot`).
 
 References
 ----------
@@ -28,10 +29,6 @@ from typing import Any
 
 import numpy as np
 
-from ..core.lazy import load
-
-colour = load("colour")
-
 __all__ = ["BRADFORD", "bradford_matrix"]
 
 #: Bradford cone-response matrix (Lam 1985); colour-science's ``CAT_BRADFORD``.
@@ -49,8 +46,8 @@ def bradford_matrix(source_white: Any, target_white: Any) -> np.ndarray:
     """Bradford (linear, von Kries in sharpened cone space) adaptation matrix.
 
     colour-science's ``colour.adaptation.matrix_chromatic_adaptation_VonKries(...,
-    transform="Bradford")`` (cone matrix :data:`BRADFORD`): a (3, 3) matrix built once per
-    illuminant, not a hot path.
+    transform="Bradford")`` (cone matrix :data:`BRADFORD`), computed by the same operations:
+    a (3, 3) matrix built once per illuminant, not a hot path.
 
     Parameters
     ----------
@@ -83,5 +80,10 @@ def bradford_matrix(source_white: Any, target_white: Any) -> np.ndarray:
             raise ValueError(f"{name} must have shape (3,), got {w.shape}")
         if not (np.all(np.isfinite(w)) and w[1] > 0):
             raise ValueError(f"{name} must be a finite XYZ triple with Y > 0, got {w.tolist()}")
-    return np.asarray(colour.adaptation.matrix_chromatic_adaptation_VonKries(
-        src, dst, transform="Bradford"), dtype=np.float64)
+    # colour-science's von Kries matrix, computed as it computes it (the same operations
+    # in the same order, so the same float64 numbers): inv(M) @ diag(M w_t / M w_s) @ M.
+    # Written out because importing colour-science takes ~0.7 s (microfacet.colour.snapshot)
+    # and the analysis needs it for nothing else; tests/colour/test_adaptation.py compares.
+    m = np.array(BRADFORD)
+    d = np.matmul(m, dst[:, None]).squeeze(-1) / np.matmul(m, src[:, None]).squeeze(-1)
+    return np.matmul(np.matmul(np.linalg.inv(m), np.diag(d)), m)

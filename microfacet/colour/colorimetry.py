@@ -52,7 +52,6 @@ from typing import Any
 import numpy as np
 
 from ..core.defaults import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
-from ..core.lazy import load
 from .arrays import channels, float_array
 from .datasets import (  # re-exported: their import path here is public
     CMF_RANGE_NM,
@@ -65,8 +64,7 @@ from .datasets import (  # re-exported: their import path here is public
     known_illuminants,
     observer_name,
 )
-
-colour = load("colour")
+from .snapshot import colour_impulse_xyz, grid_key, stored
 
 __all__ = ["OBSERVERS", "known_illuminants", "lab_to_xyz", "spectral_weights", "spectrum_to_lab",
            "spectrum_to_xyz", "white_xyz", "xyz_to_lab"]
@@ -74,48 +72,21 @@ __all__ = ["OBSERVERS", "known_illuminants", "lab_to_xyz", "spectral_weights", "
 #: CIELAB constants (CIE 15:2018, exact rationals).
 _EPSILON = 216.0 / 24389.0
 _KAPPA = 24389.0 / 27.0
-#: Unit-impulse spectra integrated per colour-science call (bounds its (k, N) temporaries).
-_BLOCK = 512
 
 # --------------------------------------------------------------------------------------
 # Spectra -> XYZ
 # --------------------------------------------------------------------------------------
 
 
-def _spectral_shape(w: np.ndarray):
-    """``colour.SpectralShape`` whose wavelengths are ``w`` (to 1e-9 of a step) and which
-    colour-science itself sees as uniform (e.g. not a 0.1 nm grid), or None."""
-    step = (w[-1] - w[0]) / (w.size - 1)
-    tol = 1e-9 * step
-    if np.abs(np.diff(w) - step).max() > tol:
-        return None
-    shape = colour.SpectralShape(w[0], w[-1], step)
-    grid = np.asarray(shape.wavelengths)
-    if (grid.shape != w.shape or np.abs(grid - w).max() > tol
-            or not colour.utilities.is_uniform(grid)):
-        return None
-    return shape
-
-
 def _impulse_xyz(w: np.ndarray, illuminant: str, observer: str) -> np.ndarray | None:
     """colour-science's "Integration" XYZ (Y = 100 white) of the unit-impulse spectra on
-    ``w``, or None where colour-science cannot hold the grid exactly."""
-    shape = _spectral_shape(w)
-    if shape is None:
-        return None
-    cmf = colour.colorimetry.reshape_msds(colour.MSDS_CMFS[observer], shape)
-    ill = colour.colorimetry.reshape_sd(colour.SDS_ILLUMINANTS[illuminant], shape)
-    if cmf.shape != shape or ill.shape != shape:
-        return None
-    n = w.size
-    out = np.empty((n, 3))
-    for i in range(0, n, _BLOCK):
-        k = min(_BLOCK, n - i)
-        impulses = np.zeros((k, n))
-        impulses[np.arange(k), i + np.arange(k)] = 1.0
-        out[i:i + k] = colour.msds_to_XYZ(impulses, cmf, ill, method="Integration",
-                                          shape=shape)
-    return out
+    ``w`` — stored with the package (:mod:`~microfacet.colour.snapshot`) for the analysis'
+    grids, else computed — or None where colour-science cannot hold the grid exactly."""
+    tables = stored()
+    key = grid_key(w, illuminant, observer)
+    if tables is not None and key in tables.weights:
+        return np.array(tables.weights[key])
+    return colour_impulse_xyz(w, illuminant, observer)
 
 
 def _cell_widths(w: np.ndarray) -> np.ndarray:

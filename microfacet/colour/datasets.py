@@ -1,8 +1,10 @@
 """CIE datasets from colour-science: standard observers (CMFs) and illuminant spectra.
 
-The tables are colour-science's own (``colour.MSDS_CMFS``, ``colour.SDS_ILLUMINANTS``),
-imported on first use and cached read-only; names are validated here, with messages that
-name the argument. :mod:`microfacet.colour.colorimetry` integrates spectra against them.
+The tables are colour-science's own (``colour.MSDS_CMFS``, ``colour.SDS_ILLUMINANTS``), read
+from the copy stored with the package (:mod:`~microfacet.colour.snapshot`: importing
+colour-science costs ~0.7 s) or, without it, from colour-science on first use; cached
+read-only. Names are validated here, with messages that name the argument.
+:mod:`microfacet.colour.colorimetry` integrates spectra against them.
 
 Examples
 --------
@@ -13,20 +15,23 @@ Examples
 from __future__ import annotations
 
 import functools
-import math
 from typing import Any
 
 import numpy as np
 
 from ..core.defaults import DEFAULT_ILLUMINANT, DEFAULT_OBSERVER
-from ..core.lazy import load
-
-colour = load("colour")
+from .snapshot import (
+    CMF_RANGE_NM,
+    OBSERVER_NAMES,
+    colour_cmf_table,
+    colour_illuminant_names,
+    colour_illuminant_table,
+    stored,
+)
 
 __all__ = ["OBSERVERS", "cmfs", "illuminant_key", "illuminant_sd", "known_illuminants"]
 
-_CIE1931 = "CIE 1931 2 Degree Standard Observer"
-_CIE1964 = "CIE 1964 10 Degree Standard Observer"
+_CIE1931, _CIE1964 = OBSERVER_NAMES
 
 #: Accepted observer names -> colour-science dataset name.
 OBSERVERS: dict[str, str] = {
@@ -35,9 +40,6 @@ OBSERVERS: dict[str, str] = {
     "10": _CIE1964,
     _CIE1964: _CIE1964,
 }
-
-#: CIE range of the standard observers tabulated at 1 nm (nm).
-CMF_RANGE_NM = (360.0, 830.0)
 
 
 # --------------------------------------------------------------------------------------
@@ -85,7 +87,8 @@ def check_range(w: np.ndarray, lo: float, hi: float, what: str) -> None:
 
 @functools.cache
 def _illuminant_names() -> tuple[str, ...]:
-    return tuple(colour.SDS_ILLUMINANTS.keys())
+    tables = stored()
+    return tables.illuminant_names if tables is not None else colour_illuminant_names()
 
 
 def known_illuminants() -> tuple[str, ...]:
@@ -131,31 +134,20 @@ def illuminant_key(illuminant: Any) -> str:
 # --------------------------------------------------------------------------------------
 
 
-def _frozen(a: Any) -> np.ndarray:
-    out = np.array(a, dtype=np.float64)
-    out.flags.writeable = False
-    return out
-
-
 @functools.cache
 def _cmf_table(name: str) -> tuple[np.ndarray, np.ndarray]:
-    msds = colour.MSDS_CMFS[name]
-    return _frozen(msds.wavelengths), _frozen(msds.values)
+    tables = stored()
+    if tables is not None and name in tables.cmf:
+        return tables.cmf[name]
+    return colour_cmf_table(name)
 
 
 @functools.cache
 def _illuminant_table(name: str) -> tuple[np.ndarray, np.ndarray]:
-    """SPD aligned to 1 nm over the union of its range and 360-830 nm.
-
-    colour-science's own ``SpectralDistribution.align`` (the dataset's interpolator,
-    linear for the CIE illuminants as CIE 15 prescribes; constant extrapolation): what
-    ``colour.sd_to_XYZ`` does when it aligns an illuminant to the 1 nm CMFs.
-    """
-    sd = colour.SDS_ILLUMINANTS[name]
-    lo = math.floor(min(sd.shape.start, CMF_RANGE_NM[0]))
-    hi = math.ceil(max(sd.shape.end, CMF_RANGE_NM[1]))
-    aligned = sd.copy().align(colour.SpectralShape(lo, hi, 1))
-    return _frozen(aligned.wavelengths), _frozen(aligned.values)
+    tables = stored()
+    if tables is not None and name in tables.illuminant:
+        return tables.illuminant[name]
+    return colour_illuminant_table(name)
 
 
 def cmfs(wavelength_nm: Any, *, observer: str = DEFAULT_OBSERVER) -> np.ndarray:
