@@ -19,7 +19,8 @@ dask_config = load("dask.config")
 
 joblib = load("joblib")
 
-__all__ = ["check_scheduler", "close_dask", "dask_client", "dask_results", "local_results"]
+__all__ = ["WORKER_ENVIRONMENT", "check_scheduler", "close_dask", "dask_client", "dask_results",
+           "job_script_prologue", "local_results"]
 
 log = logging.getLogger("microfacet.workflow")
 
@@ -74,6 +75,20 @@ def check_scheduler(scheduler) -> None:
 #: ``DASK_DISTRIBUTED__NANNY__PRE_SPAWN_ENVIRON='{"MALLOC_TRIM_THRESHOLD_": None}'`` in the
 #: environment of ``dask worker`` (README).
 WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+#: The same for workers a batch system starts (``dask worker`` in a job script): Dask reads
+#: this variable into ``WORKER_CONFIG``'s key when the worker starts.
+WORKER_ENVIRONMENT = {
+    "DASK_DISTRIBUTED__NANNY__PRE_SPAWN_ENVIRON": '{"MALLOC_TRIM_THRESHOLD_": None}'}
+
+
+def job_script_prologue() -> list[str]:
+    """Shell lines that give the Dask workers of a job script :data:`WORKER_ENVIRONMENT`:
+    for ``job_script_prologue=`` of a dask-jobqueue cluster (docs/cluster.md).
+
+    >>> print(job_script_prologue()[0])
+    export DASK_DISTRIBUTED__NANNY__PRE_SPAWN_ENVIRON='{"MALLOC_TRIM_THRESHOLD_": None}'
+    """
+    return [f"export {k}='{v}'" for k, v in WORKER_ENVIRONMENT.items()]
 
 
 def dask_client(scheduler, timeout_s, jobs=None):
