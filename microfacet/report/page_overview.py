@@ -59,7 +59,7 @@ def draw(pg, ctx):
         ax.imshow(small, cmap="gray" if small.ndim == 2 else None, vmin=0, vmax=1,
                   aspect="auto", extent=geom.extent(aif.shape), interpolation="antialiased")
         ax.set_title("all-in-focus image")
-        geom.label(ax)
+        geom.scale_bar(ax, aif.shape)
     else:
         blank_panel(pg, cells[0], "all_in_focus.png is not in the folder",
                     "all-in-focus image")

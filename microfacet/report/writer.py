@@ -24,7 +24,9 @@ pixels its panel shows at :data:`~microfacet.report.layout.PDF_DPI` (at most
 and the PDF's size hardly grow with the image; what more than one page uses is computed
 once (:class:`~microfacet.report.context.Context`). The drawing helpers the pages share are
 in :mod:`~microfacet.report.layout`, the array preparation in
-:mod:`~microfacet.report.arrays`.
+:mod:`~microfacet.report.arrays`. On Linux, from a process without other threads (``microfacet
+analyze``), the PNG pages are drawn by a forked child while this process draws the PDF: the
+two renderings of each page on two cores (docs/benchmarks.md).
 
 Importing this module does not import matplotlib; :func:`write_report` does.
 """
@@ -34,6 +36,9 @@ from __future__ import annotations
 import datetime as _dt
 import os
 import re
+import signal
+import sys
+import threading
 import time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
@@ -124,33 +129,117 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
     # Jupyter session calling this keeps its inline backend.
     metadata = {"Title": f"microfacet report — {shown.name}",
                 "Creator": f"microfacet {__version__}"}
+    pages = _Pages(ctx, shown, written)
+    child = None
     try:
-        # The PNGs are compressed by one worker thread (Pillow releases the GIL) while the
-        # next page is drawn.
-        with mpl.rc_context(RC), warnings.catch_warnings(), \
-                ThreadPoolExecutor(max_workers=1) as png_writer, \
-                backend_pdf.PdfPages(tmp, metadata=metadata) as pdf:
+        with mpl.rc_context(RC), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN slices and the like
-            pngs = []
-            for i, module in enumerate(_MODULES, start=1):
-                pg = Page(figure.Figure(figsize=PAGE_IN))
-                _header(pg, ctx, shown, module.TITLE, i, written)
-                _footer(pg, shown, i)
-                module.draw(pg, ctx)
-                pdf.savefig(pg.fig, dpi=PDF_DPI)
-                if png_dir is not None:
-                    pngs.append(png_writer.submit(
-                        _write_png, _page_rgb(pg.fig),
-                        png_dir / f"report_{i}_{module.NAME}.png"))
-            for done in pngs:
-                done.result()  # raises what writing raised
+            if png_dir is not None and _can_fork():
+                child = _PngChild.start(pages, png_dir)
+            with backend_pdf.PdfPages(tmp, metadata=metadata) as pdf:
+                # without a child, each page drawn is also rendered as a PNG here
+                pages.write(pdf, png_dir if child is None else None)
+            if child is not None:
+                child, running = None, child
+                running.wait()
         os.replace(tmp, out_pdf)
     except BaseException:
+        if child is not None:
+            child.stop()
         tmp.unlink(missing_ok=True)
         raise
     if out_pdf.resolve().is_relative_to(results_dir.resolve()):
         ctx.res.record("timings_s", "report", round(time.perf_counter() - t0, 4))
     return out_pdf
+
+
+class _Pages:
+    """The report's pages of one results folder, drawn one at a time."""
+
+    def __init__(self, ctx, shown, written):
+        self.ctx, self.shown, self.written = ctx, shown, written
+
+    def draw(self, i) -> Page:
+        """Page ``i`` (1-based): header, footer and the page module's content."""
+        module = _MODULES[i - 1]
+        pg = Page(figure.Figure(figsize=PAGE_IN))
+        _header(pg, self.ctx, self.shown, module.TITLE, i, self.written)
+        _footer(pg, self.shown, i)
+        module.draw(pg, self.ctx)
+        return pg
+
+    def write(self, pdf=None, png_dir=None) -> None:
+        """Every page into ``pdf`` (a ``PdfPages``) and/or as ``png_dir/report_<n>_<name>.png``;
+        each PNG is compressed by a worker thread (Pillow releases the GIL) while the next page
+        is drawn."""
+        with ThreadPoolExecutor(max_workers=1) as png_writer:
+            pngs = []
+            for i, m in enumerate(_MODULES, start=1):
+                fig = self.draw(i).fig
+                if pdf is not None:
+                    pdf.savefig(fig, dpi=PDF_DPI)
+                if png_dir is not None:
+                    pngs.append(png_writer.submit(_write_png, _page_rgb(fig),
+                                                  png_dir / f"report_{i}_{m.NAME}.png"))
+            for done in pngs:
+                done.result()  # raises what writing raised
+
+
+def _can_fork() -> bool:
+    """Whether the PNG pages may be drawn by a forked child: on Linux (macOS' system
+    frameworks are not fork-safe), from a process with no other Python thread (a thread
+    holding a lock at the fork would leave it held in the child; Dask and loky workers
+    have such threads and draw the pages themselves)."""
+    return (hasattr(os, "fork") and sys.platform.startswith("linux")
+            and threading.active_count() == 1)
+
+
+class _PngChild:
+    """A forked process drawing the PNG pages while this one draws the PDF (the two are
+    separate renderings of each page: 1.5 s in one process, ~1 s in two on a 2-core
+    machine, docs/benchmarks.md). It exits with 0, or 1 after writing what went wrong to
+    a pipe."""
+
+    def __init__(self, pid, err_fd):
+        self.pid, self.err_fd = pid, err_fd
+
+    @classmethod
+    def start(cls, pages: _Pages, png_dir) -> _PngChild:
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid == 0:                               # the child: never returns
+            code = 1
+            try:
+                os.close(r)
+                pages.write(png_dir=png_dir)
+                code = 0
+            except BaseException as exc:           # noqa: BLE001 - reported to the parent
+                os.write(w, f"{type(exc).__name__}: {exc}".encode()[:4000])
+            finally:
+                os._exit(code)
+        os.close(w)
+        return cls(pid, r)
+
+    def wait(self) -> None:
+        """Wait for the child; raise what it reported if it failed."""
+        with os.fdopen(self.err_fd, "rb") as f:
+            message = f.read().decode(errors="replace")
+        _, status = os.waitpid(self.pid, 0)
+        if os.waitstatus_to_exitcode(status) != 0:
+            why = message or "the process drawing them was killed"
+            raise RuntimeError(f"the report's PNG pages: {why}")
+
+    def stop(self) -> None:
+        """Kill the child and reap it (after a failure here)."""
+        try:
+            os.kill(self.pid, signal.SIGKILL)
+            os.waitpid(self.pid, 0)
+        except (ProcessLookupError, ChildProcessError):
+            pass
+        try:
+            os.close(self.err_fd)
+        except OSError:
+            pass
 
 
 def _page_rgb(fig):

@@ -139,3 +139,28 @@ def test_log_axis_labels_are_plain_text():
     assert plain_math(r"$\mathdefault{10^{0}}$") == "10⁰"
     assert plain_math(r"$\mathdefault{\alpha}$") == r"$\mathdefault{\alpha}$"  # as it was
     assert plain_math("1.5") == "1.5"
+
+
+@pytest.mark.parametrize("pixel_um, shape", [(0.5, (300, 400)), ([0.25, 0.1], (120, 900)),
+                                             (None, (64, 64)), (3.7, (50, 2000))])
+def test_maps_carry_a_scale_bar_of_the_length_it_says(pixel_um, shape):
+    """No tick marks; one bar whose length in the map's units is the number it is labelled
+    with, a 1-2-5 length of 8-20 % of the field's width, inside the map; the axes still
+    span the whole map."""
+    pg = _page()
+    geom = Geometry(pixel_um)
+    a = np.ones(shape, np.float32)
+    ax = map_panel(pg, pg.grid(2, 3)[0], a, geom, title="t", label="l", cmap="viridis",
+                   limits=(0.0, 1.0, "neither"))
+    assert list(ax.get_xticks()) == [] and list(ax.get_yticks()) == []
+    (bar,) = ax.lines
+    (x0, x1), (ya, yb) = bar.get_xdata(), bar.get_ydata()
+    label = [t.get_text() for t in ax.texts]
+    unit = "µm" if pixel_um is not None else "px"
+    assert label == [f"{x1 - x0:g} {unit}"]
+    left, right, bottom, top = geom.extent(shape)
+    assert 0.08 <= (x1 - x0) / (right - left) <= 0.2
+    mantissa = (x1 - x0) / 10 ** np.floor(np.log10(x1 - x0))
+    assert min(abs(mantissa - m) for m in (1, 2, 5)) < 1e-9
+    assert left < x0 < x1 < right and top < ya == yb < bottom
+    assert tuple(ax.get_xlim()) == (left, right) and tuple(ax.get_ylim()) == (bottom, top)

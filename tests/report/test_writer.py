@@ -146,3 +146,63 @@ def test_malformed_files_are_input_errors_naming_them(results_copy, name, text, 
     with pytest.raises(InputError, match=re.escape(where)):
         write_report(folder)
     assert not [p for p in folder.iterdir() if "report.pdf" in p.name]
+
+
+@pytest.mark.parametrize("fork", [True, False])
+def test_png_pages_are_the_same_from_a_forked_child_or_this_process(results_copy, tmp_path,
+                                                                    report, png_rgb,
+                                                                    pdf_pages, monkeypatch,
+                                                                    fork):
+    """The PNG pages are drawn by a forked child while this process draws the PDF (on Linux,
+    with no other thread), else here after each PDF page: the same pixels either way."""
+    from microfacet.report import writer
+
+    if fork and not writer._can_fork():
+        pytest.skip("this process cannot fork safely (another thread, or not Linux)")
+    monkeypatch.setattr(writer, "_can_fork", lambda: fork)
+    folder = results_copy()
+    _, ref = report
+    png = tmp_path / f"png-{fork}"
+    out = write_report(folder, png_dir=png)
+    assert pdf_pages(out) == len(PAGES)
+    for i, name in enumerate(PAGES, start=1):
+        if name == "parameters":      # its tables show the folder and the previous run's times
+            continue
+        f = f"report_{i}_{name}.png"
+        got, want = png_rgb(png / f), png_rgb(ref / f)
+        # the header's "report written" minute and the footer's folder may differ
+        body = slice(80, -40)
+        assert np.array_equal(got[body], want[body]), f
+
+
+@pytest.mark.parametrize("fork", [True, False])
+def test_a_png_that_cannot_be_written_fails_the_report_and_leaves_no_pdf(results_copy,
+                                                                         tmp_path, fork,
+                                                                         monkeypatch):
+    from microfacet.report import writer
+
+    if fork and not writer._can_fork():
+        pytest.skip("this process cannot fork safely (another thread, or not Linux)")
+    monkeypatch.setattr(writer, "_can_fork", lambda: fork)
+    folder = results_copy()
+    png = tmp_path / "png"
+    (png / "report_3_distributions.png").mkdir(parents=True)   # a folder in the PNG's way
+    with pytest.raises((RuntimeError, OSError), match="report_3_distributions.png"):
+        write_report(folder, png_dir=png)
+    assert not (folder / "report.pdf").exists()
+    assert not [p for p in folder.iterdir() if p.name.startswith(".report.pdf")]
+
+
+def test_no_fork_beside_another_thread():
+    import threading
+
+    from microfacet.report import writer
+
+    stop = threading.Event()
+    t = threading.Thread(target=stop.wait)
+    t.start()
+    try:
+        assert not writer._can_fork()
+    finally:
+        stop.set()
+        t.join()
