@@ -34,7 +34,8 @@ import numpy as np
 from ..core.lazy import load
 from .segmentation import merge_adjacent, neighbour_pairs
 
-stats = load("scipy.stats")
+# scipy.special, not scipy.stats (0.19 s more to import) for a χ² quantile
+special = load("scipy.special")
 
 __all__ = ["Regions", "Samples", "collapse", "prepare", "thickness_regions",
            "weighted_median"]
@@ -119,7 +120,7 @@ def thickness_regions(labels, value, sigma, *, alpha=1e-4) -> Regions:
     ok = np.isfinite(val) & np.isfinite(sg)
     pairs = neighbour_pairs(labels)
     both = ok[pairs[:, 0]] & ok[pairs[:, 1]] if pairs.size else np.zeros(0, bool)
-    threshold = float(stats.chi2.isf(alpha, 1))
+    threshold = float(special.chdtri(1, alpha))   # scipy.stats.chi2.isf(alpha, 1), to the bit
     tau2 = 0.0
     if both.sum() >= 10:
         i, j = pairs[both, 0], pairs[both, 1]
