@@ -65,20 +65,33 @@ def check_scheduler(scheduler) -> None:
                          f"port such as tcp://10.0.0.5:8786", param="scheduler")
 
 
-#: Dask configuration for the workers of a LocalCluster: Dask's nanny starts its workers with
-#: ``MALLOC_TRIM_THRESHOLD_=65536``, which makes glibc hand every freed block above 64 kB
-#: back to the system; the analysis allocates and frees large arrays all the time and ran
-#: 2.7× slower per stack in such a worker (4 stacks of 512²: 11-13.6 s against 4.3-5.9 s in
-#: a loky process or a worker without it, docs/benchmarks.md; a fixed threshold of 32 MB in
-#: the worker's environment was not enough: any fixed one stops glibc's own adjustment).
-#: Workers started by hand get the same with
-#: ``DASK_DISTRIBUTED__NANNY__PRE_SPAWN_ENVIRON='{"MALLOC_TRIM_THRESHOLD_": None}'`` in the
-#: environment of ``dask worker`` (README).
-WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
-#: The same for workers a batch system starts (``dask worker`` in a job script): Dask reads
-#: this variable into ``WORKER_CONFIG``'s key when the worker starts.
+#: Dask configuration for the workers of a LocalCluster (docs/benchmarks.md, "Batch
+#: throughput"):
+#:
+#: - Dask's nanny starts its workers with ``MALLOC_TRIM_THRESHOLD_=65536``, which makes glibc
+#:   hand every freed block above 64 kB back to the system; the analysis allocates and frees
+#:   large arrays all the time and ran 2.7× slower per stack in such a worker (4 stacks of
+#:   512²: 11-13.6 s against 4.3-5.9 s in a loky process or a worker without it; a fixed
+#:   threshold of 32 MB in the worker's environment was not enough: any fixed one stops
+#:   glibc's own adjustment);
+#: - the worker's statistical profiler (a stack sample every 10 ms), its event loop's 20 ms
+#:   tick, its 0.5 s system monitor and 0.1 s memory monitor all take the GIL from the
+#:   analysis: without them a stack took 4.31-4.48 s against 4.74-4.80 s (8 stacks of 512²,
+#:   three runs each; loky processes 4.31-4.52 s). The memory limits still hold, checked
+#:   every second instead of ten times a second.
+WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+                 "distributed.worker.profile.enabled": False,
+                 "distributed.admin.tick.interval": "1s",
+                 "distributed.admin.system-monitor.interval": "5s",
+                 "distributed.worker.memory.monitor-interval": "1s"}
+#: The same for workers a batch system or a user starts (``dask worker`` in a job script):
+#: Dask reads these variables into :data:`WORKER_CONFIG`'s keys when the worker starts.
 WORKER_ENVIRONMENT = {
-    "DASK_DISTRIBUTED__NANNY__PRE_SPAWN_ENVIRON": '{"MALLOC_TRIM_THRESHOLD_": None}'}
+    "DASK_DISTRIBUTED__NANNY__PRE_SPAWN_ENVIRON": '{"MALLOC_TRIM_THRESHOLD_": None}',
+    "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False",
+    "DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL": "1s",
+    "DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__INTERVAL": "5s",
+    "DASK_DISTRIBUTED__WORKER__MEMORY__MONITOR_INTERVAL": "1s"}
 
 
 def job_script_prologue() -> list[str]:

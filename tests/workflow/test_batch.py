@@ -169,9 +169,11 @@ def test_local_cluster_workers_keep_glibcs_own_trim_threshold(monkeypatch):
     pair = executors.dask_client("local", 10, jobs=1)
     try:
         got = pair[0].run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
+        profiler = pair[0].run(lambda: dask.config.get("distributed.worker.profile.enabled"))
     finally:
         executors.close_dask(pair)
     assert list(got.values()) == [None]
+    assert list(profiler.values()) == [False]      # the quieter worker (WORKER_CONFIG)
     assert dask.config.get("distributed.nanny.pre-spawn-environ") == before
     assert before.get("MALLOC_TRIM_THRESHOLD_") is not None     # Dask's default, restored
     assert os.environ["MALLOC_TRIM_THRESHOLD_"] == "65536"

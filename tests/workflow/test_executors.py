@@ -12,7 +12,7 @@ import pytest
 
 from microfacet.io.results import Results
 from microfacet.workflow.batch import run_batch
-from microfacet.workflow.executors import WORKER_ENVIRONMENT, job_script_prologue
+from microfacet.workflow.executors import WORKER_CONFIG, WORKER_ENVIRONMENT, job_script_prologue
 
 
 def test_prologue_exports_the_worker_environment():
@@ -22,14 +22,15 @@ def test_prologue_exports_the_worker_environment():
         assert line == f"export {k}='{v}'"
 
 
-def test_the_environment_sets_dasks_nanny_key(monkeypatch):
-    """The variable is what Dask reads into the nanny's pre-spawn environment."""
+def test_the_environment_is_the_local_clusters_worker_config(monkeypatch):
+    """The variables are what Dask reads into the keys a LocalCluster's workers are given."""
     dask = pytest.importorskip("dask")
     for k, v in WORKER_ENVIRONMENT.items():
         monkeypatch.setenv(k, v)
-    got = dask.config.get("distributed.nanny.pre-spawn-environ",
-                          config=dask.config.collect_env())
-    assert got == {"MALLOC_TRIM_THRESHOLD_": None}
+    env = dask.config.collect_env()
+    assert len(WORKER_ENVIRONMENT) == len(WORKER_CONFIG)
+    for key, value in WORKER_CONFIG.items():
+        assert dask.config.get(key, config=env) == value, key
 
 
 @pytest.mark.slow
@@ -53,6 +54,10 @@ def test_the_slurm_recipe_runs_a_batch_on_workers_its_job_script_starts(batch_dr
         client.wait_for_workers(2, timeout=120)
         workers = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_", "unset"))
         assert list(workers.values()) == ["unset", "unset"]
+        for key, value in WORKER_CONFIG.items():
+            if "pre-spawn" not in key:     # the nanny's, seen above in the environment
+                got = client.run(lambda key=key: __import__("dask").config.get(key))
+                assert list(got.values()) == [value, value], key
         info = client.scheduler_info()["workers"]
         assert sorted(w["nthreads"] for w in info.values()) == [1, 1]
         out = tmp_path / "res"
