@@ -32,6 +32,7 @@ import numpy as np
 from ..core.distributions import NDFMixture, ThicknessMixture
 from ..core.errors import InputError, one_line
 from ..core.pixels import pixel_size_yx
+from ..core.threads import thread_map
 from .images import read_png, write_float_tiff, write_image
 from .jsonfile import json_safe, read_json
 from .summary import FORMAT, MAX_SUMMARY_BYTES, Summary
@@ -135,31 +136,43 @@ def write_results_files(folder, *, summary: dict, maps: dict, images: dict | Non
     """
     folder = Path(folder)
     pixel = pixel_size_of(summary) if tool_copies else None
+    jobs = []
     for name, arr in maps.items():
         if name not in MAPS:
             raise ValueError(f"maps: unknown map {name!r}; known: {', '.join(MAPS)}")
-        if arr is None:
-            continue
-        a = np.asarray(arr)
-        a = (a.astype(bool) if name == "mask" else a.astype(np.int32) if name == "facets"
-             else a.astype(np.float32))
-        np.save(folder / MAPS[name][0], a)
-        if tool_copies and name in TIFF_COPIES and a.ndim == 2:
-            file, unit = TIFF_COPIES[name]
-            write_float_tiff(folder / file, a, pixel_size_um=pixel, value_unit=unit)
-        if tool_copies and name in X3P_COPIES and a.ndim == 2 and pixel is not None:
-            write_x3p(folder / X3P_COPIES[name], a, pixel)
+        if arr is not None:
+            jobs.append(lambda name=name, arr=arr: _write_map(folder, name, arr, pixel,
+                                                              tool_copies))
     for name, (img, bit_depth) in (images or {}).items():
         if name not in IMAGES:
             raise ValueError(f"images: unknown image {name!r}; known: {', '.join(IMAGES)}")
-        write_image(folder / IMAGES[name], img, bit_depth=bit_depth, pixel_size_um=pixel)
+        jobs.append(lambda name=name, img=img, bit_depth=bit_depth: write_image(
+            folder / IMAGES[name], img, bit_depth=bit_depth, pixel_size_um=pixel))
     for name, (rows, columns, fmt) in (tables or {}).items():
         if name not in TABLES:
             raise ValueError(f"tables: unknown table {name!r}; known: {', '.join(TABLES)}")
         rows = np.asarray(rows, dtype=np.float64).reshape(-1, len(columns))
-        np.savetxt(folder / TABLES[name][0], rows, delimiter=",", comments="",
-                   header=",".join(columns), fmt=fmt)
+        jobs.append(lambda name=name, rows=rows, columns=columns, fmt=fmt: np.savetxt(
+            folder / TABLES[name][0], rows, delimiter=",", comments="",
+            header=",".join(columns), fmt=fmt))
+    # the files on the analysis' threads: compression (x3p, PNG, TIFF) and writing release
+    # the GIL (docs/benchmarks.md)
+    thread_map(lambda job: job(), jobs)
     _dump(folder / "summary.json", {"format": FORMAT, **summary})
+
+
+def _write_map(folder, name, arr, pixel, tool_copies) -> None:
+    """One map's ``.npy`` and, with ``tool_copies``, its TIFF and x3p copies."""
+    a = np.asarray(arr)
+    a = (a.astype(bool, copy=False) if name == "mask" else
+         a.astype(np.int32, copy=False) if name == "facets" else
+         a.astype(np.float32, copy=False))
+    np.save(folder / MAPS[name][0], a)
+    if tool_copies and name in TIFF_COPIES and a.ndim == 2:
+        file, unit = TIFF_COPIES[name]
+        write_float_tiff(folder / file, a, pixel_size_um=pixel, value_unit=unit)
+    if tool_copies and name in X3P_COPIES and a.ndim == 2 and pixel is not None:
+        write_x3p(folder / X3P_COPIES[name], a, pixel)
 
 
 class Results:
