@@ -3,13 +3,15 @@ into it in one atomic step (``microfacet analyze`` and each batch worker)."""
 
 from __future__ import annotations
 
+import threading
+
 from ..analysis.options import AnalysisOptions
 from ..analysis.output import results_size_bytes, save_results
 from ..analysis.pipeline import check_stack_for_analysis, run_stages
 from ..analysis.stages import Stage
 from ..io.outdir import OutputFolder, check_output
 from ..io.stack import Stack, StackSource
-from ..report.writer import write_report
+from ..report.writer import preload, write_report
 
 __all__ = ["analyse_to_folder", "open_stack"]
 
@@ -74,7 +76,16 @@ def analyse_to_folder(stack, out, *, options: AnalysisOptions | None = None, ove
         result = run_stages(st, options, progress=progress)
         step(Stage.WRITE)
         with claim.writing() as tmp:
-            save_results(result, tmp)
+            # the report's imports in a thread while the files are written (their compression
+            # and writes release the GIL); joined before the report, which may fork
+            imports = threading.Thread(target=preload, daemon=True) if report else None
+            if imports is not None:
+                imports.start()
+            try:
+                save_results(result, tmp)
+            finally:
+                if imports is not None:
+                    imports.join()
             if report:
                 step(Stage.REPORT)
                 write_report(tmp, png_dir=tmp)
