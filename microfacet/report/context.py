@@ -45,7 +45,8 @@ class Context:
     ndf : NDFMixture or None
         The fitted NDF lobes (None: no fit).
     geom : Geometry
-        Map axes in µm when ``inputs.pixel_size_um`` is recorded, else in pixels.
+        Map extents (and scale bars) in µm when ``inputs.pixel_size_um`` is recorded, else in
+        pixels.
     mask : ndarray of bool or None
         ``mask.npy`` (True = masked).
     inputs : dict

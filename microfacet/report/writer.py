@@ -100,7 +100,8 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
 
     Notes
     -----
-    Map axes are in µm when ``summary["inputs"]["pixel_size_um"]`` is given, else in pixels.
+    Maps carry a scale bar in µm when ``summary["inputs"]["pixel_size_um"]`` is given, else
+    in pixels.
     Maps are block-averaged (NaN-aware; categories: nearest) to the pixels their panel shows
     at :data:`~microfacet.report.layout.PDF_DPI`, at most
     :data:`~microfacet.report.layout.MAX_MAP_PX` a side; colour limits are the 1st–99th
