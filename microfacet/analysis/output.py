@@ -24,7 +24,7 @@ from ..focus.uncertainty import (
     unresolved_relief_sigma_um,
 )
 from ..io.outdir import atomic_output_dir
-from ..io.results import write_results_files
+from ..io.results import Results, write_results_files
 from ..io.summary import (
     DeltaE,
     FacetCounts,
@@ -149,12 +149,13 @@ def save_results(result, folder) -> None:
         "facets": None if r.joint is None else r.joint.facets,
     }
     summary = build_summary(r)
-    summary.timings_s["write"] = round(time.perf_counter() - t0, 4)
     write_results_files(
         folder, summary=summary.to_json(), maps=maps,
         images={"all_in_focus": (r.focus.all_in_focus,
                                  16 if r.stack.dtype == np.uint16 else 8)},
         tables=_tables(r))
+    # the summary is written last of the files; its write time, files included, after them
+    Results(folder).record("timings_s", "write", round(time.perf_counter() - t0, 4))
 
 
 def write_results(result, out, *, overwrite=False) -> Path:
