@@ -1,6 +1,6 @@
 """Store colour-science's tables and weights with the package (``microfacet/data/
 colour_science.npz``, :mod:`microfacet.colour.snapshot`), so that an analysis does not import
-colour-science (~0.7 s, ~80 MB).
+colour-science (0.78 s, docs/colour-benchmarks.md).
 
     python -m pipelines.colour_snapshot
 

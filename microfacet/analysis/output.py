@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..colour.snapshot import stored as stored_colour_tables
 from ..core.densities import cell_edges, pdf_table
 from ..core.pixels import pixel_size_yx
 from ..focus.uncertainty import (
@@ -75,6 +76,9 @@ def _versions():
             out[name] = importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
             pass
+    tables = stored_colour_tables()
+    if tables is not None:     # the CIE tables and weights the analysis read (colour.snapshot)
+        out["colour-science tables"] = tables.colour_version
     return out
 
 

@@ -1,15 +1,16 @@
 """colour-science's tables and integration weights, stored with the package.
 
-Importing colour-science loads every one of its subpackages: ~0.7 s and ~80 MB of resident
-memory, more than the colour stage of a 1 MP analysis takes (docs/benchmarks.md, "Start-up").
+Importing colour-science loads every one of its subpackages: 0.78 s (docs/colour-benchmarks.md,
+"Not importing colour-science") and ~80 MB of resident memory (scratch: the resident size
+before and after ``import colour``), more than the colour stage of a 1 MP analysis takes.
 The analysis needs only colour-science's data — the CIE standard observers, its illuminant
 spectra and names — and its "Integration" weights on the wavelength grids the colour table
 and the image white use. Those are stored in ``data/colour_science.npz``, written by
-:func:`write_snapshot` (``python pipelines/colour_snapshot.py``) with the colour-science
-version it records. Whatever the file does not hold (another grid, illuminant or observer for
-the weights) is computed by colour-science itself, as before: the numbers are colour-science's
-either way, and tests/colour/test_snapshot.py checks the stored ones against the installed
-colour-science.
+:func:`write_snapshot` (``python -m pipelines.colour_snapshot``) with the colour-science
+version it records (summary.json's ``versions`` names it). Whatever the file does not hold
+(another grid, illuminant or observer for the weights) is computed by colour-science itself,
+as before: the numbers are colour-science's either way, and tests/colour/test_snapshot.py
+checks the stored ones against the installed colour-science.
 
 Examples
 --------
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import json
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +34,7 @@ from ..core.defaults import DEFAULT_ILLUMINANT
 from ..core.lazy import load
 
 colour = load("colour")
+log = logging.getLogger("microfacet.colour")
 
 __all__ = ["CMF_RANGE_NM", "OBSERVER_NAMES", "SNAPSHOT_PATH", "WEIGHT_GRIDS", "Snapshot",
            "colour_cmf_table", "colour_illuminant_names", "colour_illuminant_table",
@@ -89,9 +92,19 @@ def _frozen(a) -> np.ndarray:
 
 @functools.cache
 def stored(path: Path = SNAPSHOT_PATH) -> Snapshot | None:
-    """The tables stored at ``path`` (None if the file is missing)."""
+    """The tables stored at ``path``; None if the file is missing or unreadable (logged: the
+    numbers then come from colour-science itself, as they would without the file)."""
     if not path.is_file():
         return None
+    try:
+        return _read(path)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        log.warning("%s: unreadable (%s); colour-science computes its tables instead",
+                    path, " ".join(str(exc).split()))
+        return None
+
+
+def _read(path: Path) -> Snapshot:
     with np.load(path, allow_pickle=False) as z:
         meta = json.loads(str(z["meta"]))
         cmf = {n: (_frozen(z[f"cmf_w_{i}"]), _frozen(z[f"cmf_v_{i}"]))

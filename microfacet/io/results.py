@@ -155,8 +155,8 @@ def write_results_files(folder, *, summary: dict, maps: dict, images: dict | Non
         jobs.append(lambda name=name, rows=rows, columns=columns, fmt=fmt: np.savetxt(
             folder / TABLES[name][0], rows, delimiter=",", comments="",
             header=",".join(columns), fmt=fmt))
-    # the files on the analysis' threads: compression (x3p, PNG, TIFF) and writing release
-    # the GIL (docs/benchmarks.md)
+    # the files on the analysis' threads (core.threads.num_threads): the x3p's and the PNG's
+    # compression and the writes release the GIL (docs/benchmarks.md)
     thread_map(lambda job: job(), jobs)
     _dump(folder / "summary.json", {"format": FORMAT, **summary})
 

@@ -241,8 +241,8 @@ class Geometry:
 
     def scale_bar(self, ax, shape):
         """A scale bar on the map of ``shape`` (H, W, ...) pixels drawn in ``ax`` (its
-        :meth:`extent`), in place of tick marks: microscopy's convention, and a tenth of
-        the cost of drawing a map's ticks and labels (docs/benchmarks.md). The bar is
+        :meth:`extent`), in place of tick marks: microscopy's convention, and cheaper (the
+        maps' ticks and labels were a fifth of the report's time, docs/benchmarks.md). The bar is
         :func:`nice_length` of about a fifth of the field's width, bottom left, black with
         its length written above it, on a translucent white plate."""
         x0, x1, y1, _ = self.extent(shape)

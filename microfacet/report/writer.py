@@ -35,7 +35,9 @@ from __future__ import annotations
 
 import datetime as _dt
 import os
+import pickle
 import re
+import select
 import signal
 import sys
 import threading
@@ -63,6 +65,9 @@ pil_image = load("PIL.Image")
 __all__ = ["PAGES", "preload", "write_report"]
 
 _MODULES = (page_overview, page_maps, page_distributions, page_parameters, page_angular)
+#: How long the PNG child may take after the PDF is done: this many seconds, or this many
+#: times the PDF's drawing time if longer; a child that takes longer is killed.
+CHILD_TIMEOUT_S, CHILD_TIMEOUT_PER_PDF = 60.0, 10.0
 #: Page names, in order (also the PNG file names ``report_<n>_<name>.png``).
 PAGES = tuple(m.NAME for m in _MODULES)
 
@@ -136,13 +141,14 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
         with mpl.rc_context(RC), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN slices and the like
             if png_dir is not None and _can_fork():
-                child = _PngChild.start(pages, png_dir)
+                child = _PngChild.start(pages, png_dir)      # None if it cannot start
+            t_pdf = time.perf_counter()
             with backend_pdf.PdfPages(tmp, metadata=metadata) as pdf:
                 # without a child, each page drawn is also rendered as a PNG here
                 pages.write(pdf, png_dir if child is None else None)
-            if child is not None:
-                child, running = None, child
-                running.wait()
+            if child is not None and not child.wait(timeout_s=max(
+                    CHILD_TIMEOUT_S, CHILD_TIMEOUT_PER_PDF * (time.perf_counter() - t_pdf))):
+                pages.write(png_dir=png_dir)     # the child hung and was killed: draw here
         os.replace(tmp, out_pdf)
     except BaseException:
         if child is not None:
@@ -190,24 +196,40 @@ def _can_fork() -> bool:
     """Whether the PNG pages may be drawn by a forked child: on Linux (macOS' system
     frameworks are not fork-safe), from a process with no other Python thread (a thread
     holding a lock at the fork would leave it held in the child; Dask and loky workers
-    have such threads and draw the pages themselves)."""
+    have such threads and draw the pages themselves). The native thread pools of OpenBLAS
+    and OpenCV are idle at the fork (the child uses neither; OpenBLAS resets its pool in
+    the child); a child that hangs nevertheless is killed after a timeout and the pages are
+    drawn here (:meth:`_PngChild.wait`)."""
     return (hasattr(os, "fork") and sys.platform.startswith("linux")
             and threading.active_count() == 1)
 
 
 class _PngChild:
     """A forked process drawing the PNG pages while this one draws the PDF (the two are
-    separate renderings of each page: 1.5 s in one process, ~1 s in two on a 2-core
-    machine, docs/benchmarks.md). It exits with 0, or 1 after writing what went wrong to
-    a pipe."""
+    separate renderings of each page, on two cores; docs/benchmarks.md). It exits with 0,
+    or 1 after writing the exception it met (pickled) to a pipe; :meth:`wait` raises that
+    exception here, as drawing here would have raised it."""
 
     def __init__(self, pid, err_fd):
         self.pid, self.err_fd = pid, err_fd
 
     @classmethod
-    def start(cls, pages: _Pages, png_dir) -> _PngChild:
-        r, w = os.pipe()
-        pid = os.fork()
+    def start(cls, pages: _Pages, png_dir) -> _PngChild | None:
+        """Fork the child; None if the pipe or the fork fails (the pages are then drawn
+        here: a report never fails for want of a second process)."""
+        try:
+            r, w = os.pipe()
+        except OSError:
+            return None
+        try:
+            with warnings.catch_warnings():
+                # Python >= 3.12 warns of any thread at a fork, the idle native pools too
+                warnings.simplefilter("ignore", DeprecationWarning)
+                pid = os.fork()
+        except OSError:
+            os.close(r)
+            os.close(w)
+            return None
         if pid == 0:                               # the child: never returns
             code = 1
             try:
@@ -215,40 +237,76 @@ class _PngChild:
                 pages.write(png_dir=png_dir)
                 code = 0
             except BaseException as exc:           # noqa: BLE001 - reported to the parent
-                os.write(w, f"{type(exc).__name__}: {exc}".encode()[:4000])
+                os.write(w, _pickled(exc))
             finally:
                 os._exit(code)
         os.close(w)
         return cls(pid, r)
 
-    def wait(self) -> None:
-        """Wait for the child; raise what it reported if it failed."""
-        with os.fdopen(self.err_fd, "rb") as f:
-            message = f.read().decode(errors="replace")
-        _, status = os.waitpid(self.pid, 0)
+    def wait(self, *, timeout_s: float) -> bool:
+        """Wait for the child: True when it drew the pages, False when it did not finish
+        within ``timeout_s`` (it is then killed); raise the exception it reported if it
+        failed. The child is reaped whatever happens here (Ctrl-C included)."""
+        report = bytearray()
+        try:
+            deadline = time.monotonic() + timeout_s
+            while (left := deadline - time.monotonic()) > 0:
+                if select.select([self.err_fd], [], [], left)[0]:
+                    chunk = os.read(self.err_fd, 65536)
+                    if not chunk:              # the child closed the pipe: it exits
+                        break
+                    report += chunk
+            else:
+                return False
+            _, status = os.waitpid(self.pid, 0)
+            self.pid = None
+        finally:
+            self.stop()
         if os.waitstatus_to_exitcode(status) != 0:
-            why = message or "the process drawing them was killed"
-            raise RuntimeError(f"the report's PNG pages: {why}")
+            raise _unpickled(bytes(report))
+        return True
 
     def stop(self) -> None:
-        """Kill the child and reap it (after a failure here)."""
-        try:
-            os.kill(self.pid, signal.SIGKILL)
-            os.waitpid(self.pid, 0)
-        except (ProcessLookupError, ChildProcessError):
-            pass
-        try:
+        """Kill the child if it is still there, reap it and close the pipe (idempotent)."""
+        if self.pid is not None:
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+                os.waitpid(self.pid, 0)
+            except (ProcessLookupError, ChildProcessError):
+                pass
+            self.pid = None
+        if self.err_fd is not None:
             os.close(self.err_fd)
-        except OSError:
-            pass
+            self.err_fd = None
+
+
+def _pickled(exc) -> bytes:
+    """``exc`` for the parent: pickled, or as a RuntimeError with its text if it does not
+    pickle."""
+    try:
+        return pickle.dumps(exc)
+    except Exception:                              # noqa: BLE001 - any pickling failure
+        return pickle.dumps(RuntimeError(f"{type(exc).__name__}: {exc}"))
+
+
+def _unpickled(data: bytes) -> BaseException:
+    """The child's exception (from our own child: trusted bytes)."""
+    try:
+        return pickle.loads(data)
+    except Exception:                              # noqa: BLE001 - a truncated report
+        return RuntimeError("the report's PNG pages: the process drawing them was killed")
 
 
 def preload() -> None:
     """Import what :func:`write_report` draws with (matplotlib's figure and backends, Pillow)
-    and load matplotlib's font list: ~0.3 s that ``microfacet analyze`` spends in a thread
-    while it writes the results files, whose compression and writes release the GIL."""
-    figure.Figure, backend_pdf.PdfPages, backend_agg.FigureCanvasAgg, pil_image.open
-    load("matplotlib.font_manager").fontManager
+    and load matplotlib's font list: ~0.3 s (``python -X importtime``) that ``microfacet
+    analyze`` spends in a thread while it writes the results files, whose compression and
+    writes release the GIL. An error is left to :func:`write_report`, which meets it again."""
+    try:
+        figure.Figure, backend_pdf.PdfPages, backend_agg.FigureCanvasAgg, pil_image.open
+        load("matplotlib.font_manager").fontManager
+    except Exception:                              # noqa: BLE001 - raised by write_report
+        pass
 
 
 def _page_rgb(fig):

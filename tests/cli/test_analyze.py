@@ -111,3 +111,23 @@ def test_a_flat_reference_is_applied_and_said_so(batch_drawer, tmp_path, capsys)
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "flat_reference (small.png)" in err[0] and "size" in err[0]
     assert not (tmp_path / "r2").exists()
+
+
+@pytest.mark.slow
+def test_an_analysis_with_its_report_imports_neither_colour_science_nor_scipy_stats(tmp_path):
+    """colour-science (0.78 s) and scipy.stats (0.19 s) are not imported by a whole
+    `microfacet analyze`, report included (docs/benchmarks.md): its CIE tables are stored with
+    the package and its χ² quantiles come from scipy.special (fresh process)."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from microfacet.cli import main\n"
+            f"assert main(['analyze', {str(FIXTURE)!r}, '--out', {str(tmp_path / 'o')!r},"
+            " '-q']) == 0\n"
+            "print(sorted(m for m in ('colour', 'scipy.stats') if m in sys.modules))\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=600)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.strip().splitlines()[-1] == "[]"
+    assert (tmp_path / "o" / "report.pdf").is_file()

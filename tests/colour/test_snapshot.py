@@ -102,3 +102,11 @@ def test_the_colour_path_does_not_import_colour_science():
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120)
     assert run.returncode == 0, run.stderr[-2000:]
+
+
+def test_an_unreadable_file_falls_back_to_colour_science(tmp_path, caplog):
+    bad = tmp_path / "broken.npz"
+    bad.write_bytes(b"not a zip file")
+    with caplog.at_level("WARNING", logger="microfacet.colour"):
+        assert stored(bad) is None
+    assert "broken.npz" in caplog.text and len(caplog.records) == 1

@@ -14,8 +14,16 @@ from microfacet.forward.angular import DISPLAY_CORE_DEG, display_exposure, simul
 from microfacet.io.results import Results, write_results_files
 from microfacet.report import parameter_tables
 from microfacet.report.context import Context
+from microfacet.report.layout import nice_length
 from microfacet.report.page_angular import ANGLES_DEG, WAVELENGTH_NM, optics, predicted_maps
 from microfacet.report.page_maps import component_codes
+
+
+def ctx_field_um(res):
+    """The map field's width in µm (from the results' map and pixel size)."""
+    px = res.get("inputs", "pixel_size_um")
+    px = px[1] if isinstance(px, list) else px
+    return res.map("thickness_nm").shape[1] * px
 
 
 def test_header_and_units_are_on_the_pages(results, report, pdf_text):
@@ -24,7 +32,9 @@ def test_header_and_units_are_on_the_pages(results, report, pdf_text):
     p1 = pdf_text(out, 1)
     assert "microfacet report — nd-fixture" in p1 and f"microfacet {__version__}" in p1
     assert "height (µm)" in p1 and "numerical aperture" in p1
-    assert re.search(r"\b\d+(\.\d+)? µm\b", p1)           # the maps' scale bars
+    # the three maps' scale bars: the 1-2-5 length of a fifth of the field's width
+    field_um = ctx_field_um(res)
+    assert p1.count(f"{nice_length(0.2 * field_um):g} µm") >= 3
     p2 = pdf_text(out, 2)
     for label in ("thickness (nm)", "tilt from optical axis (°)", "tilt 1σ (°)", "CIEDE2000",
                   "no value", "component (seed Fig. 18c)"):

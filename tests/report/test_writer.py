@@ -179,18 +179,70 @@ def test_png_pages_are_the_same_from_a_forked_child_or_this_process(results_copy
 def test_a_png_that_cannot_be_written_fails_the_report_and_leaves_no_pdf(results_copy,
                                                                          tmp_path, fork,
                                                                          monkeypatch):
+    """The same error either way (the child's exception is raised here: a full disk stays an
+    OSError naming the file), no PDF, and no child left behind."""
+    import os
+
     from microfacet.report import writer
 
     if fork and not writer._can_fork():
         pytest.skip("this process cannot fork safely (another thread, or not Linux)")
     monkeypatch.setattr(writer, "_can_fork", lambda: fork)
+    pids = []
+    start = writer._PngChild.start
+
+    def recorded(*a, **k):
+        child = start(*a, **k)
+        pids.append(child.pid)
+        return child
+    monkeypatch.setattr(writer._PngChild, "start", recorded)
     folder = results_copy()
     png = tmp_path / "png"
     (png / "report_3_distributions.png").mkdir(parents=True)   # a folder in the PNG's way
-    with pytest.raises((RuntimeError, OSError), match="report_3_distributions.png"):
+    with pytest.raises(IsADirectoryError, match="report_3_distributions.png"):
         write_report(folder, png_dir=png)
     assert not (folder / "report.pdf").exists()
     assert not [p for p in folder.iterdir() if p.name.startswith(".report.pdf")]
+    assert len(pids) == (1 if fork else 0)
+    for pid in pids:
+        with pytest.raises(ChildProcessError):      # reaped
+            os.waitpid(pid, os.WNOHANG)
+
+
+def test_without_a_second_process_the_pages_are_drawn_here(results_copy, tmp_path,
+                                                             monkeypatch, check_pngs):
+    """A fork that fails (no memory for it) or a child that hangs (killed after the timeout)
+    never fails the report: the PNG pages are drawn in this process."""
+    import errno
+    import os
+    import time
+
+    from microfacet.report import writer
+
+    if not writer._can_fork():
+        pytest.skip("this process cannot fork safely (another thread, or not Linux)")
+    monkeypatch.setattr(writer, "_can_fork", lambda: True)
+    folder = results_copy()
+
+    def no_fork():
+        raise OSError(errno.ENOMEM, "Cannot allocate memory")
+    with monkeypatch.context() as m:
+        m.setattr(os, "fork", no_fork)
+        write_report(folder, png_dir=tmp_path / "a")
+    check_pngs(tmp_path / "a")
+    parent, write = os.getpid(), writer._Pages.write
+
+    def hang_in_child(self, pdf=None, png_dir=None):
+        if os.getpid() != parent:
+            time.sleep(600)
+        return write(self, pdf, png_dir)
+    monkeypatch.setattr(writer._Pages, "write", hang_in_child)
+    monkeypatch.setattr(writer, "CHILD_TIMEOUT_S", 0.5)
+    monkeypatch.setattr(writer, "CHILD_TIMEOUT_PER_PDF", 0.0)
+    t0 = time.perf_counter()
+    write_report(folder, png_dir=tmp_path / "b")
+    assert time.perf_counter() - t0 < 60            # the child's 600 s sleep was cut short
+    check_pngs(tmp_path / "b")
 
 
 def test_no_fork_beside_another_thread():

@@ -16,10 +16,13 @@ from microfacet.workflow.executors import WORKER_CONFIG, WORKER_ENVIRONMENT, job
 
 
 def test_prologue_exports_the_worker_environment():
-    lines = job_script_prologue()
-    assert len(lines) == len(WORKER_ENVIRONMENT)
-    for line, (k, v) in zip(lines, WORKER_ENVIRONMENT.items()):
-        assert line == f"export {k}='{v}'"
+    """The lines, run by a shell, leave exactly :data:`WORKER_ENVIRONMENT` in its
+    environment (quotes and all)."""
+    script = "\n".join(job_script_prologue() + ["env -0"])
+    run = subprocess.run(["bash", "-c", script], capture_output=True, check=True,
+                         env={"PATH": os.environ.get("PATH", "/usr/bin:/bin")})
+    env = dict(v.split("=", 1) for v in run.stdout.decode().split("\0") if "=" in v)
+    assert {k: env.get(k) for k in WORKER_ENVIRONMENT} == WORKER_ENVIRONMENT
 
 
 def test_the_environment_is_the_local_clusters_worker_config(monkeypatch):
