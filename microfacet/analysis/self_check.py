@@ -50,8 +50,8 @@ from .options import JointOptions
 from .planes import deconvolved_rms_slope, facet_edge_distance, fit_facet_planes
 from .segmentation import relabel
 
-__all__ = ["Conditions", "RenderedStack", "SelfCheck", "measured_rms_slope", "render_focus_stack",
-           "self_check_ndf", "slice_noise_sd", "slope_gain"]
+__all__ = ["Conditions", "RenderedStack", "SelfCheck", "measured_rms_slope", "self_check_ndf",
+           "slice_noise_sd", "slope_gain"]
 
 cv2 = load("cv2")
 
@@ -218,19 +218,6 @@ class RenderedStack(Sequence):
         flat = self._levels.reshape(-1)
         img = (1 - t) * flat[k] + t * flat[k + n]
         return (img + rng.normal(0.0, self._noise_sd, img.shape)).astype(np.float32)
-
-
-def render_focus_stack(texture, height_um, z_um, *, blur_px_per_um, noise_sd, rng):
-    """The slices of a :class:`RenderedStack`, all at once, their noise drawn from ``rng``
-    in the order of ``z_um``.
-
-    Returns
-    -------
-    list of ndarray float32 (H, W)
-    """
-    st = RenderedStack(texture, height_um, z_um, blur_px_per_um=blur_px_per_um,
-                       noise_sd=noise_sd)
-    return [st.render(z, rng) for z in np.asarray(z_um, dtype=np.float64).ravel()]
 
 
 def _crop(shape):

@@ -65,12 +65,18 @@ def grid_key(w: np.ndarray, illuminant: str, observer: str) -> str | None:
     >>> grid_key(np.arange(380.0, 781.0, 5.0), "D65", "CIE 1931 2 Degree Standard Observer")
     'CIE 1931 2 Degree Standard Observer|D65|380|5|780'
     """
+    step = _uniform_step(w)
+    if step is None:
+        return None
+    return f"{observer}|{illuminant}|{w[0]:.12g}|{step:.12g}|{w[-1]:.12g}"
+
+
+def _uniform_step(w: np.ndarray) -> float | None:
+    """The step of the grid ``w`` if every step is within 1e-9 of it, else None."""
     if w.size < 2:
         return None
     step = (w[-1] - w[0]) / (w.size - 1)
-    if np.abs(np.diff(w) - step).max() > 1e-9 * step:
-        return None
-    return f"{observer}|{illuminant}|{w[0]:.12g}|{step:.12g}|{w[-1]:.12g}"
+    return None if np.abs(np.diff(w) - step).max() > 1e-9 * step else float(step)
 
 
 @dataclass(frozen=True)
@@ -110,7 +116,7 @@ def _read(path: Path) -> Snapshot:
         cmf = {n: (_frozen(z[f"cmf_w_{i}"]), _frozen(z[f"cmf_v_{i}"]))
                for i, n in enumerate(meta["observers"])}
         ill = {n: (_frozen(z[f"ill_w_{i}"]), _frozen(z[f"ill_v_{i}"]))
-               for i, n in enumerate(meta["illuminants"])}
+               for i, n in enumerate(meta["illuminant_names"])}
         weights = {k: _frozen(z[f"weights_{i}"]) for i, k in enumerate(meta["weights"])}
     return Snapshot(meta["colour_version"], tuple(meta["illuminant_names"]), cmf, ill, weights)
 
@@ -132,7 +138,7 @@ def write_snapshot(path: Path = SNAPSHOT_PATH) -> Snapshot:
                 arrays[f"weights_{len(keys)}"] = colour_impulse_xyz(w, ill, obs)
                 keys.append(grid_key(w, ill, obs))
     meta = {"colour_version": colour.__version__, "illuminant_names": list(names),
-            "observers": list(observers), "illuminants": list(names), "weights": keys}
+            "observers": list(observers), "weights": keys}
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.partial")
     with open(tmp, "wb") as f:
@@ -171,10 +177,10 @@ def colour_illuminant_table(name: str) -> tuple[np.ndarray, np.ndarray]:
 def _spectral_shape(w: np.ndarray):
     """``colour.SpectralShape`` whose wavelengths are ``w`` (to 1e-9 of a step) and which
     colour-science itself sees as uniform (e.g. not a 0.1 nm grid), or None."""
-    step = (w[-1] - w[0]) / (w.size - 1)
-    tol = 1e-9 * step
-    if np.abs(np.diff(w) - step).max() > tol:
+    step = _uniform_step(w)
+    if step is None:
         return None
+    tol = 1e-9 * step
     shape = colour.SpectralShape(w[0], w[-1], step)
     grid = np.asarray(shape.wavelengths)
     if (grid.shape != w.shape or np.abs(grid - w).max() > tol
