@@ -51,6 +51,8 @@ MAX_MEAN_DIFFERENCE_NM = 2.0
 MAX_UNEXPLAINED = 0.15
 #: A ROI's single fit disagrees with its pixels beyond max(3 × their robust SD, this) (nm).
 ROI_MIN_GAP_NM = 5.0
+#: Pixels per chunk of :func:`mixture_map_check`.
+_CHUNK_PIXELS = 1 << 16
 
 
 @dataclass(frozen=True)
@@ -107,10 +109,15 @@ def mixture_map_check(thickness_nm, mixture) -> MapCheck | None:
     if t.size == 0 or len(comps) == 0:
         return None
     w, mu, sd = comps[:, 0], comps[:, 1], np.hypot(comps[:, 2], MAP_FLOOR_NM)
-    z = (t[:, None] - mu[None, :]) / sd[None, :]
-    explained = np.min(np.abs(z), axis=1) <= UNEXPLAINED_SD
-    logp = np.log(np.maximum(w, 1e-300))[None, :] - np.log(sd)[None, :] - 0.5 * z * z
-    k = np.argmax(logp, axis=1)[explained]
+    # each pixel's closest component and most likely one, a chunk of pixels at a time (the
+    # (pixels, components) arrays would hold 24 bytes per pixel and component)
+    explained, likely = np.empty(t.size, bool), np.empty(t.size, np.intp)
+    for a in range(0, t.size, _CHUNK_PIXELS):
+        z = (t[a:a + _CHUNK_PIXELS, None] - mu[None, :]) / sd[None, :]
+        explained[a:a + _CHUNK_PIXELS] = np.min(np.abs(z), axis=1) <= UNEXPLAINED_SD
+        logp = np.log(np.maximum(w, 1e-300))[None, :] - np.log(sd)[None, :] - 0.5 * z * z
+        likely[a:a + _CHUNK_PIXELS] = np.argmax(logp, axis=1)
+    k = likely[explained]
     te = t[explained]
     n = max(te.size, 1)
     frac = np.bincount(k, minlength=len(w)) / n

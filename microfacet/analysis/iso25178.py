@@ -63,6 +63,8 @@ __all__ = ["REFERENCES", "ArealParameters", "areal_parameters"]
 #: Reference surfaces: the least-squares plane (ISO 25178-2's S-F surface with a plane as
 #: F-operator) or the mean height (SurfaceTopography's default).
 REFERENCES = {"plane": "least-squares plane", "mean": "mean height"}
+#: Values per float64 temporary of the block-wise sums (2 MB).
+_BLOCK_VALUES = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -131,7 +133,9 @@ def areal_parameters(height_um, *, pixel_size_um, reference: str = "plane",
         py, px = pixel_size_yx(pixel_size_um)
     except ValueError as exc:
         raise InputError(str(exc), param="pixel_size_um") from None
-    h = np.asarray(height_um, dtype=np.float64)
+    h = np.asarray(height_um)
+    if h.dtype.kind not in "biuf":
+        h = np.asarray(h, dtype=np.float64)
     if h.ndim != 2:
         raise InputError(f"must be a 2-D map, got shape {h.shape}",
                          param="height_um")
@@ -147,10 +151,7 @@ def areal_parameters(height_um, *, pixel_size_um, reference: str = "plane",
         raise InputError(f"{n} usable heights; the parameters need at least 3", param="height_um")
     z, slope = _residuals(h, ok, py, px, reference)
     zv = z[ok]
-    gx = (z[:-1, 1:] - z[:-1, :-1]) / px
-    gy = (z[1:, :-1] - z[:-1, :-1]) / py
-    cell = ok[:-1, :-1] & ok[:-1, 1:] & ok[1:, :-1]
-    g2 = gx[cell] ** 2 + gy[cell] ** 2
+    g2 = _cell_gradients_squared(z, ok, py, px)
     nc = int(g2.size)
     sdq = math.sqrt(float(np.mean(g2))) if nc else math.nan
     sdr = float(np.mean(np.sqrt(1.0 + g2) - 1.0)) * 100.0 if nc else math.nan
@@ -160,20 +161,60 @@ def areal_parameters(height_um, *, pixel_size_um, reference: str = "plane",
                            n_cells=nc)
 
 
+def _row_blocks(n_rows, n_cols):
+    """``(start, stop)`` of consecutive row blocks of about :data:`_BLOCK_VALUES` values."""
+    step = max(1, _BLOCK_VALUES // max(int(n_cols), 1))
+    return [(a, min(n_rows, a + step)) for a in range(0, n_rows, step)]
+
+
 def _residuals(h, ok, py, px, reference):
-    """Heights minus the reference (NaN off ``ok``) and the removed plane's (∂z/∂y, ∂z/∂x)."""
-    rows, cols = np.nonzero(ok)
-    hv = h[ok]
+    """Heights (float64) minus the reference (NaN off ``ok``) and the removed plane's
+    (∂z/∂y, ∂z/∂x); the plane from its normal equations, summed a block of rows at a time
+    (an (n, 3) design matrix would hold 24 bytes per pixel)."""
+    z = np.array(h, dtype=np.float64)
     if reference == "mean":
-        return np.where(ok, h - hv.mean(), np.nan), (0.0, 0.0)
-    y = (rows - rows.mean()) * py
-    x = (cols - cols.mean()) * px
-    a = np.column_stack([np.ones_like(y), y, x])
-    coef, _, rank, _ = np.linalg.lstsq(a, hv, rcond=None)
-    if rank < 3:
+        z -= z[ok].mean()
+        z[~ok] = np.nan
+        return z, (0.0, 0.0)
+    n, sr, sc, srr, scc, src = _pixel_moments(ok)
+    if (n * srr - sr * sr) * (n * scc - sc * sc) == (n * src - sr * sc) ** 2:
         raise InputError("the usable heights lie on one line: no plane to remove "
                          "(`reference` 'mean' needs none)", param="height_um")
-    yc = (np.arange(h.shape[0]) - rows.mean()) * py
-    xc = (np.arange(h.shape[1]) - cols.mean()) * px
-    plane = coef[0] + coef[1] * yc[:, None] + coef[2] * xc[None, :]
-    return np.where(ok, h - plane, np.nan), (float(coef[1]), float(coef[2]))
+    yc = (np.arange(z.shape[0]) - sr / n) * py
+    xc = (np.arange(z.shape[1]) - sc / n) * px
+    normal, rhs = np.zeros((3, 3)), np.zeros(3)
+    for a, b in _row_blocks(*z.shape):
+        r, c = np.nonzero(ok[a:b])
+        design = np.stack([np.ones(r.size), yc[a + r], xc[c]])
+        normal += design @ design.T
+        rhs += design @ z[a:b][r, c]
+    coef = np.linalg.solve(normal, rhs)
+    for a, b in _row_blocks(*z.shape):
+        z[a:b] -= coef[0] + coef[1] * yc[a:b, None] + coef[2] * xc[None, :]
+    z[~ok] = np.nan
+    return z, (float(coef[1]), float(coef[2]))
+
+
+def _pixel_moments(ok) -> tuple:
+    """Count, sums and sums of products of the row and column indices of the pixels of
+    ``ok``, exact (Python integers): ``(n, Σr, Σc, Σr², Σc², Σrc)``. The pixels lie on one
+    line where the determinant of their scatter is 0."""
+    r, c = np.arange(ok.shape[0], dtype=np.int64), np.arange(ok.shape[1], dtype=np.int64)
+    rows_n, cols_n = ok.sum(axis=1), ok.sum(axis=0)
+    src = sum(int(np.dot(r[a:b], ok[a:b].astype(np.int64) @ c))
+              for a, b in _row_blocks(*ok.shape))
+    return (int(rows_n.sum()), int(np.dot(r, rows_n)), int(np.dot(c, cols_n)),
+            int(np.dot(r * r, rows_n)), int(np.dot(c * c, cols_n)), src)
+
+
+def _cell_gradients_squared(z, ok, py, px):
+    """|∇z|² of each grid cell whose corner and its +x and +y neighbours are in ``ok``
+    (forward differences), in row order, a block of rows at a time."""
+    H, W = z.shape
+    parts = [np.zeros(0)]
+    for a, b in _row_blocks(H - 1, W):
+        gx = (z[a:b, 1:] - z[a:b, :-1]) / px
+        gy = (z[a + 1:b + 1, :-1] - z[a:b, :-1]) / py
+        cell = ok[a:b, :-1] & ok[a:b, 1:] & ok[a + 1:b + 1, :-1]
+        parts.append(gx[cell] ** 2 + gy[cell] ** 2)
+    return np.concatenate(parts)

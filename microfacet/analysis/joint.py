@@ -67,12 +67,32 @@ _CHUNK_PX = 262144
 @dataclass
 class HeightInputs:
     """The heights the joint mode may use: height, its 1-σ error, which pixels may be used,
-    and the correlation area of the errors (pixels)."""
+    and the correlation area of the errors (pixels).
 
-    height_um: np.ndarray
-    sigma_um: np.ndarray
+    The height and its error are held as the focus stage gave them (float32: 8 bytes a pixel
+    less for each while the facet stages run, docs/benchmarks.md) and read as the float64
+    the plane fits work in (:attr:`height_um`, :attr:`sigma_um`: the same numbers).
+    """
+
+    stored_height_um: np.ndarray
+    stored_sigma_um: np.ndarray
     reliable: np.ndarray
     correlation_px: float
+
+    @property
+    def height_um(self) -> np.ndarray:
+        """Height (µm), float64, NaN where absent."""
+        return np.asarray(self.stored_height_um, dtype=np.float64)
+
+    @property
+    def sigma_um(self) -> np.ndarray:
+        """1-σ error of the height (µm), float64."""
+        return np.asarray(self.stored_sigma_um, dtype=np.float64)
+
+    def crop(self, crop) -> HeightInputs:
+        """The inputs of ``crop`` (a pair of slices)."""
+        return HeightInputs(self.stored_height_um[crop], self.stored_sigma_um[crop],
+                            self.reliable[crop], self.correlation_px)
 
 
 @dataclass
@@ -144,7 +164,7 @@ def height_inputs(surface, options: JointOptions, *, from_focus, evidence=True
     (``options.export_sigma_um``).
     """
     foc = surface.focus
-    h = np.asarray(foc.height_fit_um, dtype=np.float64)
+    h = np.asarray(foc.height_fit_um)
     if surface.no_focus:
         return HeightInputs(h, np.full(h.shape, np.nan), np.zeros(h.shape, bool), 1.0)
     if not from_focus:
@@ -158,19 +178,18 @@ def focus_heights(foc, options: JointOptions, *, evidence=True) -> HeightInputs:
     pixel itself, where the focus stage measured them; else (the segmentation: denser,
     smoother) its combined height; errors correlated over about that window."""
     if evidence and foc.evidence_height_um is not None:
-        h = np.asarray(foc.evidence_height_um, dtype=np.float64)
-        sig = np.asarray(foc.evidence_sigma_um, dtype=np.float64)
+        h, sig = np.asarray(foc.evidence_height_um), np.asarray(foc.evidence_sigma_um)
         ok = np.isfinite(h) & np.isfinite(sig) & (sig > 0)
         win = float(foc.params.get("evidence_window_px", 1))
         return HeightInputs(h, sig, ok, options.focus_error_correlation * win ** 2)
-    h = np.asarray(foc.height_fit_um, dtype=np.float64)
+    h = np.asarray(foc.height_fit_um)
     rel = np.asarray(foc.reliable, bool) & np.isfinite(h)
     sig = getattr(foc, "height_sigma_um", None)
     if sig is None:
         z = np.sort(np.asarray(foc.z_um, dtype=np.float64))
         step = float(np.median(np.diff(z))) if z.size > 1 else 1.0
         sig = np.full(h.shape, 0.25 * step)
-    sig = np.asarray(sig, dtype=np.float64)
+    sig = np.asarray(sig)
     corr = options.focus_error_correlation * float(foc.params.get("window_px", 1)) ** 2
     return HeightInputs(h, sig, rel & np.isfinite(sig) & (sig > 0), corr)
 
@@ -244,12 +263,9 @@ def bootstrap_labels(colour, seg: Segmented, scene, options: JointOptions, *, rn
     ``seg`` (with its heights), after fresh noise of the image's own measured level is added
     to its Lab values: a second segmentation as likely as the first (a parametric
     bootstrap), which differs from it wherever the image does not fix the facets' edges."""
-    hi = seg.heights
     lab = colour.lab[crop]
     lab = lab + rng.normal(0.0, colour.noise_de, lab.shape).astype(np.float32)
-    part = HeightInputs(hi.height_um[crop], hi.sigma_um[crop], hi.reliable[crop],
-                        hi.correlation_px)
-    return _segment(lab, part, colour.noise_de, scene, options)
+    return _segment(lab, seg.heights.crop(crop), colour.noise_de, scene, options)
 
 
 def _segment(lab, hi: HeightInputs, noise_de, scene, options: JointOptions):

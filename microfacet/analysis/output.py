@@ -345,14 +345,14 @@ def _iso25178_section(r) -> Iso25178Section | None:
     pixels (finite ``height_um``) about the least-squares plane, SurfaceTopography's RMS
     height and gradient of the map as measured, and the RMS slope of the analysis' own
     normals on the same pixels (None with fewer than 3 reliable heights, or all on a line)."""
-    h = np.asarray(r.focus.height_um, dtype=np.float64)
+    h = np.asarray(r.focus.height_um)
     px = r.scene.pixel_size_um
     iso = r.height_areal
     if iso is None:
         return None
     raw = areal_parameters(h, pixel_size_um=px, reference="mean")
-    rel = np.isfinite(h)
-    tan = np.tan(np.radians(np.asarray(r.surface.tilt_deg, dtype=np.float64)[rel]))
+    tan = np.asarray(r.surface.tilt_deg)[np.isfinite(h)].astype(np.float64)
+    np.tan(np.radians(tan, out=tan), out=tan)
     tan = tan[np.isfinite(tan)]
     gy, gx = iso.plane_slope_yx
     return Iso25178Section(

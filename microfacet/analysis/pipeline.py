@@ -27,6 +27,7 @@ import numpy as np
 from ..colour.model import FilmColourModel
 from ..colour.table import build_colour_table
 from ..core.errors import InputError, one_line
+from ..core.threads import return_free_memory
 from ..core.timing import StageTimer
 from ..io.limits import check_memory
 from ..io.stack import Stack, read_stack
@@ -250,7 +251,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
     """The stages of :func:`analyse_stack` on a stack already checked
     (:func:`check_stack_for_analysis`); ``progress(stage)`` at the start of each."""
     scene = scene_of(st, options)
-    timer = StageTimer(progress)
+    timer = StageTimer(progress, between=return_free_memory)
     with timer.stage(Stage.HEIGHT):
         focus = measure_height(st, options.focus)
     with timer.stage(Stage.NORMALS):
@@ -315,6 +316,9 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                 joint, roi, model, scene, options.fits, pooled=pooled,
                 gain_shifts_nm=_gain_shifts(joint, cols, model, options, scene, wb))
             dist.exposure_readings = readings
+            # read by the facet stages only: freed (and given back at the stage's end)
+            # before the self-check's peak
+            del facets, geometry, image, cols, pooled
         with timer.stage(Stage.SELF_CHECK):
             check = _self_check(st, focus, joint, scene, options,
                                 cells=lambda crop: bootstrap_labels(

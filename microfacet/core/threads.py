@@ -27,7 +27,7 @@ from numbers import Integral
 from .errors import InputError
 
 __all__ = ["ENV_VAR", "chunk_starts", "limit_malloc_arenas", "limited_threads", "num_threads",
-           "set_num_threads", "thread_map", "threads_from_text"]
+           "return_free_memory", "set_num_threads", "thread_map", "threads_from_text"]
 
 #: The environment variable the command line reads (:func:`threads_from_text`).
 ENV_VAR = "MICROFACET_NUM_THREADS"
@@ -165,5 +165,30 @@ def limit_malloc_arenas(n: int = 2) -> bool:
 
         libc = ctypes.CDLL("libc.so.6")
         return bool(libc.mallopt(_M_ARENA_MAX, int(n)))
+    except (OSError, AttributeError):
+        return False
+
+
+def return_free_memory() -> bool:
+    """Give the pages glibc's malloc holds free back to the system (``malloc_trim(0)``).
+
+    Arrays of a few megabytes come from malloc's heap once larger ones have been freed (its
+    mmap threshold rises with them), and the heap keeps what they free: between the analysis'
+    stages about 100 MB at 1 megapixel, on top of which the next stage's temporaries then
+    come (docs/benchmarks.md). The analysis calls this between its stages and before it
+    writes; a call takes a few milliseconds. Elsewhere (another C library, another system)
+    nothing is done.
+
+    Returns
+    -------
+    bool
+        Whether memory was given back.
+    """
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        import ctypes
+
+        return bool(ctypes.CDLL("libc.so.6").malloc_trim(0))
     except (OSError, AttributeError):
         return False

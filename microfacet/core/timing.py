@@ -16,6 +16,9 @@ class StageTimer:
     ----------
     progress : callable, optional
         ``progress(stage)`` is called when a stage starts.
+    between : callable, optional
+        ``between()`` is called when a stage ends, outside its time (the analysis gives the
+        memory its stage freed back to the system there).
 
     Examples
     --------
@@ -27,8 +30,9 @@ class StageTimer:
     (['read'], True)
     """
 
-    def __init__(self, progress: Callable[[object], None] | None = None):
-        self._progress = progress
+    def __init__(self, progress: Callable[[object], None] | None = None, *,
+                 between: Callable[[], object] | None = None):
+        self._progress, self._between = progress, between
         self._t0 = time.perf_counter()
         self.timings: dict[str, float] = {}
 
@@ -40,6 +44,8 @@ class StageTimer:
         t0 = time.perf_counter()
         yield
         self.timings[stage.key] = round(time.perf_counter() - t0, 4)
+        if self._between is not None:
+            self._between()
 
     def total(self) -> float:
         """Seconds since the timer was made; also recorded as ``timings["total"]``."""

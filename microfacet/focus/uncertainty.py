@@ -340,6 +340,8 @@ def combine(fits: list[WindowFit], primary: int, step, *, prefer: float = 1.0):
 
 #: σ (px) of the neighbourhood over which :func:`disagreement_variance` pools.
 DISAGREEMENT_POOL_PX = 7.0
+#: Values per map that :func:`disagreement_variance` holds in float64 at once.
+_BLOCK_VALUES = 1 << 18
 
 
 def disagreement_variance(height, sigma, evidence_height, evidence_sigma, *,
@@ -372,18 +374,25 @@ def disagreement_variance(height, sigma, evidence_height, evidence_sigma, *,
     >>> round(float(v[5, 2]), 2), round(float(v[5, 18]), 2)
     (0.23, 0.23)
     """
-    h, s = np.asarray(height, np.float64), np.asarray(sigma, np.float64)
-    he, se = np.asarray(evidence_height, np.float64), np.asarray(evidence_sigma, np.float64)
-    both = np.isfinite(h) & np.isfinite(s) & np.isfinite(he) & np.isfinite(se)
-    with np.errstate(invalid="ignore"):
-        excess = np.where(both, (h - he) ** 2 - s ** 2 - se ** 2, 0.0)   # unbiased, ± noise
+    maps = [np.asarray(a) for a in (height, sigma, evidence_height, evidence_sigma)]
+    shape = maps[0].shape
+    excess, both, measured = np.zeros(shape, np.float32), np.zeros(shape, bool), []
+    # in float64 as before, a block of rows at a time (a few MB in flight, not 100 MB at
+    # 1 MP); the same numbers
+    rows = max(1, _BLOCK_VALUES // max(int(np.prod(shape[1:])), 1))
+    for r0 in range(0, shape[0], rows):
+        h, s, he, se = (np.asarray(m[r0:r0 + rows], np.float64) for m in maps)
+        b = np.isfinite(h) & np.isfinite(s) & np.isfinite(he) & np.isfinite(se)
+        with np.errstate(invalid="ignore"):
+            e = np.where(b, (h - he) ** 2 - s ** 2 - se ** 2, 0.0)   # unbiased, ± noise
+        excess[r0:r0 + rows], both[r0:r0 + rows] = e, b
+        measured.append(e[b])
     if not both.any():
-        return np.zeros(h.shape, np.float32)
-    num = cv2.GaussianBlur(excess.astype(np.float32), (0, 0), pool_px,
-                           borderType=cv2.BORDER_REFLECT)
+        return np.zeros(shape, np.float32)
+    num = cv2.GaussianBlur(excess, (0, 0), pool_px, borderType=cv2.BORDER_REFLECT)
     den = cv2.GaussianBlur(both.astype(np.float32), (0, 0), pool_px,
                            borderType=cv2.BORDER_REFLECT)
-    fallback = np.float32(max(float(np.mean(excess[both])), 0.0))
+    fallback = np.float32(max(float(np.mean(np.concatenate(measured))), 0.0))
     pooled = np.where(den > 1e-3, num / np.maximum(den, np.float32(1e-3)), fallback)
     return np.maximum(pooled, 0.0).astype(np.float32)              # clipped once pooled
 
@@ -433,7 +442,9 @@ def unresolved_relief_sigma_um(rms_gradient, window_px_map, pixel_size_um, *,
     spread = np.zeros(int(sizes.max()) + 1 if sizes.size else 1, np.float64)
     for k in sizes:
         spread[int(k)] = window_spread_px(int(k)) if k > 0 else 0.0
-    return (coefficient * g * math.sqrt(py * px) * spread[w.astype(np.intp)]).astype(np.float32)
+    # the σ of each window size, then looked up per pixel (no float64 map)
+    sigma = (coefficient * g * math.sqrt(py * px) * spread).astype(np.float32)
+    return sigma[w]
 
 
 def height_sigma_with_bias(focus):

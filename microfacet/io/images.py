@@ -472,7 +472,10 @@ def to_code_values(image, *, bit_depth=8):
     if bit_depth not in (8, 16):
         raise ValueError(f"bit_depth: must be 8 or 16, got {bit_depth!r}")
     top, dtype = (255, np.uint8) if bit_depth == 8 else (65535, np.uint16)
-    return np.round(np.clip(np.nan_to_num(img, nan=0.0), 0, 1) * top).astype(dtype)
+    a = np.nan_to_num(img, nan=0.0)          # the one float copy, worked on in place
+    np.clip(a, 0, 1, out=a)
+    a *= top
+    return np.round(a, out=a).astype(dtype)
 
 
 def write_image(path, image, *, bit_depth=8, params=(), pixel_size_um=None):

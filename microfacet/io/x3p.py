@@ -337,10 +337,11 @@ def write_x3p(path, height_um, pixel_size_um, *, data_type=None, model="height f
     dtype = DATA_TYPES[data_type]
     invalid = ~np.isfinite(h)
     if data_type in "FD":
-        raw, z_inc, z_off = h.astype(dtype), 1e-6, None
+        raw, z_inc, z_off = h.astype(dtype, copy=False), 1e-6, None
     else:
         raw, z_inc, z_off = _quantize(h.astype(np.float64), dtype)
-    data = np.ascontiguousarray(raw, dtype=dtype).tobytes()
+    # the map's own bytes where it is stored as it is (no copy; zipfile reads a buffer)
+    data = memoryview(np.ascontiguousarray(raw, dtype=dtype)).cast("B")
     vdata = (np.packbits(~invalid.ravel(), bitorder="little").tobytes() if invalid.any()
              else None)
     md5 = hashlib.md5(data).hexdigest().upper()

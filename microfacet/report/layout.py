@@ -335,6 +335,16 @@ def colourbar(pg, im, box, label, *, extend="neither", ticks=None, ticklabels=No
     x0, y0, iw, ih = box
     cax = pg.axes(x0 + iw + 0.08, y0, 0.13, ih)
     cb = pg.fig.colorbar(im, cax=cax, extend=extend, ticks=ticks)
+    if cb.solids is not None and cb.solids.get_rasterized():
+        # a bar of many colours is a mesh that the PDF backend rasterizes on a canvas of the
+        # whole page (9 MB at PDF_DPI for each bar, docs/benchmarks.md): its colours are
+        # drawn as an image of one column instead, which the PDF embeds as it is
+        cb.solids.set_visible(False)
+        cb.solids.set_rasterized(False)   # hidden, and no page canvas made for it either
+        lo, hi = cb.norm.vmin, cb.norm.vmax
+        cax.imshow(np.linspace(lo, hi, im.cmap.N)[:, None], cmap=im.cmap, norm=im.norm,
+                   aspect="auto", origin="lower", extent=(0.0, 1.0, lo, hi),
+                   interpolation="nearest")
     if ticklabels is not None:
         cb.ax.set_yticklabels(ticklabels)
     cb.set_label(label, labelpad=5)

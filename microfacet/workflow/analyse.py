@@ -9,6 +9,7 @@ from ..analysis.options import AnalysisOptions
 from ..analysis.output import results_size_bytes, save_results
 from ..analysis.pipeline import check_stack_for_analysis, run_stages
 from ..analysis.stages import Stage
+from ..core.threads import return_free_memory
 from ..io.outdir import OutputFolder, check_output
 from ..io.stack import Stack, StackSource
 from ..report.writer import preload, write_report
@@ -75,6 +76,7 @@ def analyse_to_folder(stack, out, *, options: AnalysisOptions | None = None, ove
                       expected_bytes=results_size_bytes(st.shape, report=report)) as claim:
         result = run_stages(st, options, progress=progress)
         step(Stage.WRITE)
+        return_free_memory()      # what the last stage freed, before the files' temporaries
         with claim.writing() as tmp:
             # the report's imports in a thread while the files are written (their compression
             # and writes release the GIL); joined before the report, which may fork
@@ -88,5 +90,6 @@ def analyse_to_folder(stack, out, *, options: AnalysisOptions | None = None, ove
                     imports.join()
             if report:
                 step(Stage.REPORT)
+                return_free_memory()
                 write_report(tmp, png_dir=tmp)
     return result

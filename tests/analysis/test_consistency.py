@@ -173,3 +173,16 @@ def test_order_move_needs_the_margin_the_share_and_an_order_between():
     w[150:250] = 0.1
     mv, _ = order_move(m, d, other, gap, w, margin_de=1.0, min_separation_nm=55.0)
     assert mv is not None and mv.area_share == 1.0
+
+
+def test_the_map_check_in_chunks_is_the_check_at_once(monkeypatch):
+    """Chunking the pixels (a ragged last chunk) changes no number of the check."""
+    import microfacet.analysis.consistency as consistency
+
+    m = _map(1)
+    m[::7, ::3] = np.nan
+    mix = ThicknessMixture([(0.2, 112, 1.0), (0.6, 131, 1.5), (0.2, 150, 1.0)])
+    monkeypatch.setattr(consistency, "_CHUNK_PIXELS", 10 ** 6)
+    whole = mixture_map_check(m, mix)
+    monkeypatch.setattr(consistency, "_CHUNK_PIXELS", 333)
+    assert mixture_map_check(m, mix) == whole

@@ -177,3 +177,35 @@ def test_analysis_writes_the_iso25178_section(tmp_path):
     assert iso["rms_slope_normals"] < 0.9 * iso["rms_gradient"]
     assert iso["plane_tilt_deg"] == pytest.approx(math.degrees(math.atan(math.hypot(
         *ref.plane_slope_yx))), rel=1e-9)
+
+
+def test_plane_of_a_large_map_equals_the_direct_least_squares(monkeypatch):
+    """The plane summed a block of rows at a time (normal equations, several blocks) is the
+    least-squares plane that ``lstsq`` on the whole design matrix gives, and so are the
+    parameters about it; points on a diagonal line have no plane."""
+    import microfacet.analysis.iso25178 as iso
+
+    monkeypatch.setattr(iso, "_BLOCK_VALUES", 997)        # many blocks, a ragged last one
+    rng = np.random.default_rng(5)
+    yy, xx = np.mgrid[0:90, 0:70]
+    h = 3.0 + 0.02 * yy - 0.05 * xx + rng.normal(0, 0.2, yy.shape)
+    h[rng.random(h.shape) < 0.3] = np.nan
+    ok = np.isfinite(h)
+    py, px = 0.4, 0.3
+    y, x = (yy[ok] - yy[ok].mean()) * py, (xx[ok] - xx[ok].mean()) * px
+    coef = np.linalg.lstsq(np.column_stack([np.ones(y.size), y, x]), h[ok], rcond=None)[0]
+    z = h[ok] - (coef[0] + coef[1] * y + coef[2] * x)
+    p = areal_parameters(h, pixel_size_um=(py, px))
+    assert p.plane_slope_yx == pytest.approx((coef[1], coef[2]), rel=1e-12)
+    assert p.Sq_um == pytest.approx(math.sqrt(np.mean(z ** 2)), rel=1e-12)
+    assert p.Sa_um == pytest.approx(np.mean(np.abs(z)), rel=1e-12)
+    whole = areal_parameters(h, pixel_size_um=(py, px), reference="mean")
+    monkeypatch.setattr(iso, "_BLOCK_VALUES", 1 << 20)    # one block: the same numbers
+    assert areal_parameters(h, pixel_size_um=(py, px)).Sdq == pytest.approx(p.Sdq, rel=1e-12)
+    assert areal_parameters(h, pixel_size_um=(py, px), reference="mean") == whole
+    diagonal = np.full((6, 6), np.nan)
+    diagonal[np.arange(6), np.arange(6)] = np.arange(6.0)
+    with pytest.raises(InputError, match="one line"):
+        areal_parameters(diagonal, pixel_size_um=1.0)
+    diagonal[0, 2] = 1.0                                  # one point off the line: a plane
+    assert areal_parameters(diagonal, pixel_size_um=1.0).n_points == 7

@@ -38,6 +38,21 @@ def test_a_stage_is_the_time_from_its_start_to_its_end(clock):
     assert t.total() == 4.0 and t.timings["total"] == 4.0
 
 
+def test_between_runs_after_each_stage_outside_its_time(clock):
+    """``between`` is called when each stage ends, after its time is taken (the analysis
+    gives memory back there); not when a stage raises."""
+    calls = []
+    t = StageTimer(between=lambda: calls.append(dict(t.timings)) or setattr(clock, "t",
+                                                                            clock.t + 5.0))
+    with t.stage(Stage(key="read")):
+        clock.t = 101.0
+    with pytest.raises(RuntimeError):
+        with t.stage(Stage(key="fit")):
+            raise RuntimeError("boom")
+    assert calls == [{"read": 1.0}]
+    assert t.timings == {"read": 1.0} and t.total() == 6.0
+
+
 def test_a_stage_that_raises_records_no_time(clock):
     t = StageTimer()
     with pytest.raises(RuntimeError):

@@ -229,6 +229,36 @@ def test_the_unexplained_disagreement_with_the_evidence_becomes_sigma():
     assert float(np.median(fine)) < 0.1 * 0.05 ** 2
 
 
+def test_the_disagreement_in_blocks_of_rows_is_the_whole_map_in_float64(monkeypatch):
+    """The float64 excess worked out a block of rows at a time (a ragged last block) gives
+    the variance of the whole map at once, to the bit, and the mean over the image where
+    no neighbour has both heights."""
+    import cv2
+
+    from microfacet.focus import uncertainty
+
+    rng = np.random.default_rng(4)
+    h = rng.normal(0, 0.3, (70, 50)).astype(np.float32)
+    s = rng.uniform(0.02, 0.1, h.shape).astype(np.float32)
+    ev = (h + rng.normal(0, 0.2, h.shape)).astype(np.float32)
+    ev[:, 20:] = np.nan                  # the right side far from any evidence: the mean
+    ev[rng.random(h.shape) < 0.3] = np.nan
+    monkeypatch.setattr(uncertainty, "_BLOCK_VALUES", 8 * 50 + 3)   # 8 rows a block
+    got = uncertainty.disagreement_variance(h, s, ev, s, pool_px=2.0)
+    H, S, E = (a.astype(np.float64) for a in (h, s, ev))
+    both = np.isfinite(E)
+    excess = np.where(both, (H - E) ** 2 - S ** 2 - S ** 2, 0.0)
+    num = cv2.GaussianBlur(excess.astype(np.float32), (0, 0), 2.0,
+                           borderType=cv2.BORDER_REFLECT)
+    den = cv2.GaussianBlur(both.astype(np.float32), (0, 0), 2.0,
+                           borderType=cv2.BORDER_REFLECT)
+    mean = np.float32(max(float(np.mean(excess[both])), 0.0))
+    want = np.maximum(np.where(den > 1e-3, num / np.maximum(den, np.float32(1e-3)), mean),
+                      0.0).astype(np.float32)
+    np.testing.assert_array_equal(got, want)
+    assert np.all(got[:, 45:] == mean)
+
+
 def _creased(period_px, slope, shape=(128, 128)):
     """Planar facets meeting in creases, about period/2 px across: the sum of three triangle
     waves of the given period and slope (z steps per px) in three directions."""

@@ -312,6 +312,9 @@ def test_to_code_values_clips_rounds_and_maps_nan_to_zero():
     assert to_code_values(np.array([0.5]), bit_depth=16)[0] == 32768
     ints = np.array([3, 400], np.uint16)
     assert to_code_values(ints) is ints
+    before = x.copy()
+    to_code_values(x)                                  # worked on a copy of its own
+    np.testing.assert_array_equal(x, before)
     with pytest.raises(ValueError, match="bit_depth"):
         to_code_values(x, bit_depth=12)
 

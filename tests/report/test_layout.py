@@ -89,3 +89,48 @@ def test_page_grid_tiles_the_content_area():
     assert x + w == pytest.approx(pg.right) and y == pytest.approx(pg.bottom)
     assert cells[1][2] == pytest.approx(2 * cells[0][2])
     assert pg.content() == (pg.left, pg.bottom, pg.right - pg.left, pg.top - pg.bottom)
+
+
+def test_a_map_colour_bar_is_one_small_image_not_a_page_sized_raster(tmp_path):
+    """The bar of a map of many colours is drawn as an image of its colormap's colours from
+    vmin to vmax (the mesh matplotlib would rasterize on a canvas of the whole page in a
+    PDF is hidden): saved as a PDF, nothing on the page is rasterized; a bar of a few
+    categories is left as matplotlib draws it."""
+    from matplotlib.backends.backend_mixed import MixedModeRenderer
+    from matplotlib.backends.backend_pdf import PdfPages
+    from matplotlib.figure import Figure
+
+    from microfacet.report.layout import PAGE_IN, Geometry, category_panel, map_panel
+
+    pg = Page(Figure(figsize=PAGE_IN))
+    cells = pg.grid(1, 2)
+    a = np.linspace(100.0, 150.0, 60 * 80).reshape(60, 80)
+    ax = map_panel(pg, cells[0], a, Geometry(0.2), title="t", label="nm", cmap="viridis",
+                   limits=(110.0, 140.0, "both"))
+    category_panel(pg, cells[1], np.arange(60 * 80).reshape(60, 80) % 3, Geometry(0.2),
+                   colours=["r", "g", "b"], names=["a", "b", "c"], title="c", label="",
+                   no_value=0.0)
+    bar = [x for x in pg.fig.axes if x.get_ylabel() == "nm"]
+    assert len(bar) == 1 and len(bar[0].images) == 1 and ax.images
+    img = bar[0].images[0]
+    values = np.asarray(img.get_array()).ravel()
+    assert values[0] == 110.0 and values[-1] == 140.0 and values.size == ax.images[0].cmap.N
+    assert tuple(img.get_extent()[2:]) == (110.0, 140.0)
+    assert bar[0].get_ylim() == pytest.approx((110.0, 140.0))
+    categories = [x for x in pg.fig.axes if x.get_yticklabels()
+                  and [t.get_text() for t in x.get_yticklabels()] == ["a", "b", "c"]]
+    assert len(categories) == 1 and not categories[0].images
+    rasterized = []
+    start = MixedModeRenderer.start_rasterizing
+
+    def counting(self):
+        rasterized.append(1)
+        return start(self)
+
+    MixedModeRenderer.start_rasterizing = counting
+    try:
+        with PdfPages(tmp_path / "p.pdf") as pdf:
+            pdf.savefig(pg.fig, dpi=150)
+    finally:
+        MixedModeRenderer.start_rasterizing = start
+    assert rasterized == []
