@@ -144,8 +144,10 @@ def save_results(result, folder) -> None:
     px = r.pixels
     maps = {
         "height_um": r.focus.height_um,
-        "normals": np.where(rel[..., None], r.surface.normals, np.nan),
-        "reliability_db": r.focus.reliability_db, "height_sigma_um": height_sigma_um(r),
+        # made when written, one at a time (12 and 4 bytes a pixel)
+        "normals": lambda: np.where(rel[..., None], r.surface.normals, np.nan),
+        "reliability_db": r.focus.reliability_db,
+        "height_sigma_um": lambda: height_sigma_um(r),
         "tilt_height_deg": r.surface.tilt_deg,
         "thickness_nm": px.thickness_nm, "tilt_deg": px.tilt_deg,
         "tilt_sigma_deg": px.tilt_sigma_deg, "delta_e": px.delta_e,

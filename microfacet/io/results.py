@@ -116,9 +116,10 @@ def write_results_files(folder, *, summary: dict, maps: dict, images: dict | Non
     folder : path-like
     summary : dict
         ``summary.json`` content (made JSON-safe; ``format`` is set).
-    maps : dict of str to ndarray
+    maps : dict of str to ndarray or callable
         Names of :data:`MAPS`; floats are written as float32, ``mask`` as bool, ``facets``
-        as int32. None values are skipped.
+        as int32. None values are skipped. A callable is called for its map (or None) when
+        the map is written, so that maps made for the files exist one at a time.
     images : dict of str to (ndarray, int), optional
         Names of :data:`IMAGES` → (image in [0, 1] or code values, bit depth 8 or 16).
     tables : dict of str to (ndarray (N, C), list of str, list of str), optional
@@ -163,7 +164,10 @@ def write_results_files(folder, *, summary: dict, maps: dict, images: dict | Non
 
 def _write_map(folder, name, arr, pixel, tool_copies) -> None:
     """One map's ``.npy`` and, with ``tool_copies``, its TIFF and x3p copies."""
-    a = np.asarray(arr)
+    a = arr() if callable(arr) else arr
+    if a is None:                       # a callable that had no map to give
+        return
+    a = np.asarray(a)
     a = (a.astype(bool, copy=False) if name == "mask" else
          a.astype(np.int32, copy=False) if name == "facets" else
          a.astype(np.float32, copy=False))
@@ -359,6 +363,13 @@ class Results:
         img = None if f is None else read_png(f)
         self._cache[name] = img
         return img
+
+    def release(self) -> None:
+        """Forget the maps and images read so far (a later call reads them again): a reader
+        done with them, such as the report before its last pages, holds their memory no
+        longer. Tables are kept."""
+        for name in [n for n in self._cache if n in MAPS or n in IMAGES]:
+            del self._cache[name]
 
     def table(self, name) -> dict | None:
         """Table ``name`` of :data:`TABLES` as a dict of float columns, or None.

@@ -21,6 +21,9 @@ __all__ = ["NAME", "TITLE", "draw"]
 
 NAME = "angular"
 TITLE = "predicted angular colour"
+#: Whether the page reads the folder's maps or images (after the last page that does, the
+#: report lets them go).
+READS_MAPS = False
 #: Light and view zenith angles of the maps, degrees.
 ANGLES_DEG = np.arange(0.0, 85.0 + 1e-9, 1.0)
 #: Wavelengths of the spectra, nm.

@@ -39,6 +39,9 @@ __all__ = ["NAME", "TITLE", "draw"]
 
 NAME = "distributions"
 TITLE = "thickness and facet-normal distributions"
+#: Whether the page reads the folder's maps or images (after the last page that does, the
+#: report lets them go).
+READS_MAPS = True
 
 
 def draw(pg, ctx):

@@ -19,6 +19,9 @@ __all__ = ["NAME", "TITLE", "draw"]
 
 NAME = "maps"
 TITLE = "thickness, tilt and colour-difference maps"
+#: Whether the page reads the folder's maps or images (after the last page that does, the
+#: report lets them go).
+READS_MAPS = True
 
 
 def component_codes(thickness, mix):

@@ -25,6 +25,9 @@ __all__ = ["NAME", "TITLE", "draw"]
 
 NAME = "overview"
 TITLE = "overview"
+#: Whether the page reads the folder's maps or images (after the last page that does, the
+#: report lets them go).
+READS_MAPS = True
 
 
 def draw(pg, ctx):

@@ -16,6 +16,9 @@ __all__ = ["NAME", "TITLE", "draw", "parameter_tables"]
 
 NAME = "parameters"
 TITLE = "fitted parameters"
+#: Whether the page reads the folder's maps or images (after the last page that does, the
+#: report lets them go).
+READS_MAPS = False
 
 _STEP_NAMES = {"height_from_focus": "height from focus", "colour_and_mask": "colour and mask",
                "thickness_roi": "thickness per ROI", "tilt_per_pixel": "tilt per pixel",

@@ -173,6 +173,8 @@ class _Pages:
         _header(pg, self.ctx, self.shown, module.TITLE, i, self.written)
         _footer(pg, self.shown, i)
         module.draw(pg, self.ctx)
+        if not any(m.READS_MAPS for m in _MODULES[i:]):
+            self.ctx.res.release()       # the last pages draw from summary.json alone
         return pg
 
     def write(self, pdf=None, png_dir=None) -> None:

@@ -147,6 +147,31 @@ def test_maps_are_read_lazily(tmp_path):
         r.map("tilt_deg")
 
 
+def test_maps_given_as_callables_are_made_when_written(tmp_path):
+    """A map may be given as a callable, called once when its file is written; one that gives
+    None writes no file. Released maps and images are read again; tables are kept."""
+    calls = []
+
+    def normals():
+        calls.append(1)
+        return np.ones((H, W, 3))
+    write_results_files(tmp_path, summary={}, maps={"normals": normals,
+                                                    "thickness_nm": lambda: None,
+                                                    "tilt_deg": np.full((H, W), 2.0)},
+                        tables={"ndf_pdf": (np.ones((2, 3)), ["tilt_deg", "density",
+                                                              "mixture_density"], ["%g"] * 3)})
+    assert calls == [1]
+    assert not (tmp_path / MAPS["thickness_nm"][0]).exists()
+    r = Results(tmp_path)
+    first, table = r.map("normals"), r.table("ndf_pdf")
+    assert first.dtype == np.float32 and np.all(first == 1.0)
+    assert r.map("normals") is first                     # read once...
+    r.release()
+    again = r.map("normals")                             # ...and again once released
+    assert again is not first and np.array_equal(again, first)
+    assert r.table("ndf_pdf") is table
+
+
 @pytest.mark.parametrize("name, value, match", [
     ("tilt_deg", np.zeros((H, W, 2)), r"tilt_deg\.npy: expected a 2-D array"),
     ("normals", np.zeros((H, W)), r"normals\.npy: expected a 3-D array"),

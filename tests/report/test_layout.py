@@ -91,6 +91,7 @@ def test_page_grid_tiles_the_content_area():
     assert pg.content() == (pg.left, pg.bottom, pg.right - pg.left, pg.top - pg.bottom)
 
 
+@pytest.mark.slow
 def test_a_map_colour_bar_is_one_small_image_not_a_page_sized_raster(tmp_path):
     """The bar of a map of many colours is drawn as an image of its colormap's colours from
     vmin to vmax (the mesh matplotlib would rasterize on a canvas of the whole page in a

@@ -245,6 +245,28 @@ def test_without_a_second_process_the_pages_are_drawn_here(results_copy, tmp_pat
     check_pngs(tmp_path / "b")
 
 
+def test_pages_that_say_they_read_no_maps_read_none(results_copy, monkeypatch):
+    """The pages after the last one that reads maps or images (``READS_MAPS``) draw without
+    reading any, so the report lets them go before those pages; it does."""
+    from microfacet.report import writer
+    from microfacet.report.context import Context
+
+    ctx = Context.open(results_copy())
+    pages = writer._Pages(ctx, ctx.res.path, "now")
+    last = max(i for i, m in enumerate(writer._MODULES, start=1) if m.READS_MAPS)
+    assert 1 <= last < len(writer._MODULES)
+    for i in range(1, last + 1):
+        pages.draw(i)
+    assert not any(n in ctx.res._cache for n in ("height_um", "thickness_nm", "all_in_focus"))
+
+    def no_reading(*a, **k):
+        raise AssertionError("a page said READS_MAPS = False and read a map")
+    monkeypatch.setattr(ctx.res, "map", no_reading)
+    monkeypatch.setattr(ctx.res, "image", no_reading)
+    for i in range(last + 1, len(writer._MODULES) + 1):
+        pages.draw(i)
+
+
 def test_no_fork_beside_another_thread():
     import threading
 
