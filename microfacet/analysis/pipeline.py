@@ -72,12 +72,13 @@ log = logging.getLogger(__name__)
 
 __all__ = ["AnalysisResult", "analyse_stack", "check_stack_for_analysis", "run_stages"]
 
-#: Peak memory of :func:`analyse_stack` ≈ base + per pixel × H × W, set just above what
-#: ``/usr/bin/time -f %M microfacet analyze`` measured on nd stacks of 16 slices: 597, 926 and
-#: 1,832 MB at 0.26, 1.05 and 4.2 MP (≈ 620 MB + 290 B/px; slices are streamed, so their
-#: number does not count).
-MEMORY_BASE_BYTES = 650 << 20
-MEMORY_BYTES_PER_PIXEL = 300
+#: Peak memory of :func:`analyse_stack` ≈ base + per pixel × H × W, set above what
+#: ``microfacet analyze`` (report included) measured on nd stacks of 40 slices, 2026-11-28
+#: (``python -m pipelines run speed-analyze``): 386, 968 and 2,701 MB at 1.0, 4.0 and
+#: 12.1 MP (≈ 180 MB + 210 B/px; slices are streamed, so their number does not count), with
+#: a margin of about a fifth.
+MEMORY_BASE_BYTES = 250 << 20
+MEMORY_BYTES_PER_PIXEL = 250
 
 
 def check_stack_for_analysis(stack) -> None:
