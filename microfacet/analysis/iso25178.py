@@ -182,13 +182,15 @@ def _residuals(h, ok, py, px, reference):
                          "(`reference` 'mean' needs none)", param="height_um")
     yc = (np.arange(z.shape[0]) - sr / n) * py
     xc = (np.arange(z.shape[1]) - sc / n) * px
-    normal, rhs = np.zeros((3, 3)), np.zeros(3)
+    z_mean = float(np.mean(z[ok]))    # heights about their mean: a stage's offset of
+    normal, rhs = np.zeros((3, 3)), np.zeros(3)  # millimetres costs the sums no digits
     for a, b in _row_blocks(*z.shape):
         r, c = np.nonzero(ok[a:b])
         design = np.stack([np.ones(r.size), yc[a + r], xc[c]])
         normal += design @ design.T
-        rhs += design @ z[a:b][r, c]
+        rhs += design @ (z[a:b][r, c] - z_mean)
     coef = np.linalg.solve(normal, rhs)
+    coef[0] += z_mean
     for a, b in _row_blocks(*z.shape):
         z[a:b] -= coef[0] + coef[1] * yc[a:b, None] + coef[2] * xc[None, :]
     z[~ok] = np.nan

@@ -144,7 +144,7 @@ def save_results(result, folder) -> None:
     px = r.pixels
     maps = {
         "height_um": r.focus.height_um,
-        # made when written, one at a time (12 and 4 bytes a pixel)
+        # made by the job that writes each (12 and 4 bytes a pixel), not all before the files
         "normals": lambda: np.where(rel[..., None], r.surface.normals, np.nan),
         "reliability_db": r.focus.reliability_db,
         "height_sigma_um": lambda: height_sigma_um(r),

@@ -76,7 +76,7 @@ __all__ = ["AnalysisResult", "analyse_stack", "check_stack_for_analysis", "run_s
 #: ``microfacet analyze`` (report included) measured on nd stacks of 40 slices, 2026-11-28
 #: (``python -m pipelines run speed-analyze``): 386, 968 and 2,701 MB at 1.0, 4.0 and
 #: 12.1 MP (≈ 180 MB + 210 B/px; slices are streamed, so their number does not count), with
-#: a margin of about a fifth.
+#: a margin of a fifth (12 MP) to a third (1 MP).
 MEMORY_BASE_BYTES = 250 << 20
 MEMORY_BYTES_PER_PIXEL = 250
 

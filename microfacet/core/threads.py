@@ -158,15 +158,7 @@ def limit_malloc_arenas(n: int = 2) -> bool:
     bool
         Whether the setting was made.
     """
-    if not sys.platform.startswith("linux"):
-        return False
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL("libc.so.6")
-        return bool(libc.mallopt(_M_ARENA_MAX, int(n)))
-    except (OSError, AttributeError):
-        return False
+    return _glibc_call("mallopt", _M_ARENA_MAX, int(n))
 
 
 def return_free_memory() -> bool:
@@ -184,11 +176,17 @@ def return_free_memory() -> bool:
     bool
         Whether memory was given back.
     """
+    return _glibc_call("malloc_trim", 0)
+
+
+def _glibc_call(name, *args) -> bool:
+    """glibc's function ``name`` called with the integers ``args``, as a bool; False where
+    there is no glibc (another system, another C library) or no such function."""
     if not sys.platform.startswith("linux"):
         return False
     try:
         import ctypes
 
-        return bool(ctypes.CDLL("libc.so.6").malloc_trim(0))
+        return bool(getattr(ctypes.CDLL("libc.so.6"), name)(*args))
     except (OSError, AttributeError):
         return False

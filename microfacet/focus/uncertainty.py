@@ -374,11 +374,12 @@ def disagreement_variance(height, sigma, evidence_height, evidence_sigma, *,
     >>> round(float(v[5, 2]), 2), round(float(v[5, 18]), 2)
     (0.23, 0.23)
     """
-    maps = [np.asarray(a) for a in (height, sigma, evidence_height, evidence_sigma)]
+    maps = np.broadcast_arrays(*(np.asarray(a) for a in (height, sigma, evidence_height,
+                                                         evidence_sigma)))   # views
     shape = maps[0].shape
     excess, both, measured = np.zeros(shape, np.float32), np.zeros(shape, bool), []
-    # in float64 as before, a block of rows at a time (a few MB in flight, not 100 MB at
-    # 1 MP); the same numbers
+    # in float64 as before, a block of rows at a time (a few MB of float64 in flight, and
+    # the measured excesses, not 100 MB at 1 MP); the same numbers
     rows = max(1, _BLOCK_VALUES // max(int(np.prod(shape[1:])), 1))
     for r0 in range(0, shape[0], rows):
         h, s, he, se = (np.asarray(m[r0:r0 + rows], np.float64) for m in maps)
@@ -444,7 +445,7 @@ def unresolved_relief_sigma_um(rms_gradient, window_px_map, pixel_size_um, *,
         spread[int(k)] = window_spread_px(int(k)) if k > 0 else 0.0
     # the σ of each window size, then looked up per pixel (no float64 map)
     sigma = (coefficient * g * math.sqrt(py * px) * spread).astype(np.float32)
-    return sigma[w]
+    return sigma[w if w.dtype.kind in "ui" else w.astype(np.intp)]
 
 
 def height_sigma_with_bias(focus):

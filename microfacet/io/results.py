@@ -118,8 +118,8 @@ def write_results_files(folder, *, summary: dict, maps: dict, images: dict | Non
         ``summary.json`` content (made JSON-safe; ``format`` is set).
     maps : dict of str to ndarray or callable
         Names of :data:`MAPS`; floats are written as float32, ``mask`` as bool, ``facets``
-        as int32. None values are skipped. A callable is called for its map (or None) when
-        the map is written, so that maps made for the files exist one at a time.
+        as int32. None values are skipped. A callable is called for its map (or None) by the
+        job that writes it, so that maps made for the files are not all held before them.
     images : dict of str to (ndarray, int), optional
         Names of :data:`IMAGES` → (image in [0, 1] or code values, bit depth 8 or 16).
     tables : dict of str to (ndarray (N, C), list of str, list of str), optional
@@ -210,7 +210,7 @@ class Results:
         #: ``summary.json`` as a dict (the typed summary's JSON, version-2 layout).
         self.summary = self.typed.to_json()
         self.summary_mtime = f.stat().st_mtime
-        self._cache: dict = {}
+        self._cache: dict = {}        # ("map" | "image" | "table", name): what was read
 
     # -- summary ---------------------------------------------------------------------
     def get(self, *keys):
@@ -331,8 +331,8 @@ class Results:
         InputError
             The file is present but unreadable or of the wrong dimensions.
         """
-        if name in self._cache:
-            return self._cache[name]
+        if ("map", name) in self._cache:
+            return self._cache["map", name]
         if name not in MAPS:
             raise ValueError(f"name: unknown map {name!r}; known: {', '.join(MAPS)}")
         f = self._file(MAPS[name][0])
@@ -352,24 +352,24 @@ class Results:
                 if not np.issubdtype(a.dtype, np.number):
                     raise InputError(f"{one_line(f)}: expected numbers, got dtype {a.dtype}")
                 a = a.astype(np.float32, copy=False)
-        self._cache[name] = a
+        self._cache["map", name] = a
         return a
 
     def image(self, name) -> np.ndarray | None:
         """Image ``name`` of :data:`IMAGES` as float RGB (or grey) in [0, 1], or None."""
-        if name in self._cache:
-            return self._cache[name]
+        if ("image", name) in self._cache:
+            return self._cache["image", name]
         f = self._file(IMAGES[name])
         img = None if f is None else read_png(f)
-        self._cache[name] = img
+        self._cache["image", name] = img
         return img
 
     def release(self) -> None:
         """Forget the maps and images read so far (a later call reads them again): a reader
         done with them, such as the report before its last pages, holds their memory no
         longer. Tables are kept."""
-        for name in [n for n in self._cache if n in MAPS or n in IMAGES]:
-            del self._cache[name]
+        for key in [k for k in self._cache if k[0] != "table"]:
+            del self._cache[key]
 
     def table(self, name) -> dict | None:
         """Table ``name`` of :data:`TABLES` as a dict of float columns, or None.
@@ -379,14 +379,14 @@ class Results:
         InputError
             The file is present but empty, lacks a required column or holds a non-number.
         """
-        if name in self._cache:
-            return self._cache[name]
+        if ("table", name) in self._cache:
+            return self._cache["table", name]
         file, required = TABLES[name]
         f = self._file(file)
         out = None
         if f is not None:
             out = _read_table(f, required)
-        self._cache[name] = out
+        self._cache["table", name] = out
         return out
 
     # -- completeness ----------------------------------------------------------------

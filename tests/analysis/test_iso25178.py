@@ -203,6 +203,9 @@ def test_plane_of_a_large_map_equals_the_direct_least_squares(monkeypatch):
     monkeypatch.setattr(iso, "_BLOCK_VALUES", 1 << 20)    # one block: the same numbers
     assert areal_parameters(h, pixel_size_um=(py, px)).Sdq == pytest.approx(p.Sdq, rel=1e-12)
     assert areal_parameters(h, pixel_size_um=(py, px), reference="mean") == whole
+    far = areal_parameters(h + 3000.0, pixel_size_um=(py, px))   # a stage's offset, in µm
+    assert far.plane_slope_yx == pytest.approx(p.plane_slope_yx, rel=1e-9)
+    assert far.Sq_um == pytest.approx(p.Sq_um, rel=1e-9)
     diagonal = np.full((6, 6), np.nan)
     diagonal[np.arange(6), np.arange(6)] = np.arange(6.0)
     with pytest.raises(InputError, match="one line"):

@@ -76,6 +76,23 @@ def test_the_planes_of_the_ndf_take_the_evidence_heights(nd):
     assert j.evidence_planes is not None and j.slope_planes is j.evidence_planes
 
 
+def test_height_inputs_hold_the_focus_maps_and_read_as_float64(nd):
+    """The inputs keep the focus stage's float32 maps themselves (no copy) and read as their
+    float64 values; a crop is the inputs of the crop."""
+    foc = nd["surface"].focus
+    hi = height_inputs(nd["surface"], OPTIONS, from_focus=True)
+    assert hi.stored_height_um is foc.evidence_height_um
+    assert hi.stored_sigma_um is foc.evidence_sigma_um
+    assert hi.height_um.dtype == hi.sigma_um.dtype == np.float64
+    np.testing.assert_array_equal(hi.height_um, foc.evidence_height_um.astype(np.float64))
+    crop = (slice(10, 40), slice(5, 60))
+    part = hi.crop(crop)
+    np.testing.assert_array_equal(part.height_um, hi.height_um[crop])
+    np.testing.assert_array_equal(part.sigma_um, hi.sigma_um[crop])
+    np.testing.assert_array_equal(part.reliable, hi.reliable[crop])
+    assert part.correlation_px == hi.correlation_px
+
+
 def test_height_inputs_without_per_pixel_errors_use_a_quarter_step(nd):
     s = nd["surface"]
     foc = dataclasses.replace(s.focus, height_sigma_um=None)

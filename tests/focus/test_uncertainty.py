@@ -257,6 +257,16 @@ def test_the_disagreement_in_blocks_of_rows_is_the_whole_map_in_float64(monkeypa
                       0.0).astype(np.float32)
     np.testing.assert_array_equal(got, want)
     assert np.all(got[:, 45:] == mean)
+    s0 = np.float32(0.05)                                 # one σ for every pixel broadcasts
+    np.testing.assert_array_equal(
+        uncertainty.disagreement_variance(h, s0, ev, s0, pool_px=2.0),
+        uncertainty.disagreement_variance(h, np.full(h.shape, s0), ev, np.full(h.shape, s0),
+                                          pool_px=2.0))
+    w = np.full(h.shape, 7, np.uint8)                     # any integer or float window map
+    relief = uncertainty.unresolved_relief_sigma_um(0.2, w, 0.25)
+    for other in (w.astype(np.int64), w.astype(np.float32)):
+        np.testing.assert_array_equal(uncertainty.unresolved_relief_sigma_um(0.2, other, 0.25),
+                                      relief)
 
 
 def _creased(period_px, slope, shape=(128, 128)):

@@ -157,9 +157,13 @@ def test_maps_given_as_callables_are_made_when_written(tmp_path):
         return np.ones((H, W, 3))
     write_results_files(tmp_path, summary={}, maps={"normals": normals,
                                                     "thickness_nm": lambda: None,
-                                                    "tilt_deg": np.full((H, W), 2.0)},
+                                                    "tilt_deg": np.full((H, W), 2.0),
+                                                    "facets": np.zeros((H, W), int)},
                         tables={"ndf_pdf": (np.ones((2, 3)), ["tilt_deg", "density",
-                                                              "mixture_density"], ["%g"] * 3)})
+                                                              "mixture_density"], ["%g"] * 3),
+                                "facets": (np.ones((2, len(TABLES["facets"][1]))),
+                                           list(TABLES["facets"][1]),
+                                           ["%g"] * len(TABLES["facets"][1]))})
     assert calls == [1]
     assert not (tmp_path / MAPS["thickness_nm"][0]).exists()
     r = Results(tmp_path)
@@ -170,6 +174,10 @@ def test_maps_given_as_callables_are_made_when_written(tmp_path):
     again = r.map("normals")                             # ...and again once released
     assert again is not first and np.array_equal(again, first)
     assert r.table("ndf_pdf") is table
+    facets_table = r.table("facets")                     # a map and a table of one name
+    assert isinstance(facets_table, dict) and r.map("facets").shape == (H, W)
+    r.release()
+    assert r.table("facets") is facets_table and r.map("facets").dtype == np.int32
 
 
 @pytest.mark.parametrize("name, value, match", [
