@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import threads
+from ..core.threads import chunks
 from .sampling import weighted_median
 
 __all__ = ["MapCheck", "OrderMove", "candidate_alias", "component_orders",
@@ -51,8 +53,6 @@ MAX_MEAN_DIFFERENCE_NM = 2.0
 MAX_UNEXPLAINED = 0.15
 #: A ROI's single fit disagrees with its pixels beyond max(3 × their robust SD, this) (nm).
 ROI_MIN_GAP_NM = 5.0
-#: Pixels per chunk of :func:`mixture_map_check`.
-_CHUNK_PIXELS = 1 << 16
 
 
 @dataclass(frozen=True)
@@ -112,11 +112,11 @@ def mixture_map_check(thickness_nm, mixture) -> MapCheck | None:
     # each pixel's closest component and most likely one, a chunk of pixels at a time (the
     # (pixels, components) arrays would hold 24 bytes per pixel and component)
     explained, likely = np.empty(t.size, bool), np.empty(t.size, np.intp)
-    for a in range(0, t.size, _CHUNK_PIXELS):
-        z = (t[a:a + _CHUNK_PIXELS, None] - mu[None, :]) / sd[None, :]
-        explained[a:a + _CHUNK_PIXELS] = np.min(np.abs(z), axis=1) <= UNEXPLAINED_SD
+    for a, b in chunks(t.size, threads.BLOCK_VALUES // len(w)):
+        z = (t[a:b, None] - mu[None, :]) / sd[None, :]
+        explained[a:b] = np.min(np.abs(z), axis=1) <= UNEXPLAINED_SD
         logp = np.log(np.maximum(w, 1e-300))[None, :] - np.log(sd)[None, :] - 0.5 * z * z
-        likely[a:a + _CHUNK_PIXELS] = np.argmax(logp, axis=1)
+        likely[a:b] = np.argmax(logp, axis=1)
     k = likely[explained]
     te = t[explained]
     n = max(te.size, 1)

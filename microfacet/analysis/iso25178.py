@@ -55,16 +55,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import threads
 from ..core.errors import InputError
 from ..core.pixels import pixel_size_yx
+from ..core.threads import chunks
 
 __all__ = ["REFERENCES", "ArealParameters", "areal_parameters"]
 
 #: Reference surfaces: the least-squares plane (ISO 25178-2's S-F surface with a plane as
 #: F-operator) or the mean height (SurfaceTopography's default).
 REFERENCES = {"plane": "least-squares plane", "mean": "mean height"}
-#: Values per float64 temporary of the block-wise sums (2 MB).
-_BLOCK_VALUES = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -162,9 +162,9 @@ def areal_parameters(height_um, *, pixel_size_um, reference: str = "plane",
 
 
 def _row_blocks(n_rows, n_cols):
-    """``(start, stop)`` of consecutive row blocks of about :data:`_BLOCK_VALUES` values."""
-    step = max(1, _BLOCK_VALUES // max(int(n_cols), 1))
-    return [(a, min(n_rows, a + step)) for a in range(0, n_rows, step)]
+    """``(start, stop)`` of consecutive blocks of rows of about
+    :data:`~microfacet.core.threads.BLOCK_VALUES` values."""
+    return chunks(n_rows, threads.BLOCK_VALUES // max(int(n_cols), 1))
 
 
 def _residuals(h, ok, py, px, reference):

@@ -26,8 +26,9 @@ from numbers import Integral
 
 from .errors import InputError
 
-__all__ = ["ENV_VAR", "chunk_starts", "limit_malloc_arenas", "limited_threads", "num_threads",
-           "return_free_memory", "set_num_threads", "thread_map", "threads_from_text"]
+__all__ = ["BLOCK_VALUES", "ENV_VAR", "chunk_starts", "chunks", "limit_malloc_arenas",
+           "limited_threads", "num_threads", "return_free_memory", "set_num_threads",
+           "thread_map", "threads_from_text"]
 
 #: The environment variable the command line reads (:func:`threads_from_text`).
 ENV_VAR = "MICROFACET_NUM_THREADS"
@@ -96,17 +97,32 @@ def threads_from_text(text: str | None) -> int | None:
     return n
 
 
+#: Values a block-wise loop holds in one float64 temporary (2 MB): :func:`chunks` of a map's
+#: rows with ``in_flight = BLOCK_VALUES // row length``.
+BLOCK_VALUES = 1 << 18
+
+
+def chunks(n: int, in_flight: int) -> list:
+    """The ``(start, stop)`` of consecutive chunks of ``range(n)`` of ``in_flight`` items
+    (at least 1), for a loop that bounds its temporaries by working a chunk at a time.
+
+    >>> chunks(5, 2), chunks(3, 0)
+    ([(0, 2), (2, 4), (4, 5)], [(0, 1), (1, 2), (2, 3)])
+    """
+    step = max(1, int(in_flight))
+    return [(a, min(n, a + step)) for a in range(0, n, step)]
+
+
 def chunk_starts(n: int, in_flight: int) -> list:
-    """The ``(start, stop)`` of consecutive chunks of ``range(n)`` for :func:`thread_map`:
-    each of ``ceil(in_flight / num_threads())`` items, so that the chunks the threads hold
-    at once total at most ``in_flight`` items (memory bounded as with one thread).
+    """The :func:`chunks` of ``range(n)`` for :func:`thread_map`: each of
+    ``ceil(in_flight / num_threads())`` items, so that the chunks the threads hold at once
+    total at most ``in_flight`` items (memory bounded as with one thread).
 
     >>> with limited_threads(2):
     ...     chunk_starts(5, 4)
     [(0, 2), (2, 4), (4, 5)]
     """
-    chunk = max(1, -(-int(in_flight) // num_threads()))
-    return [(a, min(n, a + chunk)) for a in range(0, n, chunk)]
+    return chunks(n, -(-int(in_flight) // num_threads()))
 
 
 def thread_map(fn: Callable, items: Sequence) -> list:

@@ -39,8 +39,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import threads
 from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
+from ..core.threads import chunks
 from .peaks import detection_threshold, fit_peak, pertuz_db
 
 cv2 = load("cv2")
@@ -340,8 +342,6 @@ def combine(fits: list[WindowFit], primary: int, step, *, prefer: float = 1.0):
 
 #: σ (px) of the neighbourhood over which :func:`disagreement_variance` pools.
 DISAGREEMENT_POOL_PX = 7.0
-#: Values per map that :func:`disagreement_variance` holds in float64 at once.
-_BLOCK_VALUES = 1 << 18
 
 
 def disagreement_variance(height, sigma, evidence_height, evidence_sigma, *,
@@ -380,13 +380,12 @@ def disagreement_variance(height, sigma, evidence_height, evidence_sigma, *,
     excess, both, measured = np.zeros(shape, np.float32), np.zeros(shape, bool), []
     # in float64 as before, a block of rows at a time (a few MB of float64 in flight, and
     # the measured excesses, not 100 MB at 1 MP); the same numbers
-    rows = max(1, _BLOCK_VALUES // max(int(np.prod(shape[1:])), 1))
-    for r0 in range(0, shape[0], rows):
-        h, s, he, se = (np.asarray(m[r0:r0 + rows], np.float64) for m in maps)
+    for a, z in chunks(shape[0], threads.BLOCK_VALUES // max(int(np.prod(shape[1:])), 1)):
+        h, s, he, se = (np.asarray(m[a:z], np.float64) for m in maps)
         b = np.isfinite(h) & np.isfinite(s) & np.isfinite(he) & np.isfinite(se)
         with np.errstate(invalid="ignore"):
             e = np.where(b, (h - he) ** 2 - s ** 2 - se ** 2, 0.0)   # unbiased, ± noise
-        excess[r0:r0 + rows], both[r0:r0 + rows] = e, b
+        excess[a:z], both[a:z] = e, b
         measured.append(e[b])
     if not both.any():
         return np.zeros(shape, np.float32)

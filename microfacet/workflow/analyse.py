@@ -75,8 +75,7 @@ def analyse_to_folder(stack, out, *, options: AnalysisOptions | None = None, ove
     with OutputFolder(out, kind="results", inputs=[st.path], overwrite=overwrite,
                       expected_bytes=results_size_bytes(st.shape, report=report)) as claim:
         result = run_stages(st, options, progress=progress)
-        step(Stage.WRITE)
-        return_free_memory()      # what the last stage freed, before the files' temporaries
+        step(Stage.WRITE)         # (the stage timer gave back what the last stage freed)
         with claim.writing() as tmp:
             # the report's imports in a thread while the files are written (their compression
             # and writes release the GIL); joined before the report, which may fork

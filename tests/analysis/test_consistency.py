@@ -177,12 +177,12 @@ def test_order_move_needs_the_margin_the_share_and_an_order_between():
 
 def test_the_map_check_in_chunks_is_the_check_at_once(monkeypatch):
     """Chunking the pixels (a ragged last chunk) changes no number of the check."""
-    import microfacet.analysis.consistency as consistency
+    from microfacet.core import threads
 
     m = _map(1)
     m[::7, ::3] = np.nan
     mix = ThicknessMixture([(0.2, 112, 1.0), (0.6, 131, 1.5), (0.2, 150, 1.0)])
-    monkeypatch.setattr(consistency, "_CHUNK_PIXELS", 10 ** 6)
+    monkeypatch.setattr(threads, "BLOCK_VALUES", 3 * 10 ** 6)   # one chunk
     whole = mixture_map_check(m, mix)
-    monkeypatch.setattr(consistency, "_CHUNK_PIXELS", 333)
+    monkeypatch.setattr(threads, "BLOCK_VALUES", 3 * 333)     # 333 pixels
     assert mixture_map_check(m, mix) == whole

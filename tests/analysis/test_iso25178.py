@@ -183,9 +183,9 @@ def test_plane_of_a_large_map_equals_the_direct_least_squares(monkeypatch):
     """The plane summed a block of rows at a time (normal equations, several blocks) is the
     least-squares plane that ``lstsq`` on the whole design matrix gives, and so are the
     parameters about it; points on a diagonal line have no plane."""
-    import microfacet.analysis.iso25178 as iso
+    from microfacet.core import threads
 
-    monkeypatch.setattr(iso, "_BLOCK_VALUES", 997)        # many blocks, a ragged last one
+    monkeypatch.setattr(threads, "BLOCK_VALUES", 997)    # many blocks, a ragged last one
     rng = np.random.default_rng(5)
     yy, xx = np.mgrid[0:90, 0:70]
     h = 3.0 + 0.02 * yy - 0.05 * xx + rng.normal(0, 0.2, yy.shape)
@@ -200,7 +200,7 @@ def test_plane_of_a_large_map_equals_the_direct_least_squares(monkeypatch):
     assert p.Sq_um == pytest.approx(math.sqrt(np.mean(z ** 2)), rel=1e-12)
     assert p.Sa_um == pytest.approx(np.mean(np.abs(z)), rel=1e-12)
     whole = areal_parameters(h, pixel_size_um=(py, px), reference="mean")
-    monkeypatch.setattr(iso, "_BLOCK_VALUES", 1 << 20)    # one block: the same numbers
+    monkeypatch.setattr(threads, "BLOCK_VALUES", 1 << 20)  # one block: the same numbers
     assert areal_parameters(h, pixel_size_um=(py, px)).Sdq == pytest.approx(p.Sdq, rel=1e-12)
     assert areal_parameters(h, pixel_size_um=(py, px), reference="mean") == whole
     far = areal_parameters(h + 3000.0, pixel_size_um=(py, px))   # a stage's offset, in µm

@@ -235,6 +235,7 @@ def test_the_disagreement_in_blocks_of_rows_is_the_whole_map_in_float64(monkeypa
     no neighbour has both heights."""
     import cv2
 
+    from microfacet.core import threads
     from microfacet.focus import uncertainty
 
     rng = np.random.default_rng(4)
@@ -243,7 +244,7 @@ def test_the_disagreement_in_blocks_of_rows_is_the_whole_map_in_float64(monkeypa
     ev = (h + rng.normal(0, 0.2, h.shape)).astype(np.float32)
     ev[:, 20:] = np.nan                  # the right side far from any evidence: the mean
     ev[rng.random(h.shape) < 0.3] = np.nan
-    monkeypatch.setattr(uncertainty, "_BLOCK_VALUES", 8 * 50 + 3)   # 8 rows a block
+    monkeypatch.setattr(threads, "BLOCK_VALUES", 8 * 50 + 3)       # 8 rows a block
     got = uncertainty.disagreement_variance(h, s, ev, s, pool_px=2.0)
     H, S, E = (a.astype(np.float64) for a in (h, s, ev))
     both = np.isfinite(E)
