@@ -183,8 +183,8 @@ def return_free_memory() -> bool:
     Arrays of a few megabytes come from malloc's heap once larger ones have been freed (its
     mmap threshold rises with them), and the heap keeps what they free: between the analysis'
     stages about 100 MB at 1 megapixel, on top of which the next stage's temporaries then
-    come (docs/benchmarks.md). The analysis calls this between its stages and before it
-    writes; a call takes a few milliseconds. Elsewhere (another C library, another system)
+    come (docs/benchmarks.md). The analysis calls this after each of its stages and before
+    its report; a call takes a few milliseconds. Elsewhere (another C library, another system)
     nothing is done.
 
     Returns
