@@ -23,7 +23,8 @@ import numpy as np
 
 from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
-from .segmentation import plane_from_moments, plane_moments
+from ..core.threads import BLOCK_VALUES, thread_map
+from .segmentation import label_groups, plane_from_moments, plane_moments
 
 ndimage = load("scipy.ndimage")
 
@@ -169,13 +170,30 @@ def _robust_weights(labels, z, wt, pixel_size_um, S, rounds):
     steps on the better half of each plane's heights (a start that a cluster of outliers,
     such as a pit floor, cannot drag: least trimmed squares), then Tukey biweights
     (c = :data:`TUKEY_C` robust SDs, the SD at least the heights' own σ); the last round keeps
-    the biweight's inliers at their full weight. Worked on the used pixels only."""
+    the biweight's inliers at their full weight. Worked on the used pixels only, a group of
+    whole facets at a time on :func:`~microfacet.core.threads.thread_map`'s threads (each
+    facet's sums run over its pixels in the same order as over the whole image, so the
+    weights do not depend on the grouping)."""
     h, w = labels.shape
+    flat = labels.ravel()
     idx = np.flatnonzero(wt.ravel() > 0)
-    lab, zz, w0 = labels.ravel()[idx], z.ravel()[idx], wt.ravel()[idx]
     py, px = pixel_size_yx(pixel_size_um)
-    x = (idx % w - (w - 1) / 2.0) * px
-    y = (idx // w - (h - 1) / 2.0) * py
+    out = np.zeros(labels.size)
+
+    def group(g):
+        lo, hi, a, b = g
+        part = idx[a:b]
+        sel = part[(flat[part] >= lo) & (flat[part] < hi)]
+        out[sel] = _robust_group(flat[sel] - lo, hi - lo, z.ravel()[sel], wt.ravel()[sel],
+                                 (sel % w - (w - 1) / 2.0) * px,
+                                 (sel // w - (h - 1) / 2.0) * py, rounds)
+
+    thread_map(group, label_groups(labels, idx, S, BLOCK_VALUES))
+    return out.reshape(labels.shape)
+
+
+def _robust_group(lab, S, zz, w0, x, y, rounds):
+    """:func:`_robust_weights`' rounds for the pixels of labels ``0..S-1``."""
     sig = 1.0 / np.sqrt(w0)
     wr = w0
     for k in range(rounds):
@@ -196,9 +214,7 @@ def _robust_weights(labels, z, wt, pixel_size_um, S, rounds):
             t = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
         t = np.where(np.isfinite(a)[lab], t, 1.0)       # no plane yet: nothing to judge
         wr = w0 * (t if HALF_ROUNDS <= k < rounds - 1 else (t > 0))
-    out = np.zeros(labels.size)
-    out[idx] = wr
-    return out.reshape(labels.shape)
+    return wr
 
 
 def _robust_scale(lab, r, S):
@@ -262,27 +278,9 @@ def dome_mean_square_slope(labels, height_um, *, height_sigma_um, reliable, pixe
     1.0
     """
     S = int(labels.max()) + 1
-    sig = np.broadcast_to(np.asarray(height_sigma_um, dtype=np.float64), labels.shape)
-    z = np.asarray(height_um, dtype=np.float64)
-    use = np.asarray(reliable, bool) & np.isfinite(z) & np.isfinite(sig) & (sig > 0)
-    lab = labels.ravel()
-    w = np.where(use, 1.0 / np.where(use, sig, 1.0) ** 2, 0.0).ravel()
-    zz = np.where(use, z, 0.0).ravel()
-    py, px = pixel_size_yx(pixel_size_um)
-    yy, xx = np.indices(labels.shape)
-    x, y = (xx * px).ravel(), (yy * py).ravel()
-    sw = np.bincount(lab, w, S)
-    n = np.bincount(lab, use.ravel(), S)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cx, cy = np.bincount(lab, w * x, S) / sw, np.bincount(lab, w * y, S) / sw
-    x, y = x - np.nan_to_num(cx)[lab], y - np.nan_to_num(cy)[lab]
-    basis = (x, y, np.ones_like(x), x * x + y * y)
-    A = np.empty((S, 4, 4))
-    rhs = np.empty((S, 4))
-    for i in range(4):
-        rhs[:, i] = np.bincount(lab, w * basis[i] * zz, S)
-        for j in range(i, 4):
-            A[:, i, j] = A[:, j, i] = np.bincount(lab, w * basis[i] * basis[j], S)
+    sums = _dome_sums(labels, np.asarray(height_um), height_sigma_um, reliable,
+                      pixel_size_um, S)
+    A, rhs, n, szz, r2sum, area = (sums[k] for k in ("A", "rhs", "n", "szz", "r2", "area"))
     ok = n >= max(min_pixels, 5)
     ok[ok] &= np.abs(np.linalg.det(A[ok])) > 1e-12 * np.prod(np.diagonal(A[ok], axis1=1,
                                                                          axis2=2), axis=1)
@@ -290,13 +288,60 @@ def dome_mean_square_slope(labels, height_um, *, height_sigma_um, reliable, pixe
         return None
     inv = np.linalg.inv(A[ok])
     coef = np.einsum("sij,sj->si", inv, rhs[ok])
-    rss = np.bincount(lab, w * zz * zz, S)[ok] - np.einsum("si,si->s", coef, rhs[ok])
+    rss = szz[ok] - np.einsum("si,si->s", coef, rhs[ok])
     chi2 = np.maximum(rss / np.maximum(n[ok] - 4, 1), 1.0)
     d, var_d = coef[:, 3], inv[:, 3, 3] * chi2 * _correlation_factor(n[ok], correlation_px)
     # the dome's slope 2 d r, its mean square over the facet's pixels (all of them)
-    r2 = np.bincount(lab, x * x + y * y, S)[ok] / np.bincount(lab, minlength=S)[ok]
-    area = np.bincount(lab, minlength=S)[ok].astype(np.float64)
+    r2 = r2sum[ok] / area[ok]
+    area = area[ok]
     ms = float(np.sum(area * 4.0 * (d * d - var_d) * r2) / np.sum(area))
     # Var(d̂²) = 4 d² v + 2 v² for d̂ ~ N(d, v), with d² estimated by max(d̂² − v, 0)
     var_t = (4.0 * r2) ** 2 * (4.0 * np.maximum(d * d - var_d, 0.0) * var_d + 2.0 * var_d ** 2)
     return ms, float(np.sqrt(np.sum(area ** 2 * var_t)) / np.sum(area))
+
+def _dome_sums(labels, height_um, height_sigma_um, reliable, pixel_size_um, S):
+    """:func:`dome_mean_square_slope`'s sums per facet (arrays of length S): the normal
+    equations ``A`` (S, 4, 4) and ``rhs`` (S, 4) of the basis x, y, 1, r² about the centroid
+    of the facet's weighted heights, the heights used ``n``, Σ w z² ``szz``, Σ r² over all
+    its pixels ``r2`` and its pixels ``area``. A group of whole facets at a time on
+    :func:`~microfacet.core.threads.thread_map`'s threads, each facet's sums over its pixels
+    in image order."""
+    h, wd = labels.shape
+    flat = labels.ravel()
+    py, px = pixel_size_yx(pixel_size_um)
+    sig_map = np.broadcast_to(np.asarray(height_sigma_um), labels.shape)
+    rel = np.asarray(reliable, bool)
+    out = {"A": np.zeros((S, 4, 4)), "rhs": np.zeros((S, 4)), "n": np.zeros(S),
+           "szz": np.zeros(S), "r2": np.zeros(S), "area": np.zeros(S)}
+
+    def group(g):
+        lo, hi, a, b = g
+        part = np.arange(a, b)
+        sel = part[(flat[a:b] >= lo) & (flat[a:b] < hi)]
+        lab, k = flat[sel] - lo, hi - lo
+        rows, cols = np.divmod(sel, wd)
+        z = height_um[rows, cols].astype(np.float64)
+        sig = sig_map[rows, cols].astype(np.float64)
+        use = rel[rows, cols] & np.isfinite(z) & np.isfinite(sig) & (sig > 0)
+        w = np.where(use, 1.0 / np.where(use, sig, 1.0) ** 2, 0.0)
+        zz = np.where(use, z, 0.0)
+        x, y = cols * px, rows * py
+        sw = np.bincount(lab, w, k)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cx, cy = np.bincount(lab, w * x, k) / sw, np.bincount(lab, w * y, k) / sw
+        x, y = x - np.nan_to_num(cx)[lab], y - np.nan_to_num(cy)[lab]
+        basis = (x, y, np.ones_like(x), x * x + y * y)
+        A, rhs = out["A"][lo:hi], out["rhs"][lo:hi]
+        for i in range(4):
+            rhs[:, i] = np.bincount(lab, w * basis[i] * zz, k)
+            for j in range(i, 4):
+                A[:, i, j] = A[:, j, i] = np.bincount(lab, w * basis[i] * basis[j], k)
+        out["n"][lo:hi] = np.bincount(lab, use, k)
+        out["szz"][lo:hi] = np.bincount(lab, w * zz * zz, k)
+        out["r2"][lo:hi] = np.bincount(lab, basis[3], k)
+        out["area"][lo:hi] = np.bincount(lab, minlength=k)
+
+    thread_map(group, label_groups(labels, None, S, BLOCK_VALUES))
+    return out
+
+
