@@ -60,7 +60,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.lazy import load
-from ..core.threads import thread_map
+from ..core.threads import BLOCK_VALUES, chunks, thread_map
 from .options import RoiOptions
 from .search import local_minima, parabola
 
@@ -316,13 +316,23 @@ def _estimate_exposure(valid, model, grid, band, options):
     sub = [(s.xyz[:n], s.lab[:n]) for s in valid]
     inside = (np.ones(grid.size, bool) if band is None
               else (grid >= band[0]) & (grid <= band[1]))
+    # the ROIs in groups of about BLOCK_VALUES colour pairs, a group per ΔE call, on the
+    # threads (the values, medians and their mean are those of one ROI at a time)
+    per_roi = max(1, n * int(inside.sum()))
+    groups = [sub[a:b] for a, b in chunks(len(sub), BLOCK_VALUES // per_roi)]
+
+    def medians(group, m):
+        x = np.concatenate([x[:, inside] for x, _ in group])
+        lab_s = np.concatenate([lab_s for _, lab_s in group])
+        best = model.difference(m.lab_from_xyz(x), lab_s[:, None, :]).min(axis=1)
+        return [np.median(b) for b in np.split(best, np.cumsum([len(v) for v, _ in group])[:-1])]
 
     def objective(log_e):
         # Each pixel at its best thickness in the band; the median over pixels (robust to
         # partly shadowed pixels), averaged over ROIs.
         m = model.with_exposure(math.exp(log_e))
-        return float(np.mean([np.median(model.difference(
-            m.lab_from_xyz(x[:, inside]), lab_s[:, None, :]).min(axis=1)) for x, lab_s in sub]))
+        return float(np.mean([v for part in thread_map(lambda g: medians(g, m), groups)
+                              for v in part]))
 
     return _scan_exposure(objective)
 
