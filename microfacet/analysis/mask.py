@@ -107,12 +107,15 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
     if clip_level is None:
         top = 2 ** int(bit_depth) - 1
         clip_level = (top - 0.5) / top
-    invalid = ~np.all(np.isfinite(img), axis=-1)
-    safe = np.where(invalid[..., None], 0.0, img)
-    vmax = safe.max(axis=-1)
-    vmin = safe.min(axis=-1)
+    # channel by channel: a reduction over a last axis of 3 costs several times the
+    # element-wise maximum of the three planes (the same values)
+    invalid = ~(np.isfinite(img[..., 0]) & np.isfinite(img[..., 1]) & np.isfinite(img[..., 2]))
+    safe = np.where(invalid[..., None], np.float32(0), img) if invalid.any() else img
+    vmax = _channel_max(safe)
+    vmin = np.minimum(np.minimum(safe[..., 0], safe[..., 1]), safe[..., 2])
     with np.errstate(invalid="ignore", divide="ignore"):
         sat = np.where(vmax > 0, (vmax - vmin) / vmax, 0.0) * 255.0
+    del vmin
     low_sat = sat < o.saturation_min
     dark = vmax * 255.0 < o.value_min
     clipped = vmax >= clip_level
@@ -125,8 +128,9 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
     mask = low_sat | dark | clipped | invalid | shadow
     steep = np.zeros(vmax.shape, bool)
     if o.steep_ratio > 0 and (~mask).any():
-        ref = float(np.median(srgb_decode(safe[~mask]).max(axis=-1)))
-        steep = steep_facet_mask(safe, ref, dark_ratio=o.steep_ratio) & ~invalid
+        lin = _channel_max(safe, decode=True)       # steep_facet_mask's, decoded once
+        ref = float(np.median(lin[~mask]))
+        steep = (lin < o.steep_ratio * ref) & ~invalid
         mask = mask | steep
     return ColourMask(mask, low_sat & ~invalid, dark & ~invalid, clipped & ~invalid, invalid,
                       shadow, steep)
@@ -169,5 +173,12 @@ def steep_facet_mask(encoded, reference, *, dark_ratio):
     >>> int(steep_facet_mask(img, 0.6, dark_ratio=0.3).sum())
     1
     """
-    lin = srgb_decode(np.nan_to_num(np.asarray(encoded, dtype=np.float32), nan=1.0))
-    return lin.max(axis=-1) < dark_ratio * reference
+    enc = np.nan_to_num(np.asarray(encoded, dtype=np.float32), nan=1.0)
+    return _channel_max(enc, decode=True) < dark_ratio * reference
+
+
+def _channel_max(img, *, decode=False):
+    """The largest of the three channels of ``img`` (H, W, 3), decoded from sRGB first if
+    ``decode`` (float32, shape (H, W))."""
+    f = srgb_decode if decode else np.asarray
+    return np.maximum(np.maximum(f(img[..., 0]), f(img[..., 1])), f(img[..., 2]))
