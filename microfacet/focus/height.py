@@ -121,9 +121,8 @@ class FocusResult:
     params : dict
         The options used.
     timings_s : dict
-        Wall times: ``read`` (waiting for decoded, measured slices), ``focus`` (the running
-        peaks and the composite), ``fit`` (peak fits, uncertainty and choice of window),
-        ``total``.
+        Wall times: ``read`` (waiting for decoded slices), ``focus`` (per-slice work),
+        ``fit`` (peak fits, uncertainty and choice of window), ``total``.
     height_sigma_um : ndarray of float32, shape (H, W)
         One-standard-deviation uncertainty of ``height_fit_um`` in µm, NaN where no focus
         peak is significant. Calibrated on rendered stacks of known relief (steps, crater
@@ -355,22 +354,16 @@ class _Scan:
 
 
 def _scan(plan: _Plan, load, *, prefetch: bool, progress) -> _Scan:
-    """Read the slices once in increasing z: focus measures, running peaks, composite. With
-    ``prefetch`` the next slice is decoded and measured on a second thread while this one
-    updates the peaks (``t_read``: the time waited for both; ``t_focus``: the peaks')."""
+    """Read the slices once in increasing z: focus measures, running peaks, composite."""
     o, (H, W), n = plan.options, plan.slices.shape, plan.slices.n
     trackers = [PeakTracker(((H + 1) // 2, (W + 1) // 2) if ds == 2 else (H, W),
                             radius=o.fit_radius_used, n_slices=n) for _, _, ds in plan.windows]
     composite = _Composite((H, W), plan.slices.channels)
     t_read = t_focus = 0.0
-
-    def measured(i):     # on the read-ahead thread: decoding and the focus measures
-        img = load(i)
-        return img, focus_measures(img, plan.windows, operator=o.operator, colour=o.colour)
-
-    with _slices_in_z_order(measured, plan.order, prefetch) as slices:
-        for k, (img, fs), t_wait in slices:
+    with _slices_in_z_order(load, plan.order, prefetch) as slices:
+        for k, img, t_wait in slices:
             t1 = time.perf_counter()
+            fs = focus_measures(img, plan.windows, operator=o.operator, colour=o.colour)
             for tr, f in zip(trackers, fs):
                 tr.push(f, k)
             composite.add(fs[plan.main], img)
