@@ -80,19 +80,21 @@ class FacetImage:
         """Mean Lab, pixel count and mean ROI thickness of every facet's ``usable`` (default:
         all usable) pixels, its interior ones where it has any."""
         S = self.n_facets
-        lab_flat = np.asarray(self.lab, dtype=np.float64).reshape(-1, 3)
+        lab_flat = np.asarray(self.lab).reshape(-1, 3)   # gathered, then float64
         u = np.asarray(self.usable if usable is None else usable, bool).ravel()
         lb = self.labels.ravel()
         ui = u & np.asarray(self.interior, bool).ravel()
         has_interior = np.bincount(lb[ui], minlength=S) > 0
-        u = np.where(has_interior[lb], ui, u)
-        cnt = np.bincount(lb[u], minlength=S).astype(np.float64)
-        mean_lab = np.stack([np.bincount(lb[u], weights=lab_flat[u, c], minlength=S)
+        u = np.flatnonzero(np.where(has_interior[lb], ui, u))
+        lbu = lb[u]
+        cnt = np.bincount(lbu, minlength=S).astype(np.float64)
+        mean_lab = np.stack([np.bincount(lbu, weights=lab_flat[u, c].astype(np.float64),
+                                         minlength=S)
                              for c in range(3)], axis=-1) / np.maximum(cnt, 1)[:, None]
-        v = np.asarray(self.roi_thickness_px, dtype=np.float64).ravel()[u]
+        v = np.asarray(self.roi_thickness_px).ravel()[u].astype(np.float64)
         ok = np.isfinite(v)
-        mv = (np.bincount(lb[u][ok], weights=v[ok], minlength=S)
-              / np.maximum(np.bincount(lb[u][ok], minlength=S), 1))
+        mv = (np.bincount(lbu[ok], weights=v[ok], minlength=S)
+              / np.maximum(np.bincount(lbu[ok], minlength=S), 1))
         return FacetColours(mean_lab, cnt, mv)
 
 

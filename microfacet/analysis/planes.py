@@ -26,7 +26,7 @@ from ..core.pixels import pixel_size_yx
 from ..core.threads import BLOCK_VALUES, thread_map
 from .segmentation import label_groups, plane_from_moments, plane_moments
 
-ndimage = load("scipy.ndimage")
+cv2 = load("cv2")
 
 __all__ = ["FacetFit", "fit_facet_planes"]
 
@@ -234,13 +234,15 @@ def _robust_scale(lab, r, S):
 
 def facet_edge_distance(labels) -> np.ndarray:
     """Distance in pixels of every pixel from the nearest facet boundary (0 on it; +inf
-    everywhere for a single facet, which has no boundary)."""
+    everywhere for a single facet, which has no boundary): float32, OpenCV's exact Euclidean
+    transform (``DIST_MASK_PRECISE``; scipy's ``distance_transform_edt`` gives the same
+    distances, √ of whole numbers, rounded to float32, 18× slower at 12 MP)."""
     edge = np.zeros(labels.shape, bool)
     edge[:, 1:] |= labels[:, 1:] != labels[:, :-1]
     edge[1:, :] |= labels[1:, :] != labels[:-1, :]
     if not edge.any():
-        return np.full(labels.shape, np.inf)
-    return ndimage.distance_transform_edt(~edge)
+        return np.full(labels.shape, np.inf, np.float32)
+    return cv2.distanceTransform((~edge).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
 
 
 def deconvolved_rms_slope(planes: FacetFit, ok, weights) -> float:

@@ -267,6 +267,22 @@ def _felzenszwalb_tiles(img, scale, slope, *, min_size, tile=None):
     return out
 
 
+def _first_pairs(pi, pj, score, S):
+    """Which of the pairs to merge: exact ties could put a segment in two pairs; in the
+    order of ``score`` (stable), a pair is kept unless one of its segments is in a pair
+    kept before it. Only the pairs sharing a segment are walked one by one."""
+    times = np.bincount(pi, minlength=S) + np.bincount(pj, minlength=S)
+    shared = (times[pi] > 1) | (times[pj] > 1)
+    keep = ~shared
+    used = np.zeros(S, bool)
+    k_shared = np.flatnonzero(shared)
+    for k in k_shared[np.argsort(score[k_shared], kind="stable")]:
+        if not used[pi[k]] and not used[pj[k]]:
+            used[pi[k]] = used[pj[k]] = True
+            keep[k] = True
+    return keep
+
+
 def relabel(labels):
     """Labels renumbered 0..S-1 in the order of their values (int32)."""
     _, inv = np.unique(labels, return_inverse=True)
@@ -424,13 +440,7 @@ def merge_adjacent(labels, moments, cost, *, max_rounds, pairs=None):
         np.minimum.at(best, j, score)
         pick = ok & (score == best[i]) & (score == best[j])
         pi, pj = i[pick], j[pick]
-        # exact ties could put a segment in two pairs: keep its first pair only
-        used = np.zeros(S, bool)
-        keep = np.zeros(pi.size, bool)
-        for k in np.argsort(score[pick], kind="stable"):
-            if not used[pi[k]] and not used[pj[k]]:
-                used[pi[k]] = used[pj[k]] = True
-                keep[k] = True
+        keep = _first_pairs(pi, pj, score[pick], S)
         pi, pj = pi[keep], pj[keep]
         if pi.size == 0:
             break
@@ -444,5 +454,5 @@ def merge_adjacent(labels, moments, cost, *, max_rounds, pairs=None):
         a, b = new[i], new[j]
         differ = a != b
         pairs = _unique_pairs(a[differ], b[differ])
-    labels = mapping[labels].astype(np.int32)
+    labels = mapping.astype(np.int32)[labels]
     return labels, moments
