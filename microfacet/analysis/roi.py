@@ -280,19 +280,23 @@ def _band_curve(model, xyz, lab, grid, half_width_nm, *, invariant):
 def _samples(lab, tilt, usable, rois, model, grid, options, rng):
     """Per ROI (row-major) a :class:`_Sample`, or None with fewer than ``min_pixels``."""
     rows, cols, (rh, rw) = rois
-    out = []
+    drawn = []                  # the random samples in ROI order, then the model on threads
     for r0 in rows:
         for c0 in cols:
             yy, xx = np.nonzero(usable[r0:r0 + rh, c0:c0 + rw])
             yy, xx = yy + r0, xx + c0
-            if yy.size < options.min_pixels:
-                out.append(None)
-                continue
-            pick = rng.choice(yy.size, min(options.sample_px, yy.size), replace=False)
-            ys, xs = yy[pick], xx[pick]
-            xyz = model.xyz(tilt[ys, xs][:, None], grid[None, :]).astype(np.float32)
-            out.append(_Sample(xyz, lab[ys, xs], yy, xx))
-    return out
+            drawn.append(None if yy.size < options.min_pixels else (yy, xx, rng.choice(
+                yy.size, min(options.sample_px, yy.size), replace=False)))
+
+    def sample(d):
+        if d is None:
+            return None
+        yy, xx, pick = d
+        ys, xs = yy[pick], xx[pick]
+        xyz = model.xyz(tilt[ys, xs][:, None], grid[None, :]).astype(np.float32)
+        return _Sample(xyz, lab[ys, xs], yy, xx)
+
+    return thread_map(sample, drawn)
 
 
 def _order_band(valid, model, grid, options):
@@ -302,8 +306,8 @@ def _order_band(valid, model, grid, options):
     if hw <= 0 or not valid or grid.size <= 2:
         return None
     n = options.consensus_px
-    score = np.mean([_band_curve(model, s.xyz[:n], s.lab[:n], grid, hw, invariant=True)
-                     for s in valid], axis=0)
+    score = np.mean(thread_map(lambda s: _band_curve(model, s.xyz[:n], s.lab[:n], grid, hw,
+                                                     invariant=True), valid), axis=0)
     centre = float(grid[int(np.argmin(score))])
     log.info("interference-order consensus (exposure-invariant): %.1f-%.1f nm",
              centre - hw, centre + hw)

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.threads import chunk_starts, thread_map
+from ..core.threads import chunk_starts, chunks, thread_map
 from .options import TiltOptions
 from .search import coarse_to_fine, refine
 
@@ -151,20 +151,27 @@ def model_lab_rows(model, thickness_nm, theta_grid_deg):
     d = np.asarray(thickness_nm, dtype=np.float64)
     th = np.asarray(theta_grid_deg)[None, :]
     out = np.empty((d.size, th.size, 3), np.float32)
-    step = max(1, (1 << 16) // max(1, th.size))   # rows per chunk: bounded temporaries
-    for a in range(0, d.size, step):
-        out[a:a + step] = model.lab(th, d[a:a + step, None])
+
+    def rows(ab):   # a chunk of rows: bounded temporaries, on the threads
+        out[ab[0]:ab[1]] = model.lab(th, d[ab[0]:ab[1], None])
+
+    thread_map(rows, chunks(d.size, (1 << 16) // max(1, th.size)))
     return out
 
 
 def _sensitivity(model, rows_lab, step):
     """ΔE per degree of each row at each grid node (central differences; one-sided at the
     ends)."""
-    rl = rows_lab.astype(np.float32)
+    rl = rows_lab.astype(np.float32, copy=False)
     sens = np.empty(rl.shape[:2], np.float32)
-    sens[:, 1:-1] = model.difference(rl[:, 2:], rl[:, :-2]) / (2 * step)
-    sens[:, 0] = model.difference(rl[:, 1], rl[:, 0]) / step
-    sens[:, -1] = model.difference(rl[:, -1], rl[:, -2]) / step
+
+    def rows(ab):   # a chunk of rows on the threads
+        r, s = rl[ab[0]:ab[1]], sens[ab[0]:ab[1]]
+        s[:, 1:-1] = model.difference(r[:, 2:], r[:, :-2]) / (2 * step)
+        s[:, 0] = model.difference(r[:, 1], r[:, 0]) / step
+        s[:, -1] = model.difference(r[:, -1], r[:, -2]) / step
+
+    thread_map(rows, chunks(rl.shape[0], (1 << 16) // max(1, rl.shape[1])))
     return sens
 
 
