@@ -42,7 +42,7 @@ import numpy as np
 from ..core import threads
 from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
-from ..core.threads import chunks
+from ..core.threads import chunks, thread_map
 from .peaks import detection_threshold, fit_peak, pertuz_db
 
 cv2 = load("cv2")
@@ -159,9 +159,9 @@ def fit_window(tracker, zs, step, *, interpolation, shape_k, window_px, downsamp
     uniform = n < 3 or bool(np.allclose(np.diff(zs), step, rtol=1e-6, atol=0.0))
     offsets = (np.arange(K) - r).astype(np.float32)
     sub = slice(r - 1, r + 2) if interpolation == "gauss3" else slice(0, K)
-    rows = max(1, (1 << 16) // max(1, W))
-    for r0 in range(0, H, rows):
-        sl = slice(r0, min(H, r0 + rows))
+
+    def block(ab):      # a block of rows (bounded temporaries), on the threads
+        sl = slice(*ab)
         br = tracker.best_rank[sl]
         vals = tracker.window[:, sl]
         fmax = tracker.best[sl]
@@ -194,6 +194,8 @@ def fit_window(tracker, zs, step, *, interpolation, shape_k, window_px, downsamp
             xp = np.where(np.isfinite(vals[sub]), (xz[sub] if xz.ndim > 1
                                                    else xz[sub][:, None, None]), np.nan)
             pz[sl] = pertuz_db(vals[sub], xp, fit, model, fmax, tracker.fsum[sl], n)
+
+    thread_map(block, chunks(H, max(1, (1 << 16) // max(1, W))))
     detected = ok_all & (signif >= 1.0)
     # empirical-Bayes residual variance: pooled with its median at similar significance
     prior = _binned_prior(s2res, dof, signif, detected | ok_all)
