@@ -235,8 +235,9 @@ def _robust_scale(lab, r, S):
 def facet_edge_distance(labels) -> np.ndarray:
     """Distance in pixels of every pixel from the nearest facet boundary (0 on it; +inf
     everywhere for a single facet, which has no boundary): float32, OpenCV's exact Euclidean
-    transform (``DIST_MASK_PRECISE``; scipy's ``distance_transform_edt`` gives the same
-    distances, √ of whole numbers, rounded to float32, 18× slower at 12 MP)."""
+    transform (``DIST_MASK_PRECISE``): scipy's ``distance_transform_edt`` distances, √ of
+    whole numbers, exactly where they are whole and within one float32 rounding elsewhere
+    (tested); scipy's float64 transform is 18× slower at 12 MP."""
     edge = np.zeros(labels.shape, bool)
     edge[:, 1:] |= labels[:, 1:] != labels[:, :-1]
     edge[1:, :] |= labels[1:, :] != labels[:-1, :]

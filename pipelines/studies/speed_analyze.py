@@ -65,9 +65,13 @@ def stack_for(work: Path, mp: float, slices: int) -> Path:
     side = int(round(np.sqrt(mp * 1e6) / 16.0)) * 16
     path = work / f"nd-{side}x{side}-{slices}"
     if not (path / "stack.json").is_file():
-        from microfacet.forward.synth import generate_stack, preset
-        generate_stack(path, preset("nd", seed=3, height_px=side, width_px=side,
-                                    n_slices=slices))
+        # in a child process: Linux carries a parent's high-water RSS into the children it
+        # starts, so a stack made in this process would set the analyses' measured peaks
+        code = ("import sys; from microfacet.forward.synth import generate_stack, preset; "
+                "generate_stack(sys.argv[1], preset('nd', seed=3, height_px=int(sys.argv[2]), "
+                "width_px=int(sys.argv[2]), n_slices=int(sys.argv[3])))")
+        subprocess.run([sys.executable, "-c", code, str(path), str(side), str(slices)],
+                       check=True)
     return path
 
 
