@@ -72,7 +72,9 @@ class Context:
         self.mask = res.map("mask")
         self._numbers: dict = {}
 
-    def _cached(self, key, compute):
+    def cached(self, key, compute):
+        """``compute()``, computed once per ``key`` (a hashable) for this folder: what more
+        than one panel, page or rendering (the PDF and the PNG child) uses."""
         if key not in self._numbers:
             self._numbers[key] = compute()
         return self._numbers[key]
@@ -84,7 +86,7 @@ class Context:
             if a is None:
                 return None
             return 1.0 - np.count_nonzero(np.isfinite(a)) / max(a.size, 1)
-        return self._cached(("no_value", name), compute)
+        return self.cached(("no_value", name), compute)
 
     def percentiles(self, names, q=(1.0, 99.0)):
         """``((percentiles q), min, max)`` of the finite values of the maps ``names`` (one
@@ -96,7 +98,7 @@ class Context:
         def compute():
             maps = [a for a in (self.res.map(n) for n in names) if a is not None]
             return value_stats(maps, list(q))
-        return self._cached(("percentiles", names, q), compute)
+        return self.cached(("percentiles", names, q), compute)
 
     def limits(self, names, lo=1.0, hi=99.0, *, floor=None):
         """Colour limits ``(vmin, vmax, extend)`` of the maps ``names`` taken together, as

@@ -17,7 +17,7 @@ from ..forward.angular import DISPLAY_CORE_DEG, display_exposure, simulate_map, 
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, known_sets
 from .layout import blank_panel, shorten
 
-__all__ = ["NAME", "TITLE", "draw"]
+__all__ = ["NAME", "TITLE", "draw", "prepare"]
 
 NAME = "angular"
 TITLE = "predicted angular colour"
@@ -91,6 +91,24 @@ def predicted_maps(ctx) -> list:
     return out
 
 
+def prepare(ctx) -> None:
+    """Compute the page's maps now, once for the folder (``ctx``'s cache): the report calls
+    it before its PNG child forks, so that the PDF and the PNG pages draw the same maps
+    without each computing them (0.2-0.4 s of thin-film optics; docs/benchmarks.md)."""
+    _maps(ctx)
+
+
+def _maps(ctx):
+    """``(maps, None)`` of :func:`predicted_maps`, or ``(None, exception)`` if they cannot
+    be predicted; computed once per context."""
+    def compute():
+        try:
+            return predicted_maps(ctx), None
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+            return None, exc
+    return ctx.cached(("angular", "predicted_maps"), compute)
+
+
 def draw(pg, ctx):
     """Draw the angular-colour page: one or two maps side by side, with their notes.
 
@@ -99,9 +117,8 @@ def draw(pg, ctx):
     pg : microfacet.report.layout.Page
     ctx : microfacet.report.context.Context
     """
-    try:
-        maps = predicted_maps(ctx)
-    except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+    maps, exc = _maps(ctx)
+    if exc is not None:
         blank_panel(pg, pg.content(),
                     f"the angular colour could not be predicted from the fitted "
                     f"distributions:\n{shorten(exc, 200)}")

@@ -26,7 +26,10 @@ once (:class:`~microfacet.report.context.Context`). The drawing helpers the page
 in :mod:`~microfacet.report.layout`, the array preparation in
 :mod:`~microfacet.report.arrays`. On Linux, from a process without other threads (``microfacet
 analyze``), the PNG pages are drawn by a forked child while this process draws the PDF: the
-two renderings of each page on two cores (docs/benchmarks.md).
+two renderings of each page on two cores (docs/benchmarks.md). What both renderings draw and
+costs time to compute (page 5's predicted maps, a page module's ``prepare``) is computed once
+before the fork, and the objects alive before the report are frozen out of the garbage
+collector's scans while it draws.
 
 Importing this module does not import matplotlib; :func:`write_report` does.
 """
@@ -34,6 +37,7 @@ Importing this module does not import matplotlib; :func:`write_report` does.
 from __future__ import annotations
 
 import datetime as _dt
+import gc
 import os
 import pickle
 import re
@@ -44,6 +48,7 @@ import threading
 import time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -138,8 +143,11 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
     pages = _Pages(ctx, shown, written)
     child = None
     try:
-        with mpl.rc_context(RC), warnings.catch_warnings():
+        with mpl.rc_context(RC), warnings.catch_warnings(), _older_objects_frozen():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN slices and the like
+            for m in _MODULES:      # what both renderings draw, computed once (before a fork)
+                if hasattr(m, "prepare"):
+                    m.prepare(ctx)
             if png_dir is not None and _can_fork():
                 child = _PngChild.start(pages, png_dir)      # None if it cannot start
             t_pdf = time.perf_counter()
@@ -158,6 +166,24 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
     if out_pdf.resolve().is_relative_to(results_dir.resolve()):
         ctx.res.record("timings_s", "report", round(time.perf_counter() - t0, 4))
     return out_pdf
+
+
+@contextmanager
+def _older_objects_frozen():
+    """The objects alive before the report (the caller's, the libraries') left out of the
+    garbage collector's scans while it draws (``gc.freeze``): the full collections took ~0.1
+    s of a report in an analysis process (0.017 s with them frozen; docs/benchmarks.md), and
+    a forked child's collections no longer write to, and so copy, those objects' pages
+    (Python's advice for a fork without exec). Nothing is done when the caller has frozen
+    objects itself."""
+    if gc.get_freeze_count():
+        yield
+        return
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 class _Pages:

@@ -176,6 +176,64 @@ def test_png_pages_are_the_same_from_a_forked_child_or_this_process(results_copy
 
 
 @pytest.mark.parametrize("fork", [True, False])
+def test_the_angular_maps_are_predicted_once_and_before_the_fork(results_copy, tmp_path,
+                                                                 monkeypatch, fork):
+    """Page 5's maps (0.2-0.4 s of thin-film optics) are predicted once per report, in this
+    process before the PNG child forks, so that the child draws them without predicting
+    them again: every prediction is made by this process, and only one."""
+    import os
+
+    from microfacet.report import page_angular, writer
+
+    if fork and not writer._can_fork():
+        pytest.skip("this process cannot fork safely (another thread, or not Linux)")
+    monkeypatch.setattr(writer, "_can_fork", lambda: fork)
+    marks = tmp_path / "predictions"
+    marks.mkdir()
+    predict = page_angular.predicted_maps
+
+    def recorded(ctx):
+        (marks / f"{os.getpid()}-{len(list(marks.iterdir()))}").touch()
+        return predict(ctx)
+
+    monkeypatch.setattr(page_angular, "predicted_maps", recorded)
+    write_report(results_copy(), png_dir=tmp_path / "png")
+    assert [f.name.split("-")[0] for f in marks.iterdir()] == [str(os.getpid())]
+    assert (tmp_path / "png" / f"report_{len(PAGES)}_angular.png").is_file()
+
+
+@pytest.mark.parametrize("caller_froze", [False, True])
+def test_older_objects_are_frozen_while_the_report_draws(results_copy, tmp_path, monkeypatch,
+                                                         caller_froze):
+    """While the pages are drawn the objects alive before the report are out of the
+    collector's scans (gc.freeze); afterwards they are back, unless the caller had frozen
+    them itself, which is left as it was."""
+    import gc
+
+    from microfacet.report import page_parameters
+
+    seen = []
+    draw = page_parameters.draw
+
+    def recorded(pg, ctx):
+        seen.append(gc.get_freeze_count())
+        return draw(pg, ctx)
+
+    monkeypatch.setattr(page_parameters, "draw", recorded)
+    if caller_froze:
+        gc.freeze()
+    try:
+        before = gc.get_freeze_count()
+        write_report(results_copy(), out_pdf=tmp_path / "r.pdf")
+        after = gc.get_freeze_count()
+    finally:
+        gc.unfreeze()
+    assert seen and seen[0] > 0
+    assert (before > 0) == caller_froze
+    assert (after > 0) == caller_froze      # frozen objects freed meanwhile leave the count
+
+
+@pytest.mark.parametrize("fork", [True, False])
 def test_a_png_that_cannot_be_written_fails_the_report_and_leaves_no_pdf(results_copy,
                                                                          tmp_path, fork,
                                                                          monkeypatch):
