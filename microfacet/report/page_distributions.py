@@ -356,10 +356,14 @@ def _plain_log_formatter():
 
 
 def _plain_log_labels(axis):
-    """The log scale's own major and minor formatters, in plain text."""
+    """The log scale's own major and minor formatters, in plain text, and minor ticks at 2
+    and 5 times each power of ten (matplotlib's eight a decade made 48 ticks over this
+    panel's six decades, each of them five artists drawn for the PDF and again for the
+    PNG: ~0.05 s a rendering)."""
     cls = _plain_log_formatter()
     axis.set_major_formatter(cls(10.0))
     axis.set_minor_formatter(cls(10.0, labelOnlyBase=True))
+    axis.set_minor_locator(mticker.LogLocator(10.0, subs=(2.0, 5.0)))
 
 
 # --------------------------------------------------------------------------- legends
