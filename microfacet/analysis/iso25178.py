@@ -150,13 +150,20 @@ def areal_parameters(height_um, *, pixel_size_um, reference: str = "plane",
     if n < 3:
         raise InputError(f"{n} usable heights; the parameters need at least 3", param="height_um")
     z, slope = _residuals(h, ok, py, px, reference)
+    # each float64 array let go once its numbers are taken (8 bytes a pixel each)
     zv = z[ok]
+    sq, sa = math.sqrt(float(np.mean(zv ** 2))), float(np.mean(np.abs(zv)))
+    del zv
     g2 = _cell_gradients_squared(z, ok, py, px)
+    del z
     nc = int(g2.size)
     sdq = math.sqrt(float(np.mean(g2))) if nc else math.nan
-    sdr = float(np.mean(np.sqrt(1.0 + g2) - 1.0)) * 100.0 if nc else math.nan
-    return ArealParameters(Sq_um=math.sqrt(float(np.mean(zv ** 2))),
-                           Sa_um=float(np.mean(np.abs(zv))), Sdq=sdq, Sdr_percent=sdr,
+    if nc:
+        g2 += 1.0                                   # √(1 + g²) − 1, in place
+        np.sqrt(g2, out=g2)
+        g2 -= 1.0
+    sdr = float(np.mean(g2)) * 100.0 if nc else math.nan
+    return ArealParameters(Sq_um=sq, Sa_um=sa, Sdq=sdq, Sdr_percent=sdr,
                            reference=reference, plane_slope_yx=slope, n_points=n,
                            n_cells=nc)
 

@@ -528,8 +528,8 @@ def joint_pixel_tilts(joint: JointResult, colour, model, theta_grid_deg,
                     joint.prior_deg, joint.prior_sigma_deg)
     inv = invert_tilt(colour.lab.reshape(-1, 3)[flat], fid, rows, theta_grid_deg, model,
                       options)
-    out = PixelEstimates.empty(colour.lab.shape[:2])
-    out.thickness_nm.reshape(-1)[flat] = d_f[fid]
-    out.fill(flat, None, inv)
-    out.thickness_group = joint.facets
-    return out
+    thickness = d_f.astype(np.float32)[fid]          # the facet's, as the map stores it
+    del fid
+    # the maps made one at a time, each of the inversion's arrays let go once stored
+    return PixelEstimates.scattered(colour.lab.shape[:2], flat, inv, thickness_nm=thickness,
+                                    group=joint.facets)

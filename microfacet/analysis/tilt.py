@@ -93,6 +93,25 @@ class PixelEstimates:
         nan = [np.full(shape, np.nan, np.float32) for _ in range(5)]
         return cls(*nan, np.zeros(shape, np.int32))
 
+    @classmethod
+    def scattered(cls, shape, flat, inversion: "TiltInversion", *, thickness_nm,
+                  group) -> "PixelEstimates":
+        """The maps of ``shape`` with the inversion of the flat pixel indices ``flat`` and
+        their ``thickness_nm`` (one value per index) stored, NaN elsewhere, and ``group`` as
+        ``thickness_group``. Each map is made when it is filled and the inversion's array is
+        let go once stored (the inversion is left without them): the memory of one map at a
+        time beside the inversion's, not of five (4 bytes a pixel each)."""
+        maps = {}
+        for name in ("thickness_nm", "tilt_deg", "tilt_sigma_deg", "delta_e", "colour_weight"):
+            m = np.full(shape, np.nan, np.float32)
+            if name == "thickness_nm":
+                m.reshape(-1)[flat] = thickness_nm
+            else:
+                m.reshape(-1)[flat] = getattr(inversion, name)
+                setattr(inversion, name, None)
+            maps[name] = m
+        return cls(**maps, thickness_group=group)
+
     def fill(self, yy, xx, inversion: "TiltInversion") -> None:
         """Store a :class:`TiltInversion` of the pixels ``(yy, xx)`` (or, with ``xx`` None,
         of the flat pixel indices ``yy``)."""

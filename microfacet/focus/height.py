@@ -356,14 +356,19 @@ class _Scan:
 def _scan(plan: _Plan, load, *, prefetch: bool, progress) -> _Scan:
     """Read the slices once in increasing z: focus measures, running peaks, composite."""
     o, (H, W), n = plan.options, plan.slices.shape, plan.slices.n
-    trackers = [PeakTracker(((H + 1) // 2, (W + 1) // 2) if ds == 2 else (H, W),
-                            radius=o.fit_radius_used, n_slices=n) for _, _, ds in plan.windows]
+    trackers = []
+    for _, _, ds in plan.windows:       # one set of work planes per grid (pushed in turn)
+        trackers.append(PeakTracker(((H + 1) // 2, (W + 1) // 2) if ds == 2 else (H, W),
+                                    radius=o.fit_radius_used, n_slices=n,
+                                    work_from=trackers[0] if trackers else None))
     composite = _Composite((H, W), plan.slices.channels)
     t_read = t_focus = 0.0
     with _slices_in_z_order(load, plan.order, prefetch) as slices:
         for k, img, t_wait in slices:
             t1 = time.perf_counter()
-            fs = focus_measures(img, plan.windows, operator=o.operator, colour=o.colour)
+            # each window's measure computed into its tracker's ring: no copy, no extra map
+            fs = focus_measures(img, plan.windows, operator=o.operator, colour=o.colour,
+                                out=[tr.next_slot(k) for tr in trackers])
             for tr, f in zip(trackers, fs):
                 tr.push(f, k)
             composite.add(fs[plan.main], img)

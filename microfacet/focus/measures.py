@@ -89,23 +89,36 @@ def _check_window(window_px, window):
         raise ValueError(f"window must be 'gaussian' or 'box', not {window!r}")
 
 
-def _window_sum(img: np.ndarray, window_px: int, window: str, downsample: int = 1) -> np.ndarray:
-    """Window mean of ``img`` (already reduced by ``downsample`` when that is 2)."""
+def _window_sum(img: np.ndarray, window_px: int, window: str, downsample: int = 1, *,
+                dst=None) -> np.ndarray:
+    """Window mean of ``img`` (already reduced by ``downsample`` when that is 2), written
+    into ``dst`` when given."""
     if downsample == 2:
         sig = math.sqrt(max(window_px * window_px / 12.0 - _PYR_SIGMA ** 2, 0.0)) / 2.0
-        if window == "box":
-            side = max(1, int(round(window_px / 2.0)) | 1)
-            return cv2.boxFilter(img, -1, (side, side), normalize=True,
-                                 borderType=cv2.BORDER_REFLECT) if side > 1 else img
-        return cv2.GaussianBlur(img, (0, 0), sig, borderType=cv2.BORDER_REFLECT) \
-            if sig > 0.05 else img
+        side = max(1, int(round(window_px / 2.0)) | 1)
+        if window == "box" and side > 1:
+            return _into(cv2.boxFilter(img, -1, (side, side), dst=dst, normalize=True,
+                                       borderType=cv2.BORDER_REFLECT), dst)
+        if window != "box" and sig > 0.05:
+            return _into(cv2.GaussianBlur(img, (0, 0), sig, dst=dst,
+                                          borderType=cv2.BORDER_REFLECT), dst)
+        return _into(img, dst)
     if window_px == 1:
-        return img
+        return _into(img, dst)
     if window == "box":
-        return cv2.boxFilter(img, -1, (window_px, window_px), normalize=True,
-                             borderType=cv2.BORDER_REFLECT)
+        return _into(cv2.boxFilter(img, -1, (window_px, window_px), dst=dst, normalize=True,
+                                   borderType=cv2.BORDER_REFLECT), dst)
     sigma = window_px / math.sqrt(12.0)
-    return cv2.GaussianBlur(img, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+    return _into(cv2.GaussianBlur(img, (0, 0), sigma, dst=dst, borderType=cv2.BORDER_REFLECT),
+                 dst)
+
+
+def _into(a, dst):
+    """``a``, in ``dst`` when one is given (copied there unless OpenCV already wrote it)."""
+    if dst is None or a is dst:
+        return a
+    np.copyto(dst, a)
+    return dst
 
 
 def _channels(image, colour):
@@ -139,7 +152,7 @@ def _energy(g, operator):
 
 def focus_measures(image: np.ndarray, windows: Sequence[tuple[int, str, int]], *,
                    operator: str = _DEFAULTS.operator,
-                   colour: str = _DEFAULTS.colour) -> list[np.ndarray]:
+                   colour: str = _DEFAULTS.colour, out=None) -> list[np.ndarray]:
     """The focus measure of one slice for several windows.
 
     Parameters
@@ -151,6 +164,10 @@ def focus_measures(image: np.ndarray, windows: Sequence[tuple[int, str, int]], *
         the grid ``[::2, ::2]``, shape ``((H+1)//2, (W+1)//2)``).
     operator, colour
         See :func:`focus_measure`.
+    out : sequence of ndarray or None, optional
+        Where to write each window's map (float32, C-contiguous, of its grid), e.g. the ring
+        buffers of the streaming peak trackers (:meth:`~microfacet.focus.stream.PeakTracker.
+        next_slot`); the maps returned are these arrays, with the same values as without.
 
     Returns
     -------
@@ -163,29 +180,32 @@ def focus_measures(image: np.ndarray, windows: Sequence[tuple[int, str, int]], *
         _check_window(px, win)
         if ds not in (1, 2):
             raise ValueError(f"downsample must be 1 or 2, got {ds!r}")
+    dsts = [None] * len(windows) if out is None else list(out)
+    if len(dsts) != len(windows):
+        raise ValueError(f"out: one array per window ({len(windows)}), got {len(dsts)}")
     g = _channels(image, colour)
-    out = []
+    maps = []
     if operator == "glv":
         g2 = cv2.multiply(g, g)
         half = None
-        for px, win, ds in windows:
+        for (px, win, ds), dst in zip(windows, dsts):
             a, b = g, g2
             if ds == 2:
                 half = half or (cv2.pyrDown(g), cv2.pyrDown(g2))
                 a, b = half
             m = _window_sum(a, px, win, ds)
             v = cv2.subtract(_window_sum(b, px, win, ds), cv2.multiply(m, m))
-            out.append(cv2.max(_sum_channels(v), 0.0))
-        return out
+            maps.append(_into(cv2.max(_sum_channels(v), 0.0, dst=dst), dst))
+        return maps
     e = _energy(g, operator)
     e_half = None
-    for px, win, ds in windows:
+    for (px, win, ds), dst in zip(windows, dsts):
         if ds == 2:
             e_half = cv2.pyrDown(e) if e_half is None else e_half
-            out.append(_window_sum(e_half, px, win, 2))
+            maps.append(_window_sum(e_half, px, win, 2, dst=dst))
         else:
-            out.append(_window_sum(e, px, win))
-    return out
+            maps.append(_window_sum(e, px, win, dst=dst))
+    return maps
 
 
 def focus_measure(image: np.ndarray, *, operator: str = _DEFAULTS.operator,

@@ -9,7 +9,10 @@ a fixed number of image-sized buffers whatever the number of slices:
 * the running sum of the focus values and of the squared second differences along ``z``
   (the tails' level and noise, for the significance of the peak).
 
-Memory: ``2(2r+1) + 5`` float32 buffers of the tracker's grid.
+Memory: ``2(2r+1) + 4`` float32 buffers of the tracker's grid and a bool one, of which
+one float32 and the bool are work planes that trackers of the same grid, pushed one after
+another, share (``work_from``). The focus image of a rank can be computed straight into the
+ring (:meth:`PeakTracker.next_slot`): :meth:`PeakTracker.push` then copies nothing.
 
 Examples
 --------
@@ -44,6 +47,9 @@ class PeakTracker:
         ``r``: neighbours kept on each side of the best slice.
     n_slices : int
         Number of slices (sets the precision of the running sums).
+    work_from : PeakTracker, optional
+        A tracker of the same grid whose work planes this one shares: trackers that are
+        pushed one after another (never concurrently) need one set between them.
 
     Attributes
     ----------
@@ -59,7 +65,8 @@ class PeakTracker:
         Sum over all slices of the squared second difference ``F(k+1) − 2F(k) + F(k−1)``.
     """
 
-    def __init__(self, shape, *, radius: int, n_slices: int):
+    def __init__(self, shape, *, radius: int, n_slices: int,
+                 work_from: PeakTracker | None = None):
         self.r = int(radius)
         self.k = 2 * self.r + 1
         self.n = int(n_slices)
@@ -70,15 +77,26 @@ class PeakTracker:
         self.best_rank = np.zeros(shape, np.int32)
         self.fsum = np.zeros(shape, big)
         self.d2sum = np.zeros(shape, big)
-        self._d2 = np.zeros(shape, np.float32)
-        self._mask = np.empty(shape, bool)
-        self._nan = np.full(shape, np.nan, np.float32)
+        if work_from is not None and work_from._d2 is not None \
+                and work_from._d2.shape == tuple(shape):
+            self._d2, self._mask = work_from._d2, work_from._mask
+        else:
+            self._d2 = np.zeros(shape, np.float32)
+            self._mask = np.empty(shape, bool)
         self._last = -1
+
+    def next_slot(self, rank: int) -> np.ndarray:
+        """The ring buffer (float32, the tracker's grid) that the focus image of z rank
+        ``rank`` may be computed into before it is pushed (the rank ``2r+1`` before it, which
+        it replaces, is no longer read): :meth:`push` of that buffer copies nothing."""
+        return self.ring[int(rank) % self.k]
 
     def push(self, f: np.ndarray, rank: int) -> None:
         """Add the focus image of z rank ``rank`` (ranks 0, 1, 2, … in order)."""
         k = self.k
-        np.copyto(self.ring[rank % k], f)
+        slot = self.ring[rank % k]
+        if not _same_buffer(f, slot):
+            np.copyto(slot, f)
         self.fsum += f
         if rank >= 2:
             d2 = self._d2
@@ -111,15 +129,24 @@ class PeakTracker:
         np.copyto(self.best_rank, c, where=self._mask)
         for j in range(k):
             rk = c - r + j
-            src = ring[rk % k] if 0 <= rk <= last else self._nan
-            cv2.copyTo(src, m8, self.window[j])
+            if 0 <= rk <= last:
+                cv2.copyTo(ring[rk % k], m8, self.window[j])
+            else:                                       # beyond the stack (its first or
+                np.copyto(self.window[j], np.nan, where=self._mask)     # last r ranks)
 
     def release_ring(self) -> None:
         """Free the ring and the scan's work arrays (after :meth:`finish`)."""
         self.ring = None
-        self._d2 = self._mask = self._nan = None
+        self._d2 = self._mask = None
 
     def release_curves(self) -> None:
         """Free what only the peak fit reads — ``window``, ``fsum``, ``d2sum`` — once it has
         read them; ``best`` and ``best_rank`` stay."""
         self.window = self.fsum = self.d2sum = None
+
+
+def _same_buffer(a, b) -> bool:
+    """Whether ``a`` is the array ``b`` (the same memory, shape, strides and type)."""
+    return (isinstance(a, np.ndarray) and a.dtype == b.dtype and a.shape == b.shape
+            and a.strides == b.strides
+            and a.__array_interface__["data"][0] == b.__array_interface__["data"][0])

@@ -458,4 +458,6 @@ def height_sigma_with_bias(focus):
         return s
     v = disagreement_variance(focus.height_fit_um, s, focus.evidence_height_um,
                               focus.evidence_sigma_um)
-    return np.sqrt(s * s + v).astype(np.float32)
+    out = np.multiply(s, s, dtype=np.float32)     # √(s² + v) in float32, in one array
+    out += v
+    return np.sqrt(out, out=out)

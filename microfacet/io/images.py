@@ -47,6 +47,7 @@ import numpy as np
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
+from ..core.threads import BLOCK_VALUES, chunks
 
 cv2 = load("cv2")
 tifffile = load("tifffile")
@@ -471,11 +472,22 @@ def to_code_values(image, *, bit_depth=8):
         return img
     if bit_depth not in (8, 16):
         raise ValueError(f"bit_depth: must be 8 or 16, got {bit_depth!r}")
-    top, dtype = (255, np.uint8) if bit_depth == 8 else (65535, np.uint16)
-    a = np.nan_to_num(img, nan=0.0)          # the one float copy, worked on in place
-    np.clip(a, 0, 1, out=a)
-    a *= top
-    return np.round(a, out=a).astype(dtype)
+    out = np.empty(img.shape, np.uint8 if bit_depth == 8 else np.uint16)
+    _code_values_into(img, out)
+    return out
+
+
+def _code_values_into(img, out) -> None:
+    """:func:`to_code_values` of the float image ``img`` written into ``out`` (uint8 or
+    uint16, any strides: a channel-reversed view writes BGR), a block of rows at a time: the
+    float copy the values are worked on in is one block's, not the image's."""
+    top = float(np.iinfo(out.dtype).max)
+    rows = BLOCK_VALUES // max(1, int(np.prod(img.shape[1:], dtype=np.int64)))
+    for a, b in chunks(img.shape[0], rows):
+        blk = np.nan_to_num(img[a:b], nan=0.0)          # this block's float copy
+        np.clip(blk, 0, 1, out=blk)
+        blk *= top
+        out[a:b] = np.round(blk, out=blk)
 
 
 def write_image(path, image, *, bit_depth=8, params=(), pixel_size_um=None):
@@ -489,10 +501,15 @@ def write_image(path, image, *, bit_depth=8, params=(), pixel_size_um=None):
     OSError
         Naming the path, if OpenCV cannot write it.
     """
-    img = to_code_values(image, bit_depth=bit_depth)
-    if img.ndim == 3:
-        img = img[..., ::-1]  # OpenCV writes BGR
-    img = np.ascontiguousarray(img)
+    src = np.asarray(image)
+    if src.dtype.kind in "ui" or src.ndim != 3:
+        img = to_code_values(src, bit_depth=bit_depth)
+        img = np.ascontiguousarray(img[..., ::-1] if img.ndim == 3 else img)  # OpenCV: BGR
+    else:                       # the code values written straight in OpenCV's BGR order
+        if bit_depth not in (8, 16):
+            raise ValueError(f"bit_depth: must be 8 or 16, got {bit_depth!r}")
+        img = np.empty(src.shape, np.uint8 if bit_depth == 8 else np.uint16)
+        _code_values_into(src, img[..., ::-1])
     if pixel_size_um is None or Path(path).suffix.lower() != ".png":
         if not cv2.imwrite(str(path), img, list(params)):
             raise OSError(f"cannot write {path}")

@@ -6,7 +6,14 @@ import pytest
 
 from microfacet import colour as color
 from microfacet.analysis.options import TiltOptions
-from microfacet.analysis.tilt import TiltRows, invert_tilt, model_lab_rows, tilt_grid
+from microfacet.analysis.tilt import (
+    PixelEstimates,
+    TiltInversion,
+    TiltRows,
+    invert_tilt,
+    model_lab_rows,
+    tilt_grid,
+)
 from microfacet.colour.model import FilmColourModel
 from microfacet.colour.table import build_colour_table
 
@@ -124,3 +131,28 @@ def test_the_colour_difference_formula_is_the_one_asked_for(table, method, formu
     # and the search minimised that formula: no grid node is better by it
     on_grid = formula(rows.lab[0][None, :, :], lab[:, None, :]).min(axis=1)
     assert np.all(inv.delta_e <= on_grid + 1e-3)
+
+
+def test_scattered_maps_equal_the_filled_ones_and_let_the_inversion_go():
+    """PixelEstimates.scattered (each map made in turn, the inversion's arrays let go) gives
+    the maps of empty() + fill() with the thickness stored beside them, bitwise."""
+    rng = np.random.default_rng(4)
+    shape = (13, 17)
+    flat = np.sort(rng.choice(shape[0] * shape[1], 120, replace=False))
+
+    def inversion():
+        r = np.random.default_rng(5)
+        return TiltInversion(*(r.random(flat.size).astype(np.float32) for _ in range(5)))
+
+    thick = rng.uniform(100, 150, flat.size).astype(np.float32)
+    group = rng.integers(0, 9, shape).astype(np.int32)
+    ref = PixelEstimates.empty(shape)
+    ref.thickness_nm.reshape(-1)[flat] = thick
+    ref.fill(flat, None, inversion())
+    inv = inversion()
+    got = PixelEstimates.scattered(shape, flat, inv, thickness_nm=thick, group=group)
+    for name in ("thickness_nm", "tilt_deg", "tilt_sigma_deg", "delta_e", "colour_weight"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
+        assert getattr(got, name).dtype == np.float32
+    assert got.thickness_group is group
+    assert inv.tilt_deg is None and inv.delta_e is None

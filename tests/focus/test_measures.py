@@ -72,3 +72,22 @@ def test_noise_shape_of_box_variance_is_chi_square():
     k7 = noise_shape(operator="tenengrad", window_px=7, window="gaussian", downsample=1,
                      colour="luma", channels=1)
     assert 3.0 < k15 / k7 < 6.0
+
+
+@pytest.mark.parametrize("op", ["tenengrad", "sml", "glv"])
+def test_measures_written_into_given_arrays_are_the_same(op):
+    """``out=``: each window's map is written into the array given (the trackers' ring
+    buffers) and returned, bitwise equal to the maps made without it; the full and the
+    downsampled grids, a 1-px window (the energy itself), a box window."""
+    rng = np.random.default_rng(3)
+    img = rng.random((37, 41, 3)).astype(np.float32)
+    windows = [(7, "gaussian", 1), (15, "gaussian", 2), (1, "gaussian", 1), (5, "box", 1),
+               (11, "box", 2)]
+    ref = focus_measures(img, windows, operator=op)
+    out = [np.full(r.shape, -1.0, np.float32) for r in ref]
+    got = focus_measures(img, windows, operator=op, out=out)
+    for r, g, o in zip(ref, got, out):
+        assert g is o
+        np.testing.assert_array_equal(g, r)
+    with pytest.raises(ValueError, match="one array per window"):
+        focus_measures(img, windows, operator=op, out=out[:2])

@@ -47,3 +47,33 @@ def test_tracker_many_slices_uses_double_sums():
     np.testing.assert_allclose(tr.fsum, vol.astype(np.float64).sum(0), rtol=1e-12)
     tr.release_ring()
     assert tr.ring is None
+
+
+@pytest.mark.parametrize("n, radius", [(3, 2), (12, 2), (9, 1)])
+def test_measures_computed_into_the_ring_and_shared_work_planes_change_nothing(n, radius):
+    """Focus images written straight into the ring (next_slot) and two trackers of one grid
+    sharing their work planes, pushed in turn, give every array bitwise as a tracker of its
+    own fed copies does."""
+    rng = np.random.default_rng(n + 7 * radius)
+    vols = [rng.random((n, 6, 7)).astype(np.float32) for _ in range(2)]
+    ref = [PeakTracker((6, 7), radius=radius, n_slices=n) for _ in range(2)]
+    first = PeakTracker((6, 7), radius=radius, n_slices=n)
+    got = [first, PeakTracker((6, 7), radius=radius, n_slices=n, work_from=first)]
+    assert got[1]._d2 is got[0]._d2 and got[1]._mask is got[0]._mask
+    for k in range(n):
+        for vol, a, b in zip(vols, ref, got):
+            a.push(vol[k].copy(), k)
+            slot = b.next_slot(k)
+            slot[...] = vol[k]
+            b.push(slot, k)
+    for a, b in zip(ref, got):
+        a.finish()
+        b.finish()
+        for name in ("best", "best_rank", "window", "fsum", "d2sum"):
+            np.testing.assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+
+
+def test_work_planes_are_not_shared_across_grids():
+    full = PeakTracker((6, 7), radius=2, n_slices=5)
+    half = PeakTracker((3, 4), radius=2, n_slices=5, work_from=full)
+    assert half._d2.shape == (3, 4) and half._d2 is not full._d2

@@ -305,6 +305,27 @@ def test_rgb_order_is_kept_on_disk(tmp_path):
     assert decode_image(p, WHERE)[0, 0].tolist() == [200, 0, 0]
 
 
+@pytest.mark.parametrize("bit_depth", [8, 16])
+def test_code_values_worked_a_block_at_a_time_equal_the_whole_image_formula(tmp_path,
+                                                                           bit_depth):
+    """An image of several blocks of rows (BLOCK_VALUES) gets the code values of the formula
+    applied to the whole image at once, NaN and ±inf included, and write_image writes them
+    (in OpenCV's BGR order) as read back."""
+    from microfacet.core.threads import BLOCK_VALUES
+
+    rng = np.random.default_rng(9)
+    rows = 3 * (BLOCK_VALUES // (40 * 3)) + 5
+    img = rng.normal(0.5, 0.4, (rows, 40, 3)).astype(np.float32)
+    img[1, 2, 0], img[-1, 3, 1], img[rows // 2, 0, 2] = np.nan, np.inf, -np.inf
+    top = 255 if bit_depth == 8 else 65535
+    ref = np.round(np.clip(np.nan_to_num(img, nan=0.0), 0, 1) * np.float32(top))
+    ref = ref.astype(np.uint8 if bit_depth == 8 else np.uint16)
+    np.testing.assert_array_equal(to_code_values(img, bit_depth=bit_depth), ref)
+    write_image(tmp_path / "i.png", img, bit_depth=bit_depth, pixel_size_um=0.5)
+    back = cv2.imread(str(tmp_path / "i.png"), cv2.IMREAD_UNCHANGED)[..., ::-1]
+    np.testing.assert_array_equal(back, ref)
+
+
 def test_to_code_values_clips_rounds_and_maps_nan_to_zero():
     x = np.array([-0.5, 0.0, 0.6 / 255, 0.4 / 255, 1.0, 2.0, np.nan])
     np.testing.assert_array_equal(to_code_values(x), [0, 0, 1, 0, 255, 255, 0])
