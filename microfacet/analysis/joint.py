@@ -47,7 +47,13 @@ from .facet_thickness import (
     refine_exposure_on_facets,
 )
 from .options import JointOptions, TiltOptions
-from .planes import FacetFit, dome_mean_square_slope, facet_edge_distance, fit_facet_planes
+from .planes import (
+    FacetFit,
+    at_least_px,
+    dome_mean_square_slope,
+    facet_edge_distance,
+    fit_facet_planes,
+)
 from .roi import EXPOSURE_DISTINCT
 from .sampling import weighted_median
 from .segmentation import segment_facets
@@ -308,7 +314,7 @@ def facet_geometry(seg: Segmented, scene, options: JointOptions) -> FacetGeometr
     S = int(facets.max()) + 1
     area = np.bincount(facets.ravel(), minlength=S)
     dist = facet_edge_distance(facets)
-    inside = dist >= options.plane_edge_px
+    inside = at_least_px(dist, options.plane_edge_px)
 
     def planes_through(h: HeightInputs) -> FacetFit:
         return fit_facet_planes(facets, h.height_um, height_sigma_um=h.sigma_um,
@@ -337,8 +343,8 @@ def facet_image(g: FacetGeometry, colour, roi, options: JointOptions) -> FacetIm
     """The colour image as ``g``'s facets, with ``roi``'s thickness per pixel."""
     thick_roi_px = roi.thickness_nm[roi.index_map(colour.lab.shape[:2])]
     usable = ~colour.mask.mask & np.isfinite(thick_roi_px)
-    return FacetImage(g.labels, colour.lab, usable, g.edge_distance >= options.interior_px,
-                      thick_roi_px)
+    return FacetImage(g.labels, colour.lab, usable,
+                      at_least_px(g.edge_distance, options.interior_px), thick_roi_px)
 
 
 def _facets_in_colour(g: FacetGeometry, colour, roi, model, scene, options: JointOptions

@@ -47,7 +47,7 @@ from ..focus.options import FocusOptions
 from ..focus.uncertainty import height_sigma_with_bias
 from .joint import focus_heights
 from .options import JointOptions
-from .planes import deconvolved_rms_slope, facet_edge_distance, fit_facet_planes
+from .planes import at_least_px, deconvolved_rms_slope, facet_edge_distance, fit_facet_planes
 from .segmentation import relabel
 
 __all__ = ["Conditions", "RenderedStack", "SelfCheck", "measured_rms_slope", "self_check_ndf",
@@ -357,7 +357,7 @@ def _recovered_planes(sc, height_um, focus_options, joint, seed):
     rel = foc.reliable & np.isfinite(sig) & (sig > 0)
     z_scores = np.abs(foc.height_fit_um[rel] - height_um[rel]) / sig[rel]
     got = focus_heights(foc, joint)
-    interior = facet_edge_distance(sc.labels) >= joint.plane_edge_px
+    interior = at_least_px(facet_edge_distance(sc.labels), joint.plane_edge_px)
     return fit_facet_planes(sc.labels, got.height_um, height_sigma_um=got.sigma_um,
                             reliable=got.reliable & interior, pixel_size_um=sc.pixel_yx,
                             min_pixels=joint.min_plane_pixels,
