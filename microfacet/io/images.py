@@ -470,11 +470,16 @@ def to_code_values(image, *, bit_depth=8):
     img = np.asarray(image)
     if img.dtype.kind in "ui":
         return img
-    if bit_depth not in (8, 16):
-        raise ValueError(f"bit_depth: must be 8 or 16, got {bit_depth!r}")
-    out = np.empty(img.shape, np.uint8 if bit_depth == 8 else np.uint16)
+    out = np.empty(img.shape, _code_dtype(bit_depth))
     _code_values_into(img, out)
     return out
+
+
+def _code_dtype(bit_depth):
+    """The code values' dtype of ``bit_depth`` (8 or 16; anything else raises ValueError)."""
+    if bit_depth not in (8, 16):
+        raise ValueError(f"bit_depth: must be 8 or 16, got {bit_depth!r}")
+    return np.uint8 if bit_depth == 8 else np.uint16
 
 
 def _code_values_into(img, out) -> None:
@@ -506,9 +511,7 @@ def write_image(path, image, *, bit_depth=8, params=(), pixel_size_um=None):
         img = to_code_values(src, bit_depth=bit_depth)
         img = np.ascontiguousarray(img[..., ::-1] if img.ndim == 3 else img)  # OpenCV: BGR
     else:                       # the code values written straight in OpenCV's BGR order
-        if bit_depth not in (8, 16):
-            raise ValueError(f"bit_depth: must be 8 or 16, got {bit_depth!r}")
-        img = np.empty(src.shape, np.uint8 if bit_depth == 8 else np.uint16)
+        img = np.empty(src.shape, _code_dtype(bit_depth))
         _code_values_into(src, img[..., ::-1])
     if pixel_size_um is None or Path(path).suffix.lower() != ".png":
         if not cv2.imwrite(str(path), img, list(params)):

@@ -65,13 +65,11 @@ def stack_for(work: Path, mp: float, slices: int) -> Path:
     side = int(round(np.sqrt(mp * 1e6) / 16.0)) * 16
     path = work / f"nd-{side}x{side}-{slices}"
     if not (path / "stack.json").is_file():
-        # in a child process: Linux carries a parent's high-water RSS into the children it
-        # starts, so a stack made in this process would set the analyses' measured peaks
-        code = ("import sys; from microfacet.forward.synth import generate_stack, preset; "
-                "generate_stack(sys.argv[1], preset('nd', seed=3, height_px=int(sys.argv[2]), "
-                "width_px=int(sys.argv[2]), n_slices=int(sys.argv[3])))")
-        subprocess.run([sys.executable, "-c", code, str(path), str(side), str(slices)],
-                       check=True)
+        # by `microfacet synth` in a child process: Linux carries a parent's high-water RSS
+        # into the children it starts, so a stack made here would set the measured peaks
+        subprocess.run([sys.executable, "-m", "microfacet", "-q", "synth", "--preset", "nd",
+                        "--seed", "3", "--size", f"{side}x{side}", "--slices", str(slices),
+                        str(path)], check=True)
     return path
 
 
