@@ -57,7 +57,7 @@ from .planes import (
 from .roi import EXPOSURE_DISTINCT
 from .sampling import weighted_median
 from .segmentation import segment_facets
-from .tilt import PixelEstimates, TiltRows, invert_tilt, model_lab_rows
+from .tilt import PixelEstimates, TiltRows, invert_tilt_into, model_lab_rows
 from .white_balance import rebalanced_lab
 
 __all__ = ["ExposureReadings", "FacetGeometry", "JointResult", "Segmented", "bootstrap_labels",
@@ -527,15 +527,10 @@ def joint_pixel_tilts(joint: JointResult, colour, model, theta_grid_deg,
     prior. ``model`` is at the joint stage's exposure."""
     d_f = joint.thickness.thickness_nm
     flat = np.flatnonzero(joint.usable & np.isfinite(d_f)[joint.facets])  # 8 B/px
-    fid = joint.facets.reshape(-1)[flat]
     d_rows = np.where(np.isfinite(d_f), d_f, model.thickness_range_nm[0])
     # thickness, noise and prior are the facet's: given per row, gathered chunk by chunk
     rows = TiltRows(model_lab_rows(model, d_rows, theta_grid_deg), d_f, joint.colour_sigma_de,
                     joint.prior_deg, joint.prior_sigma_deg)
-    inv = invert_tilt(colour.lab.reshape(-1, 3)[flat], fid, rows, theta_grid_deg, model,
-                      options)
-    thickness = d_f.astype(np.float32)[fid]          # the facet's, as the map stores it
-    del fid
-    # the maps made one at a time, each of the inversion's arrays let go once stored
-    return PixelEstimates.scattered(colour.lab.shape[:2], flat, inv, thickness_nm=thickness,
-                                    group=joint.facets)
+    out = PixelEstimates.empty(joint.facets.shape, group=joint.facets)
+    invert_tilt_into(out, flat, colour.lab, rows, theta_grid_deg, model, options)
+    return out

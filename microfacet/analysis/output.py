@@ -136,9 +136,11 @@ def _tables(r) -> dict:
     return tables
 
 
-def save_results(result, folder) -> None:
+def save_results(result, folder) -> dict:
     """Write the results of ``result`` into the existing folder ``folder`` (normally the
-    temporary folder of an :class:`~microfacet.io.outdir.OutputFolder`)."""
+    temporary folder of an :class:`~microfacet.io.outdir.OutputFolder`); returns the maps
+    written that ``result`` holds, as their files hold them (for
+    ``write_report(folder, maps=...)``: :func:`~microfacet.io.results.write_results_files`)."""
     r = result
     t0 = time.perf_counter()
     rel = np.isfinite(r.focus.height_um)
@@ -156,13 +158,14 @@ def save_results(result, folder) -> None:
         "facets": None if r.joint is None else r.joint.facets,
     }
     summary = build_summary(r)
-    write_results_files(
+    stored = write_results_files(
         folder, summary=summary.to_json(), maps=maps,
         images={"all_in_focus": (r.focus.all_in_focus,
                                  16 if r.stack.dtype == np.uint16 else 8)},
         tables=_tables(r))
     # the summary is written last of the files; its write time, files included, after them
     Results(folder).record("timings_s", "write", round(time.perf_counter() - t0, 4))
+    return stored
 
 
 def write_results(result, out, *, overwrite=False) -> Path:

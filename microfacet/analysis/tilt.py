@@ -40,7 +40,8 @@ from ..core.threads import chunk_starts, chunks, thread_map
 from .options import TiltOptions
 from .search import coarse_to_fine, refine
 
-__all__ = ["TiltInversion", "TiltRows", "invert_tilt", "model_lab_rows", "seed_tilts"]
+__all__ = ["TiltInversion", "TiltRows", "invert_tilt", "invert_tilt_into",
+           "model_lab_rows", "seed_tilts"]
 
 #: Pixels in flight in the search (bounded temporaries; split over the threads).
 CHUNK_PX = 65536
@@ -89,28 +90,10 @@ class PixelEstimates:
     thickness_group: np.ndarray
 
     @classmethod
-    def empty(cls, shape) -> "PixelEstimates":
+    def empty(cls, shape, *, group=None) -> "PixelEstimates":
+        """NaN maps of ``shape``, and ``group`` (default zeros) as ``thickness_group``."""
         nan = [np.full(shape, np.nan, np.float32) for _ in range(5)]
-        return cls(*nan, np.zeros(shape, np.int32))
-
-    @classmethod
-    def scattered(cls, shape, flat, inversion: "TiltInversion", *, thickness_nm,
-                  group) -> "PixelEstimates":
-        """The maps of ``shape`` with the inversion of the flat pixel indices ``flat`` and
-        their ``thickness_nm`` (one value per index) stored, NaN elsewhere, and ``group`` as
-        ``thickness_group``. Each map is made when it is filled and the inversion's array is
-        let go once stored (the inversion is left without them): the memory of one map at a
-        time beside the inversion's, not of five (4 bytes a pixel each)."""
-        maps = {}
-        for name in ("thickness_nm", "tilt_deg", "tilt_sigma_deg", "delta_e", "colour_weight"):
-            m = np.full(shape, np.nan, np.float32)
-            if name == "thickness_nm":
-                m.reshape(-1)[flat] = thickness_nm
-            else:
-                m.reshape(-1)[flat] = getattr(inversion, name)
-                setattr(inversion, name, None)
-            maps[name] = m
-        return cls(**maps, thickness_group=group)
+        return cls(*nan, np.zeros(shape, np.int32) if group is None else group)
 
     def fill(self, yy, xx, inversion: "TiltInversion") -> None:
         """Store a :class:`TiltInversion` of the pixels ``(yy, xx)`` (or, with ``xx`` None,
@@ -250,23 +233,68 @@ def invert_tilt(lab_px, row_index, rows: TiltRows, theta_grid_deg, model,
     TiltInversion
     """
     lab_px = np.asarray(lab_px, dtype=np.float32)
-    th = np.asarray(theta_grid_deg, dtype=np.float64)
     n = lab_px.shape[0]
     out = {k: np.empty(n, np.float32) for k in ("t", "s", "w", "j", "e")}
+    search = _search(rows, theta_grid_deg, model, options)
+
+    def chunk(ab):
+        a, b = ab
+        out["t"][a:b], out["s"][a:b], out["w"][a:b], out["j"][a:b], out["e"][a:b] = search(
+            lab_px[a:b], row_index[a:b])
+
+    thread_map(chunk, chunk_starts(n, CHUNK_PX))
+    return TiltInversion(out["t"], out["s"], out["e"], out["w"], out["j"])
+
+
+def invert_tilt_into(out: PixelEstimates, flat, lab, rows: TiltRows, theta_grid_deg, model,
+                     options: TiltOptions) -> None:
+    """:func:`invert_tilt` of the pixels at the flat indices ``flat`` of the image ``lab``
+    (H, W, 3), each in the row ``out.thickness_group`` gives it, stored into the maps of
+    ``out`` with the row's thickness: the same numbers, gathered and stored chunk by chunk
+    (the memory of a chunk beside the maps, not of every pixel's Lab and results: ~60 bytes
+    a pixel less; docs/benchmarks.md).
+
+    Parameters
+    ----------
+    out : PixelEstimates
+        Maps (H, W) to fill; ``thickness_group`` holds each pixel's row.
+    flat : ndarray of int, shape (n,)
+        The pixels (flat indices into H × W).
+    lab : ndarray, shape (H, W, 3)
+    rows, theta_grid_deg, model, options
+        As :func:`invert_tilt`.
+    """
+    lab_flat, group = lab.reshape(-1, 3), out.thickness_group.reshape(-1)
+    maps = [m.reshape(-1) for m in (out.tilt_deg, out.tilt_sigma_deg, out.colour_weight)]
+    de_map, d_map = out.delta_e.reshape(-1), out.thickness_nm.reshape(-1)
+    d_rows = np.asarray(rows.thickness_nm).astype(np.float32)     # as the map stores it
+    search = _search(rows, theta_grid_deg, model, options)
+
+    def chunk(ab):
+        px = flat[ab[0]:ab[1]]
+        ri = group[px]
+        t, s, w, _, e = search(np.asarray(lab_flat[px], dtype=np.float32), ri)
+        for m, v in zip(maps, (t, s, w)):
+            m[px] = v
+        de_map[px], d_map[px] = e, d_rows[ri]
+
+    thread_map(chunk, chunk_starts(flat.size, CHUNK_PX))
+
+
+def _search(rows: TiltRows, theta_grid_deg, model, options: TiltOptions):
+    """``search(lab_px, row_index) -> (tilt, σ, colour weight, J, ΔE)`` of a chunk of pixels:
+    the search of :func:`invert_tilt` with what every chunk shares computed once."""
+    th = np.asarray(theta_grid_deg, dtype=np.float64)
     sens = _sensitivity(model, rows.lab, th[1] - th[0])
     stride = max(1, min(int(options.coarse_stride), (th.size - 1) // 2))
     d_rows = np.asarray(rows.thickness_nm, dtype=np.float64)
 
-    def chunk(ab):
-        a, b = ab
-        ri = row_index[a:b]
-        out["t"][a:b], out["s"][a:b], out["w"][a:b], out["j"][a:b] = _invert_chunk(
-            lab_px[a:b], ri, rows, sens, th, model, stride)
-        # the exact ΔE at the solution (table interpolation at the off-grid tilt), per chunk
-        out["e"][a:b] = model.delta_e(lab_px[a:b], out["t"][a:b], d_rows[ri])
-
-    thread_map(chunk, chunk_starts(n, CHUNK_PX))
-    return TiltInversion(out["t"], out["s"], out["e"], out["w"], out["j"])
+    def search(lab_px, ri):
+        t, s, w, j = _invert_chunk(lab_px, ri, rows, sens, th, model, stride)
+        t = t.astype(np.float32)     # the tilt as stored, and the ΔE of that tilt
+        # the exact ΔE at the solution (table interpolation at the off-grid tilt)
+        return t, s, w, j, model.delta_e(lab_px, t, d_rows[ri])
+    return search
 
 
 def seed_tilts(colour, roi, model, theta_grid_deg, options: TiltOptions) -> PixelEstimates:

@@ -10,9 +10,11 @@ Examples
 --------
 >>> import tempfile, pathlib
 >>> d = pathlib.Path(tempfile.mkdtemp())
->>> write_results_files(d, summary={"thickness": {"mixture": {"components": [
+>>> written = write_results_files(d, summary={"thickness": {"mixture": {"components": [
 ...     {"weight": 1.0, "mean_nm": 51.0, "sd_nm": 2.0}]}}},
 ...     maps={"thickness_nm": np.full((2, 3), 51.0)})
+>>> written["thickness_nm"].dtype                 # the maps as their files hold them
+dtype('float32')
 >>> r = Results(d)
 >>> r.map("thickness_nm").shape, r.map("tilt_deg") is None
 ((2, 3), True)
@@ -107,7 +109,7 @@ def pixel_size_of(summary: dict) -> tuple[float, float] | None:
 
 
 def write_results_files(folder, *, summary: dict, maps: dict, images: dict | None = None,
-                        tables: dict | None = None, tool_copies: bool = True) -> None:
+                        tables: dict | None = None, tool_copies: bool = True) -> dict:
     """Write the files of a results folder into ``folder`` (which exists; normally the
     temporary folder of a :class:`~microfacet.io.outdir.OutputFolder`).
 
@@ -130,18 +132,28 @@ def write_results_files(folder, *, summary: dict, maps: dict, images: dict | Non
         ``pHYs`` chunk. The pixel size is ``summary["inputs"]["pixel_size_um"]``
         (:func:`pixel_size_of`).
 
+    Returns
+    -------
+    dict of str to ndarray
+        The maps given as arrays (not callables), as their files hold them (the dtypes
+        above; the array itself where it already has its dtype): what :class:`Results`
+        would read back, for a reader in the same process (``Results(folder, maps=...)``).
+
     Raises
     ------
     ValueError
         An unknown name.
     """
     folder = Path(folder)
+    stored = {name: _as_stored(name, arr) for name, arr in maps.items()
+              if arr is not None and not callable(arr)}
     pixel = pixel_size_of(summary) if tool_copies else None
     jobs = []
     for name, arr in maps.items():
         if name not in MAPS:
             raise ValueError(f"maps: unknown map {name!r}; known: {', '.join(MAPS)}")
         if arr is not None:
+            arr = stored.get(name, arr)
             jobs.append(lambda name=name, arr=arr: _write_map(folder, name, arr, pixel,
                                                               tool_copies))
     for name, (img, bit_depth) in (images or {}).items():
@@ -160,6 +172,20 @@ def write_results_files(folder, *, summary: dict, maps: dict, images: dict | Non
     # compression and the writes release the GIL (docs/benchmarks.md)
     thread_map(lambda job: job(), jobs)
     _dump(folder / "summary.json", {"format": FORMAT, **summary})
+    return stored
+
+
+def _as_stored(name, arr) -> np.ndarray:
+    """Map ``name`` as its file stores it: ``mask`` bool, ``facets`` int32, the others
+    float32 (``arr`` itself where it has that dtype).
+
+    >>> _as_stored("mask", np.array([0, 2])).tolist(), _as_stored("tilt_deg", [1]).dtype
+    ([False, True], dtype('float32'))
+    """
+    a = np.asarray(arr)
+    return (a.astype(bool, copy=False) if name == "mask" else
+            a.astype(np.int32, copy=False) if name == "facets" else
+            a.astype(np.float32, copy=False))
 
 
 def _write_map(folder, name, arr, pixel, tool_copies) -> None:
@@ -167,10 +193,7 @@ def _write_map(folder, name, arr, pixel, tool_copies) -> None:
     a = arr() if callable(arr) else arr
     if a is None:                       # a callable that had no map to give
         return
-    a = np.asarray(a)
-    a = (a.astype(bool, copy=False) if name == "mask" else
-         a.astype(np.int32, copy=False) if name == "facets" else
-         a.astype(np.float32, copy=False))
+    a = _as_stored(name, a)
     np.save(folder / MAPS[name][0], a)
     if tool_copies and name in TIFF_COPIES and a.ndim == 2:
         file, unit = TIFF_COPIES[name]
@@ -187,6 +210,10 @@ class Results:
     folder : path-like
         A results folder (docs/results-format.md). Only ``summary.json`` is required; a
         missing map, image or table reads as None.
+    maps : dict of str to ndarray, optional, keyword-only
+        Maps of the folder already in memory, as :func:`write_results_files` returned them
+        (what their files hold): :meth:`map` gives them, read-only, instead of reading the
+        files again (the analysis' report holds no second copy).
 
     Raises
     ------
@@ -195,7 +222,7 @@ class Results:
         another format (the message names the file).
     """
 
-    def __init__(self, folder):
+    def __init__(self, folder, *, maps: dict | None = None):
         self.path = Path(folder)
         f = self.path / "summary.json"
         if not self.path.is_dir():
@@ -211,6 +238,13 @@ class Results:
         self.summary = self.typed.to_json()
         self.summary_mtime = f.stat().st_mtime
         self._cache: dict = {}        # ("map" | "image" | "table", name): what was read
+        self._given: dict = {}        # name: a map given in memory (kept by release)
+        for name, arr in (maps or {}).items():
+            if name not in MAPS:
+                raise ValueError(f"maps: unknown map {name!r}; known: {', '.join(MAPS)}")
+            view = _as_stored(name, arr).view()
+            view.flags.writeable = False      # the caller's array: read, never changed
+            self._given[name] = view
 
     # -- summary ---------------------------------------------------------------------
     def get(self, *keys):
@@ -331,6 +365,8 @@ class Results:
         InputError
             The file is present but unreadable or of the wrong dimensions.
         """
+        if name in self._given:
+            return self._given[name]
         if ("map", name) in self._cache:
             return self._cache["map", name]
         if name not in MAPS:
@@ -367,7 +403,8 @@ class Results:
     def release(self) -> None:
         """Forget the maps and images read so far (a later call reads them again): a reader
         done with them, such as the report before its last pages, holds their memory no
-        longer. Tables are kept."""
+        longer. Tables are kept, and the maps given in memory (their memory is the
+        caller's)."""
         for key in [k for k in self._cache if k[0] != "table"]:
             del self._cache[key]
 

@@ -19,8 +19,8 @@ Examples
 >>> import numpy as np, tempfile, pathlib
 >>> from microfacet.io.results import write_results_files
 >>> d = pathlib.Path(tempfile.mkdtemp())
->>> write_results_files(d, summary={"inputs": {"pixel_size_um": 0.5}},
-...                     maps={"height_um": np.zeros((2, 3))}, tool_copies=False)
+>>> _ = write_results_files(d, summary={"inputs": {"pixel_size_um": 0.5}},
+...                         maps={"height_um": np.zeros((2, 3))}, tool_copies=False)
 >>> [(kw["name"], kw["scale"], kind) for _, kw, kind in get_results_reader(str(d))(str(d))]
 [('height_um', (0.5, 0.5), 'image')]
 >>> get_stack_reader(str(d)) is None

@@ -116,9 +116,10 @@ class Context:
         return ident is not False, str(reason)
 
     @classmethod
-    def open(cls, results_dir) -> "Context":
-        """The context of the results folder ``results_dir`` (raises as :class:`Results`)."""
-        return cls(Results(results_dir))
+    def open(cls, results_dir, *, maps=None) -> "Context":
+        """The context of the results folder ``results_dir`` with the ``maps`` given in
+        memory (raises as :class:`Results`)."""
+        return cls(Results(results_dir, maps=maps))
 
     def max_tilt(self):
         """The largest measurable tilt (asin(NA)/2), degrees, or None."""

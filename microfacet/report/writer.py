@@ -56,6 +56,7 @@ import numpy as np
 from .. import __version__
 from ..core.defaults import DEFAULT_ILLUMINANT
 from ..core.lazy import load
+from ..core.threads import return_free_memory
 from . import page_angular, page_distributions, page_maps, page_overview, page_parameters
 from .context import Context
 from .layout import PAGE_IN, PDF_DPI, PNG_DPI, RC, Page, shorten
@@ -77,7 +78,7 @@ CHILD_TIMEOUT_S, CHILD_TIMEOUT_PER_PDF = 60.0, 10.0
 PAGES = tuple(m.NAME for m in _MODULES)
 
 
-def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
+def write_report(results_dir, *, out_pdf=None, png_dir=None, maps=None) -> Path:
     """Write the multi-page PDF report (and optional PNGs) of an analysis results folder.
 
     Parameters
@@ -95,6 +96,10 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
     png_dir : path-like, optional, keyword-only
         If given, each page is also written there as ``report_<n>_<name>.png``
         (names in :data:`PAGES`; 1286 × 910 pixels); the folder is created if needed.
+    maps : dict of str to ndarray, optional, keyword-only
+        Maps of ``results_dir`` the caller holds in memory as their files hold them (what
+        :func:`~microfacet.analysis.output.save_results` returns), drawn instead of reading
+        their files again: the same report without a second copy of them (never changed).
 
     Returns
     -------
@@ -125,7 +130,7 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
     PosixPath('results/sample1/report.pdf')
     """
     t0 = time.perf_counter()
-    ctx = Context.open(results_dir)
+    ctx = Context.open(results_dir, maps=maps)
     ctx.check_tables()  # a malformed CSV fails here, before anything is drawn
     results_dir = ctx.res.path
     out_pdf = Path(out_pdf) if out_pdf is not None else results_dir / "report.pdf"
@@ -148,6 +153,7 @@ def write_report(results_dir, *, out_pdf=None, png_dir=None) -> Path:
             for m in _MODULES:      # what both renderings draw, computed once (before a fork)
                 if hasattr(m, "prepare"):
                     m.prepare(ctx)
+            return_free_memory()    # the preparation's temporaries, before the child copies
             if png_dir is not None and _can_fork():
                 child = _PngChild.start(pages, png_dir)      # None if it cannot start
             t_pdf = time.perf_counter()
@@ -217,6 +223,11 @@ class _Pages:
                 if png_dir is not None:
                     pngs.append(png_writer.submit(_write_png, _page_rgb(fig),
                                                   png_dir / f"report_{i}_{m.NAME}.png"))
+                # the page's figure (a reference cycle) and its renderers' buffers go before
+                # the next page is drawn: the report's memory that of one page, not of five
+                fig = None
+                gc.collect()
+                return_free_memory()
             for done in pngs:
                 done.result()  # raises what writing raised
 

@@ -83,12 +83,12 @@ def analyse_to_folder(stack, out, *, options: AnalysisOptions | None = None, ove
             if imports is not None:
                 imports.start()
             try:
-                save_results(result, tmp)
+                written = save_results(result, tmp)
             finally:
                 if imports is not None:
                     imports.join()
             if report:
                 step(Stage.REPORT)
                 return_free_memory()
-                write_report(tmp, png_dir=tmp)
+                write_report(tmp, png_dir=tmp, maps=written)   # the maps held: no 2nd copy
     return result

@@ -8,7 +8,6 @@ from microfacet import colour as color
 from microfacet.analysis.options import TiltOptions
 from microfacet.analysis.tilt import (
     PixelEstimates,
-    TiltInversion,
     TiltRows,
     invert_tilt,
     model_lab_rows,
@@ -133,26 +132,33 @@ def test_the_colour_difference_formula_is_the_one_asked_for(table, method, formu
     assert np.all(inv.delta_e <= on_grid + 1e-3)
 
 
-def test_scattered_maps_equal_the_filled_ones_and_let_the_inversion_go():
-    """PixelEstimates.scattered (each map made in turn, the inversion's arrays let go) gives
-    the maps of empty() + fill() with the thickness stored beside them, bitwise."""
+def test_inverting_into_maps_gives_the_numbers_of_invert_tilt(table, model, monkeypatch):
+    """invert_tilt_into (each chunk gathered from the image and stored into the maps) gives,
+    bitwise, what invert_tilt of the gathered pixels stored by fill() gives, with each pixel's
+    row thickness beside it; pixels not asked for keep NaN. Chunks smaller than the pixels, so
+    that several chunks (on the threads) are stored."""
+    from microfacet.analysis import tilt as tilt_module
+
+    monkeypatch.setattr(tilt_module, "CHUNK_PX", 37)
     rng = np.random.default_rng(4)
     shape = (13, 17)
     flat = np.sort(rng.choice(shape[0] * shape[1], 120, replace=False))
-
-    def inversion():
-        r = np.random.default_rng(5)
-        return TiltInversion(*(r.random(flat.size).astype(np.float32) for _ in range(5)))
-
-    thick = rng.uniform(100, 150, flat.size).astype(np.float32)
-    group = rng.integers(0, 9, shape).astype(np.int32)
+    group = rng.integers(0, 3, shape).astype(np.int32)
+    d = np.array([112.0, 131.0, 150.0])
+    true = rng.uniform(2, 24, shape)
+    lab = _lab(table, true.ravel(), d[group.ravel()]).reshape(shape + (3,))
+    lab += rng.normal(0, 0.5, lab.shape).astype(np.float32)
+    grid = tilt_grid(26.0, 0.5)
+    rows = TiltRows(model_lab_rows(model, d, grid), d, np.array([0.5, 0.7, 0.9]),
+                    prior_deg=np.array([5.0, 9.0, 13.0]), prior_sigma_deg=np.full(3, 4.0))
     ref = PixelEstimates.empty(shape)
-    ref.thickness_nm.reshape(-1)[flat] = thick
-    ref.fill(flat, None, inversion())
-    inv = inversion()
-    got = PixelEstimates.scattered(shape, flat, inv, thickness_nm=thick, group=group)
+    ref.thickness_nm.reshape(-1)[flat] = d[group.reshape(-1)[flat]]
+    ref.fill(flat, None, invert_tilt(lab.reshape(-1, 3)[flat], group.reshape(-1)[flat], rows,
+                                     grid, model, TiltOptions()))
+    got = PixelEstimates.empty(shape, group=group)
+    tilt_module.invert_tilt_into(got, flat, lab, rows, grid, model, TiltOptions())
     for name in ("thickness_nm", "tilt_deg", "tilt_sigma_deg", "delta_e", "colour_weight"):
         np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
         assert getattr(got, name).dtype == np.float32
     assert got.thickness_group is group
-    assert inv.tilt_deg is None and inv.delta_e is None
+    assert np.isfinite(got.tilt_deg).sum() == flat.size

@@ -180,6 +180,34 @@ def test_maps_given_as_callables_are_made_when_written(tmp_path):
     assert r.table("facets") is facets_table and r.map("facets").dtype == np.int32
 
 
+def test_the_maps_written_come_back_as_their_files_hold_them(tmp_path):
+    """``write_results_files`` returns the maps given as arrays as their files hold them (the
+    array itself where it has the file's dtype); ``Results(folder, maps=...)`` gives those
+    instead of reading the files, read-only, and keeps them when released."""
+    rng = np.random.default_rng(3)
+    maps = _maps(rng)
+    maps["tilt_deg"] = maps["tilt_deg"].astype(np.float32)
+    maps["delta_e"] = lambda: np.ones((H, W))                       # made for its file
+    stored = write_results_files(tmp_path, summary={}, maps=maps)
+    assert set(stored) == {"thickness_nm", "tilt_deg", "normals", "mask", "facets"}
+    assert stored["tilt_deg"] is maps["tilt_deg"] and stored["normals"] is maps["normals"]
+    from_files = Results(tmp_path)
+    for name, a in stored.items():
+        f = from_files.map(name)
+        assert a.dtype == f.dtype and np.array_equal(a, f, equal_nan=a.dtype.kind == "f")
+    np.save(tmp_path / MAPS["thickness_nm"][0], np.zeros((H, W)))   # not what is given
+    r = Results(tmp_path, maps=stored)
+    given = r.map("thickness_nm")
+    assert np.shares_memory(given, stored["thickness_nm"]) and not given.flags.writeable
+    with pytest.raises(ValueError, match="read-only"):
+        given[0, 0] = 1.0
+    assert stored["tilt_deg"].flags.writeable                   # the caller's stays its own
+    r.release()
+    assert r.map("thickness_nm") is given and r.map("delta_e").dtype == np.float32
+    with pytest.raises(ValueError, match="maps: unknown map 'thickness'"):
+        Results(tmp_path, maps={"thickness": np.ones((H, W))})
+
+
 @pytest.mark.parametrize("name, value, match", [
     ("tilt_deg", np.zeros((H, W, 2)), r"tilt_deg\.npy: expected a 2-D array"),
     ("normals", np.zeros((H, W)), r"normals\.npy: expected a 3-D array"),

@@ -175,6 +175,36 @@ def test_png_pages_are_the_same_from_a_forked_child_or_this_process(results_copy
         assert np.array_equal(got[body], want[body]), f
 
 
+def test_maps_given_in_memory_draw_the_same_pages_without_reading_their_files(
+        results_copy, tmp_path, report, png_rgb, monkeypatch):
+    """The analysis hands the report the maps it holds (``maps=``, as their files hold them):
+    the same pixels as a report that reads the files, no map file is opened, and the caller's
+    arrays come back unchanged (the report receives them read-only)."""
+    import microfacet.io.results as results_module
+
+    folder = results_copy()
+    names = ("height_um", "thickness_nm", "tilt_deg", "tilt_sigma_deg", "delta_e",
+             "tilt_height_deg", "mask")
+    maps = {n: np.load(folder / f"{n}.npy") for n in names}
+    before = {n: a.copy() for n, a in maps.items()}
+    loads = []
+    real_load = np.load
+    monkeypatch.setattr(results_module.np, "load",
+                        lambda f, *a, **k: loads.append(f) or real_load(f, *a, **k))
+    _, ref = report
+    png = tmp_path / "png"
+    write_report(folder, png_dir=png, maps=maps)
+    assert not [f for f in loads if str(f).endswith(tuple(f"{n}.npy" for n in names))]
+    for n in names:
+        assert np.array_equal(maps[n], before[n], equal_nan=n != "mask"), n
+        assert maps[n].flags.writeable, n              # the caller's array, still its own
+    for i, name in enumerate(PAGES, start=1):
+        if name == "parameters":      # its tables show the folder and the previous run's times
+            continue
+        f = f"report_{i}_{name}.png"
+        assert np.array_equal(png_rgb(png / f)[80:-40], png_rgb(ref / f)[80:-40]), f
+
+
 @pytest.mark.parametrize("fork", [True, False])
 def test_the_angular_maps_are_predicted_once_and_before_the_fork(results_copy, tmp_path,
                                                                  monkeypatch, fork):
