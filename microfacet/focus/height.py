@@ -71,6 +71,7 @@ import numpy as np
 
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
+from ..core.threads import BLOCK_VALUES, chunks
 from ..io.limits import check_memory
 from .align import estimate_warps, warped_loader
 from .fill import fill_missing
@@ -376,11 +377,8 @@ def _scan(plan: _Plan, load, *, prefetch: bool, progress) -> _Scan:
             t_focus += time.perf_counter() - t1
             if progress is not None:
                 progress(k + 1, n)
-    t1 = time.perf_counter()
     for tr in trackers:
-        tr.finish()
         tr.release_ring()
-    t_focus += time.perf_counter() - t1
     return _Scan(trackers, composite.image, t_read, t_focus)
 
 
@@ -458,10 +456,19 @@ def _choose(plan: _Plan, fits: list[WindowFit], step) -> _Choice:
     if plan.evidence is not None:
         fits = fits[:plan.evidence]
     idx, sigma, detected = combine(fits, plan.main, step, prefer=SIGMA_MODEL["prefer"])
-    pick = idx[None].astype(np.intp)
-    height = np.take_along_axis(np.stack([f.height_um for f in fits]), pick, 0)[0]
-    if o.reliability == "pertuz":
-        rel = np.take_along_axis(np.stack([f.pertuz_db for f in fits]), pick, 0)[0]
+    # the chosen window's numbers a block of rows at a time (no stack of every window's map)
+    height = np.empty(idx.shape, np.result_type(*[f.height_um for f in fits]))
+    pertuz = o.reliability == "pertuz"
+    rel = np.empty(idx.shape, np.result_type(*[f.pertuz_db for f in fits])) if pertuz \
+        else None
+    for a, b in chunks(idx.shape[0], BLOCK_VALUES // max(1, idx.shape[1])):
+        pick = idx[None, a:b].astype(np.intp)
+        height[a:b] = np.take_along_axis(np.stack([f.height_um[a:b] for f in fits]), pick,
+                                         0)[0]
+        if pertuz:
+            rel[a:b] = np.take_along_axis(np.stack([f.pertuz_db[a:b] for f in fits]), pick,
+                                          0)[0]
+    if pertuz:
         reliable = rel >= cut
     else:
         rel = _precision_db(sigma)

@@ -3,13 +3,16 @@
 Slices arrive one at a time in increasing ``z`` rank. :class:`PeakTracker` keeps, per pixel,
 a fixed number of image-sized buffers whatever the number of slices:
 
-* a ring of the last ``2r+1`` focus images (with a delay of ``r`` ranks each candidate peak
-  has its ``2r+1`` neighbours known);
-* the best focus value so far, its rank and the ``2r+1`` values around it;
+* a ring of the last ``max(r, 2) + 1`` focus images (the ``r`` before a new best value and the
+  three of a second difference);
+* the best focus value so far, its rank and the ``2r+1`` values around it: the ``r + 1`` up to
+  it copied from the ring when it is found, the ``r`` after it filled in as they arrive (NaN
+  beyond the stack);
 * the running sum of the focus values and of the squared second differences along ``z``
   (the tails' level and noise, for the significance of the peak).
 
-Memory: ``2(2r+1) + 4`` float32 buffers of the tracker's grid and a bool one, of which
+Memory: ``(2r+1) + max(r, 2) + 5`` float32 buffers of the tracker's grid and a bool one
+(``3r + 7`` at r = 2, was ``4r + 6`` with a ring of ``2r+1``), of which
 one float32 and the bool are work planes that trackers of the same grid, pushed one after
 another, share (``work_from``). The focus image of a rank can be computed straight into the
 ring (:meth:`PeakTracker.next_slot`): :meth:`PeakTracker.push` then copies nothing.
@@ -20,7 +23,6 @@ Examples
 >>> t = PeakTracker((1, 1), radius=1, n_slices=5)
 >>> for k, f in enumerate([1.0, 2.0, 5.0, 3.0, 1.0]):
 ...     t.push(np.full((1, 1), f, np.float32), k)
->>> t.finish()
 >>> int(t.best_rank[0, 0]), t.window[:, 0, 0].tolist()
 (2, [2.0, 5.0, 3.0])
 """
@@ -54,11 +56,12 @@ class PeakTracker:
     Attributes
     ----------
     best : ndarray of float32
-        The largest focus value (after :meth:`finish`).
+        The largest focus value so far.
     best_rank : ndarray of int32
         Its z rank.
     window : ndarray of float32, shape (2r+1, H, W)
-        Focus values at ranks ``best_rank - r … best_rank + r`` (NaN beyond the stack).
+        Focus values at ranks ``best_rank - r … best_rank + r`` (NaN beyond the stack; those
+        after the best rank as far as pushed).
     fsum : ndarray
         Sum of the focus values over all slices.
     d2sum : ndarray
@@ -71,7 +74,7 @@ class PeakTracker:
         self.k = 2 * self.r + 1
         self.n = int(n_slices)
         big = np.float64 if n_slices > 1000 else np.float32
-        self.ring = np.zeros((self.k,) + tuple(shape), np.float32)
+        self.ring = np.zeros((max(self.r, 2) + 1,) + tuple(shape), np.float32)
         self.window = np.full((self.k,) + tuple(shape), np.nan, np.float32)
         self.best = np.full(shape, -np.inf, np.float32)
         self.best_rank = np.zeros(shape, np.int32)
@@ -83,59 +86,62 @@ class PeakTracker:
         else:
             self._d2 = np.zeros(shape, np.float32)
             self._mask = np.empty(shape, bool)
-        self._last = -1
 
     def next_slot(self, rank: int) -> np.ndarray:
         """The ring buffer (float32, the tracker's grid) that the focus image of z rank
-        ``rank`` may be computed into before it is pushed (the rank ``2r+1`` before it, which
-        it replaces, is no longer read): :meth:`push` of that buffer copies nothing."""
-        return self.ring[int(rank) % self.k]
+        ``rank`` may be computed into before it is pushed (the rank it replaces is no longer
+        read): :meth:`push` of that buffer copies nothing."""
+        return self.ring[int(rank) % self.ring.shape[0]]
 
     def push(self, f: np.ndarray, rank: int) -> None:
         """Add the focus image of z rank ``rank`` (ranks 0, 1, 2, … in order)."""
-        k = self.k
-        slot = self.ring[rank % k]
+        ring, m = self.ring, self.ring.shape[0]
+        slot = ring[rank % m]
         if not _same_buffer(f, slot):
             np.copyto(slot, f)
-        self.fsum += f
+        self.fsum += slot
         if rank >= 2:
             d2 = self._d2
-            cv2.addWeighted(self.ring[rank % k], 1.0, self.ring[(rank - 1) % k], -2.0, 0.0,
-                            dst=d2)
-            cv2.add(d2, self.ring[(rank - 2) % k], dst=d2)
+            cv2.addWeighted(slot, 1.0, ring[(rank - 1) % m], -2.0, 0.0, dst=d2)
+            cv2.add(d2, ring[(rank - 2) % m], dst=d2)
             if self.d2sum.dtype == np.float32:
                 cv2.accumulateSquare(d2, self.d2sum)
             else:
                 self.d2sum += np.square(d2, dtype=np.float64)
-        self._last = rank
-        c = rank - self.r
-        if c >= 0:
-            self._take(c, rank)
+        self._fill_after(slot, rank)
+        self._take(slot, rank)
 
-    def finish(self) -> None:
-        """Take the last candidates (call once after the last slice)."""
-        last = self._last
-        for c in range(max(0, last - self.r + 1), last + 1):
-            self._take(c, last)
+    def _fill_after(self, f, rank):
+        """``f`` (rank ``rank``) into the window of each pixel whose best so far is one of
+        the ``r`` ranks before it."""
+        m8 = self._mask.view(np.uint8)                  # 0/1, an OpenCV mask (no copy)
+        for j in range(1, self.r + 1):
+            if rank - j < 0:
+                break
+            np.equal(self.best_rank, rank - j, out=self._mask)
+            self._mask &= self.best > -np.inf           # a best was taken (not the zeros)
+            if self._mask.any():
+                cv2.copyTo(f, m8, self.window[self.r + j])
 
-    def _take(self, c, last):
-        """Candidate rank c: its window ranks c-r..c+r are all known (or beyond the end)."""
-        ring, k, r = self.ring, self.k, self.r
-        np.greater(ring[c % k], self.best, out=self._mask)
+    def _take(self, f, rank):
+        """Rank ``rank`` where it beats the best so far: its value, rank, and the ``r`` values
+        before it from the ring (NaN before the stack); those after it NaN until pushed."""
+        ring, r, m = self.ring, self.r, self.ring.shape[0]
+        np.greater(f, self.best, out=self._mask)
         if not self._mask.any():
             return
-        m8 = self._mask.view(np.uint8)                  # 0/1, an OpenCV mask (no copy)
-        cv2.max(ring[c % k], self.best, dst=self.best)
-        np.copyto(self.best_rank, c, where=self._mask)
-        for j in range(k):
-            rk = c - r + j
-            if 0 <= rk <= last:
-                cv2.copyTo(ring[rk % k], m8, self.window[j])
-            else:                                       # beyond the stack (its first or
-                np.copyto(self.window[j], np.nan, where=self._mask)     # last r ranks)
+        m8 = self._mask.view(np.uint8)
+        cv2.max(f, self.best, dst=self.best)
+        np.copyto(self.best_rank, rank, where=self._mask)
+        for j in range(self.k):
+            rk = rank - r + j
+            if 0 <= rk <= rank:
+                cv2.copyTo(ring[rk % m], m8, self.window[j])
+            else:                                       # before the stack, or not yet read
+                np.copyto(self.window[j], np.nan, where=self._mask)
 
     def release_ring(self) -> None:
-        """Free the ring and the scan's work arrays (after :meth:`finish`)."""
+        """Free the ring and the scan's work arrays (after the last slice)."""
         self.ring = None
         self._d2 = self._mask = None
 

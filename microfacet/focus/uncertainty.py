@@ -293,21 +293,35 @@ def add_relief_terms(fit: WindowFit, step, model: dict) -> None:
         w = np.isfinite(fit.sigma_fit).astype(np.float32)
     h = np.where(np.isfinite(fit.height_um), fit.height_um / step, 0.0).astype(np.float32)
     sm = _normalised(h, w, s)
-    gx = cv2.Sobel(sm, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REFLECT) / 8.0
-    gy = cv2.Sobel(sm, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REFLECT) / 8.0
-    slope = np.sqrt(gx * gx + gy * gy) / ds                    # z steps per full-grid pixel
-    hxx = cv2.Sobel(sm, cv2.CV_32F, 2, 0, ksize=3, borderType=cv2.BORDER_REFLECT) / 4.0
-    hyy = cv2.Sobel(sm, cv2.CV_32F, 0, 2, ksize=3, borderType=cv2.BORDER_REFLECT) / 4.0
-    hxy = cv2.Sobel(sm, cv2.CV_32F, 1, 1, ksize=3, borderType=cv2.BORDER_REFLECT) / 4.0
-    curv = (np.abs(0.5 * (hxx + hyy)) + np.sqrt(0.25 * (hxx - hyy) ** 2 + hxy * hxy)) / ds ** 2
+    h = w = None
     wd = fit.width[fit.detected & np.isfinite(fit.width)]
     w_med = float(np.median(wd)) if wd.size else np.inf
-    broad = np.sqrt(np.maximum(np.where(np.isfinite(fit.width), fit.width, 0.0) ** 2
-                               - (model["broad_ratio"] * w_med) ** 2, 0.0))
-    var = (fit.sigma_fit.astype(np.float64) ** 2 + (model["slope"] * slope * spread) ** 2
-           + (model["curv"] * curv * spread ** 2) ** 2 + (model["broad"] * broad) ** 2
-           + model["floor"] ** 2)
-    fit.sigma = np.sqrt(var).astype(np.float32)
+    wd = None
+    sigma = np.empty(sm.shape, np.float32)
+    n_rows = sm.shape[0]
+    # a block of rows at a time (with the one-row margin the 3×3 derivatives read): the
+    # derivative and float64 temporaries are a block's, not the map's; the same numbers
+    for a, b in chunks(n_rows, threads.BLOCK_VALUES // max(1, sm.shape[1])):
+        lo, hi = max(a - 1, 0), min(b + 1, n_rows)
+        part, keep = sm[lo:hi], slice(a - lo, b - lo)
+
+        def d(dx, dy, part=part, keep=keep):
+            return cv2.Sobel(part, cv2.CV_32F, dx, dy, ksize=3,
+                             borderType=cv2.BORDER_REFLECT)[keep]
+        gx, gy = d(1, 0) / 8.0, d(0, 1) / 8.0
+        slope = np.sqrt(gx * gx + gy * gy) / ds                # z steps per full-grid pixel
+        hxx, hyy, hxy = d(2, 0) / 4.0, d(0, 2) / 4.0, d(1, 1) / 4.0
+        curv = (np.abs(0.5 * (hxx + hyy)) + np.sqrt(0.25 * (hxx - hyy) ** 2 + hxy * hxy)) \
+            / ds ** 2
+        width = fit.width[a:b]
+        broad = np.sqrt(np.maximum(np.where(np.isfinite(width), width, 0.0) ** 2
+                                   - (model["broad_ratio"] * w_med) ** 2, 0.0))
+        var = (fit.sigma_fit[a:b].astype(np.float64) ** 2
+               + (model["slope"] * slope * spread) ** 2
+               + (model["curv"] * curv * spread ** 2) ** 2 + (model["broad"] * broad) ** 2
+               + model["floor"] ** 2)
+        sigma[a:b] = np.sqrt(var)
+    fit.sigma = sigma
 
 
 def combine(fits: list[WindowFit], primary: int, step, *, prefer: float = 1.0):
@@ -327,19 +341,33 @@ def combine(fits: list[WindowFit], primary: int, step, *, prefer: float = 1.0):
     detected : ndarray of bool
         True where at least one window has a significant peak.
     """
+    shape = np.shape(fits[0].sigma)
+    # a block of rows at a time: the float64 temporaries are a block's, not the image's
+    row_values = max(1, int(np.prod(shape[1:], dtype=np.int64)))
+    blocks = [slice(a, b) for a, b in chunks(shape[0], threads.BLOCK_VALUES // row_values)]
     for lo, hi in zip(fits[:-1], fits[1:]):
-        both = lo.detected & hi.detected
-        d2 = ((hi.height_um - lo.height_um) / step) ** 2 - hi.sigma_fit ** 2 - lo.sigma_fit ** 2
-        extra = np.where(both & np.isfinite(d2), np.maximum(d2, 0.0), 0.0)
-        hi.sigma = np.sqrt(hi.sigma.astype(np.float64) ** 2 + extra).astype(np.float32)
-    raw = np.stack([f.sigma for f in fits])
-    det = np.stack([f.detected for f in fits])
-    score = np.minimum(np.where(np.isfinite(raw), raw, 1e5), 1e5).astype(np.float64)
-    score[[i for i in range(len(fits)) if i != primary]] /= prefer
-    score = np.where(det, score, score + 1e7)
-    idx = np.argmin(score, axis=0).astype(np.int8)
-    sigma = np.take_along_axis(raw, idx[None].astype(np.intp), 0)[0]
-    return idx, sigma.astype(np.float32), det.any(0)
+        widened = np.empty(shape, np.float32)
+        for r in blocks:
+            both = lo.detected[r] & hi.detected[r]
+            d2 = (((hi.height_um[r] - lo.height_um[r]) / step) ** 2 - hi.sigma_fit[r] ** 2
+                  - lo.sigma_fit[r] ** 2)
+            extra = np.where(both & np.isfinite(d2), np.maximum(d2, 0.0), 0.0)
+            widened[r] = np.sqrt(hi.sigma[r].astype(np.float64) ** 2 + extra)
+        hi.sigma = widened
+    idx = np.empty(shape, np.int8)
+    sigma = np.empty(shape, np.float32)
+    detected = np.empty(shape, bool)
+    others = [i for i in range(len(fits)) if i != primary]
+    for r in blocks:
+        raw = np.stack([f.sigma[r] for f in fits])
+        det = np.stack([f.detected[r] for f in fits])
+        score = np.minimum(np.where(np.isfinite(raw), raw, 1e5), 1e5).astype(np.float64)
+        score[others] /= prefer
+        score = np.where(det, score, score + 1e7)
+        idx[r] = np.argmin(score, axis=0)
+        sigma[r] = np.take_along_axis(raw, idx[r][None].astype(np.intp), 0)[0]
+        detected[r] = det.any(0)
+    return idx, sigma, detected
 
 
 #: σ (px) of the neighbourhood over which :func:`disagreement_variance` pools.

@@ -81,6 +81,44 @@ def test_relief_width_term():
     assert abs(fit.sigma[20, 20] - m["floor"]) < 1e-6
 
 
+@pytest.mark.parametrize("block_values", [1, 50, 100])
+def test_relief_terms_and_the_choice_are_the_same_worked_in_blocks_of_rows(monkeypatch,
+                                                                          block_values):
+    """add_relief_terms and combine work a block of rows at a time (the 3×3 derivatives with
+    a one-row margin): bitwise the numbers of the whole map at once, for blocks of one row,
+    of a few rows and of the whole map, on a rough surface with gaps, infinite widths and
+    undetected pixels."""
+    from microfacet.core import threads
+
+    shape = (37, 23)
+
+    def fits():
+        r = np.random.default_rng(12)
+        out = []
+        for px in (7, 15):
+            h = cv2.GaussianBlur(r.normal(0, 3, shape).astype(np.float32), (0, 0), 2.0)
+            h[r.random(shape) < 0.1] = np.nan
+            width = r.uniform(0.5, 4, shape).astype(np.float32)
+            width[r.random(shape) < 0.1] = np.inf
+            sf = r.uniform(0.01, 0.5, shape).astype(np.float32)
+            out.append(WindowFit(px, 1, h, sf, sf.copy(), width, r.random(shape) < 0.8,
+                                 np.ones(shape, np.float32), None))
+        return out
+    ref = fits()
+    for f in ref:
+        add_relief_terms(f, 0.5, SIGMA_MODEL)
+    want = combine(ref, 0, 0.5, prefer=0.7)
+    monkeypatch.setattr(threads, "BLOCK_VALUES", block_values)
+    got_fits = fits()
+    for f in got_fits:
+        add_relief_terms(f, 0.5, SIGMA_MODEL)
+    got = combine(got_fits, 0, 0.5, prefer=0.7)
+    for a, b in zip(got_fits, ref):
+        np.testing.assert_array_equal(a.sigma, b.sigma)
+    for a, b in zip(got, want):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_combine_takes_the_smaller_sigma_of_a_significant_peak():
     h = np.zeros((1, 4), np.float32)
     small = window_fit(h, sigma_fit=0.2, window_px=7)
@@ -175,7 +213,6 @@ def test_fit_window_height_on_analytic_curves():
     tr = PeakTracker(mu.shape, radius=2, n_slices=12)
     for k in range(12):
         tr.push((1.0 / (1.0 + (k - mu) ** 2) ** 2 + 1e-3).astype(np.float32), k)
-    tr.finish()
     zs = np.arange(12.0) * 0.5
     fit = fit_window(tr, zs, 0.5, interpolation="lorentz", shape_k=10.0, window_px=7,
                      alpha=1e-5, prior_dof=8.0)
