@@ -40,7 +40,7 @@ import numpy as np
 
 from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
-from ..core.threads import BLOCK_VALUES, thread_map
+from ..core.threads import BLOCK_VALUES, chunks, thread_map
 from .options import JointOptions
 
 measure = load("skimage.measure")
@@ -172,14 +172,47 @@ def plane_from_moments(m):
 
 
 def neighbour_pairs(labels):
-    """Unique neighbouring label pairs (i < j), 4-connectivity, sorted by (i, j)."""
+    """Unique neighbouring label pairs (i < j), 4-connectivity, sorted by (i, j).
+
+    A block of rows at a time (with the row below it for the vertical pairs), each block's
+    pairs made unique before the next: the memory of a block's boundary pixels and of the
+    pairs, not of every boundary pixel of the image (~25 bytes a pixel at 4 MP).
+
+    >>> neighbour_pairs(np.array([[0, 0, 1], [2, 2, 1]])).tolist()
+    [[0, 1], [0, 2], [1, 2]]
+    """
     labels = np.asarray(labels)
-    parts_a, parts_b = [], []
-    for x, y in ((labels[:, :-1], labels[:, 1:]), (labels[:-1, :], labels[1:, :])):
-        differ = x != y                            # compress first: boundaries are few
-        parts_a.append(x[differ].astype(np.int64))
-        parts_b.append(y[differ].astype(np.int64))
-    return _unique_pairs(np.concatenate(parts_a), np.concatenate(parts_b))
+    if labels.size == 0:
+        return np.zeros((0, 2), np.int64)
+    h, w = labels.shape
+    n = int(labels.max()) + 1
+    keys = []
+    for a, b in _row_blocks(labels):
+        blk = labels[a:min(h, b + 1)]
+        for x, y in ((blk[:b - a, :-1], blk[:b - a, 1:]), (blk[:-1, :], blk[1:, :])):
+            differ = x != y                        # compress first: boundaries are few
+            if differ.any():
+                keys.append(_sorted_unique(_pair_keys(x[differ], y[differ], n)))
+    if not keys:
+        return np.zeros((0, 2), np.int64)
+    key = _sorted_unique(np.concatenate(keys))
+    return np.stack([key // n, key % n], axis=1)
+
+
+def _pair_keys(a, b, n):
+    """``min(a, b) · n + max(a, b)`` as int64: one key per unordered pair."""
+    a, b = a.astype(np.int64), b.astype(np.int64)
+    lo = np.minimum(a, b)
+    np.maximum(a, b, out=b)
+    lo *= n
+    lo += b
+    return lo
+
+
+def _sorted_unique(key):
+    """The distinct values of ``key``, sorted (one sort; numpy 2.4's ``np.unique`` hashes)."""
+    key = np.sort(key)
+    return key[np.concatenate(([True], key[1:] != key[:-1]))]
 
 
 def _unique_pairs(a, b):
@@ -189,10 +222,8 @@ def _unique_pairs(a, b):
     2·10⁵-2·10⁶ keys: 0.97 s of the segmentation at 4 MP)."""
     if a.size == 0:
         return np.zeros((0, 2), np.int64)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    n = int(hi.max()) + 1
-    key = np.sort(lo * n + hi)
-    key = key[np.concatenate(([True], key[1:] != key[:-1]))]
+    n = int(np.maximum(a, b).max()) + 1
+    key = _sorted_unique(_pair_keys(np.asarray(a), np.asarray(b), n))
     return np.stack([key // n, key % n], axis=1)
 
 
@@ -336,7 +367,8 @@ def segment_facets(lab, *, facet_px, noise_de=None, height_um=None, height_sigma
         raise ValueError(f"facet_px: must be finite and > 0, got {facet_px!r}")
     options = JointOptions() if options is None else options
     # float32 (the analysis' Lab is float32 already): half the memory of float64
-    img = np.where(np.isfinite(lab), lab, np.array(_NAN_LAB, np.float32)).astype(np.float32)
+    img = np.where(np.isfinite(lab), lab, np.array(_NAN_LAB, np.float32)).astype(
+        np.float32, copy=False)
     h, w = img.shape[:2]
     area = math.pi / 4.0 * max(facet_px, 2.0) ** 2
     if noise_de is None or not np.isfinite(noise_de) or noise_de <= 0:
@@ -357,14 +389,12 @@ def segment_facets(lab, *, facet_px, noise_de=None, height_um=None, height_sigma
                       + [np.bincount(flat, weights=img[..., c].ravel(), minlength=S)
                          for c in range(3)], axis=1)
     if height_um is not None:
-        sig = (np.ones((h, w)) if height_sigma_um is None
-               else np.asarray(height_sigma_um, dtype=np.float64))
-        bad = ~(np.isfinite(sig) & (sig > 0))
+        sig = np.ones((h, w)) if height_sigma_um is None else np.asarray(height_sigma_um)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            wt = np.square(sig)                    # 1/σ² in place: one (H, W) float64
+            wt = np.square(sig, dtype=np.float64)  # 1/σ² in place: one (H, W) float64
             np.divide(1.0, wt, out=wt)
-        wt[bad] = 0.0
-        del sig, bad
+        wt[~(np.isfinite(sig) & (sig > 0))] = 0.0
+        del sig
         planes = plane_moments(labels, height_um, wt, pixel_size_um=pixel_size_um,
                                n_labels=S)
     else:
@@ -419,7 +449,7 @@ def merge_adjacent(labels, moments, cost, *, max_rounds, pairs=None):
     moments : ndarray, shape (S', m)
     """
     S = int(labels.max()) + 1
-    if not np.all(np.bincount(labels.ravel(), minlength=S)):  # labels 0..S-1 with gaps
+    if not np.all(_label_counts(labels, S)):                   # labels 0..S-1 with gaps
         labels = relabel(labels)
         S, pairs = int(labels.max()) + 1, None
     moments = np.asarray(moments, dtype=np.float64)
@@ -431,7 +461,11 @@ def merge_adjacent(labels, moments, cost, *, max_rounds, pairs=None):
         if pairs.size == 0:
             break
         i, j = pairs[:, 0], pairs[:, 1]
-        ok, score = cost(moments[i], moments[j])
+        ok, score = np.empty(i.size, bool), np.empty(i.size)
+        # the pairs' moments a chunk of pairs at a time (2 × 8 bytes × m per pair at once
+        # were ~100 MB at 4 MP); the cost is per pair, so the same numbers
+        for a, b in chunks(i.size, BLOCK_VALUES // max(1, moments.shape[1])):
+            ok[a:b], score[a:b] = cost(moments[i[a:b]], moments[j[a:b]])
         if not ok.any():
             break
         score = np.where(ok, score, np.inf)
@@ -454,5 +488,27 @@ def merge_adjacent(labels, moments, cost, *, max_rounds, pairs=None):
         a, b = new[i], new[j]
         differ = a != b
         pairs = _unique_pairs(a[differ], b[differ])
-    labels = mapping.astype(np.int32)[labels]
-    return labels, moments
+    return _mapped(mapping.astype(np.int32), labels), moments
+
+
+def _row_blocks(labels):
+    """Blocks of whole rows of ``labels`` (2-D) of about :data:`BLOCK_VALUES` pixels."""
+    return chunks(labels.shape[0], BLOCK_VALUES // max(1, labels.shape[1]))
+
+
+def _label_counts(labels, S):
+    """``np.bincount(labels.ravel(), minlength=S)``, a block of rows at a time (bincount
+    converts its input to intp: 8 bytes a pixel for the whole image at once)."""
+    counts = np.zeros(S, np.int64)
+    for a, b in _row_blocks(labels):
+        counts += np.bincount(labels[a:b].ravel(), minlength=S)
+    return counts
+
+
+def _mapped(mapping, labels):
+    """``mapping[labels]`` a block of rows at a time (the index converted to intp a block's
+    worth at a time)."""
+    out = np.empty(labels.shape, mapping.dtype)
+    for a, b in _row_blocks(labels):
+        out[a:b] = mapping[labels[a:b]]
+    return out

@@ -214,6 +214,29 @@ def test_plane_from_too_few_points_is_nan():
     assert np.isnan(a).all() and np.isnan(b).all() and np.isnan(cov).all()
 
 
+@pytest.mark.parametrize("block_values", [1, 45, 1 << 18])
+def test_neighbour_pairs_are_every_4_connected_pair_once_in_any_blocks(monkeypatch,
+                                                                      block_values):
+    """neighbour_pairs, a block of rows at a time: every unordered pair of different labels
+    that touch horizontally or vertically, once, sorted — as a brute-force walk over the
+    pixels finds them — with blocks of one row, of a few rows and of the whole image."""
+    from microfacet.analysis import segmentation
+
+    monkeypatch.setattr(segmentation, "BLOCK_VALUES", block_values)
+    rng = np.random.default_rng(8)
+    labels = rng.integers(0, 40, (17, 13)).astype(np.int32)
+    labels[5:9] = 7                                     # a block of one label
+    want = set()
+    for y in range(17):
+        for x in range(13):
+            for yy, xx in ((y + 1, x), (y, x + 1)):
+                if yy < 17 and xx < 13 and labels[y, x] != labels[yy, xx]:
+                    want.add(tuple(sorted((int(labels[y, x]), int(labels[yy, xx])))))
+    got = segmentation.neighbour_pairs(labels)
+    assert got.dtype == np.int64 and got.tolist() == sorted(map(list, want))
+    assert segmentation.neighbour_pairs(np.zeros((3, 4), np.int32)).shape == (0, 2)
+
+
 def test_merge_adjacent_merges_mutual_best_pairs_while_allowed():
     """Six strips with values 0, 0.1, 5, 5.2, 20, 20.1: allowing merges of means within 1
     gives three regions; forbidding all merges leaves six."""
