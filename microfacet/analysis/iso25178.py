@@ -58,7 +58,6 @@ import numpy as np
 from ..core import threads
 from ..core.errors import InputError
 from ..core.pixels import pixel_size_yx
-from ..core.threads import chunks
 
 __all__ = ["REFERENCES", "ArealParameters", "areal_parameters"]
 
@@ -168,12 +167,6 @@ def areal_parameters(height_um, *, pixel_size_um, reference: str = "plane",
                            n_cells=nc)
 
 
-def _row_blocks(n_rows, n_cols):
-    """``(start, stop)`` of consecutive blocks of rows of about
-    :data:`~microfacet.core.threads.BLOCK_VALUES` values."""
-    return chunks(n_rows, threads.BLOCK_VALUES // max(int(n_cols), 1))
-
-
 def _residuals(h, ok, py, px, reference):
     """Heights (float64) minus the reference (NaN off ``ok``) and the removed plane's
     (∂z/∂y, ∂z/∂x); the plane from its normal equations, summed a block of rows at a time
@@ -191,14 +184,14 @@ def _residuals(h, ok, py, px, reference):
     xc = (np.arange(z.shape[1]) - sc / n) * px
     z_mean = float(np.mean(z[ok]))    # heights about their mean: a stage's offset of
     normal, rhs = np.zeros((3, 3)), np.zeros(3)  # millimetres costs the sums no digits
-    for a, b in _row_blocks(*z.shape):
+    for a, b in threads.row_chunks(z.shape):
         r, c = np.nonzero(ok[a:b])
         design = np.stack([np.ones(r.size), yc[a + r], xc[c]])
         normal += design @ design.T
         rhs += design @ (z[a:b][r, c] - z_mean)
     coef = np.linalg.solve(normal, rhs)
     coef[0] += z_mean
-    for a, b in _row_blocks(*z.shape):
+    for a, b in threads.row_chunks(z.shape):
         z[a:b] -= coef[0] + coef[1] * yc[a:b, None] + coef[2] * xc[None, :]
     z[~ok] = np.nan
     return z, (float(coef[1]), float(coef[2]))
@@ -211,7 +204,7 @@ def _pixel_moments(ok) -> tuple:
     r, c = np.arange(ok.shape[0], dtype=np.int64), np.arange(ok.shape[1], dtype=np.int64)
     rows_n, cols_n = ok.sum(axis=1), ok.sum(axis=0)
     src = sum(int(np.dot(r[a:b], ok[a:b].astype(np.int64) @ c))
-              for a, b in _row_blocks(*ok.shape))
+              for a, b in threads.row_chunks(ok.shape))
     return (int(rows_n.sum()), int(np.dot(r, rows_n)), int(np.dot(c, cols_n)),
             int(np.dot(r * r, rows_n)), int(np.dot(c * c, cols_n)), src)
 
@@ -221,7 +214,7 @@ def _cell_gradients_squared(z, ok, py, px):
     (forward differences), in row order, a block of rows at a time."""
     H, W = z.shape
     parts = [np.zeros(0)]
-    for a, b in _row_blocks(H - 1, W):
+    for a, b in threads.row_chunks((H - 1, W)):
         gx = (z[a:b, 1:] - z[a:b, :-1]) / px
         gy = (z[a + 1:b + 1, :-1] - z[a:b, :-1]) / py
         cell = ok[a:b, :-1] & ok[a:b, 1:] & ok[a + 1:b + 1, :-1]

@@ -19,7 +19,7 @@ from .. import __version__
 from ..colour.snapshot import stored as stored_colour_tables
 from ..core.densities import cell_edges, pdf_table
 from ..core.pixels import pixel_size_yx
-from ..core.threads import BLOCK_VALUES, chunks
+from ..core.threads import row_chunks
 from ..focus.uncertainty import (
     RELIEF_COEFFICIENT,
     height_sigma_with_bias,
@@ -303,7 +303,7 @@ def height_sigma_um(r) -> np.ndarray | None:
     h = r.focus.height_um
     out = np.empty(h.shape, np.float32)
     # a block of rows at a time: the temporaries are a block's (were 33 bytes a pixel)
-    for a, b in chunks(h.shape[0], BLOCK_VALUES // max(1, h.shape[1])):
+    for a, b in row_chunks(h.shape):
         s, e = sig[a:b], relief[a:b]
         out[a:b] = np.where(np.isfinite(h[a:b]), np.sqrt(s * s + e * e), np.float32(np.nan))
     return out

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
-from ..core.threads import BLOCK_VALUES, chunks, thread_map
+from ..core.threads import BLOCK_VALUES, chunks, row_chunks, thread_map
 from .options import JointOptions
 
 measure = load("skimage.measure")
@@ -187,7 +187,7 @@ def neighbour_pairs(labels):
     h, w = labels.shape
     n = int(labels.max()) + 1
     keys = []
-    for a, b in _row_blocks(labels):
+    for a, b in row_chunks(labels.shape):
         blk = labels[a:min(h, b + 1)]
         for x, y in ((blk[:b - a, :-1], blk[:b - a, 1:]), (blk[:-1, :], blk[1:, :])):
             differ = x != y                        # compress first: boundaries are few
@@ -491,16 +491,11 @@ def merge_adjacent(labels, moments, cost, *, max_rounds, pairs=None):
     return _mapped(mapping.astype(np.int32), labels), moments
 
 
-def _row_blocks(labels):
-    """Blocks of whole rows of ``labels`` (2-D) of about :data:`BLOCK_VALUES` pixels."""
-    return chunks(labels.shape[0], BLOCK_VALUES // max(1, labels.shape[1]))
-
-
 def _label_counts(labels, S):
     """``np.bincount(labels.ravel(), minlength=S)``, a block of rows at a time (bincount
     converts its input to intp: 8 bytes a pixel for the whole image at once)."""
     counts = np.zeros(S, np.int64)
-    for a, b in _row_blocks(labels):
+    for a, b in row_chunks(labels.shape):
         counts += np.bincount(labels[a:b].ravel(), minlength=S)
     return counts
 
@@ -509,6 +504,6 @@ def _mapped(mapping, labels):
     """``mapping[labels]`` a block of rows at a time (the index converted to intp a block's
     worth at a time)."""
     out = np.empty(labels.shape, mapping.dtype)
-    for a, b in _row_blocks(labels):
+    for a, b in row_chunks(labels.shape):
         out[a:b] = mapping[labels[a:b]]
     return out

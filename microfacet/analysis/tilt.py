@@ -95,16 +95,6 @@ class PixelEstimates:
         nan = [np.full(shape, np.nan, np.float32) for _ in range(5)]
         return cls(*nan, np.zeros(shape, np.int32) if group is None else group)
 
-    def fill(self, yy, xx, inversion: "TiltInversion") -> None:
-        """Store a :class:`TiltInversion` of the pixels ``(yy, xx)`` (or, with ``xx`` None,
-        of the flat pixel indices ``yy``)."""
-        for name in ("tilt_deg", "tilt_sigma_deg", "delta_e", "colour_weight"):
-            target = getattr(self, name)
-            if xx is None:
-                target.reshape(-1)[yy] = getattr(inversion, name)
-            else:
-                target[yy, xx] = getattr(inversion, name)
-
 
 def tilt_grid(max_tilt_deg, step_deg) -> np.ndarray:
     """The uniform tilt grid :func:`invert_tilt` needs (its parabola refinement and
@@ -313,15 +303,10 @@ def seed_tilts(colour, roi, model, theta_grid_deg, options: TiltOptions) -> Pixe
     """
     shape = colour.lab.shape[:2]
     roi_index = roi.index_map(shape)
-    out = PixelEstimates.empty(shape)
-    out.thickness_group = roi_index
-    usable = ~colour.mask.mask & np.isfinite(roi.thickness_nm[roi_index])
-    yy, xx = np.nonzero(usable)
+    out = PixelEstimates.empty(shape, group=roi_index)
+    flat = np.flatnonzero(~colour.mask.mask & np.isfinite(roi.thickness_nm[roi_index]))
     rows_d = np.where(np.isfinite(roi.thickness_nm), roi.thickness_nm,
                       model.thickness_range_nm[0])
     rows = TiltRows(model_lab_rows(model, rows_d, theta_grid_deg), rows_d, colour.noise_de)
-    rix = roi_index[yy, xx]
-    inv = invert_tilt(colour.lab[yy, xx], rix, rows, theta_grid_deg, model, options)
-    out.thickness_nm[yy, xx] = rows_d[rix]
-    out.fill(yy, xx, inv)
+    invert_tilt_into(out, flat, colour.lab, rows, theta_grid_deg, model, options)
     return out

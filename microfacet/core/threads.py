@@ -17,6 +17,7 @@ True
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
@@ -27,8 +28,8 @@ from numbers import Integral
 from .errors import InputError
 
 __all__ = ["BLOCK_VALUES", "ENV_VAR", "chunk_starts", "chunks", "limit_malloc_arenas",
-           "limited_threads", "num_threads", "return_free_memory", "set_num_threads",
-           "thread_map", "threads_from_text"]
+           "limited_threads", "num_threads", "return_free_memory", "row_chunks",
+           "set_num_threads", "thread_map", "threads_from_text"]
 
 #: The environment variable the command line reads (:func:`threads_from_text`).
 ENV_VAR = "MICROFACET_NUM_THREADS"
@@ -97,9 +98,21 @@ def threads_from_text(text: str | None) -> int | None:
     return n
 
 
-#: Values a block-wise loop holds in one float64 temporary (2 MB): :func:`chunks` of a map's
-#: rows with ``in_flight = BLOCK_VALUES // row length``.
+#: Values a block-wise loop holds in one float64 temporary (2 MB): :func:`row_chunks` of a
+#: map's rows.
 BLOCK_VALUES = 1 << 18
+
+
+def row_chunks(shape) -> list:
+    """The :func:`chunks` of the rows of an array of ``shape`` (``shape[0]`` rows of
+    ``prod(shape[1:])`` values each) for a loop that works a block of whole rows at a time:
+    about :data:`BLOCK_VALUES` values a block, at least one row.
+
+    >>> row_chunks((5, 100000)), row_chunks((3, 1 << 20, 3))
+    ([(0, 2), (2, 4), (4, 5)], [(0, 1), (1, 2), (2, 3)])
+    """
+    row = max(1, math.prod(int(v) for v in shape[1:]))
+    return chunks(int(shape[0]), BLOCK_VALUES // row)
 
 
 def chunks(n: int, in_flight: int) -> list:

@@ -71,7 +71,7 @@ import numpy as np
 
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
-from ..core.threads import BLOCK_VALUES, chunks
+from ..core.threads import row_chunks
 from ..io.limits import check_memory
 from .align import estimate_warps, warped_loader
 from .fill import fill_missing
@@ -461,7 +461,7 @@ def _choose(plan: _Plan, fits: list[WindowFit], step) -> _Choice:
     pertuz = o.reliability == "pertuz"
     rel = np.empty(idx.shape, np.result_type(*[f.pertuz_db for f in fits])) if pertuz \
         else None
-    for a, b in chunks(idx.shape[0], BLOCK_VALUES // max(1, idx.shape[1])):
+    for a, b in row_chunks(idx.shape):
         pick = idx[None, a:b].astype(np.intp)
         height[a:b] = np.take_along_axis(np.stack([f.height_um[a:b] for f in fits]), pick,
                                          0)[0]

@@ -119,7 +119,8 @@ class PeakTracker:
             if rank - j < 0:
                 break
             np.equal(self.best_rank, rank - j, out=self._mask)
-            self._mask &= self.best > -np.inf           # a best was taken (not the zeros)
+            if rank == j:                   # rank 0: also the zeros of pixels without a best
+                self._mask &= self.best > -np.inf
             if self._mask.any():
                 cv2.copyTo(f, m8, self.window[self.r + j])
 

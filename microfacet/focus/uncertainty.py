@@ -298,11 +298,10 @@ def add_relief_terms(fit: WindowFit, step, model: dict) -> None:
     w_med = float(np.median(wd)) if wd.size else np.inf
     wd = None
     sigma = np.empty(sm.shape, np.float32)
-    n_rows = sm.shape[0]
     # a block of rows at a time (with the one-row margin the 3×3 derivatives read): the
     # derivative and float64 temporaries are a block's, not the map's; the same numbers
-    for a, b in chunks(n_rows, threads.BLOCK_VALUES // max(1, sm.shape[1])):
-        lo, hi = max(a - 1, 0), min(b + 1, n_rows)
+    for a, b in threads.row_chunks(sm.shape):
+        lo, hi = max(a - 1, 0), min(b + 1, sm.shape[0])
         part, keep = sm[lo:hi], slice(a - lo, b - lo)
 
         def d(dx, dy, part=part, keep=keep):
@@ -343,8 +342,7 @@ def combine(fits: list[WindowFit], primary: int, step, *, prefer: float = 1.0):
     """
     shape = np.shape(fits[0].sigma)
     # a block of rows at a time: the float64 temporaries are a block's, not the image's
-    row_values = max(1, int(np.prod(shape[1:], dtype=np.int64)))
-    blocks = [slice(a, b) for a, b in chunks(shape[0], threads.BLOCK_VALUES // row_values)]
+    blocks = [slice(a, b) for a, b in threads.row_chunks(shape)]
     for lo, hi in zip(fits[:-1], fits[1:]):
         widened = np.empty(shape, np.float32)
         for r in blocks:
@@ -410,7 +408,7 @@ def disagreement_variance(height, sigma, evidence_height, evidence_sigma, *,
     excess, both, measured = np.zeros(shape, np.float32), np.zeros(shape, bool), []
     # in float64 as before, a block of rows at a time (a few MB of float64 in flight, and
     # the measured excesses, not 100 MB at 1 MP); the same numbers
-    for a, z in chunks(shape[0], threads.BLOCK_VALUES // max(int(np.prod(shape[1:])), 1)):
+    for a, z in threads.row_chunks(shape):
         h, s, he, se = (np.asarray(m[a:z], np.float64) for m in maps)
         b = np.isfinite(h) & np.isfinite(s) & np.isfinite(he) & np.isfinite(se)
         with np.errstate(invalid="ignore"):

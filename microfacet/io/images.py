@@ -47,7 +47,7 @@ import numpy as np
 from ..core.errors import InputError, one_line
 from ..core.lazy import load
 from ..core.pixels import pixel_size_yx
-from ..core.threads import BLOCK_VALUES, chunks
+from ..core.threads import row_chunks
 
 cv2 = load("cv2")
 tifffile = load("tifffile")
@@ -487,8 +487,7 @@ def _code_values_into(img, out) -> None:
     uint16, any strides: a channel-reversed view writes BGR), a block of rows at a time: the
     float copy the values are worked on in is one block's, not the image's."""
     top = float(np.iinfo(out.dtype).max)
-    rows = BLOCK_VALUES // max(1, int(np.prod(img.shape[1:], dtype=np.int64)))
-    for a, b in chunks(img.shape[0], rows):
+    for a, b in row_chunks(img.shape):
         blk = np.nan_to_num(img[a:b], nan=0.0)          # this block's float copy
         np.clip(blk, 0, 1, out=blk)
         blk *= top

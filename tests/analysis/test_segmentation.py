@@ -221,8 +221,9 @@ def test_neighbour_pairs_are_every_4_connected_pair_once_in_any_blocks(monkeypat
     that touch horizontally or vertically, once, sorted — as a brute-force walk over the
     pixels finds them — with blocks of one row, of a few rows and of the whole image."""
     from microfacet.analysis import segmentation
+    from microfacet.core import threads
 
-    monkeypatch.setattr(segmentation, "BLOCK_VALUES", block_values)
+    monkeypatch.setattr(threads, "BLOCK_VALUES", block_values)      # the row blocks' size
     rng = np.random.default_rng(8)
     labels = rng.integers(0, 40, (17, 13)).astype(np.int32)
     labels[5:9] = 7                                     # a block of one label

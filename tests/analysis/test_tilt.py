@@ -134,7 +134,7 @@ def test_the_colour_difference_formula_is_the_one_asked_for(table, method, formu
 
 def test_inverting_into_maps_gives_the_numbers_of_invert_tilt(table, model, monkeypatch):
     """invert_tilt_into (each chunk gathered from the image and stored into the maps) gives,
-    bitwise, what invert_tilt of the gathered pixels stored by fill() gives, with each pixel's
+    bitwise, what invert_tilt of the gathered pixels stored at their places gives, with each pixel's
     row thickness beside it; pixels not asked for keep NaN. Chunks smaller than the pixels, so
     that several chunks (on the threads) are stored."""
     from microfacet.analysis import tilt as tilt_module
@@ -153,8 +153,10 @@ def test_inverting_into_maps_gives_the_numbers_of_invert_tilt(table, model, monk
                     prior_deg=np.array([5.0, 9.0, 13.0]), prior_sigma_deg=np.full(3, 4.0))
     ref = PixelEstimates.empty(shape)
     ref.thickness_nm.reshape(-1)[flat] = d[group.reshape(-1)[flat]]
-    ref.fill(flat, None, invert_tilt(lab.reshape(-1, 3)[flat], group.reshape(-1)[flat], rows,
-                                     grid, model, TiltOptions()))
+    inv = invert_tilt(lab.reshape(-1, 3)[flat], group.reshape(-1)[flat], rows, grid, model,
+                      TiltOptions())
+    for name in ("tilt_deg", "tilt_sigma_deg", "delta_e", "colour_weight"):
+        getattr(ref, name).reshape(-1)[flat] = getattr(inv, name)
     got = PixelEstimates.empty(shape, group=group)
     tilt_module.invert_tilt_into(got, flat, lab, rows, grid, model, TiltOptions())
     for name in ("thickness_nm", "tilt_deg", "tilt_sigma_deg", "delta_e", "colour_weight"):
