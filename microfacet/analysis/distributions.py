@@ -488,13 +488,19 @@ def _seen_facets(joint, cens_frac) -> np.ndarray:
 
 def _dome_share(dome, pl, use, area) -> float | None:
     """The upper end (+2 standard errors) of the mean square slope inside the facets over
-    the planes' own: how much wider the per-pixel NDF may be than the planes'. None where
-    either is not measured."""
-    if dome is None or not use.any():
+    the planes' own: how much wider the per-pixel NDF may be than the planes'. None without
+    planes (nothing to judge); NaN where the planes' facets are too few or too small to
+    measure it (:func:`~.planes.dome_mean_square_slope` gives None), or where the planes'
+    own slope is all noise and the dome term is not 0: their flatness is not shown either."""
+    if not use.any():
         return None
+    if dome is None:
+        return math.nan
     rms = deconvolved_rms_slope(pl, use, area[use])
-    ms, se = dome
-    return float(max(ms + 2.0 * se, 0.0) / rms ** 2) if rms > 0 else None
+    top = max(dome[0] + 2.0 * dome[1], 0.0)
+    if not rms > 0:
+        return 0.0 if top == 0.0 else math.nan
+    return float(top / rms ** 2)
 
 
 def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,

@@ -202,7 +202,9 @@ def self_check_judgement(judgement: Judgement, check, options: FitOptions) -> Ju
     t, wt = check.transfer, check.width_transfer
     if math.isfinite(t) and low <= t <= high and math.isfinite(wt) and low <= wt <= high:
         return judgement
-    if not math.isfinite(t):
+    if not math.isfinite(t) and check.facets == 0:
+        said = "had fewer than 3 facet planes with measurable slopes to inject on"
+    elif not math.isfinite(t):
         said = "could not recover injected slopes"
     elif low <= t <= high:
         said = (f"recovers the injected slopes ({t:.2f}×) but the NDF would see "
@@ -221,9 +223,17 @@ def dome_judgement(judgement: Judgement, dome_share, options: FitOptions) -> Jud
     own (``dome_share``: the upper end, +2 standard errors, of
     :func:`~.planes.dome_mean_square_slope` over the planes' deconvolved mean square), the
     planes' NDF may be too narrow and is not identified (rounded grains, or facets too small
-    for their heights to show whether they are)."""
+    for their heights to show whether they are). NaN: not measured (fewer than 3 facets with
+    enough heights for a dome term, or planes whose slope is all noise), so not shown planar
+    either: not identified. None (no planes): unchanged."""
     if not judgement.identified or dome_share is None or dome_share <= options.max_dome_share:
         return judgement
+    if math.isnan(dome_share):
+        return Judgement(False, Reason(
+            "curved_facets", "whether the facets are planar is not measured: fewer than 3 "
+            "facets have enough heights inside their edges for a dome term (or their planes' "
+            "slope is all noise), so an NDF of the planes may be too narrow; larger facets "
+            "in pixels (a higher magnification) would show it", "fits.max_dome_share"))
     return Judgement(False, Reason(
         "curved_facets", f"the facets may not be planar: the slopes inside them may add up to "
         f"{100 * dome_share:.0f} % to the mean square slope of their planes (identified up "

@@ -237,7 +237,8 @@ class FitOptions(Options):
     max_dome_share: float = option(
         0.3, help="largest mean square slope inside the facets (which planes miss) as a share "
                   "of the planes' own, for an identified NDF (0.3: the planes' RMS slope at "
-                  "most 12 % below the per-pixel one)", low=0)
+                  "most 12 % below the per-pixel one); where it cannot be measured (too few "
+                  "facets with enough heights) the NDF is not identified either", low=0)
     max_censored_fraction: float = option(
         0.5, help="largest share of the surface past the acceptance for an identified NDF",
         low=0, high=1)

@@ -431,15 +431,17 @@ def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):
 
 
 def _self_check(st, focus, joint, scene, options, *, cells) -> SelfCheck | None:
-    """The NDF's injection-recovery (:mod:`.self_check`) where the heights come from focus
-    and at least 3 facets have planes; None otherwise or when switched off. ``cells(crop)``
-    gives the facets the injection follows on the self-check's crop (a second segmentation
-    of the re-noised image, :func:`~.joint.bootstrap_labels`)."""
+    """The NDF's injection-recovery (:mod:`.self_check`) where the heights come from focus;
+    None when switched off or for heights not from focus. With fewer than 3 facet planes
+    whose slopes it could measure, nothing was measured (:meth:`SelfCheck.unmeasured`): the
+    stack's transfer is unknown, so its NDF is not identified. ``cells(crop)`` gives the
+    facets the injection follows on the self-check's crop (a second segmentation of the
+    re-noised image, :func:`~.joint.bootstrap_labels`)."""
     if not (options.fits.self_check and scene.from_focus and st.has_slices):
         return None
     rms = measured_rms_slope(joint, scene.max_tilt_deg)
     if rms is None:
-        return None
+        return SelfCheck.unmeasured()
     cond = Conditions(np.asarray(st.z_um, np.float64), scene.pixel_size_um,
                       scene.numerical_aperture, slice_noise_sd(st, focus), scene.seed)
     return self_check_ndf(focus, joint.facets, cells=cells, conditions=cond, rms_slope=rms,

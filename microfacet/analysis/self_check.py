@@ -119,6 +119,16 @@ class SelfCheck:
     height_sigma_scale: float = math.nan
     height_coverage: float = math.nan
 
+    @classmethod
+    def unmeasured(cls) -> SelfCheck:
+        """A self-check that measured nothing (fewer than 3 facet planes with measurable
+        slopes to inject on): its transfers are NaN, which no range accepts.
+
+        >>> SelfCheck.unmeasured().facets, math.isnan(SelfCheck.unmeasured().transfer)
+        (0, True)
+        """
+        return cls([], [], [], math.nan, math.nan, 0)
+
     def width_error(self, noise_relative_error) -> float:
         """Relative error of the NDF's width with its systematic part: the noise's
         (``noise_relative_error``, :func:`~.ndf_fit.width_relative_error`), the self-check's

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import time
 from pathlib import Path
 
@@ -93,7 +94,8 @@ def _text_summary(result, out: Path, elapsed_s: float) -> str:
         comps += " -- NOT IDENTIFIED"
     if result.self_check is not None and dist.ndf:
         c = result.self_check
-        lobes += f", self-check {c.transfer:.2f}x slopes, {c.width_transfer:.2f}x width"
+        lobes += (f", self-check {c.transfer:.2f}x slopes, {c.width_transfer:.2f}x width"
+                  if math.isfinite(c.transfer) else ", self-check measured nothing")
     if not dist.ndf_judgement.identified:
         lobes += " -- NOT IDENTIFIED, not a measurement"
     de = result.delta_e_stats

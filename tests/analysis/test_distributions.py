@@ -51,9 +51,8 @@ def test_joint_ndf_judged_by_its_evidence_and_then_by_its_self_check(nd):
     r = nd["result"]
     assert r.focus.reliable.mean() > 0.5                  # the premise: heights are reliable
     nfit, nj = r.ndf_fit, r.distributions.ndf_judgement
-    evidence = analyse_stack(nd["path"], AnalysisOptions(
-        mode="joint", fits=FitOptions(self_check=False, max_dome_share=1e9))
-    ).distributions.ndf_judgement
+    # the evidence's judgement alone: the facets taken as measured planar, no self-check
+    evidence = _refit(r, dataclasses.replace(r.joint, dome_ms_slope=(0.0, 0.0))).ndf_judgement
     assert evidence.identified is True and evidence.reason is None
     low, high = OPTIONS.self_check_range
     check = r.self_check
@@ -115,9 +114,9 @@ def _usable_planes(j):
 
 
 def _planes_only(j, **changes):
-    """``j`` with its NDF made of ``j.planes`` (no evidence planes) and no dome measure, so
-    that the judgement under test is the evidence's."""
-    return dataclasses.replace(j, evidence_planes=None, dome_ms_slope=None, **changes)
+    """``j`` with its NDF made of ``j.planes`` (no evidence planes) and facets measured
+    planar (a dome term of 0 ± 0), so that the judgement under test is the evidence's."""
+    return dataclasses.replace(j, evidence_planes=None, dome_ms_slope=(0.0, 0.0), **changes)
 
 
 def _refit(r, joint, options=OPTIONS):

@@ -338,7 +338,8 @@ def test_unexplained_facets_are_robust_outliers():
 def test_an_ndf_of_planes_is_refused_where_the_facets_may_be_curved():
     """``dome_share`` (upper end of the slope inside the facets over the planes' own) above
     ``fits.max_dome_share``: not identified, the reason names the option; at or below it, or
-    unmeasured, the judgement is unchanged."""
+    without planes (None), the judgement is unchanged; not measurable (NaN: too few facets
+    with enough heights), not identified either."""
     from microfacet.analysis.identification import dome_judgement
 
     ok, opts = Judgement(True), FitOptions()
@@ -350,6 +351,10 @@ def test_an_ndf_of_planes_is_refused_where_the_facets_may_be_curved():
     assert dome_judgement(ok, 0.8, FitOptions(max_dome_share=1.0)) is ok
     already = Judgement(False)
     assert dome_judgement(already, 5.0, opts) is already
+    unmeasured = dome_judgement(ok, math.nan, opts)
+    assert not unmeasured.identified and unmeasured.reason.code == "curved_facets"
+    assert "not measured" in unmeasured.reason.plain()
+    assert not dome_judgement(ok, math.nan, FitOptions(max_dome_share=1e9)).identified
 
 
 def test_a_white_balance_estimate_off_one_beyond_its_sigma_is_a_warning():

@@ -111,6 +111,39 @@ def test_the_judgement_follows_the_self_check():
     assert not self_check_judgement(ok, check(1.0, width=math.nan), opts).identified
     already = Judgement(False)
     assert self_check_judgement(already, check(1.0), opts) is already
+    none = self_check_judgement(ok, SelfCheck.unmeasured(), opts)
+    assert not none.identified and "fewer than 3 facet planes" in none.reason.plain()
+
+
+def test_a_self_check_with_too_few_planes_measures_nothing_and_identifies_nothing():
+    """Heights from focus but fewer than 3 facet planes with measurable slopes: the
+    self-check runs on nothing, so it reports nothing measured (not "no check"), and the NDF
+    those planes gave is not identified; switched off, or on heights not from focus, there
+    is no check."""
+    from types import SimpleNamespace
+
+    from microfacet.analysis.options import AnalysisOptions
+    from microfacet.analysis.pipeline import _self_check
+    from microfacet.analysis.planes import fit_facet_planes
+
+    yy, xx = np.mgrid[0:12, 0:24]
+    labels = (xx >= 12).astype(np.int32)
+    planes = fit_facet_planes(labels, 0.05 * xx * 0.5, height_sigma_um=0.01,
+                              reliable=np.ones(labels.shape, bool), pixel_size_um=0.5,
+                              min_pixels=8)
+    assert planes.fitted.all()                      # two good planes: fewer than 3
+    joint = SimpleNamespace(slope_planes=planes, area_px=np.bincount(labels.ravel()))
+    scene = SimpleNamespace(from_focus=True, max_tilt_deg=30.0)
+    st = SimpleNamespace(has_slices=True)
+    opts = AnalysisOptions(fits=FitOptions(self_check=True))
+    c = _self_check(st, None, joint, scene, opts, cells=None)
+    assert c is not None and c.facets == 0 and math.isnan(c.transfer)
+    assert c.to_json()["transfer"] is None
+    assert not self_check_judgement(Judgement(True), c, opts.fits).identified
+    off = AnalysisOptions(fits=FitOptions(self_check=False))
+    assert _self_check(st, None, joint, scene, off, cells=None) is None
+    assert _self_check(st, None, joint, SimpleNamespace(from_focus=False, max_tilt_deg=30.0),
+                       opts, cells=None) is None
 
 
 @pytest.mark.slow
