@@ -34,20 +34,38 @@ from pipelines._scoring import (
 )
 from pipelines.studies.accuracy_sweep import world_of
 
+#: Segment areas (px) the planes' gain is reported for: [0, 30), [30, 60), [60, 120), ≥ 120.
+AREA_BINS_PX = (0, 30, 60, 120)
 
-def _actual_gain(r, true_height_um) -> float | None:
-    """Gain of the analysis' facet-plane slopes projected on the planes fitted to the true
-    heights over the same facets (area-weighted, facets below the acceptance)."""
+
+def plane_gains(r, true_height_um, true_rms_slope) -> dict:
+    """The analysis' facet-plane slopes against the planes fitted to the true heights over
+    the same segments (facets below the acceptance with a usable plane): their gain
+    (``actual_gain``, area-weighted; ``None`` with fewer than 3), that gain per segment area
+    (``gain_by_area``: ``AREA_BINS_PX``, None with fewer than 5 planes in a bin), and the
+    true planes' area-weighted RMS slope over the true per-pixel one
+    (``segment_rms_ratio``: what the segments alone leave of the width, heights aside)."""
     pl = r.joint.slope_planes
     true = fit_facet_planes(r.joint.facets, true_height_um, height_sigma_um=1.0,
                             reliable=np.isfinite(true_height_um),
                             pixel_size_um=r.scene.pixel_size_um, min_pixels=5)
     ok = (pl.fitted & true.fitted & (pl.tilt_deg < r.scene.max_tilt_deg)
           & (pl.slope_sigma < sc.MAX_SLOPE_SIGMA))
+    area = r.joint.area_px.astype(np.float64)
     if ok.sum() < 3:
-        return None
-    return sc.slope_gain(pl.slope_x[ok], pl.slope_y[ok], true.slope_x[ok], true.slope_y[ok],
-                         r.joint.area_px[ok].astype(np.float64))
+        return {"actual_gain": None, "gain_by_area": None, "segment_rms_ratio": None}
+
+    def gain(m):
+        return sc.slope_gain(pl.slope_x[m], pl.slope_y[m], true.slope_x[m], true.slope_y[m],
+                             area[m])
+
+    edges = (*AREA_BINS_PX, np.inf)
+    bins = [ok & (area >= lo) & (area < hi) for lo, hi in zip(edges[:-1], edges[1:])]
+    rms = np.sqrt(np.sum(area[ok] * (true.slope_x[ok] ** 2 + true.slope_y[ok] ** 2))
+                  / np.sum(area[ok]))
+    return {"actual_gain": gain(ok),
+            "gain_by_area": [gain(m) if m.sum() >= 5 else None for m in bins],
+            "segment_rms_ratio": float(rms / true_rms_slope)}
 
 
 def _relief_coefficient(r, truth, facet) -> float | None:
@@ -124,7 +142,8 @@ def scene_record(d: Path, options: AnalysisOptions) -> dict:
     """One stack analysed and scored against its truth: its world, the NDF's identification
     and reason, the lobes' RMS ratio and W1, the self-check, censored against truly past
     the limit, the height's 2σ coverage and the relief coefficient that would make it 95 %,
-    and the planes' actual slope gain."""
+    the planes' actual slope gain (all, and by segment area) and the true planes' RMS slope
+    over the per-pixel one (:func:`plane_gains`)."""
     r = analyse_stack(d, options)
     t = facet_tilts(d / "truth")
     vis = np.isfinite(t) & (t < r.scene.max_tilt_deg)
@@ -136,8 +155,9 @@ def scene_record(d: Path, options: AnalysisOptions) -> dict:
         "world": world_of(params), "relief_file": params.get("relief_file"),
         "past_limit_fraction": past_limit_fraction(d / "truth", r.scene.max_tilt_deg),
         **censored_fractions(r),
-        "actual_gain": _actual_gain(r, np.load(d / "truth" / "height_um.npy")),
-        "facet_purity": facet_purity(r.joint.facets, np.load(d / "truth" / "facet_id.npy")),
+        **plane_gains(r, np.load(d / "truth" / "height_um.npy"), true_rms),
+        "facet_purity": facet_purity(r.joint.facets, np.load(d / "truth" / "facet_id.npy"))
+        if (d / "truth" / "facet_id.npy").exists() else None,
         "scene": d.name, "true_rms_slope": true_rms, "measured_rms_slope": meas,
         "actual_ratio": None if meas is None else meas / true_rms,
         "self_check": None if c is None else c.to_json(),
