@@ -11,8 +11,9 @@ a fixed number of image-sized buffers whatever the number of slices:
 * the running sum of the focus values and of the squared second differences along ``z``
   (the tails' level and noise, for the significance of the peak).
 
-Memory: ``(2r+1) + max(r, 2) + 5`` float32 buffers of the tracker's grid and a bool one
-(``3r + 7`` at r = 2, was ``4r + 6`` with a ring of ``2r+1``), of which
+Memory: ``(2r+1) + max(r, 2) + 3.5`` float32 buffers of the tracker's grid and a bool one
+(the best value is the window's middle row and its rank an int16: ``3r + 5.5`` at r = 2,
+was ``4r + 6`` with a ring of ``2r+1`` and planes of their own for both), of which
 one float32 and the bool are work planes that trackers of the same grid, pushed one after
 another, share (``work_from``). The focus image of a rank can be computed straight into the
 ring (:meth:`PeakTracker.next_slot`): :meth:`PeakTracker.push` then copies nothing.
@@ -56,12 +57,13 @@ class PeakTracker:
     Attributes
     ----------
     best : ndarray of float32
-        The largest focus value so far.
-    best_rank : ndarray of int32
+        The largest focus value so far (-inf before any): the window's middle row, a view.
+    best_rank : ndarray of int16 (int32 beyond 32768 slices)
         Its z rank.
     window : ndarray of float32, shape (2r+1, H, W)
         Focus values at ranks ``best_rank - r … best_rank + r`` (NaN beyond the stack; those
-        after the best rank as far as pushed).
+        after the best rank as far as pushed; the middle row -inf where no slice had a
+        finite value).
     fsum : ndarray
         Sum of the focus values over all slices.
     d2sum : ndarray
@@ -76,8 +78,12 @@ class PeakTracker:
         big = np.float64 if n_slices > 1000 else np.float32
         self.ring = np.zeros((max(self.r, 2) + 1,) + tuple(shape), np.float32)
         self.window = np.full((self.k,) + tuple(shape), np.nan, np.float32)
-        self.best = np.full(shape, -np.inf, np.float32)
-        self.best_rank = np.zeros(shape, np.int32)
+        # the best value is the window's middle row (no plane of its own): -inf until a
+        # slice beats it
+        self.best = self.window[self.r]
+        self.best.fill(-np.inf)
+        self.best_rank = np.zeros(shape, np.int16 if self.n <= np.iinfo(np.int16).max + 1
+                                  else np.int32)
         self.fsum = np.zeros(shape, big)
         self.d2sum = np.zeros(shape, big)
         if work_from is not None and work_from._d2 is not None \
@@ -148,7 +154,9 @@ class PeakTracker:
 
     def release_curves(self) -> None:
         """Free what only the peak fit reads — ``window``, ``fsum``, ``d2sum`` — once it has
-        read them; ``best`` and ``best_rank`` stay."""
+        read them; ``best`` (copied out of the window) and ``best_rank`` stay."""
+        if self.window is not None:
+            self.best = self.best.copy()
         self.window = self.fsum = self.d2sum = None
 
 

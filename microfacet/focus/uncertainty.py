@@ -162,7 +162,7 @@ def fit_window(tracker, zs, step, *, interpolation, shape_k, window_px, downsamp
 
     def block(ab):      # a block of rows (bounded temporaries), on the threads
         sl = slice(*ab)
-        br = tracker.best_rank[sl]
+        br = tracker.best_rank[sl].astype(np.int32)     # stored int16: the sums' precision
         vals = tracker.window[:, sl]
         fmax = tracker.best[sl]
         zc = zs[br]
@@ -214,7 +214,7 @@ def _significance(tracker, sl, n, shape_k):
     """Peak excess over the mean of the curve's tails, in units of the tails' noise, of the
     rows ``sl`` (inf for an excess over noiseless tails)."""
     r, K = tracker.r, tracker.k
-    br = tracker.best_rank[sl]
+    br = tracker.best_rank[sl].astype(np.int32)         # int32 counts: float64 means below
     vals = tracker.window[:, sl]
     lo_rank = np.maximum(br - r, 0)
     hi_rank = np.minimum(br + r, n - 1)
