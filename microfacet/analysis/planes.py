@@ -37,6 +37,10 @@ __all__ = ["FacetFit", "fit_facet_planes"]
 ROBUST_ROUNDS = 6
 HALF_ROUNDS = 4
 TUKEY_C = 4.685
+#: Planes whose slope noise (per axis) exceeds this carry no slope information (slivers along
+#: an edge); the RMS slope of the planes leaves them out, as their weight in the NDF's
+#: deconvolving fit is nil.
+MAX_SLOPE_SIGMA = 0.3
 
 
 @dataclass

@@ -47,7 +47,13 @@ from ..focus.options import FocusOptions
 from ..focus.uncertainty import height_sigma_with_bias
 from .joint import focus_heights
 from .options import JointOptions
-from .planes import at_least_px, deconvolved_rms_slope, facet_edge_distance, fit_facet_planes
+from .planes import (
+    MAX_SLOPE_SIGMA,
+    at_least_px,
+    deconvolved_rms_slope,
+    facet_edge_distance,
+    fit_facet_planes,
+)
 from .segmentation import relabel
 
 __all__ = ["Conditions", "RenderedStack", "SelfCheck", "measured_rms_slope", "self_check_ndf",
@@ -64,9 +70,6 @@ SIGMA_COVERAGE = 0.95
 
 #: Injected lobe widths, as multiples of the scene's own measured RMS slope.
 WIDTH_FACTORS = (0.5, 1.0, 2.0)
-#: Planes whose slope noise (per axis) exceeds this carry no slope information (slivers along
-#: an edge); they are left out, as their weight in the NDF's deconvolving fit is nil.
-MAX_SLOPE_SIGMA = 0.3
 #: Blur of an in-focus pixel (px) and the blur levels the renderer interpolates between.
 _BASE_BLUR_PX = 0.5
 _LEVELS_PX = np.array([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0])

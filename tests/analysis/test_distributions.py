@@ -6,6 +6,7 @@ samples on the bundled fixture."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -390,3 +391,27 @@ def test_the_white_balance_part_is_the_components_facets_move():
     assert u[1]["white_balance_nm"] == pytest.approx(np.hypot(1.0, 0.5), abs=1e-4)
     assert u[1]["sigma_nm"] == pytest.approx(np.hypot(u[1]["sampling_nm"], np.hypot(1.0, 0.5)),
                                              abs=1e-3)
+
+
+def test_the_dome_share_is_over_the_planes_that_carry_slope():
+    """The planar-facet check's denominator, the planes' noise-removed mean square slope,
+    leaves out slivers whose slope noise exceeds planes.MAX_SLOPE_SIGMA (as the self-check's
+    measured RMS does): one plane with a huge σ no longer swamps it into "not measured";
+    with nothing but slivers, or no dome term, it is not measured (NaN); without planes,
+    nothing to judge (None)."""
+    from microfacet.analysis.distributions import _dome_share
+    from microfacet.analysis.planes import MAX_SLOPE_SIGMA, FacetFit
+
+    slope = np.array([0.10, -0.05, 0.08, 0.0])
+    sigma = np.array([0.01, 0.01, 0.01, 1e3])            # the last: a sliver along an edge
+    n = slope.size
+    planes = FacetFit(slope, np.zeros(n), np.zeros((n, 2, 2)), sigma,
+                      np.degrees(np.arctan(np.abs(slope))), np.ones(n), np.full(n, 20),
+                      np.ones(n), np.ones(n, bool))
+    use, area = np.ones(n, bool), np.full(n, 50.0)
+    good = sigma < MAX_SLOPE_SIGMA
+    ms = np.average(slope[good] ** 2 - 2 * sigma[good] ** 2)
+    assert _dome_share((0.001, 0.0005), planes, use, area) == pytest.approx(0.002 / ms)
+    assert math.isnan(_dome_share((0.001, 0.0005), planes, ~good, area))
+    assert math.isnan(_dome_share(None, planes, use, area))
+    assert _dome_share((0.001, 0.0005), planes, np.zeros(n, bool), area) is None
