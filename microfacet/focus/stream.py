@@ -12,8 +12,8 @@ a fixed number of image-sized buffers whatever the number of slices:
   (the tails' level and noise, for the significance of the peak).
 
 Memory: ``(2r+1) + max(r, 2) + 3.5`` float32 buffers of the tracker's grid and a bool one
-(the best value is the window's middle row and its rank an int16: ``3r + 5.5`` at r = 2,
-was ``4r + 6`` with a ring of ``2r+1`` and planes of their own for both), of which
+(10.5 at r = 2: the best value is the window's middle row and its rank an int16; 12 with
+planes of their own for both, 14 with a ring of ``2r+1``), of which
 one float32 and the bool are work planes that trackers of the same grid, pushed one after
 another, share (``work_from``). The focus image of a rank can be computed straight into the
 ring (:meth:`PeakTracker.next_slot`): :meth:`PeakTracker.push` then copies nothing.
