@@ -58,7 +58,7 @@ from .identification import (
 from .mixtures import MixtureFit, fit_thickness_mixture
 from .ndf_fit import fit_ndf_mixture, width_relative_error
 from .options import FitOptions
-from .planes import MAX_SLOPE_SIGMA, deconvolved_rms_slope
+from .planes import deconvolved_rms_slope
 from .sampling import thickness_regions
 from .segmentation import neighbour_pairs
 
@@ -492,15 +492,12 @@ def _dome_share(dome, pl, use, area) -> float | None:
     planes (nothing to judge); NaN where the planes' facets are too few or too small to
     measure it (:func:`~.planes.dome_mean_square_slope` gives None), or where the planes'
     own slope is all noise and the dome term is not 0: their flatness is not shown either.
-    The planes' RMS slope leaves out slivers (slope noise above
-    :data:`~.planes.MAX_SLOPE_SIGMA`), as :func:`~.self_check.measured_rms_slope` does: a
-    few of them swamp a noise-removed mean square."""
+    The planes' RMS slope leaves out slivers (:func:`~.planes.deconvolved_rms_slope`)."""
     if not use.any():
         return None
     if dome is None:
         return math.nan
-    rms_use = use & (pl.slope_sigma < MAX_SLOPE_SIGMA)    # slivers: no slope information
-    rms = deconvolved_rms_slope(pl, rms_use, area[rms_use]) if rms_use.any() else 0.0
+    rms = deconvolved_rms_slope(pl, use, area[use])        # slivers left out there
     top = max(dome[0] + 2.0 * dome[1], 0.0)
     if not rms > 0:
         return 0.0 if top == 0.0 else math.nan

@@ -38,8 +38,8 @@ ROBUST_ROUNDS = 6
 HALF_ROUNDS = 4
 TUKEY_C = 4.685
 #: Planes whose slope noise (per axis) exceeds this carry no slope information (slivers along
-#: an edge); the RMS slope of the planes leaves them out, as their weight in the NDF's
-#: deconvolving fit is nil.
+#: an edge); the RMS slope of the planes (:func:`deconvolved_rms_slope`) leaves them out, as
+#: their weight in the NDF's deconvolving fit is nil.
 MAX_SLOPE_SIGMA = 0.3
 
 
@@ -278,11 +278,15 @@ def facet_edge_distance(labels) -> np.ndarray:
 
 
 def deconvolved_rms_slope(planes: FacetFit, ok, weights) -> float:
-    """Weighted RMS |∇h| of ``planes[ok]`` with their slope noise (2 ``slope_sigma``² per
-    facet) removed in quadrature: the facets' own RMS slope."""
-    w = np.asarray(weights, dtype=np.float64)
-    g2 = np.tan(np.radians(planes.tilt_deg[ok])) ** 2
-    noise2 = 2.0 * planes.slope_sigma[ok] ** 2
+    """Weighted RMS |∇h| of ``planes[ok]`` (``weights`` per selected plane) with their slope
+    noise (2 ``slope_sigma``² per facet) removed in quadrature: the facets' own RMS slope.
+    Slivers (slope noise above :data:`MAX_SLOPE_SIGMA`) are left out: they carry no slope,
+    and a few of them would swamp the noise-removed mean square (0 with none left)."""
+    sig = planes.slope_sigma[ok]
+    keep = sig < MAX_SLOPE_SIGMA
+    w = np.asarray(weights, dtype=np.float64)[keep]
+    g2 = np.tan(np.radians(planes.tilt_deg[ok][keep])) ** 2
+    noise2 = 2.0 * sig[keep] ** 2
     return math.sqrt(max(float(np.sum(w * (g2 - noise2)) / max(float(np.sum(w)), 1e-300)),
                          0.0))
 
