@@ -319,7 +319,9 @@ def order_move(mixture, thickness_nm, other_thickness_nm, gap_de, weights, *, ma
     (:func:`order_alias_of`'s criterion) and those facets fit it within ``margin_de`` on
     average (area-weighted ``gap_de``: ΔE00 at the runner-up minus at the chosen order).
     Both components must be narrower than ``max_sd_nm``: a component as wide as an order's
-    window holds samples of any order and is no order to move to or from.
+    window holds samples of any order and is no order to move to or from (nor is one at
+    that width, the SD ceiling of the analysis' thickness fit: samples scattered wider hold
+    it there).
     Of the pairs that qualify, the one of least mean gap: the colours decide the direction,
     not the areas.
 
@@ -345,7 +347,7 @@ def order_move(mixture, thickness_nm, other_thickness_nm, gap_de, weights, *, ma
     gap = np.asarray(gap_de, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64)
     on = np.isfinite(other) & np.isfinite(gap)
-    narrow = np.array([c[2] for c in mixture.components]) <= max_sd_nm
+    narrow = np.array([c[2] for c in mixture.components]) < max_sd_nm * (1.0 - 1e-6)
     best = None
     for k in range(mu.size):
         mine = own == k

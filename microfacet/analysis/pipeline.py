@@ -315,7 +315,8 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         with timer.stage(Stage.MIXTURES):
             dist = fit_joint_distributions(
                 joint, roi, model, scene, options.fits, pooled=pooled,
-                gain_shifts_nm=_gain_shifts(joint, cols, model, options, scene, wb))
+                gain_shifts_nm=_gain_shifts(joint, cols, model, options, scene, wb),
+                order_window_nm=options.joint.order_window_fraction * model.period_nm)
             dist.exposure_readings = readings
             # read by the facet stages only: freed (and given back at the stage's end)
             # before the self-check's peak
