@@ -138,12 +138,13 @@ def _thickness_samples(joint, options, cens_frac=None):
 def _thickness_fit(joint, ok, regions, options, seed, window_nm=None) -> MixtureFit:
     """The facets' thickness mixture; ``window_nm``: the half-width of a facet's order
     window, which a population's :data:`~.consistency.ALIAS_SD` band does not exceed (the
-    components' SD ceiling, ``max_sd_nm`` of :func:`~.mixtures.fit_thickness_mixture`)."""
+    components' SD ceiling where ``options.thickness_max_sd_nm`` does not set one)."""
     th = joint.thickness
+    if options.thickness_max_sd_nm is None and window_nm is not None:
+        options = options.replace(thickness_max_sd_nm=window_nm / ALIAS_SD)
     return fit_thickness_mixture(th.thickness_nm[ok], sigma_nm=th.sigma_nm[ok],
                                  weights=joint.area_px[ok].astype(np.float64),
                                  n_effective=regions, options=options, background=True,
-                                 max_sd_nm=None if window_nm is None else window_nm / ALIAS_SD,
                                  seed=seed)
 
 

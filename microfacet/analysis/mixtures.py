@@ -367,6 +367,23 @@ class _Data:
     max_s2: float = math.inf
 
 
+def _thickness_data(x, a, v, opts: FitOptions, n_count, n_eff) -> _Data:
+    """What every K of a thickness fit shares (:class:`_Data`): the distinct (value, error)
+    pairs the EM runs on, the SD floor and ceiling, the samples' spread beyond their errors."""
+    s2_floor = opts.thickness_sd_floor_nm ** 2
+    ceiling = opts.thickness_max_sd_nm
+    spread = float(np.sqrt(max(np.average((x - np.average(x, weights=a)) ** 2, weights=a)
+                               - np.average(v, weights=a), s2_floor)))
+    ac, xc, vc = collapse(a, x, v)   # the EM on distinct (value, error) pairs
+    # With measurement errors well above the floor, a component at the floor has a bounded
+    # likelihood (its spread is below the resolution, e.g. a population seen in one region):
+    # admissible. Without, it is a spike on repeated values: not admissible.
+    return _Data(x, a, v, (xc, vc, ac), s2_floor, spread, n_count,
+                 opts.thickness_min_component_samples,
+                 float(np.average(v, weights=a)) >= 4.0 * s2_floor, n_eff,
+                 math.inf if ceiling is None else float(ceiling) ** 2)
+
+
 def _fit_k(k, d, sols, bg):
     """The most likely admissible of the starts for K = ``k`` after 25 EM updates, converged;
     returns (w, mu, s2, ℓ, w_bg, admissible)."""
@@ -386,7 +403,7 @@ def _fit_k(k, d, sols, bg):
 
 def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=None,
                           n_effective=None, options: FitOptions | None = None,
-                          background=False, max_sd_nm=None, seed=0) -> MixtureFit:
+                          background=False, seed=0) -> MixtureFit:
     """Gaussian mixture of the true oxide thickness, number of components by BIC.
 
     Parameters
@@ -413,23 +430,18 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
         and to ``3K − 1 ≤ n_effective``); ``thickness_sd_floor_nm`` (smallest component SD:
         a single distinct value is one component at the floor, ``degenerate`` says so; for
         K ≥ 2 a component at the floor is not admissible unless the samples' errors, mean
-        σ² ≥ 4 floor², bound its likelihood); ``thickness_min_component_samples`` (fewest
-        independent samples ``w_k n_eff`` a component of a K ≥ 2 solution needs);
-        ``thickness_max_samples`` (larger inputs are subsampled with ``seed``).
+        σ² ≥ 4 floor², bound its likelihood); ``thickness_max_sd_nm`` (largest component
+        SD, a ceiling: the EM's variance update is clipped to it, the constrained maximum;
+        None: none; ``info["sd_ceiling_nm"]`` records it);
+        ``thickness_min_component_samples`` (fewest independent samples ``w_k n_eff`` a
+        component of a K ≥ 2 solution needs); ``thickness_max_samples`` (larger inputs are
+        subsampled with ``seed``).
     background : bool, optional
         Fit, beside the K Gaussians, a uniform background over the samples' span with its
         own weight (one more parameter for every K): samples no population explains (dust,
         pit floors, mis-fitted facets) then neither ask for components of their own nor
         widen the populations. The components returned are the populations' mixture
         (weights renormalised without it); ``info["background_weight"]`` is its weight.
-    max_sd_nm : float, optional
-        Largest component SD (nm), a ceiling as ``thickness_sd_floor_nm`` is a floor (the
-        EM's variance update is clipped to it, the constrained maximum). A population does
-        not span interference orders (the analysis gives a third of a facet's order window:
-        ±3 SD within it); without a ceiling, facets scattered over a few orders (mis-read,
-        10-30 % of the area) are cheapest as one wide component that swallows a population
-        beside them, where with it they are the background's and the populations' tails
-        (``tests/analysis/test_mixtures.py -k scattered``).
     seed : int, optional
 
     Returns
@@ -463,7 +475,6 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
     v = s * s
     W = float(a.sum())
     uniq = np.unique(x)
-    s2_floor = sd_floor_nm ** 2
     if uniq.size == 1 and not np.any(v > 0):
         val = float(uniq[0])
         ll = W * (-math.log(sd_floor_nm) - 0.5 * _LOG_2PI)
@@ -473,20 +484,11 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
                           f"{sd_floor_nm:g} nm", x.size, {1: ll})
     n_count = n_eff if n_regions is None else max(float(n_regions), n_eff)
     k_max = k_max_for(opts.max_components, uniq.size, n_count, 3, -1)
-    ac, xc, vc = collapse(a, x, v)   # the EM on distinct (value, error) pairs
+    d = _thickness_data(x, a, v, opts, n_count, n_eff)
     # the background: uniform over the samples' span (padded by the SD floor and errors)
     span = float(x.max() - x.min()) + 4.0 * float(np.sqrt(np.max(v)) if v.size else 0.0) \
         + 2.0 * sd_floor_nm
     bg = 1.0 / span if background and uniq.size > 2 else 0.0
-    spread = float(np.sqrt(max(np.average((x - np.average(x, weights=a)) ** 2, weights=a)
-                               - np.average(v, weights=a), s2_floor)))
-    # With measurement errors well above the floor, a component at the floor has a bounded
-    # likelihood (its spread is below the resolution, e.g. a population seen in one region):
-    # admissible. Without, it is a spike on repeated values: not admissible.
-    d = _Data(x, a, v, (xc, vc, ac), s2_floor, spread, n_count,
-              opts.thickness_min_component_samples,
-              float(np.average(v, weights=a)) >= 4.0 * s2_floor, n_eff,
-              math.inf if max_sd_nm is None else float(max_sd_nm) ** 2)
     sols, lls, fits, bgw = {}, {}, {}, {}
     with single_thread():
         for k in range(1, k_max + 1):
@@ -503,7 +505,8 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
     mixture = ThicknessMixture(comps)
     info = {"inadmissible_k": sorted(set(bics) - set(ok)), "background_weight": bgw[k_best],
             "sd_at_floor": [i for i, c in enumerate(mixture.components)
-                            if c[2] <= sd_floor_nm * 1.0001]}
+                            if c[2] <= sd_floor_nm * 1.0001],
+            "sd_ceiling_nm": opts.thickness_max_sd_nm}
     if n_regions is not None:
         info["candidates"] = population_candidates(d, (sols[k_best], lls[k_best], bg),
                                                    regions, k_best)

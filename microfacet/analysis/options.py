@@ -204,6 +204,13 @@ class FitOptions(Options):
         cli=True, metavar="K")
     thickness_sd_floor_nm: float = option(0.1, help="smallest thickness component SD",
                                           unit="nm", low=0, low_exclusive=True)
+    thickness_max_sd_nm: float | None = option(
+        None, help="largest thickness component SD (none: a third of a facet's interference-"
+                   "order window, joint.order_window_fraction of the colours' period: a "
+                   "population does not span orders, and facets scattered over a few orders "
+                   "are left to the background and the populations' tails instead of one "
+                   "wide component that swallows a population)", unit="nm", low=0,
+        low_exclusive=True)
     order_moves: str = option(
         "pool", help="`pool`: a thickness component whose facets fit another component's "
                      "interference order within ambiguous_order_de on average is read in "

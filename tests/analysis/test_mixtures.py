@@ -621,13 +621,13 @@ def _scattered_scene(seed, scattered):
 def test_scattered_facets_do_not_make_a_wide_component_of_a_population(seed):
     """A fifth of the facets read anywhere over three orders: without a ceiling on the SD
     they are one component 55-60 nm wide that swallows the 167 nm population beside them
-    (the background holds at most BACKGROUND_MAX); with the ceiling (``max_sd_nm``, a
-    third of an order window in the analysis) they are the background's and the tails', and
-    both populations are found."""
+    (the background holds at most BACKGROUND_MAX); with the ceiling
+    (``fits.thickness_max_sd_nm``, a third of an order window in the analysis) they are the
+    background's and the tails', and both populations are found."""
     x, w, regions = _scattered_scene(seed, 0.2)
     kw = dict(sigma_nm=0.3, weights=w, n_effective=regions, background=True)
     wide = fit_thickness_mixture(x, **kw)
     assert max(wide.mixture.sds_nm) > 40.0
-    fit = fit_thickness_mixture(x, max_sd_nm=18.0, **kw)
+    fit = fit_thickness_mixture(x, options=FitOptions(thickness_max_sd_nm=18.0), **kw)
     np.testing.assert_allclose(sorted(fit.mixture.means_nm), [84.0, 167.0], atol=1.0)
-    assert max(fit.mixture.sds_nm) < 3.0
+    assert max(fit.mixture.sds_nm) < 3.0 and fit.info["sd_ceiling_nm"] == 18.0
