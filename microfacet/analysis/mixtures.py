@@ -28,11 +28,12 @@ Model choice with an honest number of independent samples (both fitters)
     A K whose solution has a component carried by fewer than ``min_component_samples``
     regions (``w_k`` × the regions' plain count when their ``Regions`` are given, else
     ``n_eff``) or with its SD at the floor describes a sample or a spike, not a population:
-    it is not admissible, whatever its BIC. K is also limited to
-    the number of distinct values and to ``p ≤`` that number of regions; ``degenerate``
-    says when a limit applied. (The Kish size weighs a population on one small region below
-    one region: counted so, a population 190 nm from the others was left out at eight
-    regions.)
+    it is not admissible, whatever its BIC. K is also limited to the number of distinct
+    values and to ``p ≤`` that number of regions; ``degenerate`` says when a limit applied.
+    (The Kish size weighs a population on one small region below one region: counted so, a
+    population 190 nm from the others was left out at eight regions.) The thickness
+    components' SD also has a ceiling where ``thickness_max_sd_nm`` sets one (a population
+    does not span interference orders).
     Of the admissible K, the smallest within 2 of the least BIC is chosen (a larger K must
     earn "positive evidence"). ``bic_margin`` is the least BIC of the other admissible K minus
     that of the chosen one (≥ 10: very strong evidence for the choice; near 0 or negative,
