@@ -140,8 +140,10 @@ def _thickness_fit(joint, ok, regions, options, seed, window_nm=None) -> Mixture
     window, which a population's :data:`~.consistency.ALIAS_SD` band does not exceed (the
     components' SD ceiling where ``options.thickness_max_sd_nm`` does not set one)."""
     th = joint.thickness
-    if options.thickness_max_sd_nm is None and window_nm is not None:
-        options = options.replace(thickness_max_sd_nm=window_nm / ALIAS_SD)
+    top = None if window_nm is None else window_nm / ALIAS_SD
+    if options.thickness_max_sd_nm is None and top is not None \
+            and top > options.thickness_sd_floor_nm:
+        options = options.replace(thickness_max_sd_nm=top)
     return fit_thickness_mixture(th.thickness_nm[ok], sigma_nm=th.sigma_nm[ok],
                                  weights=joint.area_px[ok].astype(np.float64),
                                  n_effective=regions, options=options, background=True,

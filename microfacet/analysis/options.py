@@ -265,6 +265,14 @@ class FitOptions(Options):
         0.5, help="warn when the sample's mean plane is tilted by more than this fraction of "
                   "the NDF's rms lobe width (a tilt m widens a lobe σ to √(σ² + m²))", low=0)
 
+    def __post_init__(self):
+        super().__post_init__()
+        top = self.thickness_max_sd_nm
+        if top is not None and top <= self.thickness_sd_floor_nm:
+            raise InputError(f"must be > `fits.thickness_sd_floor_nm` "
+                             f"({self.thickness_sd_floor_nm:g}), got {top:g}",
+                             param="thickness_max_sd_nm")
+
 
 @dataclass(frozen=True)
 class OpticsOptions(Options):

@@ -88,6 +88,8 @@ def test_sections_are_frozen():
     ({"fits": {"max_components": 11}}, "fits.max_components", "must be <= 10, got 11"),
     ({"fits": {"max_components": True}}, "fits.max_components", "must be a finite number"),
     ({"fits": {"max_width_error": "0.2"}}, "fits.max_width_error", "must be a finite number"),
+    ({"fits": {"thickness_max_sd_nm": 0.05}}, "fits.thickness_max_sd_nm",
+     "must be > fits.thickness_sd_floor_nm (0.1), got 0.05"),
     ({"optics": {"delta_e_method": "CMC"}}, "optics.delta_e_method",
      "must be one of CIEDE2000, CIE94, CIE76, got 'CMC'"),
     ({"optics": {"thickness_range_nm": [300, 100]}}, "optics.thickness_range_nm",
