@@ -22,7 +22,7 @@ from microfacet.analysis import AnalysisOptions, analyse_stack
 from microfacet.analysis import self_check as sc
 from microfacet.analysis.options import FitOptions, JointOptions
 from microfacet.analysis.output import height_sigma_terms, height_sigma_um
-from microfacet.analysis.planes import fit_facet_planes
+from microfacet.analysis.planes import MAX_SLOPE_SIGMA, fit_facet_planes
 from microfacet.focus.options import FocusOptions
 from pipelines._scoring import (
     facet_tilts,
@@ -50,7 +50,7 @@ def plane_gains(r, true_height_um, true_rms_slope) -> dict:
                             reliable=np.isfinite(true_height_um),
                             pixel_size_um=r.scene.pixel_size_um, min_pixels=5)
     ok = (pl.fitted & true.fitted & (pl.tilt_deg < r.scene.max_tilt_deg)
-          & (pl.slope_sigma < sc.MAX_SLOPE_SIGMA))
+          & (pl.slope_sigma < MAX_SLOPE_SIGMA))
     area = r.joint.area_px.astype(np.float64)
     if ok.sum() < 3:
         return {"actual_gain": None, "gain_by_area": None, "segment_rms_ratio": None}

@@ -135,15 +135,8 @@ def _thickness_samples(joint, options, cens_frac=None):
     return ok, unexplained, regions
 
 
-def _thickness_fit(joint, ok, regions, options, seed, window_nm=None) -> MixtureFit:
-    """The facets' thickness mixture; ``window_nm``: the half-width of a facet's order
-    window, which a population's :data:`~.consistency.ALIAS_SD` band does not exceed (the
-    components' SD ceiling where ``options.thickness_max_sd_nm`` does not set one)."""
+def _thickness_fit(joint, ok, regions, options, seed) -> MixtureFit:
     th = joint.thickness
-    top = None if window_nm is None else window_nm / ALIAS_SD
-    if options.thickness_max_sd_nm is None and top is not None \
-            and top > options.thickness_sd_floor_nm:
-        options = options.replace(thickness_max_sd_nm=top)
     return fit_thickness_mixture(th.thickness_nm[ok], sigma_nm=th.sigma_nm[ok],
                                  weights=joint.area_px[ok].astype(np.float64),
                                  n_effective=regions, options=options, background=True,
@@ -223,7 +216,7 @@ def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: F
         if regions is None:
             break
         th = joint.thickness
-        fit = _thickness_fit(joint, ok, regions, options, seed, window_nm)
+        fit = _thickness_fit(joint, ok, regions, options, seed)
         mv, moved = order_move(fit.mixture, np.where(ok, th.thickness_nm, np.nan),
                                np.where(done, np.nan, th.thickness_other_order_nm),
                                th.delta_e_other_order - th.delta_e, joint.area_px,
@@ -251,7 +244,7 @@ def _on_component(thickness_nm, mixture, mean_nm) -> np.ndarray:
 
 
 def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders | None = None,
-                     gain_shifts_nm=None, window_nm=None):
+                     gain_shifts_nm=None):
     """The thickness mixture of the facets, and its judgement; each candidate population
     with the side of the square field (µm) that would decide it, each component's mean with
     its uncertainty (:func:`mean_uncertainty`). ``pooled``: the samples and mixture
@@ -263,8 +256,7 @@ def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders
                                 else _thickness_samples(joint, options, cens_frac))
     if regions is None:
         return None, NO_SAMPLES["thickness"]
-    fit = pooled.fit if ready else _thickness_fit(joint, ok, regions, options, scene.seed,
-                                                  window_nm)
+    fit = pooled.fit if ready else _thickness_fit(joint, ok, regions, options, scene.seed)
     _describe_candidates(fit, regions, th, area, ok,
                          joint.facets.size * float(np.prod(scene.pixel_size_um)))
     fit.info["mean_uncertainty"] = mean_uncertainty(
@@ -514,7 +506,7 @@ def _dome_share(dome, pl, use, area) -> float | None:
 
 def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
                             pooled: PooledOrders | None = None,
-                            gain_shifts_nm=None, order_window_nm=None) -> Distributions:
+                            gain_shifts_nm=None) -> Distributions:
     """Thickness mixture and NDF of a :class:`~.joint.JointResult`, with identification.
 
     Parameters
@@ -535,13 +527,9 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
         Each facet's thickness move for a 1σ error of the R and B gains
         (:func:`~.joint.gain_thickness_shifts`): the white-balance part of the components'
         mean uncertainty (``info["mean_uncertainty"]``, :func:`mean_uncertainty`).
-    order_window_nm : float, optional
-        Half-width of a facet's interference-order window (nm): the thickness components'
-        SD is at most a third of it (:func:`_thickness_fit`).
     """
     cens_frac = _censored_fraction(joint)
-    tfit, tj = _joint_thickness(joint, roi, options, scene, cens_frac, pooled, gain_shifts_nm,
-                                order_window_nm)
+    tfit, tj = _joint_thickness(joint, roi, options, scene, cens_frac, pooled, gain_shifts_nm)
     if tfit is not None and pooled is not None:
         tfit.info["order_moves"] = [m.to_json() for m in pooled.moves]
     nfit, nj = _joint_ndf(joint, model, cens_frac, scene.max_tilt_deg, options, scene.seed)

@@ -32,7 +32,7 @@ from ..core.timing import StageTimer
 from ..io.limits import check_memory
 from ..io.stack import Stack, read_stack
 from .colour_image import measure_colour, no_colour_message
-from .consistency import mixture_map_check, roi_pixel_check
+from .consistency import ALIAS_SD, mixture_map_check, roi_pixel_check
 from .distributions import (
     Distributions,
     PooledOrders,
@@ -308,15 +308,15 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
             model = model.with_exposure(joint.exposure)
             image = facet_image(geometry, colour, roi, options.joint)   # the colours are final
             cols = image.colours()
-            pooled = _order_moves(joint, image, cols, colour, model, options, scene)
+            fits = _fit_options(options, model)
+            pooled = _order_moves(joint, image, cols, colour, model, options, scene, fits)
             joint = pooled.joint
         with timer.stage(Stage.TILT):
             pixels = joint.pixels = joint_pixel_tilts(joint, colour, model, grid, options.tilt)
         with timer.stage(Stage.MIXTURES):
             dist = fit_joint_distributions(
-                joint, roi, model, scene, options.fits, pooled=pooled,
-                gain_shifts_nm=_gain_shifts(joint, cols, model, options, scene, wb),
-                order_window_nm=options.joint.order_window_fraction * model.period_nm)
+                joint, roi, model, scene, fits, pooled=pooled,
+                gain_shifts_nm=_gain_shifts(joint, cols, model, options, scene, wb))
             dist.exposure_readings = readings
             # read by the facet stages only: freed (and given back at the stage's end)
             # before the self-check's peak
@@ -355,19 +355,34 @@ def _gain_shifts(joint, cols, model, options, scene, wb):
                                  options.joint, log_gain_rb=sigma, illuminant=scene.illuminant)
 
 
-def _order_moves(joint, image, cols, colour, model, options, scene):
+def _order_window_nm(options, model) -> float:
+    """Half-width of a facet's interference-order window (nm): ``joint.order_window_fraction``
+    of the colours' period."""
+    return options.joint.order_window_fraction * model.period_nm
+
+
+def _fit_options(options, model):
+    """``options.fits`` with the thickness components' SD ceiling where it sets none: a
+    :data:`~.consistency.ALIAS_SD`-th of a facet's order window (a population does not span
+    interference orders; ``fits.thickness_max_sd_nm``)."""
+    fits, top = options.fits, _order_window_nm(options, model) / ALIAS_SD
+    if fits.thickness_max_sd_nm is None and top > fits.thickness_sd_floor_nm:
+        fits = fits.replace(thickness_max_sd_nm=top)
+    return fits
+
+
+def _order_moves(joint, image, cols, colour, model, options, scene, fits):
     """The facets of a component that is another read in a neighbouring interference order,
     in that order (:func:`~.distributions.pool_interference_orders`, ``fits.order_moves``);
     ``image`` and ``cols``: the facets' image and colours (:func:`~.joint.facet_image`),
-    shared by every round."""
-    if options.fits.order_moves == "off":
+    shared by every round; ``fits``: the mixtures' options (:func:`_fit_options`)."""
+    if fits.order_moves == "off":
         return PooledOrders(joint)
     return pool_interference_orders(
         joint, lambda j, moved, centre: facets_in_other_order(
             j, image, colour, model, options.joint, moved=moved, centre_nm=centre,
             colours=cols),
-        period_nm=model.period_nm,
-        window_nm=options.joint.order_window_fraction * model.period_nm, options=options.fits,
+        period_nm=model.period_nm, window_nm=_order_window_nm(options, model), options=fits,
         seed=scene.seed)
 
 
