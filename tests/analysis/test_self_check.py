@@ -201,3 +201,24 @@ def test_a_rendered_stack_is_the_same_whenever_it_is_read():
     np.testing.assert_allclose(quiet[0], cv2.GaussianBlur(tex, (0, 0), 2.0), atol=1e-6)
     with pytest.raises(IndexError):
         a[len(a)]
+    # a stack given another's blur levels of the same texture renders the same slices
+    shared = RenderedStack(tex, h, z, blur_px_per_um=2.0, noise_sd=0.01, seed=(3,),
+                           levels=b.levels)
+    assert all(np.array_equal(shared[i], first[i]) for i in range(len(a)))
+
+
+def test_the_blur_level_index_is_np_interp_bit_for_bit():
+    """The renderer's level index is arithmetic on the levels' spacing (0.5 px to 2 px, then
+    2^m, 1.5 · 2^m): it must equal np.interp over the levels exactly (float32), at the levels,
+    one ulp either side of them, past the last and at random blurs from 0.5 px up."""
+    from microfacet.analysis.self_check import _LEVELS_PX, _level_index
+
+    rng = np.random.default_rng(2)
+    lv = _LEVELS_PX[1:]
+    sigma = np.concatenate([lv, np.nextafter(lv, 0.0), np.nextafter(lv, np.inf),
+                            rng.uniform(0.5, 40.0, 200_000), rng.uniform(0.5, 2.5, 50_000),
+                            [1e6]])
+    want = np.interp(sigma, _LEVELS_PX, np.arange(_LEVELS_PX.size, dtype=np.float32))
+    got = _level_index(sigma)
+    assert got.dtype == np.float32
+    assert np.array_equal(got, want.astype(np.float32))
