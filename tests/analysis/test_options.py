@@ -42,7 +42,7 @@ def test_defaults_are_the_seeds():
     assert o.optics.delta_e_method == "CIEDE2000"                    # seed: ΔE00
     assert o.optics.thickness_range_nm == (0.0, 400.0)
     assert o.optics.film is None and o.optics.exposure is None       # the stack's, or default
-    assert o.fits.max_components == 5 and o.tilt.step_deg == 0.5
+    assert o.fits.max_components == 5 and o.tilt.step_deg == 1.0
     for name, cls in SECTIONS.items():
         assert getattr(o, name) == cls(), name
 
