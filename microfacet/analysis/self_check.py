@@ -70,7 +70,8 @@ SIGMA_COVERAGE = 0.95
 
 #: Injected lobe widths, as multiples of the scene's own measured RMS slope.
 WIDTH_FACTORS = (0.5, 1.0, 2.0)
-#: Blur of an in-focus pixel (px) and the blur levels the renderer interpolates between.
+#: Blur of an in-focus pixel (px) and the blur levels the renderer interpolates between
+#: (:func:`_level_index` computes a blur's place among them from this spacing).
 _BASE_BLUR_PX = 0.5
 _LEVELS_PX = np.array([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0])
 
@@ -241,9 +242,10 @@ def _blur_levels(texture):
 def _level_index(sigma):
     """``np.interp(sigma, _LEVELS_PX, arange)`` as float32, bit for bit, for ``sigma`` ≥ 0.5 px
     (the renderer's blur is never less), in arithmetic instead of a search: the levels are
-    0.5 px apart up to 2 px, then 2^m, 1.5 · 2^m, 2^(m+1), …, each step 2^(m-1) wide, so the
-    index is 2 σ below 2 px and 2 e − 2 + 4 m above, with σ = m · 2^e (``np.frexp``); both
-    are one rounding of the value np.interp rounds once, and half the time."""
+    0.5 px apart up to 2 px, then 2^k, 1.5 · 2^k, 2^(k+1), …, each step 2^(k-1) wide, so the
+    index is 2σ below 2 px and 2e − 2 + 4f above, with σ = f · 2^e and 0.5 ≤ f < 1
+    (``np.frexp``). Each is one rounding of the value np.interp rounds once; half its time.
+    (tests/analysis/test_self_check.py checks it against np.interp.)"""
     mant, expo = np.frexp(sigma)
     f = np.where(sigma < 2.0, 2.0 * sigma, 2.0 * expo - 2.0 + 4.0 * mant)
     return np.minimum(f, _LEVELS_PX.size - 1.0).astype(np.float32)
