@@ -603,18 +603,13 @@ def test_the_background_does_not_take_a_small_population(seed):
 def _scattered_scene(seed, scattered):
     """Facets of six regions at 84 nm and four at 167 nm (about 80 / 20 % of the area), a
     share ``scattered`` of them read anywhere in 30-300 nm (mis-read over several orders)."""
-    from microfacet.analysis.sampling import Regions
-
     rng = np.random.default_rng(seed)
     value = np.concatenate([rng.normal(84.0, 1.5, 6), rng.normal(167.0, 1.5, 4)])
     area = np.concatenate([rng.uniform(3000, 9000, 6), rng.uniform(1500, 3000, 4)])
-    nf = np.maximum(area / 60.0, 1.0).astype(int)
-    x = np.repeat(value, nf) + rng.normal(0.0, 0.5, nf.sum())
+    x, w, regions = _regions_facets(value, area, rng)
     mis = rng.random(x.size) < scattered
     x[mis] = rng.uniform(30.0, 300.0, mis.sum())
-    regions = Regions(np.repeat(np.arange(value.size), nf), value, 0.3 / np.sqrt(nf), area,
-                      0.0)
-    return x, np.repeat(area / nf, nf), regions
+    return x, w, regions
 
 
 @pytest.mark.parametrize("seed", [0, 1])
