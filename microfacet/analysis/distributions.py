@@ -39,7 +39,9 @@ from .consistency import (
     MOVE_MIN_SHARE,
     candidate_alias,
     component_orders,
+    component_samples,
     distinct_populations,
+    misread_components,
     nearest_component,
     order_move,
 )
@@ -55,7 +57,7 @@ from .identification import (
     thickness_judgement,
     unexplained_facets,
 )
-from .mixtures import MixtureFit, fit_thickness_mixture
+from .mixtures import CANDIDATE_MISFIT, MixtureFit, fit_thickness_mixture
 from .ndf_fit import fit_ndf_mixture, width_relative_error
 from .options import FitOptions
 from .planes import deconvolved_rms_slope
@@ -130,9 +132,14 @@ def _thickness_samples(joint, options, cens_frac=None):
     ok = (np.isfinite(th.thickness_nm) & (joint.area_px > 0)
           & ((_censored_fraction(joint) if cens_frac is None else cens_frac)
              < CENSORED_FACET_FRACTION) & ~unexplained)
-    regions = (thickness_regions(joint.facets, np.where(ok, th.thickness_nm, np.nan),
-                                 th.sigma_nm) if ok.sum() >= 2 else None)
-    return ok, unexplained, regions
+    return ok, unexplained, _regions(joint, ok)
+
+
+def _regions(joint, ok):
+    """The thickness regions of the facets ``ok`` (None for fewer than two)."""
+    th = joint.thickness
+    return (thickness_regions(joint.facets, np.where(ok, th.thickness_nm, np.nan),
+                              th.sigma_nm) if ok.sum() >= 2 else None)
 
 
 def _thickness_fit(joint, ok, regions, options, seed) -> MixtureFit:
@@ -141,6 +148,47 @@ def _thickness_fit(joint, ok, regions, options, seed) -> MixtureFit:
                                  weights=joint.area_px[ok].astype(np.float64),
                                  n_effective=regions, options=options, background=True,
                                  seed=seed)
+
+
+#: Most rounds of setting misread components aside (:func:`_set_aside_misread`), one refit
+#: each.
+MAX_MISREAD_ROUNDS = 2
+
+
+def _set_aside_misread(joint, fit, samples, options, seed):
+    """The mixture refitted without the facets of its misread components
+    (:func:`~.consistency.misread_components`: minor components whose colours the film
+    explains much worse than the populations', by the rule a candidate population's colours
+    must pass); up to :data:`MAX_MISREAD_ROUNDS` times. Their facets join the unexplained
+    ones. Returns the fit, the samples ``(ok, unexplained, regions)`` and one record per
+    component set aside (mean and weight in the mixture it was found in, its facets' and the
+    populations' median ΔE00, its facets).
+
+    The number of independent regions grows with the field, and facets misread the same way
+    (a stain's colour, an order's look-alike) then pay for a component of their own: on the
+    generalization sweep at 1024² px such components made two to five populations of one to
+    three (docs/accuracy.md, "Misread facets").
+    """
+    th = joint.thickness
+    ok, unexplained, regions = samples
+    records = []
+    for _ in range(MAX_MISREAD_ROUNDS):
+        d = np.where(ok, th.thickness_nm, np.nan)
+        bad = misread_components(fit.mixture, d, th.delta_e, misfit=CANDIDATE_MISFIT)
+        if not bad:
+            break
+        drop = component_samples(fit.mixture, d, [k for k, _, _ in bad])
+        left = _regions(joint, ok & ~drop)
+        if left is None:
+            break
+        for k, de_k, de_rest in bad:
+            w, mu, _ = fit.mixture.components[k]
+            records.append({"mean_nm": float(mu), "weight": float(w), "delta_e": de_k,
+                            "delta_e_populations": de_rest,
+                            "facets": int(component_samples(fit.mixture, d, [k]).sum())})
+        ok, unexplained, regions = ok & ~drop, unexplained | drop, left
+        fit = _thickness_fit(joint, ok, regions, options, seed)
+    return fit, (ok, unexplained, regions), records
 
 
 #: Most components moved to another's interference order (:func:`pool_interference_orders`),
@@ -257,6 +305,9 @@ def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders
     if regions is None:
         return None, NO_SAMPLES["thickness"]
     fit = pooled.fit if ready else _thickness_fit(joint, ok, regions, options, scene.seed)
+    fit, (ok, unexplained, regions), misread = _set_aside_misread(
+        joint, fit, (ok, unexplained, regions), options, scene.seed)
+    fit.info["misread_components"] = misread
     _describe_candidates(fit, regions, th, area, ok,
                          joint.facets.size * float(np.prod(scene.pixel_size_um)))
     fit.info["mean_uncertainty"] = mean_uncertainty(

@@ -474,6 +474,21 @@ def _candidate_warning(fit) -> Reason | None:
                   "fits.thickness_min_component_samples")
 
 
+def _misread_warning(fit) -> Reason | None:
+    """Minor components set aside as misread facets (``info["misread_components"]``,
+    :func:`~.distributions.fit_joint_distributions`)."""
+    gone = (fit.info.get("misread_components") or []) if fit is not None else []
+    if not gone:
+        return None
+    each = "; ".join(f"{m['mean_nm']:.1f} nm ({100 * m['weight']:.0f} %, median dE00 "
+                     f"{m['delta_e']:.2f} against the populations' {m['delta_e_populations']:.2f})"
+                     for m in gone)
+    return Reason("thickness_misread", f"facets whose colours the film explains much worse "
+                  f"than the populations' were set aside, not counted as populations: {each} "
+                  f"(summary.json thickness.mixture.misread_components; their thicknesses stay "
+                  f"in thickness_nm.npy)", "optics.film")
+
+
 def _white_balance_warning(wb) -> Reason | None:
     """The colours leave the gains free (:func:`gains_unconstrained`), or look unbalanced:
     an estimate, no reference, a gain off 1 by > 3σ, > 3 %."""
@@ -526,8 +541,8 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
         ``(pixel_median_nm, disagrees)`` per ROI (:func:`~.consistency.roi_pixel_check`):
         a warning naming the ROIs whose single fit disagrees with their pixels.
     """
-    out = [r for r in (_spike_warning(dist.thickness), _candidate_warning(dist.thickness))
-           if r is not None]
+    out = [r for r in (_spike_warning(dist.thickness), _candidate_warning(dist.thickness),
+                       _misread_warning(dist.thickness)) if r is not None]
     if map_check is not None and not map_check.consistent:
         out.append(Reason("mixture_map_mismatch", f"the thickness mixture does not summarize "
                           f"the per-pixel map: area fractions differ by up to "

@@ -231,8 +231,9 @@ def _analysis_rows(ctx):
 
 def _order_rows(res):
     """The thicknesses' interference order (``thickness.order``: established, or the first
-    reason and how many more) and each component read in another's order
-    (``thickness.mixture.order_moves``)."""
+    reason and how many more), each component read in another's order
+    (``thickness.mixture.order_moves``) and each set aside as misread facets
+    (``thickness.mixture.misread_components``)."""
     rows = []
     order = res.get("thickness", "order")
     if isinstance(order, dict) and "established" in order:
@@ -244,6 +245,11 @@ def _order_rows(res):
         rows.append(["order move", f"{fmt(m.get('from_nm'), '.1f')} → "
                      f"{fmt(m.get('to_nm'), '.1f', 'nm')} "
                      f"({fmt(pct(m.get('area_share')), '.0f', '%')} of a component)"])
+    for m in res.get("thickness", "mixture", "misread_components") or []:
+        rows.append(["set aside (misread)", f"{fmt(m.get('mean_nm'), '.1f', 'nm')} "
+                     f"({fmt(pct(m.get('weight')), '.0f', '%')}; {DE} "
+                     f"{fmt(m.get('delta_e'), '.1f')} vs "
+                     f"{fmt(m.get('delta_e_populations'), '.1f')})"])
     return rows
 
 

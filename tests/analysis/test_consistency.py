@@ -6,6 +6,7 @@ does summarize its map passes."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from microfacet.analysis.consistency import mixture_map_check, roi_pixel_check
 from microfacet.core.distributions import ThicknessMixture
@@ -186,3 +187,39 @@ def test_the_map_check_in_chunks_is_the_check_at_once(monkeypatch):
     whole = mixture_map_check(m, mix)
     monkeypatch.setattr(threads, "BLOCK_VALUES", 3 * 333)     # 333 pixels
     assert mixture_map_check(m, mix) == whole
+
+
+def _misread_scene(share=0.1, de_minor=(3.5, 5.5), seed=0, n=2000):
+    """Facets of a 130 nm population (ΔE00 0.3-3.0) and a ``share`` of them read at 250 nm
+    with ΔE00 drawn from ``de_minor``."""
+    rng = np.random.default_rng(seed)
+    m = int(share * n)
+    d = np.r_[rng.normal(130, 1.0, n - m), rng.normal(250, 1.0, m)]
+    de = np.r_[rng.uniform(0.3, 3.0, n - m), rng.uniform(*de_minor, m)]
+    mix = ThicknessMixture([(1 - share, 130.0, 1.0), (share, 250.0, 1.0)])
+    return mix, d, de
+
+
+def test_a_minor_component_the_film_explains_far_worse_is_misread():
+    """The 250 nm facets' median ΔE00 (4.5) is above 1.5 × the population's (1.65) + 0.5:
+    misread, with both medians; the population itself never is, whatever the colours."""
+    from microfacet.analysis.consistency import component_samples, misread_components
+
+    mix, d, de = _misread_scene()
+    ((k, de_k, de_rest),) = misread_components(mix, d, de, misfit=1.5)
+    assert mix.components[k][1] == 250.0
+    assert de_k == pytest.approx(4.5, abs=0.2) and de_rest == pytest.approx(1.65, abs=0.1)
+    assert component_samples(mix, d, [k]).sum() == 200
+    # one component is always kept, however its colours fit
+    one = ThicknessMixture([(1.0, 130.0, 1.0)])
+    assert misread_components(one, d[:1800], de[:1800] + 10.0, misfit=1.5) == []
+
+
+@pytest.mark.parametrize("share, de_minor", [(0.1, (0.3, 3.0)), (0.3, (3.5, 5.5))])
+def test_a_population_explained_as_well_or_a_major_one_is_not_misread(share, de_minor):
+    """Colours as well explained as the population's, or a component above
+    MISREAD_MAX_SHARE of the weight: kept."""
+    from microfacet.analysis.consistency import misread_components
+
+    mix, d, de = _misread_scene(share=share, de_minor=de_minor)
+    assert misread_components(mix, d, de, misfit=1.5) == []

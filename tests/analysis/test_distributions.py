@@ -257,6 +257,58 @@ def test_a_population_split_between_orders_is_pooled_into_one():
     np.testing.assert_array_equal(pooled.samples[0], ok)
 
 
+
+def _misread_joint(seed=2, n_minor=90, de_minor=(3.5, 5.5)):
+    """Facets of 8×8 px on a 240×240 image: blocks of 3×3 facets (regions) of a 130 nm and
+    a 175 nm population, a checkerboard (ΔE00 0.3-3.0), and ``n_minor`` facets scattered over
+    both read at 250 nm with ΔE00 drawn from ``de_minor``."""
+    from types import SimpleNamespace
+
+    from microfacet.analysis.facet_thickness import FacetThickness
+
+    rng = np.random.default_rng(seed)
+    labels = np.arange(900).reshape(30, 30).repeat(8, axis=0).repeat(8, axis=1)
+    row, col = np.divmod(np.arange(900), 30)
+    d = np.where((row // 3 + col // 3) % 2, 130.0, 175.0) + rng.normal(0, 0.8, 900)
+    de = rng.uniform(0.3, 3.0, 900)
+    minor = np.zeros(900, bool)
+    minor[rng.choice(900, n_minor, replace=False)] = True
+    d[minor] = rng.normal(250, 0.8, n_minor)
+    de[minor] = rng.uniform(*de_minor, n_minor)
+    ft = FacetThickness(d, np.full(900, 0.5), de, np.zeros(900, bool), np.full(900, 64),
+                        de + 3.0, d + 111.0)
+    return SimpleNamespace(thickness=ft, area_px=np.full(900, 64), facets=labels,
+                           censored=np.zeros(labels.shape, bool)), minor
+
+
+@pytest.mark.parametrize("de_minor, misread", [((3.5, 5.5), True), ((0.3, 3.0), False)])
+def test_facets_the_film_explains_far_worse_are_set_aside_not_a_population(de_minor, misread):
+    """Scattered facets read at 250 nm form a third component; where their colours fit the
+    film far worse than the two populations' (median ΔE00 4.5 against 1.65) they are set
+    aside: the refit has the two populations, the record says what went, and their facets
+    join the unexplained ones. Where they fit as well, the component stays."""
+    from microfacet.analysis.distributions import (
+        _set_aside_misread,
+        _thickness_fit,
+        _thickness_samples,
+    )
+
+    joint, minor = _misread_joint(de_minor=de_minor)
+    samples = _thickness_samples(joint, OPTIONS)
+    assert not (samples[1] & minor).any()       # not robust outliers of the ΔE00 alone
+    before = _thickness_fit(joint, samples[0], samples[2], OPTIONS, 0)
+    assert before.n_components == 3
+    fit, (ok, unexplained, _), records = _set_aside_misread(joint, before, samples, OPTIONS, 0)
+    if not misread:
+        assert fit is before and records == []
+        return
+    assert [round(m) for m in fit.mixture.means_nm] == [130, 175]
+    ((r,),) = (records,)
+    assert r["mean_nm"] == pytest.approx(250, abs=1) and r["facets"] == minor.sum()
+    assert r["delta_e"] > 1.5 * r["delta_e_populations"] + 0.5
+    np.testing.assert_array_equal(unexplained, minor)
+    np.testing.assert_array_equal(ok, ~minor)
+
 def test_an_order_move_most_facets_refuse_is_not_made():
     """Solved again in the other order, most of the 163 nm facets keep their own (it fits
     them better by more than the switch margin): the move is dropped, the facets unchanged."""
