@@ -213,11 +213,11 @@ def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguo
     return out
 
 
-#: Largest share of the samples' weight a component may hold and still be set aside as
-#: misread facets (:func:`misread_components`): facets the film does not explain — dust and
-#: stains on a facet, groove walls, facets read in another order — are a minority of the
-#: film; the components they formed on the generalization sweeps held 2-19 % of the area
-#: (docs/accuracy.md, "Misread facets").
+#: Largest weight a component of the mixture may have and still be set aside as misread
+#: facets (:func:`misread_components`): facets the film does not explain — dust and stains
+#: on a facet, groove walls, facets read in another order — are a minority of the film; the
+#: components set aside on the generalization sweeps weighed 0.01-0.19 (docs/accuracy.md,
+#: "Misread facets, and a field 16× larger").
 MISREAD_MAX_SHARE = 0.2
 
 

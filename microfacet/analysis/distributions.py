@@ -167,7 +167,7 @@ def _set_aside_misread(joint, fit, samples, options, seed):
     The number of independent regions grows with the field, and facets misread the same way
     (a stain's colour, an order's look-alike) then pay for a component of their own: on the
     generalization sweep at 1024² px such components made two to five populations of one to
-    three (docs/accuracy.md, "Misread facets").
+    three (docs/accuracy.md, "Misread facets, and a field 16× larger").
     """
     th = joint.thickness
     ok, unexplained, regions = samples

@@ -401,6 +401,19 @@ def test_a_reported_candidate_population_is_a_warning_naming_the_field():
     assert [c["reported"] for c in fit.to_json()["candidates"]] == [True, False, False]
 
 
+
+def test_a_component_set_aside_as_misread_is_a_warning_naming_it():
+    """Each component set aside (info["misread_components"]) is named with its weight and
+    both misfits; none set aside, no warning."""
+    gone = [{"mean_nm": 367.04, "weight": 0.048, "delta_e": 1.33,
+             "delta_e_populations": 0.55, "facets": 974}]
+    fit = MixtureFit(ThicknessMixture([(1.0, 234.8, 1.0)]), 0.0, {1: 0.0}, 10, 10.0,
+                     info={"misread_components": gone})
+    (w,) = [r for r in _warn(_dist(thickness_fit=fit)) if r.code == "thickness_misread"]
+    assert "367.0 nm (5 %, median dE00 1.33 against the populations' 0.55)" in w.text
+    fit.info["misread_components"] = []
+    assert not [r for r in _warn(_dist(thickness_fit=fit)) if r.code == "thickness_misread"]
+
 def test_a_candidate_that_may_be_a_component_in_another_order_is_said_so():
     """A candidate that lies an order from a component (``alias_of_nm``) is not reported as
     a population of its own: it is an order-alias warning, and the order is not

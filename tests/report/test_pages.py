@@ -14,7 +14,7 @@ from microfacet.forward.angular import DISPLAY_CORE_DEG, display_exposure, simul
 from microfacet.io.results import Results, write_results_files
 from microfacet.report import parameter_tables
 from microfacet.report.context import Context
-from microfacet.report.layout import nice_length
+from microfacet.report.layout import DE, nice_length
 from microfacet.report.page_angular import ANGLES_DEG, WAVELENGTH_NM, optics, predicted_maps
 from microfacet.report.page_maps import component_codes
 
@@ -251,8 +251,9 @@ def test_candidate_populations_are_not_drawn_on_the_tilt_panel(results_copy):
 
 
 def test_the_parameter_page_states_the_order_and_each_order_move(results_copy):
-    """summary.json's thickness.order (its first reason and how many more) and each
-    thickness.mixture.order_moves entry are rows of the analysis table."""
+    """summary.json's thickness.order (its first reason and how many more), each
+    thickness.mixture.order_moves entry and each misread_components entry are rows of the
+    analysis table."""
     folder = results_copy()
     summary = json.loads((folder / "summary.json").read_text())
     summary["thickness"]["order"] = {"established": False, "reasons": [
@@ -261,9 +262,14 @@ def test_the_parameter_page_states_the_order_and_each_order_move(results_copy):
     summary["thickness"]["mixture"]["order_moves"] = [
         {"from_nm": 163.1, "to_nm": 50.1, "area_share": 0.92, "mean_gap_de": 0.56,
          "facets": 172}]
+    summary["thickness"]["mixture"]["misread_components"] = [
+        {"mean_nm": 367.04, "weight": 0.048, "delta_e": 1.33, "delta_e_populations": 0.55,
+         "facets": 974}]
     (folder / "summary.json").write_text(json.dumps(summary))
     rows = parameter_tables(folder)["analysis"]["rows"]
     assert dict(rows)["interference order"] == (
         "not established: the facets of a 163.1 nm component were read in the order of the "
         "50.1 nm one (+1 more)")
     assert [v for k, v in rows if k == "order move"] == ["163.1 → 50.1 nm (92 % of a component)"]
+    assert [v for k, v in rows if k == "set aside (misread)"] == [
+        f"367.0 nm (5 %; {DE} 1.3 vs 0.6)"]
