@@ -35,9 +35,10 @@ import numpy as np
 
 from ..core import threads
 from ..core.threads import chunks
+from .mixtures import colour_explained
 from .sampling import weighted_median
 
-__all__ = ["MapCheck", "OrderMove", "candidate_alias", "component_orders", "component_samples",
+__all__ = ["MapCheck", "OrderMove", "candidate_alias", "component_orders",
            "distinct_populations", "misread_components", "mixture_map_check",
            "nearest_component", "order_alias_of", "order_move", "roi_pixel_check"]
 
@@ -218,34 +219,33 @@ def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguo
 #: on a facet, groove walls, facets read in another order — are a minority of the film; the
 #: components set aside on the generalization sweeps weighed 0.01-0.19 (docs/accuracy.md,
 #: "Misread facets, and a field 16× larger").
-MISREAD_MAX_SHARE = 0.2
+MISREAD_MAX_WEIGHT = 0.2
 
 
-def misread_components(mixture, thickness_nm, delta_e, *, misfit,
-                       max_share=MISREAD_MAX_SHARE) -> list:
+def misread_components(mixture, thickness_nm, delta_e, *,
+                       max_weight=MISREAD_MAX_WEIGHT) -> list:
     """The minor components of ``mixture`` whose samples' colours the film explains much
     worse than the other components' samples': misread facets, not a population.
 
     Each sample (facet) belongs to its most likely component within
     :data:`UNEXPLAINED_SD` widened SD. From the lightest component up, a component of weight
-    at most ``max_share`` is misread where the median ΔE00 of its samples
-    exceeds ``misfit`` × the median of the samples of the components still kept, + 0.5 (the
-    rule a candidate population's colours must pass,
-    :attr:`~.mixtures.PopulationCandidate.colour_explained`); at least one component is kept.
+    at most ``max_weight`` is misread where the median ΔE00 of its samples is not
+    :func:`~.mixtures.colour_explained` beside the median of the samples of the components
+    still kept (the rule a candidate population's colours must pass); at least one component
+    is kept.
 
     Parameters
     ----------
     mixture : ThicknessMixture
     thickness_nm, delta_e : array_like, shape (S,)
         Each sample's thickness (nm; NaN: none) and its colour misfit ΔE00.
-    misfit : float
-        The factor on the kept components' median ΔE00.
-    max_share : float, optional
+    max_weight : float, optional
 
     Returns
     -------
-    list of (int, float, float)
-        Per misread component: its index, its samples' median ΔE00 and the kept ones'.
+    list of (int, float, float, ndarray of bool)
+        Per misread component: its index, its samples' median ΔE00, the kept ones', and its
+        samples.
 
     Examples
     --------
@@ -253,9 +253,9 @@ def misread_components(mixture, thickness_nm, delta_e, *, misfit,
     >>> m = ThicknessMixture([(0.85, 130.0, 1.0), (0.15, 250.0, 1.0)])
     >>> d = np.r_[np.full(85, 130.0), np.full(15, 250.0)]
     >>> de = np.r_[np.full(85, 1.0), np.full(15, 4.0)]
-    >>> misread_components(m, d, de, misfit=1.5)    # 4.0 > 1.5 × 1.0 + 0.5
-    [(1, 4.0, 1.0)]
-    >>> misread_components(m, d, de, misfit=1.5, max_share=0.1)
+    >>> [(k, a, b, int(s.sum())) for k, a, b, s in misread_components(m, d, de)]   # 4 > 2
+    [(1, 4.0, 1.0, 15)]
+    >>> misread_components(m, d, de, max_weight=0.1)
     []
     """
     own, _, _ = _own_component(mixture, thickness_nm)
@@ -266,26 +266,13 @@ def misread_components(mixture, thickness_nm, delta_e, *, misfit,
         mine = (own == k) & np.isfinite(de)
         rest = np.isin(own, [j for j in kept if j != k]) & np.isfinite(de)
         if (len(kept) == 1 or not mine.any() or not rest.any()
-                or not mixture.components[k][0] <= max_share):
+                or mixture.components[k][0] > max_weight):
             continue
         de_k, de_rest = float(np.median(de[mine])), float(np.median(de[rest]))
-        if de_k > misfit * de_rest + 0.5:
+        if not colour_explained(de_k, de_rest):
             kept.remove(k)
-            out.append((k, de_k, de_rest))
+            out.append((k, de_k, de_rest, own == k))
     return out
-
-
-def component_samples(mixture, thickness_nm, components) -> np.ndarray:
-    """The samples that belong to any of ``components`` (indices): each sample to its most
-    likely component within :data:`UNEXPLAINED_SD` widened SD.
-
-    >>> from microfacet.core.distributions import ThicknessMixture
-    >>> m = ThicknessMixture([(0.5, 130.0, 1.0), (0.5, 250.0, 1.0)])
-    >>> component_samples(m, [130.0, 251.0, 400.0, np.nan], [1]).tolist()
-    [False, True, False, False]
-    """
-    own, _, _ = _own_component(mixture, thickness_nm)
-    return np.isin(own, list(components))
 
 
 def nearest_component(mixture, values_nm, *, exclude=None) -> np.ndarray:

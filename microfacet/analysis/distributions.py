@@ -39,7 +39,6 @@ from .consistency import (
     MOVE_MIN_SHARE,
     candidate_alias,
     component_orders,
-    component_samples,
     distinct_populations,
     misread_components,
     nearest_component,
@@ -57,7 +56,7 @@ from .identification import (
     thickness_judgement,
     unexplained_facets,
 )
-from .mixtures import CANDIDATE_MISFIT, MixtureFit, fit_thickness_mixture
+from .mixtures import MixtureFit, fit_thickness_mixture
 from .ndf_fit import fit_ndf_mixture, width_relative_error
 from .options import FitOptions
 from .planes import deconvolved_rms_slope
@@ -173,19 +172,18 @@ def _set_aside_misread(joint, fit, samples, options, seed):
     ok, unexplained, regions = samples
     records = []
     for _ in range(MAX_MISREAD_ROUNDS):
-        d = np.where(ok, th.thickness_nm, np.nan)
-        bad = misread_components(fit.mixture, d, th.delta_e, misfit=CANDIDATE_MISFIT)
+        bad = misread_components(fit.mixture, np.where(ok, th.thickness_nm, np.nan),
+                                 th.delta_e)
         if not bad:
             break
-        drop = component_samples(fit.mixture, d, [k for k, _, _ in bad])
+        drop = np.logical_or.reduce([mine for *_, mine in bad])
         left = _regions(joint, ok & ~drop)
         if left is None:
             break
-        for k, de_k, de_rest in bad:
+        for k, de_k, de_rest, mine in bad:
             w, mu, _ = fit.mixture.components[k]
             records.append({"mean_nm": float(mu), "weight": float(w), "delta_e": de_k,
-                            "delta_e_populations": de_rest,
-                            "facets": int(component_samples(fit.mixture, d, [k]).sum())})
+                            "delta_e_populations": de_rest, "facets": int(mine.sum())})
         ok, unexplained, regions = ok & ~drop, unexplained | drop, left
         fit = _thickness_fit(joint, ok, regions, options, seed)
     return fit, (ok, unexplained, regions), records

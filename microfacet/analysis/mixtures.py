@@ -533,6 +533,19 @@ CANDIDATE_MAX_FIELD_SCALE = 16.0
 _FIELD_SCALES = np.geomspace(1.0, 1e4, 401)
 
 
+def colour_explained(delta_e, delta_e_populations) -> bool:
+    """Whether samples of median colour misfit ``delta_e`` (ΔE00) fit the film as well as
+    the populations' (median ``delta_e_populations``): at most :data:`CANDIDATE_MISFIT` ×
+    theirs, + 0.5. Else they are mis-read regions or facets, not a population (a candidate's
+    :attr:`PopulationCandidate.colour_explained`, a minor component's
+    :func:`~.consistency.misread_components`).
+
+    >>> colour_explained(1.9, 1.0), colour_explained(2.1, 1.0)
+    (True, False)
+    """
+    return bool(delta_e <= CANDIDATE_MISFIT * delta_e_populations + 0.5)
+
+
 @dataclass
 class PopulationCandidate:
     """A population the regions suggest but the field does not decide
@@ -589,7 +602,7 @@ class PopulationCandidate:
         :data:`CANDIDATE_MISFIT` × theirs, and +0.5): a population, not mis-read regions."""
         if self.delta_e is None or self.delta_e_populations is None:
             return None
-        return self.delta_e <= CANDIDATE_MISFIT * self.delta_e_populations + 0.5
+        return colour_explained(self.delta_e, self.delta_e_populations)
 
     @property
     def reported(self) -> bool:

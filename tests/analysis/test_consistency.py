@@ -203,23 +203,23 @@ def _misread_scene(share=0.1, de_minor=(3.5, 5.5), seed=0, n=2000):
 def test_a_minor_component_the_film_explains_far_worse_is_misread():
     """The 250 nm facets' median ΔE00 (4.5) is above 1.5 × the population's (1.65) + 0.5:
     misread, with both medians; the population itself never is, whatever the colours."""
-    from microfacet.analysis.consistency import component_samples, misread_components
+    from microfacet.analysis.consistency import misread_components
 
     mix, d, de = _misread_scene()
-    ((k, de_k, de_rest),) = misread_components(mix, d, de, misfit=1.5)
+    ((k, de_k, de_rest, mine),) = misread_components(mix, d, de)
     assert mix.components[k][1] == 250.0
     assert de_k == pytest.approx(4.5, abs=0.2) and de_rest == pytest.approx(1.65, abs=0.1)
-    assert component_samples(mix, d, [k]).sum() == 200
+    assert mine.sum() == 200
     # one component is always kept, however its colours fit
     one = ThicknessMixture([(1.0, 130.0, 1.0)])
-    assert misread_components(one, d[:1800], de[:1800] + 10.0, misfit=1.5) == []
+    assert misread_components(one, d[:1800], de[:1800] + 10.0) == []
 
 
 @pytest.mark.parametrize("share, de_minor", [(0.1, (0.3, 3.0)), (0.3, (3.5, 5.5))])
 def test_a_population_explained_as_well_or_a_major_one_is_not_misread(share, de_minor):
     """Colours as well explained as the population's, or a component above
-    MISREAD_MAX_SHARE of the weight: kept."""
+    MISREAD_MAX_WEIGHT: kept."""
     from microfacet.analysis.consistency import misread_components
 
     mix, d, de = _misread_scene(share=share, de_minor=de_minor)
-    assert misread_components(mix, d, de, misfit=1.5) == []
+    assert misread_components(mix, d, de) == []
