@@ -63,7 +63,7 @@ from .planes import deconvolved_rms_slope
 from .sampling import thickness_regions
 from .segmentation import neighbour_pairs
 
-__all__ = ["Distributions", "PooledOrders", "fit_joint_distributions",
+__all__ = ["Distributions", "PooledOrders", "correct_ndf_width", "fit_joint_distributions",
            "fit_seed_distributions", "pool_interference_orders"]
 
 sparse = load("scipy.sparse")
@@ -475,8 +475,10 @@ def _describe_candidates(fit, regions, th, area, ok, field_um2) -> None:
                 th.delta_e_other_order[mine] - de[mine], area[mine], misfit)
 
 
-def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed):
-    """The NDF of the facet planes (censored), and its judgement."""
+def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed, *, slope_gain=1.0):
+    """The NDF of the facet planes (censored), and its judgement; the planes' slopes (and
+    their noise) divided by ``slope_gain`` for the fit only (the evidence and the dome term
+    compare the planes with heights of the same gain)."""
     th, pl = joint.thickness, joint.slope_planes
     area = joint.area_px.astype(np.float64)
     use = pl.fitted & np.isfinite(pl.tilt_deg) & (cens_frac < CENSORED_FACET_FRACTION)
@@ -500,7 +502,8 @@ def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed):
     c_err = float(np.nanmedian(joint.colour_sigma_de / np.sqrt(np.maximum(area, 1))))
     fit, rel = None, math.inf
     if use.sum() >= 2:
-        fit = fit_ndf_mixture(pl.tilt_deg[use], slope_sigma=pl.slope_sigma[use],
+        tilt = np.degrees(np.arctan(np.tan(np.radians(pl.tilt_deg[use])) / slope_gain))
+        fit = fit_ndf_mixture(tilt, slope_sigma=pl.slope_sigma[use] / slope_gain,
                               weights=area[use], censored=(C, max_tilt_deg) if C > 0 else None,
                               n_effective=max(n_eff, 1.0), options=options, seed=seed)
         fit.info["samples"] = "facet plane tilts (height from focus)"
@@ -583,6 +586,39 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
         tfit.info["order_moves"] = [m.to_json() for m in pooled.moves]
     nfit, nj = _joint_ndf(joint, model, cens_frac, scene.max_tilt_deg, options, scene.seed)
     return Distributions(tfit, nfit, tj, nj, *_roi_flags(roi, options))
+
+
+def correct_ndf_width(dist: Distributions, joint, model, scene, options: FitOptions,
+                      check) -> Distributions:
+    """The NDF refitted to the facet planes' slopes over the self-check's width transfer.
+
+    The self-check (:mod:`.self_check`) measures, on the stack itself, the RMS slope the
+    NDF sees of injected planes over their true one (``check.width_transfer``). Where the
+    self-check passes — that and the slopes' gain (``check.transfer``) both in
+    ``options.self_check_range``: the stack resolves the slopes, at a gain it measured —
+    the planes' slopes and their noise are divided by the width transfer before the lobes
+    are fitted again (``fits.self_check_correct``); the uncorrected lobes and the gain are
+    kept in ``info["width_correction"]``. Its uncertainty stays in the width's total error
+    (:meth:`~.self_check.SelfCheck.width_error`: the correction's size, since the transfer
+    measured on injected planes predicts a scene's own error only on average;
+    docs/accuracy.md). A width transfer in range beside a slope gain far outside it (a
+    stack without focus texture: planes of noise, whose noise model sets the width) is no
+    measured gain, and is not corrected for. Otherwise ``dist`` unchanged.
+    """
+    low, high = options.self_check_range
+    g = math.nan if check is None else check.width_transfer
+    t = math.nan if check is None else check.transfer
+    if (dist.ndf is None or not options.self_check_correct
+            or not (low <= g <= high and low <= t <= high)    # False for NaN
+            or "facet plane" not in str(dist.ndf.info.get("samples"))):
+        return dist
+    fit, _ = _joint_ndf(joint, model, _censored_fraction(joint), scene.max_tilt_deg, options,
+                        scene.seed, slope_gain=g)
+    fit.info = {**dist.ndf.info, "censored_fraction": fit.info["censored_fraction"],
+                "inadmissible_k": fit.info["inadmissible_k"],
+                "width_correction": {"slope_gain": float(g),
+                                     "uncorrected": dist.ndf.mixture.to_json()["components"]}}
+    return dataclasses.replace(dist, ndf=fit)
 
 
 def fit_seed_distributions(pixels, roi, model, noise_de, options: FitOptions, *,

@@ -241,6 +241,10 @@ class FitOptions(Options):
         (0.8, 1.25), help="recovered/injected RMS slope outside this range: the NDF is not "
                           "identified", kind=tuple, check=lambda v: None if (
                               len(v) == 2 and 0 < v[0] < 1 < v[1]) else "need 0 < low < 1 < high")
+    self_check_correct: bool = option(
+        True, help="divide the facet planes' slopes by the self-check's width transfer before "
+                   "the NDF's lobes are fitted, where the self-check passes (both transfers "
+                   "in self_check_range; the correction's size stays in the width's error)")
     max_dome_share: float = option(
         0.3, help="largest mean square slope inside the facets (which planes miss) as a share "
                   "of the planes' own, for an identified NDF (0.3: the planes' RMS slope at "

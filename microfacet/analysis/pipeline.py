@@ -36,6 +36,7 @@ from .consistency import ALIAS_SD, mixture_map_check, roi_pixel_check
 from .distributions import (
     Distributions,
     PooledOrders,
+    correct_ndf_width,
     fit_joint_distributions,
     fit_seed_distributions,
     pool_interference_orders,
@@ -327,6 +328,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                                     colour, seg, scene, options.joint,
                                     rng=np.random.default_rng([scene.seed, 22]), crop=crop))
             dist.ndf_judgement = self_check_judgement(dist.ndf_judgement, check, options.fits)
+            dist = correct_ndf_width(dist, joint, model, scene, fits, check)
             if check is not None and dist.ndf is not None:
                 err = check.width_error(dist.ndf.info.get("width_relative_error"))
                 dist.ndf.info["width_relative_error_total"] = (float(err) if math.isfinite(err)

@@ -94,7 +94,9 @@ def _text_summary(result, out: Path, elapsed_s: float) -> str:
         comps += " -- NOT IDENTIFIED"
     if result.self_check is not None and dist.ndf:
         c = result.self_check
-        lobes += (f", self-check {c.transfer:.2f}x slopes, {c.width_transfer:.2f}x width"
+        fixed = "width_correction" in dist.ndf.info
+        lobes += ((f", self-check {c.transfer:.2f}x slopes, {c.width_transfer:.2f}x width"
+                   + (" (widths corrected for it)" if fixed else ""))
                   if math.isfinite(c.transfer) else ", self-check measured nothing")
     if not dist.ndf_judgement.identified:
         lobes += " -- NOT IDENTIFIED, not a measurement"

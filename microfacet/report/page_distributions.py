@@ -58,23 +58,27 @@ def draw(pg, ctx):
     x, dens = _tilt_panel(ax_n, ctx)
     ndf_ok, ndf_why = ctx.identification("ndf")
     _ndf_panel(ax_d, x, dens, ctx.ndf if ndf_ok else None, hi=float(ax_n.get_xlim()[1]))
-    _self_check_note(ax_d, ctx.res.get("ndf", "self_check"))
+    _self_check_note(ax_d, ctx.res.get("ndf", "self_check"),
+                     ctx.res.get("ndf", "mixture", "width_correction"))
     if not ndf_ok:
         _not_identified(ax_d, ndf_why)
     _delta_e_panel(ax_e, ctx)
 
 
-def _self_check_note(ax, check):
+def _self_check_note(ax, check, correction=None):
     """The NDF's self-check (``ndf.self_check``) in the panel's lower left corner: the
-    recovered/injected slope gain, per injected width, and the width the NDF would see."""
+    recovered/injected slope gain, per injected width, and the width the NDF would see;
+    where the lobes were corrected for that width (``ndf.mixture.width_correction``), so."""
     if not isinstance(check, dict) or check.get("transfer") is None:
         return
     per = ", ".join("–" if v is None else f"{v:.2f}" for v in check.get("ratio") or [])
     wt = check.get("width_transfer")
     width = "" if wt is None else f"; width after noise removal {wt:.2f}×"
+    fixed = ("\nlobes fitted to the slopes over it (ndf.mixture.width_correction)"
+             if isinstance(correction, dict) else "")
     ax.text(0.01, 0.02, f"self-check: injected slopes recovered at {check['transfer']:.2f}×"
-            f"{width}\n({per} at 0.5, 1, 2× the width; ndf.self_check)", transform=ax.transAxes,
-            ha="left", va="bottom", fontsize=6.5, color="0.25")
+            f"{width}\n({per} at 0.5, 1, 2× the width; ndf.self_check){fixed}",
+            transform=ax.transAxes, ha="left", va="bottom", fontsize=6.5, color="0.25")
 
 
 def _hist_axes(pg, cell):
