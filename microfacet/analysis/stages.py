@@ -61,10 +61,12 @@ class Stage(enum.Enum):
                          "or not; each thickness mean's 1σ with the white balance's part "
                          "(`analysis.joint.gain_thickness_shifts`)")
     SELF_CHECK = StageInfo("self_check", "self-check", 0.5,
-                           "analysis.self_check.self_check_ndf",
+                           "analysis.self_check.self_check_ndf / "
+                           "analysis.distributions.correct_ndf_width",
                            "`SelfCheck`: recovered/injected RMS slope of known facet slopes "
-                           "rendered in the scene's own conditions; the NDF's judgement "
-                           "(joint mode)")
+                           "rendered in the scene's own conditions; the NDF's judgement, and "
+                           "its lobes refitted to the slopes over the width transfer where the "
+                           "self-check passes (joint mode)")
     WRITE = StageInfo("write", "write", 0.3, "analysis.output.save_results",
                       "the results folder (`io.results`, `io.summary.Summary`)")
     REPORT = StageInfo("report", "report", 3.3, "report.write_report", "report.pdf and its PNGs")
