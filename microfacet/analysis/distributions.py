@@ -53,6 +53,7 @@ from .identification import (
     dome_judgement,
     ndf_judgement,
     seed_ndf_judgement,
+    self_check_passes,
     thickness_judgement,
     unexplained_facets,
 )
@@ -475,11 +476,34 @@ def _describe_candidates(fit, regions, th, area, ok, field_um2) -> None:
                 th.delta_e_other_order[mine] - de[mine], area[mine], misfit)
 
 
-def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed, *, slope_gain=1.0):
-    """The NDF of the facet planes (censored), and its judgement; the planes' slopes (and
-    their noise) divided by ``slope_gain`` for the fit only (the evidence and the dome term
-    compare the planes with heights of the same gain)."""
-    th, pl = joint.thickness, joint.slope_planes
+@dataclass
+class _PlaneSamples:
+    """The NDF's samples: the facets whose plane it uses, their areas, and the censored
+    weight (area) counted against all the film seen."""
+
+    use: np.ndarray
+    area: np.ndarray
+    censored: float
+
+    @property
+    def n_effective(self) -> float:
+        """Facets with a plane, plus the censored weight in facets of their mean area."""
+        a = self.area[self.use] if self.use.any() else self.area
+        return float(self.use.sum()) + self.censored / max(float(a.mean()), 1.0)
+
+    def fit(self, planes, max_tilt_deg, options, seed, *, slope_gain=1.0) -> MixtureFit:
+        """The lobes of the planes' slopes (and slope noise) divided by ``slope_gain``."""
+        u, C = self.use, self.censored
+        tilt = np.degrees(np.arctan(np.tan(np.radians(planes.tilt_deg[u])) / slope_gain))
+        return fit_ndf_mixture(tilt, slope_sigma=planes.slope_sigma[u] / slope_gain,
+                               weights=self.area[u],
+                               censored=(C, max_tilt_deg) if C > 0 else None,
+                               n_effective=max(self.n_effective, 1.0), options=options,
+                               seed=seed)
+
+
+def _plane_samples(joint, cens_frac) -> _PlaneSamples:
+    pl = joint.slope_planes
     area = joint.area_px.astype(np.float64)
     use = pl.fitted & np.isfinite(pl.tilt_deg) & (cens_frac < CENSORED_FACET_FRACTION)
     # Only what is dark is censored. A bright facet whose plane reads steeper than the
@@ -487,7 +511,6 @@ def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed, *, slope_ga
     # (counted as censored, slope noise alone turned instrument-measured surfaces with
     # almost nothing past the limit into a wide lobe).
     C = float(joint.censored.sum())
-    mean_area = float(area[use].mean()) if use.any() else float(area.mean())
     # The facets seen without a plane (too little texture for one) are not past the limit
     # either: the planes sample the seen film, so the censored share is of all of it
     # (counted against the planes alone, it read 0.29 on a sweep scene with no facet past
@@ -496,16 +519,20 @@ def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed, *, slope_ga
     # shadow, whose tilt is as unknown as the planes' absence says nothing of).
     seen_all = float(area[_seen_facets(joint, cens_frac) | use].sum())
     C = C * float(area[use].sum()) / seen_all if use.any() and seen_all > 0 else C
-    n_eff = float(use.sum()) + C / max(mean_area, 1.0)
+    return _PlaneSamples(use, area, C)
+
+
+def _joint_ndf(joint, model, cens_frac, max_tilt_deg, options, seed):
+    """The NDF of the facet planes (censored), and its judgement."""
+    th, pl = joint.thickness, joint.slope_planes
+    ps = _plane_samples(joint, cens_frac)
+    use, area, C = ps.use, ps.area, ps.censored
     d_med = float(np.nanmedian(th.thickness_nm)) if np.isfinite(th.thickness_nm).any() else 0.0
     contrast = colour_tilt_contrast(model, d_med) if d_med > 0 else 0.0
     c_err = float(np.nanmedian(joint.colour_sigma_de / np.sqrt(np.maximum(area, 1))))
     fit, rel = None, math.inf
     if use.sum() >= 2:
-        tilt = np.degrees(np.arctan(np.tan(np.radians(pl.tilt_deg[use])) / slope_gain))
-        fit = fit_ndf_mixture(tilt, slope_sigma=pl.slope_sigma[use] / slope_gain,
-                              weights=area[use], censored=(C, max_tilt_deg) if C > 0 else None,
-                              n_effective=max(n_eff, 1.0), options=options, seed=seed)
+        fit = ps.fit(pl, max_tilt_deg, options, seed)
         fit.info["samples"] = "facet plane tilts (height from focus)"
         rel = width_relative_error(pl.tilt_deg[use], pl.slope_sigma[use], area[use],
                                    float(use.sum()))
@@ -588,7 +615,7 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
     return Distributions(tfit, nfit, tj, nj, *_roi_flags(roi, options))
 
 
-def correct_ndf_width(dist: Distributions, joint, model, scene, options: FitOptions,
+def correct_ndf_width(dist: Distributions, joint, scene, options: FitOptions,
                       check) -> Distributions:
     """The NDF refitted to the facet planes' slopes over the self-check's width transfer.
 
@@ -605,15 +632,14 @@ def correct_ndf_width(dist: Distributions, joint, model, scene, options: FitOpti
     stack without focus texture: planes of noise, whose noise model sets the width) is no
     measured gain, and is not corrected for. Otherwise ``dist`` unchanged.
     """
-    low, high = options.self_check_range
-    g = math.nan if check is None else check.width_transfer
-    t = math.nan if check is None else check.transfer
-    if (dist.ndf is None or not options.self_check_correct
-            or not (low <= g <= high and low <= t <= high)    # False for NaN
-            or "facet plane" not in str(dist.ndf.info.get("samples"))):
+    if dist.ndf is None or not options.self_check_correct or not self_check_passes(
+            check, options):
         return dist
-    fit, _ = _joint_ndf(joint, model, _censored_fraction(joint), scene.max_tilt_deg, options,
-                        scene.seed, slope_gain=g)
+    ps = _plane_samples(joint, _censored_fraction(joint))
+    if ps.use.sum() < 2:       # the NDF is of per-pixel tilts: no planes to correct
+        return dist
+    g = check.width_transfer
+    fit = ps.fit(joint.slope_planes, scene.max_tilt_deg, options, scene.seed, slope_gain=g)
     fit.info = {**dist.ndf.info, "censored_fraction": fit.info["censored_fraction"],
                 "inadmissible_k": fit.info["inadmissible_k"],
                 "width_correction": {"slope_gain": float(g),

@@ -37,7 +37,8 @@ from .white_balance import LOG_RANGE
 
 __all__ = ["Judgement", "Reason", "analysis_warnings", "colour_tilt_contrast",
            "gains_unconstrained", "mean_plane_tilt_deg", "ndf_judgement", "order_check",
-           "seed_ndf_judgement", "self_check_judgement", "thickness_judgement"]
+           "seed_ndf_judgement", "self_check_judgement", "self_check_passes",
+           "thickness_judgement"]
 
 #: Mean ΔE00 of pure noise of σ per Lab component, E|N(0, σ²I₃)| = 2·sqrt(2/π)·σ: the
 #: image's noise floor of the mean ΔE00 is this × ``noise_de``.
@@ -191,17 +192,25 @@ class NdfEvidence:
     thickness_nm: float
 
 
+def self_check_passes(check, options: FitOptions) -> bool:
+    """Whether the self-check (:class:`~.self_check.SelfCheck`, or None) says the stack
+    resolves the facets' slopes: its slope gain (``transfer``) and its width transfer both
+    in ``fits.self_check_range`` (False where either was not measured)."""
+    if check is None:
+        return False
+    low, high = options.self_check_range
+    return bool(low <= check.transfer <= high and low <= check.width_transfer <= high)
+
+
 def self_check_judgement(judgement: Judgement, check, options: FitOptions) -> Judgement:
     """The NDF's judgement after its self-check (:mod:`.self_check`): an NDF the stack
     cannot resolve — the recovered/injected slope gain (``transfer``) or the width the NDF
     would see over the true width (``width_transfer``) outside ``fits.self_check_range``, or
     not measurable — is not identified, whatever its other evidence says."""
-    if not judgement.identified or check is None:
+    if not judgement.identified or check is None or self_check_passes(check, options):
         return judgement
     low, high = options.self_check_range
     t, wt = check.transfer, check.width_transfer
-    if math.isfinite(t) and low <= t <= high and math.isfinite(wt) and low <= wt <= high:
-        return judgement
     if not math.isfinite(t) and check.facets == 0:
         said = "had fewer than 3 facet planes with measurable slopes to inject on"
     elif not math.isfinite(t):

@@ -328,7 +328,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                                     colour, seg, scene, options.joint,
                                     rng=np.random.default_rng([scene.seed, 22]), crop=crop))
             dist.ndf_judgement = self_check_judgement(dist.ndf_judgement, check, options.fits)
-            dist = correct_ndf_width(dist, joint, model, scene, fits, check)
+            dist = correct_ndf_width(dist, joint, scene, fits, check)
             if check is not None and dist.ndf is not None:
                 err = check.width_error(dist.ndf.info.get("width_relative_error"))
                 dist.ndf.info["width_relative_error_total"] = (float(err) if math.isfinite(err)

@@ -517,12 +517,12 @@ def test_no_correction_outside_the_range_or_when_switched_off(nd, nd_analysis):
     j = nd_analysis("joint")
     off = FitOptions(self_check_correct=False)
     d = dataclasses.replace(j.distributions, ndf=j.ndf_fit)
-    assert correct_ndf_width(d, j.joint, j.model, j.scene, off, j.self_check) is d
+    assert correct_ndf_width(d, j.joint, j.scene, off, j.self_check) is d
     for out in ({"width_transfer": 1.3}, {"transfer": 0.05}, {"transfer": math.nan}):
         check = dataclasses.replace(j.self_check, **out)
-        assert correct_ndf_width(d, j.joint, j.model, j.scene, OPTIONS, check) is d
+        assert correct_ndf_width(d, j.joint, j.scene, OPTIONS, check) is d
     unit = dataclasses.replace(j.self_check, width_transfer=1.0)
-    same = correct_ndf_width(d, j.joint, j.model, j.scene, OPTIONS, unit).ndf
+    same = correct_ndf_width(d, j.joint, j.scene, OPTIONS, unit).ndf
     before = [(c["weight"], c["sd_deg"]) for c in j.ndf_fit.info["width_correction"][
         "uncorrected"]]
     assert np.ravel(same.mixture.components) == pytest.approx(np.ravel(before), rel=1e-6)
