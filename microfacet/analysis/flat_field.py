@@ -59,7 +59,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..colour.colorimetry import lab_to_xyz
-from ..colour.transfer import srgb_decode, srgb_encode
+from ..colour.transfer import srgb_decode
 from ..core.errors import InputError
 from .identification import unexplained_facets
 from .mask import steep_facet_mask
@@ -444,7 +444,7 @@ def _reference_field(lin, block):
     return (out - c[0]).astype(np.float32)
 
 
-def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, steep_ratio):
+def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, mask_options):
     """The colours under even light.
 
     Parameters
@@ -456,8 +456,8 @@ def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, steep_
     gains_rgb : tuple of 3 float
         The camera's white-balance gains the colours are divided by too.
     illuminant : str
-    steep_ratio : float
-        ``mask.steep_ratio``: the steep mask is recomputed on the even image.
+    mask_options : MaskOptions
+        The steep mask's thresholds (``mask.steep_*``): it is recomputed on the even image.
 
     Returns
     -------
@@ -476,9 +476,8 @@ def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, steep_
     dark = cm.dark | (dim & ~cm.invalid)
     base = cm.low_saturation | dark | cm.clipped | cm.invalid | cm.shadow
     steep = np.zeros_like(cm.steep)
-    if steep_ratio > 0 and (~base).any():
-        corrected = srgb_encode(np.maximum(lin, 0.0), dtype=np.float32)
-        ref = float(np.median(lin[~base].max(axis=-1)))
-        steep = steep_facet_mask(corrected, ref, dark_ratio=steep_ratio) & ~cm.invalid
+    if mask_options.steep_ratio > 0 and (~base).any():
+        top = np.maximum(lin, 0.0).max(axis=-1)
+        steep = steep_facet_mask(top, float(np.median(top[~base])), mask_options) & ~cm.invalid
     mask = dataclasses.replace(cm, mask=base | steep, dark=dark, steep=steep)
     return dataclasses.replace(colour, lab=lab, mask=mask)

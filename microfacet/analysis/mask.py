@@ -81,8 +81,9 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
         ``saturation_min`` (HSV saturation threshold on the 0-255 scale, the seed's 15),
         ``value_min`` (HSV value threshold, 0-255), ``shadow_ratio`` (mask pixels darker
         than this fraction of their 9×9 neighbourhood's median value; 0 disables),
-        ``steep_ratio`` (mask pixels whose linear value is below this fraction of the median
-        of the other unmasked pixels, :func:`steep_facet_mask`; 0 disables).
+        ``steep_ratio``, ``steep_core_ratio`` and ``steep_rim_px`` (mask pixels far darker
+        than the median of the other unmasked pixels, :func:`steep_facet_mask`;
+        ``steep_ratio`` 0 disables).
     bit_depth : int
         Bit depth of the source images, for the default clip level.
     clip_level : float, optional
@@ -128,9 +129,8 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
     mask = low_sat | dark | clipped | invalid | shadow
     steep = np.zeros(vmax.shape, bool)
     if o.steep_ratio > 0 and (~mask).any():
-        lin = _channel_max(safe, decode=True)       # steep_facet_mask's, decoded once
-        ref = float(np.median(lin[~mask]))
-        steep = (lin < o.steep_ratio * ref) & ~invalid
+        lin = _channel_max(safe, decode=True)
+        steep = steep_facet_mask(lin, float(np.median(lin[~mask])), o) & ~invalid
         mask = mask | steep
     return ColourMask(mask, low_sat & ~invalid, dark & ~invalid, clipped & ~invalid, invalid,
                       shadow, steep)
@@ -138,29 +138,34 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
 
 
 
-def steep_facet_mask(encoded, reference, *, dark_ratio):
+def steep_facet_mask(linear_max, reference, options: MaskOptions):
     """Pixels far darker than the film: facets tilted past the objective's acceptance.
 
     Under coaxial light a facet tilted past asin(NA)/2 reflects outside the objective and
     images dark: measured on synthetic scenes, a linear value of ~0.05 of the film's
     median, while the film's colours over a scene's thickness range mostly stay above ~0.4
-    of it. The darkest film colour of all (TiO2 on Ti near 37 nm, brightest channel at
-    normal incidence) is 0.26 of the median film colour over 20–400 nm: such a film next to
-    much brighter ones would be taken as dark (a ratio of 0.12 avoids that, but on the
-    fixture unmasked groove pixels then raised the thickness error from 2.18 to 2.36 nm and
-    split a population, so 0.3 stays). Their noise can still make dark facets look
-    saturated, so the saturation test misses them. The steps' walls are dark
-    too; which dark areas are whole facets is decided per facet by the joint stage.
+    of it. The darkest film colour of all (TiO2 on Ti near 29–37 nm, brightest channel at
+    normal incidence) is 0.15–0.29 of the median film colour over 20–400 nm, by the bundled
+    optical constants (0.26 for the sweep's Jolivet 2023 film on Johnson & Christy's Ti,
+    0.15 on Palm 2018's), so a film of that colour beside much brighter ones is dark
+    without being steep. Two thresholds tell them apart (hysteresis, as in Canny's edges):
+    a pixel below ``steep_core_ratio`` of the film (0.1: two thirds of the darkest film's
+    value, twice the steep facets') is darker than any film and steep; one below
+    ``steep_ratio`` (0.3) is steep only within ``steep_rim_px``
+    of such a core — the blurred rim of the same facet, pit or groove wall. (Every pixel
+    below 0.3 was masked before: on the sweep of docs/accuracy.md a population of 37 nm
+    film, a third of one scene, was masked as steep and lost.) Their noise can still make
+    dark facets look saturated, so the saturation test misses them. Which dark areas are
+    whole facets is decided per facet by the joint stage.
 
     Parameters
     ----------
-    encoded : ndarray, shape (H, W, 3)
-        sRGB-encoded image in [0, 1].
+    linear_max : ndarray, shape (H, W)
+        The largest of the three linear (decoded) channels per pixel.
     reference : float
         Median linear value (max channel) of the film's pixels.
-    dark_ratio : float
-        Dark: a linear value below this fraction of ``reference``
-        (:attr:`~.options.MaskOptions.steep_ratio`).
+    options : MaskOptions
+        ``steep_ratio``, ``steep_core_ratio`` and ``steep_rim_px``.
 
     Returns
     -------
@@ -168,13 +173,24 @@ def steep_facet_mask(encoded, reference, *, dark_ratio):
 
     Examples
     --------
-    >>> img = np.full((4, 4, 3), [0.8, 0.4, 0.2], np.float32)
-    >>> img[0, 0] = 0.1                              # linear 0.010: dark
-    >>> int(steep_facet_mask(img, 0.6, dark_ratio=0.3).sum())
-    1
+    >>> lin = np.full((5, 7), 0.6, np.float32)
+    >>> lin[2, 1] = 0.01                    # a steep facet's core: 0.017 of the film
+    >>> lin[2, 2] = 0.15                    # its blurred rim: 0.25 of it, beside the core
+    >>> lin[:, 5:] = 0.16                   # a dark film, 0.27 of it, nowhere near a core
+    >>> steep_facet_mask(lin, 0.6, MaskOptions()).sum(axis=0).tolist()
+    [0, 1, 1, 0, 0, 0, 0]
     """
-    enc = np.nan_to_num(np.asarray(encoded, dtype=np.float32), nan=1.0)
-    return _channel_max(enc, decode=True) < dark_ratio * reference
+    o = options
+    lin = np.nan_to_num(np.asarray(linear_max, dtype=np.float32), nan=np.inf)
+    dark = lin < o.steep_ratio * reference
+    core = lin < min(o.steep_core_ratio, o.steep_ratio) * reference
+    if o.steep_rim_px <= 0 or not dark.any() or np.array_equal(core, dark):
+        return core
+    r = int(o.steep_rim_px)
+    yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+    disc = (yy * yy + xx * xx <= o.steep_rim_px ** 2).astype(np.uint8)
+    near = cv2.dilate(core.astype(np.uint8), disc).astype(bool)
+    return core | (dark & near)
 
 
 def _channel_max(img, *, decode=False):

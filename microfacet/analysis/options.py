@@ -76,8 +76,22 @@ class MaskOptions(Options):
                    "value (partly shadowed step walls; 0 disables)", low=0, high=1)
     steep_ratio: float = option(
         0.3, help="mask pixels whose linear value is below this fraction of the film's median "
-                  "(tilted past the acceptance; mask.steep_facet_mask explains the value)",
+                  "(tilted past the acceptance; mask.steep_facet_mask explains the value) "
+                  "where they lie within `mask.steep_rim_px` of a pixel darker than "
+                  "`mask.steep_core_ratio` of it",
         low=0, high=1)
+    steep_core_ratio: float = option(
+        0.1, help="pixels whose linear value is below this fraction of the film's median are "
+                  "darker than any film colour (the darkest, TiO2 of 29-37 nm on Ti, is "
+                  "0.15-0.29 of it by the optical constants; steep facets ~0.05) "
+                  "and masked as steep; those between this and `mask.steep_ratio` only "
+                  "beside them (a film of a dark colour is not steep; set it to "
+                  "`mask.steep_ratio` to mask every pixel below that)", low=0, high=1)
+    steep_rim_px: float = option(
+        2.5, help="how far the blurred rim of a dark facet, pit or groove reaches from its "
+                  "core (pixels between `mask.steep_core_ratio` and `mask.steep_ratio` of the "
+                  "film's median this close to the core are masked with it)", unit="px",
+        low=0, high=50)
 
 
 @dataclass(frozen=True)

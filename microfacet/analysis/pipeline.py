@@ -274,7 +274,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
             colour = flat_fielded(colour, flat_ref.map(colour.lab.shape[:2]),
                                   gains_rgb=wb.gains_rgb if wb.applied else (1.0, 1.0, 1.0),
                                   illuminant=scene.illuminant,
-                                  steep_ratio=options.mask.steep_ratio)
+                                  mask_options=options.mask)
         elif wb.applied:
             colour = dataclasses.replace(colour, lab=balanced_lab(
                 colour.encoded, wb.gains_rgb, illuminant=scene.illuminant))
@@ -430,7 +430,7 @@ def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):
             break
         flat = flat_fielded(colour, trial.map(shape),
                             gains_rgb=wb.gains_rgb if wb.applied else (1.0, 1.0, 1.0),
-                            illuminant=scene.illuminant, steep_ratio=options.mask.steep_ratio)
+                            illuminant=scene.illuminant, mask_options=options.mask)
         second = facets_in(flat)
         de = tuple(float(np.nanmedian(j.thickness.delta_e)) for j in (joint, second[0]))
         log.info("flat field, round %d: corner loss %.3f; median facet dE00 %.3f -> %.3f",

@@ -141,14 +141,14 @@ def test_flat_fielded_colours_are_those_of_even_light():
     rng = np.random.default_rng(4)
     lin = np.broadcast_to(np.array([0.45, 0.30, 0.12], np.float32), (40, 60, 3)).copy()
     lin *= rng.uniform(0.9, 1.1, (40, 60, 1)).astype(np.float32)
-    lin[36:, 56:] *= 0.45         # a darker film in the corner: dark enough only when dimmed
+    lin[36:, 56:] *= 0.2      # a dark film in the corner: darker than any film only when dimmed
     ff = FlatField(coefficients=(0.0, 0.0, -1.5, 0.0, -1.5))
     v = ff.map((40, 60))
     opts = MaskOptions()
     kw = dict(color_space="sRGB", bit_depth=16, illuminant="D65", delta_e_method="CIEDE2000")
     even = measure_colour(srgb_encode(lin, dtype=np.float32), opts, **kw)
     dim = measure_colour(srgb_encode(lin * v[..., None], dtype=np.float32), opts, **kw)
-    fixed = flat_fielded(dim, v, illuminant="D65", steep_ratio=opts.steep_ratio)
+    fixed = flat_fielded(dim, v, illuminant="D65", mask_options=opts)
     assert np.abs(fixed.lab - even.lab).max() < 0.05
     assert dim.mask.steep.sum() > even.mask.steep.sum()        # the corners read as dark
     assert np.array_equal(fixed.mask.steep, even.mask.steep)
@@ -158,7 +158,7 @@ def test_flat_fielded_colours_are_those_of_even_light():
     biased = measure_colour(srgb_encode(lin * v[..., None] * np.float32(gains),
                                         dtype=np.float32), opts, **kw)
     both = flat_fielded(biased, v, gains_rgb=gains, illuminant="D65",
-                        steep_ratio=opts.steep_ratio)
+                        mask_options=opts)
     assert np.abs(both.lab - even.lab).max() < 0.05
 
 
@@ -169,7 +169,7 @@ def test_too_little_light_is_masked_not_amplified():
     opts = MaskOptions()
     kw = dict(color_space="sRGB", bit_depth=16, illuminant="D65", delta_e_method="CIEDE2000")
     img = measure_colour(srgb_encode(lin * v[..., None], dtype=np.float32), opts, **kw)
-    fixed = flat_fielded(img, v, illuminant="D65", steep_ratio=opts.steep_ratio)
+    fixed = flat_fielded(img, v, illuminant="D65", mask_options=opts)
     assert fixed.mask.mask[:, :3].all() and not fixed.mask.mask[:, 3:].any()
 
 

@@ -43,3 +43,50 @@ def test_sixteen_bit_clip_level():
 def test_bad_image_shape():
     with pytest.raises(ValueError, match="image"):
         colour_mask(np.zeros((4, 4)))
+
+
+def _film_linear_rgb(thickness_nm, film="TiO2_Jolivet2023_amorphous",
+                     substrate="Ti_JohnsonChristy1974"):
+    """Linear sRGB (D65-balanced) of the film at normal incidence, one row per thickness."""
+    from microfacet.colour.srgb import colours_from_spectra, srgb_decode
+    from microfacet.optics.thinfilm import reflectance
+
+    wl = np.arange(380.0, 781.0, 5.0)
+    r = reflectance(wl[None, :], 0.0, np.asarray(thickness_nm, float)[:, None], film,
+                    substrate)
+    return srgb_decode(colours_from_spectra(r, wl, exposure=0.6)[2] / 255.0)
+
+
+@pytest.mark.parametrize("film", ["TiO2_Jolivet2023_amorphous", "TiO2_Siefke2016_ALD"])
+@pytest.mark.parametrize("substrate", ["Ti_JohnsonChristy1974", "Ti_Palm2018"])
+def test_no_film_colour_is_darker_than_the_steep_core(film, substrate):
+    # Airy's formula over 20-400 nm: the darkest film (29-37 nm) against the median film
+    # colour stays well above the core threshold (1.5x on Palm's Ti, 2.6x on Johnson &
+    # Christy's), so a few % of pixel noise does not take a film for a steep facet; it is
+    # below the rim's threshold, which is why that one alone would
+    top = _film_linear_rgb(np.arange(20.0, 401.0, 1.0), film, substrate).max(axis=-1)
+    darkest = float(top.min() / np.median(top))
+    assert 1.4 * MaskOptions().steep_core_ratio < darkest < MaskOptions().steep_ratio
+
+
+def test_a_dark_film_is_not_steep_but_a_dark_facet_and_its_rim_are():
+    from microfacet.colour.srgb import srgb_encode
+
+    thin, thick = _film_linear_rgb([37.0, 200.0])
+    rng = np.random.default_rng(3)
+    lin = np.broadcast_to(thick, (40, 60, 3)).copy()
+    lin[:, 40:] = thin                               # a third of the field: 37 nm film
+    ref = float(np.median(lin.max(axis=-1)))
+    lin *= rng.uniform(0.97, 1.03, lin.shape[:2])[..., None]
+    lin[10:16, 10:16] = 0.05 * ref * np.array([1.0, 0.9, 0.8])     # a steep facet (dark core)
+    lin[9, 10:16] = 0.2 * ref * thick / thick.max()                # its blurred rim
+    lin[20, 50] = 0.04 * ref                                        # a pit in the dark film
+    m = colour_mask(srgb_encode(lin, dtype=np.float32), MaskOptions(shadow_ratio=0))
+    assert m.steep[10:16, 10:16].all() and m.steep[9, 10:16].all()
+    assert m.steep[20, 50]
+    assert not m.steep[:, 40:][np.hypot(*np.mgrid[-20:20, -10:10]) > 2.5].any()
+    assert m.steep.sum() == 36 + 6 + 21       # the facet, its rim, the pit and its rim
+    # one threshold (the core at 0.3) masks the whole dark film as steep
+    one = colour_mask(srgb_encode(lin, dtype=np.float32),
+                      MaskOptions(shadow_ratio=0, steep_core_ratio=0.3))
+    assert one.steep[:, 40:].mean() > 0.9
