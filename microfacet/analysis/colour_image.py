@@ -20,7 +20,7 @@ import numpy as np
 
 from ..colour.difference import delta_e
 from ..colour.srgb import srgb_encode, srgb_to_lab
-from .mask import ColourMask, colour_mask
+from .mask import MASK_REASONS, ColourMask, colour_mask
 from .options import MaskOptions
 
 __all__ = ["ColourImage", "compression_noise_de", "estimate_colour_noise",
@@ -124,8 +124,8 @@ def no_colour_message(stack, mask: ColourMask, what: str, options: MaskOptions) 
     """One-line InputError text for a stack without usable colour, with the mask reasons."""
     key = "tiff" if stack.tiff_path is not None else "slices" if stack.has_slices else "image"
     f = mask.fractions()
-    reasons = ", ".join(f"{name.replace('_', ' ')} {100 * f[name]:.0f}%" for name in
-                        ("low_saturation", "dark", "clipped", "invalid", "shadow", "steep"))
+    reasons = ", ".join(f"{name.replace('_', ' ')} {100 * f[name]:.0f}%"
+                        for name in MASK_REASONS)
     return (f"{stack.path / 'stack.json'}: key {key!r}: no colour information to analyse, "
             f"{what} ({reasons}; `mask.saturation_min` {options.saturation_min:g}, "
             f"`mask.value_min` {options.value_min:g} on the 0-255 scale)")

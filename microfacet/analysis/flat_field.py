@@ -457,15 +457,16 @@ def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, mask_o
         The camera's white-balance gains the colours are divided by too.
     illuminant : str
     mask_options : MaskOptions
-        The steep mask's thresholds (``mask.steep_*``): it is recomputed on the even image.
+        The steep mask's thresholds (``mask.steep_*``, ``mask.dark_film_min_px``): it is
+        recomputed on the even image.
 
     Returns
     -------
     ColourImage
         Lab of the linear values divided by ``field`` and ``gains_rgb``; the steep mask
-        recomputed; pixels with less than e^-:data:`MAX_LOG_LOSS` of the centre's light
-        masked as dark (too little light to read); the other masks kept. The noise is kept
-        too, though a corner's grows as 1/V.
+        and the dark features recomputed; pixels with less than e^-:data:`MAX_LOG_LOSS` of
+        the centre's light masked as dark (too little light to read); the other masks kept.
+        The noise is kept too, though a corner's grows as 1/V.
     """
     enc = np.asarray(colour.encoded, np.float32)
     v = np.asarray(field, np.float32)
@@ -475,9 +476,11 @@ def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, mask_o
     cm = colour.mask
     dark = cm.dark | (dim & ~cm.invalid)
     base = cm.low_saturation | dark | cm.clipped | cm.invalid | cm.shadow
-    steep = np.zeros_like(cm.steep)
+    steep = feature = np.zeros_like(cm.steep)
     if mask_options.steep_ratio > 0 and (~base).any():
         top = np.maximum(lin, 0.0).max(axis=-1)
-        steep = steep_facet_mask(top, float(np.median(top[~base])), mask_options) & ~cm.invalid
-    mask = dataclasses.replace(cm, mask=base | steep, dark=dark, steep=steep)
+        steep, feature = (m & ~cm.invalid for m in steep_facet_mask(
+            top, float(np.median(top[~base])), mask_options))
+    mask = dataclasses.replace(cm, mask=base | steep | feature, dark=dark, steep=steep,
+                               dark_feature=feature)
     return dataclasses.replace(colour, lab=lab, mask=mask)

@@ -26,6 +26,10 @@ cv2 = load("cv2")
 
 __all__ = ["ColourMask", "colour_mask"]
 
+#: The mask's reasons, in the order summary.json and the report give them.
+MASK_REASONS = ("low_saturation", "dark", "clipped", "invalid", "shadow", "steep",
+                "dark_feature")
+
 
 @dataclass
 class ColourMask:
@@ -45,7 +49,12 @@ class ColourMask:
         seed's saturation test misses them.
     steep : ndarray of bool
         Far darker than the film (:func:`steep_facet_mask`): tilted past the acceptance
-        (all False without ``steep_ratio``).
+        (all False without ``steep_ratio``). The NDF censors these.
+    dark_feature : ndarray of bool
+        Darker than ``steep_ratio`` of the film without being steep, in a shape narrower than
+        ``dark_film_min_px`` (:func:`steep_facet_mask`): scratches, pit and groove walls and
+        rims, stains — masked, not censored. A wider dark area is a film of a dark colour
+        and is analysed.
     """
 
     mask: np.ndarray
@@ -55,6 +64,7 @@ class ColourMask:
     invalid: np.ndarray
     shadow: np.ndarray
     steep: np.ndarray
+    dark_feature: np.ndarray
 
     @property
     def fraction(self) -> float:
@@ -64,7 +74,7 @@ class ColourMask:
     def fractions(self) -> dict:
         """Masked fraction per reason (a pixel may have several)."""
         return {k: float(getattr(self, k).mean()) for k in
-                ("low_saturation", "dark", "clipped", "invalid", "shadow", "steep")} | {
+                MASK_REASONS} | {
                     "any": self.fraction}
 
 
@@ -81,9 +91,10 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
         ``saturation_min`` (HSV saturation threshold on the 0-255 scale, the seed's 15),
         ``value_min`` (HSV value threshold, 0-255), ``shadow_ratio`` (mask pixels darker
         than this fraction of their 9×9 neighbourhood's median value; 0 disables),
-        ``steep_ratio``, ``steep_core_ratio`` and ``steep_rim_px`` (mask pixels far darker
-        than the median of the other unmasked pixels, :func:`steep_facet_mask`;
-        ``steep_ratio`` 0 disables).
+        ``steep_ratio``, ``steep_core_ratio``, ``steep_rim_px`` and ``dark_film_min_px``
+        (mask pixels far darker than the median of the other unmasked pixels as steep, or
+        as dark features where they are not, :func:`steep_facet_mask`; ``steep_ratio`` 0
+        disables).
     bit_depth : int
         Bit depth of the source images, for the default clip level.
     clip_level : float, optional
@@ -127,19 +138,21 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
     else:
         shadow = np.zeros(vmax.shape, bool)
     mask = low_sat | dark | clipped | invalid | shadow
-    steep = np.zeros(vmax.shape, bool)
+    steep = feature = np.zeros(vmax.shape, bool)
     if o.steep_ratio > 0 and (~mask).any():
         lin = _channel_max(safe, decode=True)
-        steep = steep_facet_mask(lin, float(np.median(lin[~mask])), o) & ~invalid
-        mask = mask | steep
+        steep, feature = steep_facet_mask(lin, float(np.median(lin[~mask])), o)
+        steep, feature = steep & ~invalid, feature & ~invalid
+        mask = mask | steep | feature
     return ColourMask(mask, low_sat & ~invalid, dark & ~invalid, clipped & ~invalid, invalid,
-                      shadow, steep)
+                      shadow, steep, feature)
 
 
 
 
 def steep_facet_mask(linear_max, reference, options: MaskOptions):
-    """Pixels far darker than the film: facets tilted past the objective's acceptance.
+    """Pixels far darker than the film: facets tilted past the objective's acceptance, and
+    dark features that are not film.
 
     Under coaxial light a facet tilted past asin(NA)/2 reflects outside the objective and
     images dark: measured on synthetic scenes, a linear value of ~0.05 of the film's
@@ -165,32 +178,43 @@ def steep_facet_mask(linear_max, reference, options: MaskOptions):
     reference : float
         Median linear value (max channel) of the film's pixels.
     options : MaskOptions
-        ``steep_ratio``, ``steep_core_ratio`` and ``steep_rim_px``.
+        ``steep_ratio``, ``steep_core_ratio``, ``steep_rim_px`` and ``dark_film_min_px``.
 
     Returns
     -------
-    ndarray of bool, shape (H, W)
+    steep, dark_feature : ndarray of bool, shape (H, W)
 
     Examples
     --------
-    >>> lin = np.full((5, 7), 0.6, np.float32)
+    >>> lin = np.full((30, 40), 0.6, np.float32)
     >>> lin[2, 1] = 0.01                    # a steep facet's core: 0.017 of the film
     >>> lin[2, 2] = 0.15                    # its blurred rim: 0.25 of it, beside the core
-    >>> lin[:, 5:] = 0.16                   # a dark film, 0.27 of it, nowhere near a core
-    >>> steep_facet_mask(lin, 0.6, MaskOptions()).sum(axis=0).tolist()
-    [0, 1, 1, 0, 0, 0, 0]
+    >>> lin[:, 20:] = 0.16                  # a dark film, 0.27 of it, nowhere near a core
+    >>> lin[10, :12] = 0.15                 # a scratch as dark, one pixel wide
+    >>> steep, feature = steep_facet_mask(lin, 0.6, MaskOptions())
+    >>> int(steep.sum()), int(feature.sum()), bool(steep[:, 20:].any() | feature[:, 20:].any())
+    (2, 12, False)
     """
     o = options
     lin = np.nan_to_num(np.asarray(linear_max, dtype=np.float32), nan=np.inf)
     dark = lin < o.steep_ratio * reference
     core = lin < min(o.steep_core_ratio, o.steep_ratio) * reference
-    if o.steep_rim_px <= 0 or not dark.any() or np.array_equal(core, dark):
-        return core
-    r = int(o.steep_rim_px)
+    rest = dark & ~core
+    if not rest.any():
+        return core, rest
+    steep = core | (rest & cv2.dilate(core.astype(np.uint8), _disc(o.steep_rim_px)).astype(bool)
+                    if o.steep_rim_px > 0 else core)
+    rest &= ~steep
+    wide = cv2.morphologyEx(dark.astype(np.uint8), cv2.MORPH_OPEN,
+                            _disc(0.5 * o.dark_film_min_px)).astype(bool)
+    return steep, rest & ~wide
+
+
+def _disc(radius_px):
+    """A disc of ``radius_px`` (uint8, a structuring element for OpenCV)."""
+    r = int(radius_px)
     yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
-    disc = (yy * yy + xx * xx <= o.steep_rim_px ** 2).astype(np.uint8)
-    near = cv2.dilate(core.astype(np.uint8), disc).astype(bool)
-    return core | (dark & near)
+    return (yy * yy + xx * xx <= radius_px ** 2).astype(np.uint8)
 
 
 def _channel_max(img, *, decode=False):

@@ -92,6 +92,11 @@ class MaskOptions(Options):
                   "core (pixels between `mask.steep_core_ratio` and `mask.steep_ratio` of the "
                   "film's median this close to the core are masked with it)", unit="px",
         low=0, high=50)
+    dark_film_min_px: float = option(
+        17.0, help="the narrowest dark area (pixels between `mask.steep_core_ratio` and "
+                   "`mask.steep_ratio` of the film's median, no steep core) taken for a film "
+                   "of a dark colour; narrower ones are scratches, walls and rims, masked "
+                   "(`dark_feature`) but not censored", unit="px", low=1, high=1000)
 
 
 @dataclass(frozen=True)

@@ -132,6 +132,8 @@ def _mask_rows(ctx):
     if isinstance(m, dict):
         for k, name in (("low_saturation", "low saturation"), ("dark", "dark"),
                         ("clipped", "clipped (over-exposed)"), ("shadow", "shadow"),
+                        ("steep", "steep (past the acceptance)"),
+                        ("dark_feature", "dark features (scratches, walls)"),
                         ("invalid", "invalid (NaN)")):
             if k in m:
                 rows.append([f"   {name}", fmt(pct(m[k]), ".1f", "%")])

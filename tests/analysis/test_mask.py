@@ -20,7 +20,7 @@ def test_each_reason_is_detected_and_named():
     assert m.mask.sum() == 5
     assert m.fraction == pytest.approx(5 / 400)
     assert set(m.fractions()) == {"low_saturation", "dark", "clipped", "invalid", "shadow",
-                                   "steep", "any"}
+                                   "steep", "dark_feature", "any"}
 
 
 def test_saturation_threshold_is_on_the_0_255_scale():
@@ -81,11 +81,16 @@ def test_a_dark_film_is_not_steep_but_a_dark_facet_and_its_rim_are():
     lin[10:16, 10:16] = 0.05 * ref * np.array([1.0, 0.9, 0.8])     # a steep facet (dark core)
     lin[9, 10:16] = 0.2 * ref * thick / thick.max()                # its blurred rim
     lin[20, 50] = 0.04 * ref                                        # a pit in the dark film
+    lin[30:32, 2:30] = 0.2 * ref * thick / thick.max()              # a scratch as dark, 2 px
     m = colour_mask(srgb_encode(lin, dtype=np.float32), MaskOptions(shadow_ratio=0))
     assert m.steep[10:16, 10:16].all() and m.steep[9, 10:16].all()
     assert m.steep[20, 50]
     assert not m.steep[:, 40:][np.hypot(*np.mgrid[-20:20, -10:10]) > 2.5].any()
     assert m.steep.sum() == 36 + 6 + 21       # the facet, its rim, the pit and its rim
+    # the scratch is dark but thin: masked, not steep; the dark film is neither
+    assert m.dark_feature[30:32, 2:30].all() and not m.steep[30:32, 2:30].any()
+    assert m.dark_feature.sum() == 56 and not m.mask[:, 40:][
+        np.hypot(*np.mgrid[-20:20, -10:10]) > 2.5].any()
     # one threshold (the core at 0.3) masks the whole dark film as steep
     one = colour_mask(srgb_encode(lin, dtype=np.float32),
                       MaskOptions(shadow_ratio=0, steep_core_ratio=0.3))
