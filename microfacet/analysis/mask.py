@@ -202,8 +202,9 @@ def steep_facet_mask(linear_max, reference, options: MaskOptions):
     rest = dark & ~core
     if not rest.any():
         return core, rest
-    steep = core | (rest & cv2.dilate(core.astype(np.uint8), _disc(o.steep_rim_px)).astype(bool)
-                    if o.steep_rim_px > 0 else core)
+    steep = core.copy()
+    if o.steep_rim_px > 0:               # the rim: dark pixels beside a core
+        steep |= rest & cv2.dilate(core.astype(np.uint8), _disc(o.steep_rim_px)).astype(bool)
     rest &= ~steep
     wide = cv2.morphologyEx(dark.astype(np.uint8), cv2.MORPH_OPEN,
                             _disc(0.5 * o.dark_film_min_px)).astype(bool)
