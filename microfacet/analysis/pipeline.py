@@ -32,7 +32,7 @@ from ..core.timing import StageTimer
 from ..io.limits import check_memory
 from ..io.stack import Stack, read_stack
 from .colour_image import measure_colour, no_colour_message
-from .consistency import ALIAS_SD, mixture_map_check, roi_pixel_check
+from .consistency import ALIAS_SD, MapCheck, mixture_map_check, roi_pixel_check
 from .distributions import (
     Distributions,
     PooledOrders,
@@ -49,7 +49,12 @@ from .flat_field import (
     flat_fielded,
     reference_flat_field,
 )
-from .identification import analysis_warnings, mean_plane_tilt_deg, self_check_judgement
+from .identification import (
+    analysis_warnings,
+    map_check_judgement,
+    mean_plane_tilt_deg,
+    self_check_judgement,
+)
 from .iso25178 import areal_parameters
 from .joint import (
     bootstrap_labels,
@@ -129,6 +134,10 @@ class AnalysisResult:
     flat_field : FlatField or None
         The flat field (vignetting) the colours were divided by, or why none: a reference's
         (both modes) or the joint mode's estimate; None in seed mode without a reference.
+    map_check : MapCheck or None
+        The thickness mixture against the per-pixel thickness map
+        (:func:`~.consistency.mixture_map_check`; None without either): a mixture that
+        fails it is not identified (:func:`~.identification.map_check_judgement`).
     """
 
     stack: Stack
@@ -146,13 +155,7 @@ class AnalysisResult:
     self_check: SelfCheck | None = None
     white_balance: WhiteBalance = field(default_factory=WhiteBalance)
     flat_field: FlatField | None = None
-
-    @functools.cached_property
-    def map_check(self):
-        """The thickness mixture against the per-pixel thickness map
-        (:func:`~.consistency.mixture_map_check`; None without either)."""
-        fit = self.thickness_fit
-        return mixture_map_check(self.pixels.thickness_nm, fit.mixture if fit else None)
+    map_check: MapCheck | None = None
 
     @functools.cached_property
     def height_areal(self):
@@ -333,6 +336,9 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                 err = check.width_error(dist.ndf.info.get("width_relative_error"))
                 dist.ndf.info["width_relative_error_total"] = (float(err) if math.isfinite(err)
                                                                else None)
+    map_check = mixture_map_check(pixels.thickness_nm, dist.thickness.mixture
+                                  if dist.thickness is not None else None)
+    dist.thickness_judgement = map_check_judgement(dist.thickness_judgement, map_check)
     if not dist.thickness_judgement.identified:
         wb = wb.withdraw("the thickness is not identified, and the gains the film's colours "
                          "ask for are those of the thicknesses they were read at"
@@ -341,7 +347,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
     timer.total()
     return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
                           dist, dict(timer.timings), check, wb,
-                          flat if options.mode == "joint" else flat_ref)
+                          flat if options.mode == "joint" else flat_ref, map_check)
 
 
 def _gain_shifts(joint, cols, model, options, scene, wb):

@@ -560,3 +560,26 @@ def test_gains_the_colours_leave_free_leave_the_order_unestablished():
     for wb in (None, WhiteBalance(), dataclasses.replace(free, source="stack.json"),
                dataclasses.replace(free, estimate_sigma=(0.05, 0.9 * LOG_RANGE))):
         assert check(wb)["established"]
+
+
+def test_a_mixture_that_does_not_summarize_its_map_is_not_identified():
+    from microfacet.analysis.consistency import mixture_map_check
+    from microfacet.analysis.identification import Judgement, Reason, map_check_judgement
+    from microfacet.core.distributions import ThicknessMixture
+
+    rng = np.random.default_rng(5)
+    # three populations in the map (198, 211, 225 nm); the mixture holds one narrow spike
+    t = np.concatenate([rng.normal(198, 1, 7000), rng.normal(211, 1, 1500),
+                        rng.normal(225, 2, 1500)])
+    spike = mixture_map_check(t, ThicknessMixture([(1.0, 207.4, 0.11)]))
+    right = mixture_map_check(t, ThicknessMixture([(0.7, 198, 1), (0.15, 211, 1),
+                                                   (0.15, 225, 2)]))
+    assert right.consistent and not spike.consistent
+    assert map_check_judgement(Judgement(True), right).identified
+    j = map_check_judgement(Judgement(True), spike)
+    assert not j.identified and j.reason.code == "mixture_map_mismatch"
+    assert "far from every component" in j.reason.text
+    # a judgement already against the mixture keeps its own reason
+    other = Judgement(False, Reason("order_ambiguous", "x", "optics.film"))
+    assert map_check_judgement(other, spike) is other
+    assert map_check_judgement(Judgement(True), None).identified
