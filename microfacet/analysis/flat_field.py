@@ -479,8 +479,8 @@ def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, mask_o
     steep = feature = np.zeros_like(cm.steep)
     if mask_options.steep_ratio > 0 and (~base).any():
         top = np.maximum(lin, 0.0).max(axis=-1)
-        steep, feature = (m & ~cm.invalid for m in steep_facet_mask(
-            top, float(np.median(top[~base])), mask_options))
+        steep, feature = steep_facet_mask(np.where(cm.invalid, np.nan, top),
+                                          float(np.median(top[~base])), mask_options)
     mask = dataclasses.replace(cm, mask=base | steep | feature, dark=dark, steep=steep,
                                dark_feature=feature)
     return dataclasses.replace(colour, lab=lab, mask=mask)

@@ -576,8 +576,9 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
     """
     out = [r for r in (_spike_warning(dist.thickness), _candidate_warning(dist.thickness),
                        _misread_warning(dist.thickness)) if r is not None]
+    judged = dist.thickness_judgement.reason
     if (map_check is not None and not map_check.consistent
-            and getattr(dist.thickness_judgement.reason, "code", None) != "mixture_map_mismatch"):
+            and (judged is None or judged.code != "mixture_map_mismatch")):
         out.append(Reason("mixture_map_mismatch", f"the thickness mixture does not summarize "
                           f"the per-pixel map: area fractions differ by up to "
                           f"{map_check.max_fraction_difference:.2f}, means by up to "

@@ -73,9 +73,8 @@ class ColourMask:
 
     def fractions(self) -> dict:
         """Masked fraction per reason (a pixel may have several)."""
-        return {k: float(getattr(self, k).mean()) for k in
-                MASK_REASONS} | {
-                    "any": self.fraction}
+        return {k: float(getattr(self, k).mean()) for k in MASK_REASONS} | {
+            "any": self.fraction}
 
 
 def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
@@ -141,8 +140,9 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
     steep = feature = np.zeros(vmax.shape, bool)
     if o.steep_ratio > 0 and (~mask).any():
         lin = _channel_max(safe, decode=True)
-        steep, feature = steep_facet_mask(lin, float(np.median(lin[~mask])), o)
-        steep, feature = steep & ~invalid, feature & ~invalid
+        ref = float(np.median(lin[~mask]))
+        # a NaN pixel is no dark core: its neighbours are not a steep rim
+        steep, feature = steep_facet_mask(np.where(invalid, np.nan, lin), ref, o)
         mask = mask | steep | feature
     return ColourMask(mask, low_sat & ~invalid, dark & ~invalid, clipped & ~invalid, invalid,
                       shadow, steep, feature)

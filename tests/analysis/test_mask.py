@@ -95,3 +95,13 @@ def test_a_dark_film_is_not_steep_but_a_dark_facet_and_its_rim_are():
     one = colour_mask(srgb_encode(lin, dtype=np.float32),
                       MaskOptions(shadow_ratio=0, steep_core_ratio=0.3))
     assert one.steep[:, 40:].mean() > 0.9
+
+
+def test_a_nan_pixel_is_no_steep_core():
+    # invalid (NaN) pixels are masked as invalid; the dim pixels beside one are not a rim
+    img = np.full((20, 20, 3), [0.6, 0.3, 0.8], np.float32)
+    img[5:8, 5:8] *= 0.5                       # linear ~0.2 of the film: dim, no dark core
+    img[6, 6] = np.nan
+    m = colour_mask(img, MaskOptions(shadow_ratio=0, dark_film_min_px=1))
+    assert m.invalid[6, 6] and not m.steep.any()
+    assert not m.dark_feature.any()            # 3 px is a film at dark_film_min_px 1
