@@ -187,9 +187,12 @@ def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguo
     Each sample (facet) belongs to its most likely component within
     :data:`UNEXPLAINED_SD` widened SD. Returns one dict per component:
     ``order_ambiguous_fraction``, ``other_order_nm`` (weighted median of the ambiguous
-    samples' runner-up thickness; None without any) and ``alias_of_nm`` (the mean of the
-    other component it lies on when at least :data:`ALIAS_MIN_AMBIGUOUS` of the weight is
-    ambiguous; else None).
+    samples' runner-up thickness; None without any), ``alias_of_nm`` (the mean of the
+    other component it lies on (:func:`order_alias_of`) when at least
+    :data:`ALIAS_MIN_AMBIGUOUS` of the weight is ambiguous, or when that component's
+    runner-up order lies on this one in turn, whatever the shares: two components each
+    other's runner-up order are one population's colours read in two orders as much as
+    two populations; else None) and ``alias_both_ways`` (the latter).
 
     >>> from microfacet.core.distributions import ThicknessMixture
     >>> m = ThicknessMixture([(0.8, 250.0, 1.0), (0.2, 140.0, 1.0)])
@@ -198,19 +201,28 @@ def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguo
     ...                        np.array([False, False, True, False]))
     >>> [(o["order_ambiguous_fraction"], o["alias_of_nm"]) for o in out]   # by mean
     [(0.5, 250.0), (0.0, None)]
+    >>> out = component_orders(m, d, np.array([141.0, 360.0, 252.0, 251.0]), np.ones(4),
+    ...                        np.array([True, False, True, False]))
+    >>> [(o["alias_of_nm"], o["alias_both_ways"]) for o in out]   # 50 % each way
+    [(250.0, True), (140.0, True)]
     """
     own, mu, _ = _own_component(mixture, thickness_nm)
     w = np.asarray(weights, dtype=np.float64)
-    out = []
+    fracs, others, onto = [], [], []
     for k in range(mu.size):
         mine = own == k
         amb = mine & np.asarray(ambiguous, bool) & np.isfinite(other_thickness_nm)
-        frac = float(w[amb].sum() / w[mine].sum()) if w[mine].sum() > 0 else 0.0
-        other = weighted_median(np.asarray(other_thickness_nm)[amb], w[amb])
-        alias = (order_alias_of(mixture, other, exclude=k)
-                 if other is not None and frac >= ALIAS_MIN_AMBIGUOUS else None)
-        out.append({"order_ambiguous_fraction": frac, "other_order_nm": other,
-                    "alias_of_nm": alias})
+        fracs.append(float(w[amb].sum() / w[mine].sum()) if w[mine].sum() > 0 else 0.0)
+        others.append(weighted_median(np.asarray(other_thickness_nm)[amb], w[amb]))
+        onto.append(-1 if others[k] is None else
+                    int(nearest_component(mixture, others[k], exclude=k)[0]))
+    out = []
+    for k in range(mu.size):
+        j = onto[k]
+        both = j >= 0 and onto[j] == k
+        alias = float(mu[j]) if j >= 0 and (fracs[k] >= ALIAS_MIN_AMBIGUOUS or both) else None
+        out.append({"order_ambiguous_fraction": fracs[k], "other_order_nm": others[k],
+                    "alias_of_nm": alias, "alias_both_ways": bool(both)})
     return out
 
 

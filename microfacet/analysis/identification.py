@@ -466,14 +466,18 @@ def _unexplained_floor(delta_e_median, noise_de, options) -> float | None:
 
 
 def _aliases(fit) -> list:
-    """``(mean, alias mean, ambiguous fraction)`` of each component that may be another read
-    in a neighbouring order (``info["component_orders"]``,
-    :func:`~.consistency.component_orders`)."""
+    """``(mean, alias mean, ambiguous fraction, both ways)`` of each component that may be
+    another read in a neighbouring order (``info["component_orders"]``,
+    :func:`~.consistency.component_orders`); a pair that are each other's alias once, by
+    the one with more of its area ambiguous."""
     if fit is None:
         return []
     orders = fit.info.get("component_orders") or []
-    return [(c[1], o["alias_of_nm"], o["order_ambiguous_fraction"])
-            for c, o in zip(fit.mixture.components, orders) if o.get("alias_of_nm") is not None]
+    out = [(c[1], o["alias_of_nm"], o["order_ambiguous_fraction"], o.get("alias_both_ways"))
+           for c, o in zip(fit.mixture.components, orders) if o.get("alias_of_nm") is not None]
+    back = {a[0]: a for a in out}          # a pair: the partner's alias is this one
+    return [a for a in out if not (a[1] in back and back[a[1]][1] == a[0]
+                                   and (back[a[1]][2], a[0]) > (a[2], a[1]))]
 
 
 def _order_moves(fit) -> list:
@@ -609,12 +613,14 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
                           f"has a runner-up interference order within "
                           f"{options.ambiguous_order_de:g} dE00: the order is not established "
                           f"there (facets.csv other_order_delta_e)", _RANGE))
-    for mean, other, frac in _aliases(dist.thickness):
+    for mean, other, frac, both in _aliases(dist.thickness):
         out.append(Reason("order_alias", f"the {mean:.1f} nm thickness component may be the "
                           f"{other:.1f} nm population read in another interference order: "
                           f"{100 * frac:.0f} % of its area fits that order within "
-                          f"{options.ambiguous_order_de:g} dE00 (facets.csv "
-                          f"other_order_thickness_nm)", _RANGE))
+                          f"{options.ambiguous_order_de:g} dE00"
+                          + (", and that component's runner-up order lies on this one"
+                             if both else "") + " (facets.csv other_order_thickness_nm)",
+                          _RANGE))
     for m in _order_moves(dist.thickness):
         out.append(Reason("order_pooled", f"{100 * m['area_share']:.0f} % of a "
                           f"{m['from_nm']:.1f} nm thickness component was read in the "

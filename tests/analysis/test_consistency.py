@@ -91,6 +91,36 @@ def test_a_component_read_one_order_away_from_another_is_an_order_alias():
     assert component_orders(m, d, far, np.ones(d.size), amb)[1]["alias_of_nm"] is None
 
 
+def test_two_components_each_others_runner_up_order_are_aliases_at_any_share():
+    """One 235 nm population read partly an order up (the 1024² sweep's seed-0 g009: 235 and
+    367 nm components, 10 % and 0.3 % of their areas ambiguous): each component's ambiguous
+    facets have their runner-up order on the other, so both are aliases, of each other,
+    though neither share reaches 20 %. Where only one side points at the other, or the
+    other side points elsewhere, the shares decide as before."""
+    from microfacet.analysis.consistency import component_orders, distinct_populations
+
+    rng = np.random.default_rng(5)
+    d = np.concatenate([rng.normal(235, 2, 400), rng.normal(367, 3, 40)])
+    other = np.concatenate([d[:400] + 130, d[400:] - 130])
+    amb = np.zeros(d.size, bool)
+    amb[:40] = True                                       # 10 % of the 235 nm facets
+    amb[400:402] = True                                   # 5 % of the 367 nm ones
+    m = ThicknessMixture([(0.9, 235.0, 2.0), (0.1, 367.0, 3.0)])
+    out = component_orders(m, d, other, np.ones(d.size), amb)
+    assert [(o["alias_of_nm"], o["alias_both_ways"]) for o in out] == [(367.0, True),
+                                                                      (235.0, True)]
+    assert distinct_populations(m, out) == 1
+    one_way = amb.copy()
+    one_way[400:402] = False                              # the 367 nm facets all clear
+    out = component_orders(m, d, other, np.ones(d.size), one_way)
+    assert [o["alias_of_nm"] for o in out] == [None, None]
+    elsewhere = other.copy()
+    elsewhere[400:] -= 40.0                               # their runner-up on nothing
+    out = component_orders(m, d, elsewhere, np.ones(d.size), amb)
+    assert [o["alias_of_nm"] for o in out] == [None, None]
+    assert distinct_populations(m, out) == 2
+
+
 def test_distinct_populations_count_each_alias_with_its_component():
     from microfacet.analysis.consistency import distinct_populations
 

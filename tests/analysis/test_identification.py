@@ -501,6 +501,18 @@ def test_order_check_says_why_the_order_is_not_established():
                                    "another order"]
     (w,) = _warn(d)
     assert w.code == "order_alias" and "49 % of its area" in w.text
+    # two components each other's runner-up order: one pair, named once, by the more
+    # ambiguous one
+    d.thickness = MixtureFit(ThicknessMixture([(0.9, 235.0, 2.0), (0.1, 367.0, 3.0)]), 0.0,
+                             {2: 0.0}, 10, 10.0)
+    d.thickness.info["component_orders"] = [
+        {"alias_of_nm": 367.0, "order_ambiguous_fraction": 0.10, "alias_both_ways": True},
+        {"alias_of_nm": 235.0, "order_ambiguous_fraction": 0.05, "alias_both_ways": True}]
+    assert check(d)["reasons"] == ["the 235.0 nm component may be the 367.0 nm one read in "
+                                   "another order"]
+    (w,) = _warn(d)
+    assert w.code == "order_alias" and "10 % of its area" in w.text
+    assert "that component's runner-up order lies on this one" in w.text
 
 
 def test_two_exposures_that_fit_alike_leave_the_order_undecided():
