@@ -88,3 +88,42 @@ def test_run_refuses_to_write_docs_or_inputs_wrongly(args):
     assert res.returncode != 0
     assert _snapshot() == before
     assert not (ROOT / "fixtures" / "x").exists()
+
+
+def test_sweep_scores_count_the_targets_from_a_runs_files(tmp_path):
+    """Three scenes of one run: the NDF identified on two (one 30 % off, one 10 %), the
+    count right on one and the distinct count on two, one scene read in a wrong order
+    without the flag, and two determined white-balance gains, one of them 5 % off."""
+    import csv
+    import json
+
+    from pipelines.sweep_scores import read_runs, scores
+
+    out, work = tmp_path / "out", tmp_path / "work"
+    out.mkdir()
+    rows = {"name": ["g000", "g001", "g002"], "mode": ["joint"] * 3,
+            "identified": [True, True, False], "textured": [True, True, False],
+            "lobe_rms_ratio": [0.7, 1.1, 0.5], "ndf_w1_deg": [2.0, 1.0, 9.0],
+            "censored_fraction": [0.1, 0.0, 0.0], "past_limit_fraction": [0.05, 0.0, 0.0],
+            "height_coverage": [0.9, 0.95, 1.0], "pops_found": [2, 3, 1],
+            "pops_distinct": [2, 2, 1], "pops_true": [2, 2, 2],
+            "region_mae_nm": [0.2, 0.4, 9.0], "v_white_balance": [0, 1, 0],
+            "order_wrong": [False, False, True], "order_flagged": [False, False, False],
+            "wb_true_r": [1.0, 1.1, 1.0], "wb_true_b": [1.0, 0.9, 1.0]}
+    with open(out / "generalization.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(rows)
+        w.writerows(zip(*rows.values()))
+    for name, est, det in (("g000", [1.01, 1.0, 1.0], [True, False]),
+                           ("g001", [1.1, 1.0, 0.945], [False, True])):
+        (work / "results" / "joint" / name).mkdir(parents=True)
+        (work / "results" / "joint" / name / "summary.json").write_text(json.dumps(
+            {"white_balance": {"estimate_rgb": est, "determined_rb": det}}))
+    s = scores(read_runs(f"{out}:{work}"))
+    assert s["… off by more than 25 %"] == "1" and s["… within 15 %"] == "1 of 2"
+    assert s["true population count"] == "1"
+    assert s["… counting order aliases with their component"] == "2"
+    assert s["read in a wrong order (not flagged)"] == "1 (1)"
+    assert s["white-balance gains determined (within 2 %)"] == "2 (1)"
+    assert s["region MAE, median (nm)"] == "0.400"
+    assert s["… white-balance scenes / the others"] == "0.40 / 4.60"
