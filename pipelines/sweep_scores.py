@@ -74,7 +74,9 @@ def _determined(work: Path, row) -> list:
 
 
 def _median(v) -> float:
-    return float(np.median(v)) if len(v) else float("nan")
+    """The median over the scenes scored (a failed scene's empty cell is NaN)."""
+    v = np.asarray(v, dtype=np.float64)
+    return float(np.median(v[np.isfinite(v)])) if np.isfinite(v).any() else float("nan")
 
 
 def scores(d: Runs) -> dict:
@@ -125,7 +127,10 @@ def main(argv) -> None:
     specs = [a for a in argv if not a.startswith("--label=")]
     labels = [a.split("=", 1)[1] for a in argv if a.startswith("--label=")]
     labels += specs[len(labels):]
-    print(table({lab: scores(read_runs(s)) for lab, s in zip(labels, specs)}))
+    try:
+        print(table({lab: scores(read_runs(s)) for lab, s in zip(labels, specs)}))
+    except (OSError, KeyError, ValueError) as exc:
+        raise SystemExit(f"sweep_scores: {type(exc).__name__}: {exc}") from None
 
 
 if __name__ == "__main__":
