@@ -24,6 +24,7 @@ import numpy as np
 from microfacet.analysis.mask import colour_mask
 from microfacet.analysis.options import MaskOptions
 from microfacet.io.images import read_png
+from pipelines._shared import md_table
 
 CLASSES = ("film, not past the limit", "facets truly past the limit",
            "pits, scratches, dust, stains", "grooves between facets")
@@ -72,12 +73,12 @@ def main(folders) -> None:
                 total[k] = [(a0 + b0, a1 + b1) for (a0, a1), (b0, b1) in zip(total[k], c[k])]
     if total is None:
         sys.exit("mask_truth: no results/joint/*/all_in_focus.png with a truth folder")
-    print("| truth | pixels | below 0.3: masked and censored before | censored now (steep) "
-          "| masked now (steep or dark feature) |\n|---|---|---|---|---|")
-    for i, name in enumerate(CLASSES):
-        n = max(total["n"][i], 1)
-        print(f"| {name} | {total['n'][i]:,} | {100 * total['one threshold'][i][1] / n:.2f} % "
-              f"| {100 * total['now'][i][0] / n:.2f} % | {100 * total['now'][i][1] / n:.2f} % |")
+    pct = [[100 * total[k][i][j] / max(total["n"][i], 1) for k, j in
+            (("one threshold", 1), ("now", 0), ("now", 1))] for i in range(len(CLASSES))]
+    print(md_table(["truth", "pixels", "below 0.3: masked and censored before",
+                    "censored now (steep)", "masked now (steep or dark feature)"],
+                   [[name, f"{total['n'][i]:,}", *(f"{v:.2f} %" for v in pct[i])]
+                    for i, name in enumerate(CLASSES)]))
     print("worst scene's film masked: " + ", ".join(f"{k} {100 * v:.1f} %"
                                                     for k, v in worst.items()))
 

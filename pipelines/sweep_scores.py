@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pipelines._shared import md_table
+
 #: A determined white-balance gain is right within this relative error (issue 23).
 WB_TOLERANCE = 0.02
 
@@ -116,11 +118,8 @@ def scores(d: Runs) -> dict:
 def table(columns: dict) -> str:
     """Markdown: one row per score, one column per label."""
     rows = list(next(iter(columns.values())))
-    lines = ["| score | " + " | ".join(columns) + " |",
-             "|---|" + "---|" * len(columns)]
-    lines += ["| " + r + " | " + " | ".join(c[r] for c in columns.values()) + " |"
-              for r in rows]
-    return "\n".join(lines)
+    return md_table(["score", *columns], [[r, *(c[r] for c in columns.values())]
+                                          for r in rows])
 
 
 def main(argv) -> None:

@@ -62,7 +62,7 @@ from ..colour.colorimetry import lab_to_xyz
 from ..colour.transfer import srgb_decode
 from ..core.errors import InputError
 from .identification import unexplained_facets
-from .mask import steep_facet_mask
+from .mask import dark_classes
 from .planes import TUKEY_C
 from .white_balance import balanced_lab
 
@@ -478,9 +478,8 @@ def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, mask_o
     base = cm.low_saturation | dark | cm.clipped | cm.invalid | cm.shadow
     steep = feature = np.zeros_like(cm.steep)
     if mask_options.steep_ratio > 0 and (~base).any():
-        top = np.maximum(lin, 0.0).max(axis=-1)
-        steep, feature = steep_facet_mask(np.where(cm.invalid, np.nan, top),
-                                          float(np.median(top[~base])), mask_options)
+        steep, feature = dark_classes(np.maximum(lin, 0.0).max(axis=-1), base, cm.invalid,
+                                      mask_options)
     mask = dataclasses.replace(cm, mask=base | steep | feature, dark=dark, steep=steep,
                                dark_feature=feature)
     return dataclasses.replace(colour, lab=lab, mask=mask)

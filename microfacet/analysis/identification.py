@@ -195,11 +195,16 @@ def map_check_judgement(judgement: Judgement, check) -> Judgement:
     if not judgement.identified or check is None or check.consistent:
         return judgement
     return Judgement(False, Reason(
-        "mixture_map_mismatch", f"the mixture does not summarize the per-pixel thickness "
-        f"map: area fractions differ by up to {check.max_fraction_difference:.2f}, means by "
-        f"up to {check.max_mean_difference_nm:.1f} nm, and "
-        f"{100 * check.unexplained_fraction:.0f} % of the map is far from every component "
-        f"(thickness_nm.npy is the finer answer)", "fits.max_components"))
+        "mixture_map_mismatch", "the mixture does not summarize the per-pixel thickness map: "
+        + _map_mismatch_text(check), "fits.max_components"))
+
+
+def _map_mismatch_text(check) -> str:
+    """How a mixture differs from its map (:class:`~.consistency.MapCheck`)."""
+    return (f"area fractions differ by up to {check.max_fraction_difference:.2f}, means by up "
+            f"to {check.max_mean_difference_nm:.1f} nm, and "
+            f"{100 * check.unexplained_fraction:.0f} % of the map is far from every component "
+            f"(thickness_nm.npy is the finer answer)")
 
 
 @dataclass
@@ -583,12 +588,8 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
     judged = dist.thickness_judgement.reason
     if (map_check is not None and not map_check.consistent
             and (judged is None or judged.code != "mixture_map_mismatch")):
-        out.append(Reason("mixture_map_mismatch", f"the thickness mixture does not summarize "
-                          f"the per-pixel map: area fractions differ by up to "
-                          f"{map_check.max_fraction_difference:.2f}, means by up to "
-                          f"{map_check.max_mean_difference_nm:.1f} nm, and "
-                          f"{100 * map_check.unexplained_fraction:.0f} % of the map is far "
-                          f"from every component (thickness_nm.npy is the finer answer)",
+        out.append(Reason("mixture_map_mismatch", "the thickness mixture does not summarize "
+                          "the per-pixel map: " + _map_mismatch_text(map_check),
                           "fits.max_components"))
     if roi_check is not None and np.any(roi_check[1]):
         med, bad = roi_check

@@ -139,15 +139,20 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
     mask = low_sat | dark | clipped | invalid | shadow
     steep = feature = np.zeros(vmax.shape, bool)
     if o.steep_ratio > 0 and (~mask).any():
-        lin = _channel_max(safe, decode=True)
-        ref = float(np.median(lin[~mask]))
-        # a NaN pixel is no dark core: its neighbours are not a steep rim
-        steep, feature = steep_facet_mask(np.where(invalid, np.nan, lin), ref, o)
+        steep, feature = dark_classes(_channel_max(safe, decode=True), mask, invalid, o)
         mask = mask | steep | feature
     return ColourMask(mask, low_sat & ~invalid, dark & ~invalid, clipped & ~invalid, invalid,
                       shadow, steep, feature)
 
 
+
+
+def dark_classes(linear_max, masked, invalid, options: MaskOptions):
+    """:func:`steep_facet_mask` against the median of the pixels not ``masked`` (the film),
+    an ``invalid`` pixel passed as NaN: it is no dark core, so its neighbours are no steep
+    rim. Returns ``(steep, dark_feature)``."""
+    ref = float(np.median(linear_max[~masked]))
+    return steep_facet_mask(np.where(invalid, np.nan, linear_max), ref, options)
 
 
 def steep_facet_mask(linear_max, reference, options: MaskOptions):
