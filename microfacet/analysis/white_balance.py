@@ -14,7 +14,11 @@ width; at least the spread over bootstrap resamples of the tiles): a scene of on
 colour leaves a direction of gains a thickness change compensates, and the width says so.
 Measured on the generalization sweep (docs/accuracy.md): this σ covers the errors (median
 |error|/σ 0.6), and at 256 × 256 px it is 1–15 %, so the gains are rarely determined to 1 %
-without a reference.
+without a reference. A gain is called determined only where the tiles hold at least two
+distinct film colours (:func:`film_colours`): for one colour the misfit's valley, along
+which a gain and the thickness trade, is curved, and its narrow width across the best can
+pass for a spread below 1 % while the best lies far along it (a 200 nm film over a 5° tilt
+spread: B 19 % off at σ 0.85 %, tests/analysis/test_white_balance.py).
 
 A reference wins over the estimate: ``white_balance`` gains in stack.json, a
 ``white_reference`` image of a white standard (its median linear R, G, B, divided by G, are
@@ -51,7 +55,8 @@ from .search import parabola
 
 ndimage = load("scipy.ndimage")
 
-__all__ = ["WhiteBalance", "balanced_lab", "estimate_white_balance", "rebalanced_lab",
+__all__ = ["WhiteBalance", "balanced_lab", "estimate_white_balance", "film_colours",
+           "rebalanced_lab",
            "reference_gains", "substrate_colour_rgb", "substrate_gain_sigma",
            "substrate_gains"]
 
@@ -70,6 +75,12 @@ PIXEL_FREEDOM_NM = 3.0
 #: gains are determined.
 BOOTSTRAP = 64
 DETERMINED_LOG_SD = 0.01
+#: Distinct film colours a determined gain needs: the tiles' best thicknesses at the
+#: estimate, in groups split where sorted neighbours lie more than COLOUR_GAP_NM apart
+#: (~2 ΔE00 per nm: a distinct colour), each of at least MIN_COLOUR_TILES tiles.
+MIN_FILM_COLOURS = 2
+COLOUR_GAP_NM = 10.0
+MIN_COLOUR_TILES = 4
 #: 1σ of a reference's log gains (a white standard's or stack.json's): the neutrality of the
 #: standard and the light's drift between it and the stack, taken as 1 % (not measured here).
 REFERENCE_LOG_SD = 0.01
@@ -91,13 +102,18 @@ class WhiteBalance:
     estimate_sigma : tuple of 2 float or None
         1σ of the R and B estimates (bootstrap over the image's tiles), relative.
     determined : tuple of 2 bool or None
-        Per gain (R, B): the estimate's spread is below 1 % and its best lies inside the
-        search.
+        Per gain (R, B): the estimate's spread is below 1 %, its best lies inside the
+        search, and the tiles hold at least :data:`MIN_FILM_COLOURS` distinct film colours
+        (one colour constrains the gains only through its spread with tilt, which a bias
+        of the model shared by every tile moves unseen: measured 9.75 % off at σ 1 %,
+        docs/accuracy.md).
     misfit_gain : float or None
         How much the tiles' misfit (mean squared log chromaticity) improves at the
         estimate, against gains 1.
     tiles : int
         Tiles the estimate used.
+    film_colours : int or None
+        Distinct film colours among the tiles at the estimate (:func:`film_colours`).
     withdrawn : str or None
         Why the analysis no longer calls the estimate determined, where it did before
         (:meth:`withdraw`).
@@ -113,6 +129,7 @@ class WhiteBalance:
     determined: tuple | None = None
     misfit_gain: float | None = None
     tiles: int = 0
+    film_colours: int | None = None
     withdrawn: str | None = None
     reference_sigma: tuple | None = None
 
@@ -181,7 +198,8 @@ class WhiteBalance:
              "determined_rb": None if self.determined is None
              else [bool(v) for v in self.determined],
              "misfit_gain": self.misfit_gain,
-             "tiles": int(self.tiles), "determined_withdrawn": self.withdrawn,
+             "tiles": int(self.tiles), "film_colours": self.film_colours,
+             "determined_withdrawn": self.withdrawn,
              "reference_sigma_rb": None if self.reference_sigma is None
              else [float(v) for v in self.reference_sigma]}
 
@@ -331,14 +349,39 @@ class _Scorer:
         self.resid = self.u[:, None, :] - self.m                                   # (T·n, D, 2)
         self.k = max(1, int(round(PIXEL_FREEDOM_NM / 2.0)))
 
-    def per_tile(self, log_r, log_b) -> np.ndarray:
-        """Mean misfit per tile at gains (e^log_r, 1, e^log_b), each tile at its best
-        thickness, each pixel free by ±PIXEL_FREEDOM_NM about it."""
+    def per_thickness(self, log_r, log_b) -> np.ndarray:
+        """Mean misfit (T, D) per tile and thickness of the grid at gains
+        (e^log_r, 1, e^log_b), each pixel free by ±PIXEL_FREEDOM_NM about the thickness."""
         e = self.resid - np.array([log_r, log_b], np.float32)
         e = np.minimum(np.einsum("ndc,ndc->nd", e, e), self.CLIP)                  # (T·n, D)
         e = ndimage.minimum_filter1d(e, size=2 * self.k + 1, axis=1, mode="nearest")
-        per = e.reshape(self.n_tiles, -1, e.shape[-1]).mean(axis=1)                 # (T, D)
-        return per.min(axis=1)
+        return e.reshape(self.n_tiles, -1, e.shape[-1]).mean(axis=1)                # (T, D)
+
+    def per_tile(self, log_r, log_b) -> np.ndarray:
+        """Mean misfit per tile at gains (e^log_r, 1, e^log_b), each tile at its best
+        thickness (:meth:`per_thickness`)."""
+        return self.per_thickness(log_r, log_b).min(axis=1)
+
+    def best_thickness_nm(self, log_r, log_b) -> np.ndarray:
+        """Each tile's thickness of least misfit at the gains (nm, (T,))."""
+        return self.grid[self.per_thickness(log_r, log_b).argmin(axis=1)]
+
+
+def film_colours(thickness_nm, *, gap_nm=COLOUR_GAP_NM, min_tiles=MIN_COLOUR_TILES) -> int:
+    """How many distinct film colours the tiles hold: their thicknesses sorted and split
+    where neighbours lie more than ``gap_nm`` apart, the groups of at least ``min_tiles``
+    counted.
+
+    >>> film_colours([100, 102, 104, 101, 180, 182, 181, 183, 300])
+    2
+    >>> film_colours([100, 102, 104, 101, 106, 110, 114, 118, 122])
+    1
+    """
+    d = np.sort(np.asarray(thickness_nm, np.float64))
+    if d.size == 0:
+        return 0
+    sizes = np.diff(np.flatnonzero(np.diff(d, prepend=-np.inf, append=np.inf) > gap_nm))
+    return int(np.count_nonzero(sizes >= min_tiles))
 
 
 def _argmin_2d(scores, ax_r, ax_b):
@@ -418,11 +461,13 @@ def estimate_white_balance(encoded, tilt_deg, usable, model, *, illuminant, seed
     best = float(sc.per_tile(lr, lb).mean())
     edge_r = abs(lr) >= LOG_RANGE - FINE_STEP or fine_r[0] >= lr or lr >= fine_r[-1]
     edge_b = abs(lb) >= LOG_RANGE - FINE_STEP or fine_b[0] >= lb or lb >= fine_b[-1]
-    determined = (bool(sd[0] < DETERMINED_LOG_SD and not edge_r),
-                  bool(sd[1] < DETERMINED_LOG_SD and not edge_b))
+    colours = film_colours(sc.best_thickness_nm(lr, lb))
+    several = colours >= MIN_FILM_COLOURS
+    determined = (bool(sd[0] < DETERMINED_LOG_SD and not edge_r and several),
+                  bool(sd[1] < DETERMINED_LOG_SD and not edge_b and several))
     return WhiteBalance(estimate_rgb=(math.exp(lr), 1.0, math.exp(lb)),
                         estimate_sigma=(float(sd[0]), float(sd[1])), determined=determined,
-                        misfit_gain=at_one - best, tiles=sc.n_tiles)
+                        misfit_gain=at_one - best, tiles=sc.n_tiles, film_colours=colours)
 
 
 # ------------------------------------------------------------------------------ choice

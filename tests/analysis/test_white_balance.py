@@ -280,8 +280,9 @@ def _film_image(model, thickness_nm, tilt_deg, rng):
 @pytest.mark.slow
 def test_one_film_colour_leaves_the_gains_free_four_fix_them():
     """A gain and a thickness trade off for one film colour: the estimate's spread is
-    unbounded and the order check is told so (:func:`gains_unconstrained`); four film
-    colours over-determine the two gains: found within 3 % (σ ~2 %), not free."""
+    unbounded and the order check is told so (:func:`gains_unconstrained`), and no gain is
+    called determined; four film colours over-determine the two gains: found within 3 %
+    (σ ~2 %), not free, and counted as four (:func:`film_colours`)."""
     from microfacet.analysis.identification import gains_unconstrained
     from microfacet.analysis.white_balance import estimate_white_balance
     from microfacet.colour.model import FilmColourModel
@@ -299,9 +300,48 @@ def test_one_film_colour_leaves_the_gains_free_four_fix_them():
                                              illuminant="D65")
     assert gains_unconstrained(found["one"])
     assert not all(np.isfinite(found["one"].estimate_sigma))
+    assert not any(found["one"].determined)
     four = found["four"]
+    assert four.film_colours == 4
     assert not gains_unconstrained(four)
     assert abs(four.estimate_rgb[0] / GAINS[0] - 1) < 0.03
     assert abs(four.estimate_rgb[2] / GAINS[2] - 1) < 0.03
     # a reference gives the gains: never free, whatever the estimate's spread
     assert not gains_unconstrained(dataclasses.replace(found["one"], source="stack.json"))
+
+
+@pytest.mark.parametrize(("thickness_nm", "expected"), [
+    ([150.0] * 20, 1),                                    # one colour
+    ([150.0] * 16 + [190.0] * 4, 2),                      # a second of the fewest tiles
+    ([150.0] * 17 + [190.0] * 3, 1),                      # too few tiles for a colour
+    (list(np.arange(100.0, 300.0, 8.0)), 1),              # a continuum: no gap > 10 nm
+    ([60.0] * 5 + [120.0] * 5 + [180.0] * 5, 3),
+    ([], 0),
+])
+def test_distinct_film_colours_are_groups_of_tiles_apart_in_thickness(thickness_nm, expected):
+    from microfacet.analysis.white_balance import film_colours
+
+    rng = np.random.default_rng(0)
+    assert film_colours(rng.permutation(np.asarray(thickness_nm))) == expected
+
+
+@pytest.mark.slow
+def test_one_film_colour_with_a_narrow_spread_is_not_called_determined():
+    """One film colour (200 nm) over a tilt spread of 5°: the misfit's valley, along which
+    a gain and the thickness trade, is curved, and its width across the best is narrow: B's
+    spread is below the 1 % that would call it determined, yet the estimate is > 5 % off.
+    One colour is counted, and no gain is called determined."""
+    from microfacet.analysis.white_balance import DETERMINED_LOG_SD, estimate_white_balance
+    from microfacet.colour.model import FilmColourModel
+    from microfacet.colour.table import build_colour_table
+
+    model = FilmColourModel(build_colour_table(thickness_range_nm=(0.0, 400.0),
+                                               theta_range_deg=(0.0, 40.0)))
+    rng = np.random.default_rng(1)
+    tilt = np.clip(np.abs(rng.normal(0.0, 5.0, (256, 256))), 0.0, 40.0)
+    img = _film_image(model, np.full((256, 256), 200.0), tilt, rng)
+    wb = estimate_white_balance(img, tilt, np.ones(tilt.shape, bool), model,
+                                illuminant="D65")
+    assert wb.estimate_sigma[1] < DETERMINED_LOG_SD           # the spread alone would
+    assert abs(wb.estimate_rgb[2] / GAINS[2] - 1) > 0.05
+    assert wb.film_colours == 1 and wb.determined == (False, False)
