@@ -379,7 +379,10 @@ def gains_unconstrained(wb) -> bool:
     gains, and the scene's own estimate (:func:`~.white_balance.estimate_white_balance`)
     has a spread on R or B that is unbounded or not a number (its misfit has no minimum to
     measure: e.g. one film colour, where a gain and a thickness trade off) or as wide as the
-    half-range of log gains it searches (:data:`~.white_balance.LOG_RANGE`). With
+    half-range of log gains it searches (:data:`~.white_balance.LOG_RANGE`), or its best at
+    the edge of that search (the misfit still falls there: the gains are not bracketed; on
+    the held-out 256² draws of the sweep two one-colour scenes with R 0.82 and 0.79, at the
+    edge, were read an order off unflagged, docs/accuracy.md). With
     ``white_balance = "apply"`` a gain left at 1 beside an applied one counts too. Without
     an estimate (``white_balance = "off"``, or too few tiles for one) nothing is known, and
     False is returned. ``wb``: a :class:`~.white_balance.WhiteBalance` or None.
@@ -390,11 +393,16 @@ def gains_unconstrained(wb) -> bool:
     >>> referenced = dataclasses.replace(free, source="stack.json")
     >>> gains_unconstrained(free), gains_unconstrained(referenced)
     (True, False)
+    >>> edge = WhiteBalance(estimate_rgb=(0.818, 1.0, 0.99), estimate_sigma=(0.04, 0.02))
+    >>> gains_unconstrained(edge), gains_unconstrained(dataclasses.replace(
+    ...     edge, estimate_rgb=(0.95, 1.0, 0.99)))
+    (True, False)
     """
     if (wb is None or wb.from_reference or wb.estimate_rgb is None
             or not wb.estimate_sigma):
         return False
-    return not all(math.isfinite(s) and s < LOG_RANGE for s in wb.estimate_sigma)
+    return (not all(math.isfinite(s) and s < LOG_RANGE for s in wb.estimate_sigma)
+            or any(wb.at_search_edge()))
 
 
 def order_check(dist, *, delta_e_median, noise_de, options: FitOptions,
@@ -538,7 +546,8 @@ def _white_balance_warning(wb) -> Reason | None:
         return Reason("white_balance_free", f"the film's colours do not fix the white balance "
                       f"(e.g. one film colour: a gain and a thickness trade off; they ask for R "
                       f"x{wb.estimate_rgb[0]:.3f}, B x{wb.estimate_rgb[2]:.3f} with a spread "
-                      f"as wide as the search) and no reference gives it, so the thickness "
+                      f"as wide as the search, or at its edge) and no reference gives it, so "
+                      f"the thickness "
                       f"and its interference order rest on the image being balanced for the "
                       f"illuminant; a white or bare-substrate reference "
                       f"(`optics.white_reference`, `optics.substrate_reference`) settles it",

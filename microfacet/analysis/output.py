@@ -41,7 +41,6 @@ from .identification import (
     MEDIAN_NOISE_FLOOR_FACTOR,
     NOISE_FLOOR_FACTOR,
     mean_plane_tilt_deg,
-    order_check,
 )
 from .iso25178 import REFERENCES, areal_parameters
 
@@ -234,9 +233,7 @@ def _thickness_section(r) -> ThicknessSection:
                     "runner_up_thickness_nm": float(roi.runner_up_thickness_nm[i]),
                     "runner_up_delta_e": float(roi.runner_up_delta_e[i])}
                    for i in np.flatnonzero(dist.roi_ambiguous)]),
-        order=order_check(dist, delta_e_median=r.delta_e_stats["median"],
-                          noise_de=r.colour.noise_de, options=r.options.fits,
-                          white_balance=r.white_balance))
+        order=r.order)
 
 
 def _ndf_section(r) -> NdfSection:

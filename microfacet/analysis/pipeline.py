@@ -53,6 +53,7 @@ from .identification import (
     analysis_warnings,
     map_check_judgement,
     mean_plane_tilt_deg,
+    order_check,
     self_check_judgement,
 )
 from .iso25178 import areal_parameters
@@ -199,6 +200,15 @@ class AnalysisResult:
                                  options=self.options.fits, white_balance=self.white_balance,
                                  map_check=self.map_check, roi_check=self.roi_check)
 
+    @functools.cached_property
+    def order(self) -> dict:
+        """Whether the thicknesses' interference order is established, and if not why
+        (:func:`~.identification.order_check`; summary.json ``thickness.order``). It does not
+        depend on which gains are called determined, only on the estimate and its spread."""
+        return order_check(self.distributions, delta_e_median=self.delta_e_stats["median"],
+                           noise_de=self.colour.noise_de, options=self.options.fits,
+                           white_balance=self.white_balance)
+
     @property
     def delta_e_stats(self) -> dict:
         """Mean, median and 95th percentile of the per-pixel ΔE (None without pixels)."""
@@ -340,14 +350,24 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                                   if dist.thickness is not None else None)
     dist.thickness_judgement = map_check_judgement(dist.thickness_judgement, map_check)
     if not dist.thickness_judgement.identified:
-        wb = wb.withdraw("the thickness is not identified, and the gains the film's colours "
-                         "ask for are those of the thicknesses they were read at"
-                         + (" (the determined gains were applied)" if wb.source == "estimated"
-                            else ""))
+        wb = _withdrawn(wb, "the thickness is not identified")
     timer.total()
-    return AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels, joint,
-                          dist, dict(timer.timings), check, wb,
-                          flat if options.mode == "joint" else flat_ref, map_check)
+    result = AnalysisResult(st, options, scene, focus, surface, colour, model, roi, pixels,
+                            joint, dist, dict(timer.timings), check, wb,
+                            flat if options.mode == "joint" else flat_ref, map_check)
+    if not result.order["established"]:
+        result.white_balance = _withdrawn(wb, "the interference order is not established")
+    return result
+
+
+def _withdrawn(wb, why):
+    """``wb`` with no gain called determined, because ``why``: the gains the film's colours
+    ask for are those of the thicknesses, in the orders, they were read at
+    (:meth:`~.white_balance.WhiteBalance.withdraw`)."""
+    return wb.withdraw(f"{why}, and the gains the film's colours ask for are those of the "
+                       f"thicknesses, in the orders, they were read at"
+                       + (" (the determined gains were applied)" if wb.source == "estimated"
+                          else ""))
 
 
 def _gain_shifts(joint, cols, model, options, scene, wb):

@@ -159,6 +159,19 @@ class WhiteBalance:
             return self
         return dataclasses.replace(self, determined=(False, False), withdrawn=reason)
 
+    def at_search_edge(self) -> tuple:
+        """Per gain (R, B), whether the estimate's best lies at the edge of the log gains
+        searched (within :data:`FINE_STEP` of ±:data:`LOG_RANGE`): the misfit still falls
+        there, and the gain is not bracketed. ``(False, False)`` without an estimate.
+
+        >>> WhiteBalance(estimate_rgb=(0.818, 1.0, 1.05)).at_search_edge()
+        (True, False)
+        """
+        if self.estimate_rgb is None:
+            return (False, False)
+        return tuple(bool(abs(math.log(g)) >= LOG_RANGE - FINE_STEP)
+                     for g in (self.estimate_rgb[0], self.estimate_rgb[2]))
+
     def log_gain_sigma(self) -> tuple | None:
         """1σ of the log R and B gains the colours were corrected with, as far as the
         scene tells: a reference's (``reference_sigma``, else :data:`REFERENCE_LOG_SD`); a

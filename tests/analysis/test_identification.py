@@ -539,9 +539,10 @@ def test_two_exposures_that_fit_alike_leave_the_order_undecided():
 
 
 def test_gains_the_colours_leave_free_leave_the_order_unestablished():
-    """No reference and an estimate whose spread is unbounded (one film colour): the order
-    rests on the image being balanced, so it is not established, and a warning names the
-    references that settle it; a reference, or an estimate with a finite spread, does not."""
+    """No reference and an estimate whose spread is unbounded (one film colour) or whose
+    best lies at the edge of the search: the order rests on the image being balanced, so it
+    is not established, and a warning names the references that settle it; a reference, or
+    an estimate with a finite spread inside the search, does not."""
     from microfacet.analysis.identification import order_check
     from microfacet.analysis.white_balance import LOG_RANGE, WhiteBalance
 
@@ -569,8 +570,15 @@ def test_gains_the_colours_leave_free_leave_the_order_unestablished():
     applied_r = dataclasses.replace(free, gains_rgb=(1.1, 1.0, 1.0), source="estimated",
                                     estimate_sigma=(0.005, math.inf), determined=(True, False))
     assert not check(applied_r)["established"]
+    # a best at the edge of the search (the misfit still falling there), either gain, on
+    # either side: the gains are not bracketed, whatever the spread
+    for edge in ((math.exp(-LOG_RANGE), 1.0, 0.95), (1.0, 1.0, math.exp(LOG_RANGE - 0.005))):
+        assert not check(dataclasses.replace(free, estimate_rgb=edge,
+                                             estimate_sigma=(0.04, 0.02)))["established"]
     for wb in (None, WhiteBalance(), dataclasses.replace(free, source="stack.json"),
-               dataclasses.replace(free, estimate_sigma=(0.05, 0.9 * LOG_RANGE))):
+               dataclasses.replace(free, estimate_sigma=(0.05, 0.9 * LOG_RANGE)),
+               dataclasses.replace(free, estimate_rgb=(math.exp(-0.8 * LOG_RANGE), 1.0, 1.1),
+                                   estimate_sigma=(0.04, 0.02))):
         assert check(wb)["established"]
 
 

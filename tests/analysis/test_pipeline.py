@@ -264,3 +264,34 @@ def test_white_balance_is_not_called_determined_where_the_thickness_is_not(monke
     assert wb.determined == (False, False) and wb.estimate_rgb == est.estimate_rgb
     assert "the thickness is not identified" in wb.withdrawn
     assert wb.to_dict()["determined_withdrawn"] == wb.withdrawn
+
+
+@pytest.mark.slow
+def test_white_balance_is_not_called_determined_where_the_order_is_not(monkeypatch):
+    """The thickness identified but its interference order not established (here a ROI's
+    runner-up order within the threshold): the gains the colours ask for are those of the
+    orders they were read in, so none is called determined; the order's reasons are
+    summary.json's."""
+    import microfacet.analysis.pipeline as pl
+    from microfacet.analysis.output import build_summary
+    from microfacet.analysis.white_balance import WhiteBalance
+
+    est = WhiteBalance(estimate_rgb=(1.04, 1.0, 0.97), estimate_sigma=(0.005, 0.006),
+                       determined=(True, True), tiles=40)
+    monkeypatch.setattr(pl, "choose_white_balance", lambda *a, **k: est)
+    real = pl.fit_joint_distributions
+
+    def ambiguous(*args, **kwargs):
+        d = real(*args, **kwargs)
+        d.roi_ambiguous = np.zeros_like(d.roi_ambiguous)
+        d.roi_ambiguous[0] = True
+        return d
+
+    monkeypatch.setattr(pl, "fit_joint_distributions", ambiguous)
+    r = analyse_stack(FIXTURE, AnalysisOptions(mode="joint"))
+    assert r.distributions.thickness_judgement.identified
+    assert not r.order["established"] and "1 ROI(s) with an ambiguous order" in r.order["reasons"]
+    wb = r.white_balance
+    assert wb.determined == (False, False) and wb.estimate_rgb == est.estimate_rgb
+    assert "the interference order is not established" in wb.withdrawn
+    assert build_summary(r).thickness.order == r.order
