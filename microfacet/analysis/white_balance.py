@@ -104,9 +104,9 @@ class WhiteBalance:
     determined : tuple of 2 bool or None
         Per gain (R, B): the estimate's spread is below 1 %, its best lies inside the
         search, and the tiles hold at least :data:`MIN_FILM_COLOURS` distinct film colours
-        (one colour constrains the gains only through its spread with tilt, which a bias
-        of the model shared by every tile moves unseen: measured 9.75 % off at σ 1 %,
-        docs/accuracy.md).
+        (for one colour a gain and the thickness trade along a curved valley of the misfit,
+        whose narrow width across the best passes for a small spread: measured 9.75 % off at
+        σ 1 % on the sweep, 19 % at σ 0.85 % on a clean one-colour film, docs/accuracy.md).
     misfit_gain : float or None
         How much the tiles' misfit (mean squared log chromaticity) improves at the
         estimate, against gains 1.
