@@ -169,8 +169,7 @@ class WhiteBalance:
         """
         if self.estimate_rgb is None:
             return (False, False)
-        return tuple(bool(abs(math.log(g)) >= LOG_RANGE - FINE_STEP)
-                     for g in (self.estimate_rgb[0], self.estimate_rgb[2]))
+        return tuple(_at_edge(math.log(g)) for g in (self.estimate_rgb[0], self.estimate_rgb[2]))
 
     def log_gain_sigma(self) -> tuple | None:
         """1σ of the log R and B gains the colours were corrected with, as far as the
@@ -375,9 +374,11 @@ class _Scorer:
         thickness (:meth:`per_thickness`)."""
         return self.per_thickness(log_r, log_b).min(axis=1)
 
-    def best_thickness_nm(self, log_r, log_b) -> np.ndarray:
-        """Each tile's thickness of least misfit at the gains (nm, (T,))."""
-        return self.grid[self.per_thickness(log_r, log_b).argmin(axis=1)]
+
+
+def _at_edge(log_gain) -> bool:
+    """A log gain within :data:`FINE_STEP` of the edge of the search (±:data:`LOG_RANGE`)."""
+    return bool(abs(log_gain) >= LOG_RANGE - FINE_STEP)
 
 
 def film_colours(thickness_nm, *, gap_nm=COLOUR_GAP_NM, min_tiles=MIN_COLOUR_TILES) -> int:
@@ -471,10 +472,11 @@ def estimate_white_balance(encoded, tilt_deg, usable, model, *, illuminant, seed
     sd = np.maximum(np.std(np.array(boot), axis=0), _systematic_sd(fine.mean(axis=2), fine_r,
                                                                     fine_b, sc.n_tiles))
     at_one = float(sc.per_tile(0.0, 0.0).mean())
-    best = float(sc.per_tile(lr, lb).mean())
-    edge_r = abs(lr) >= LOG_RANGE - FINE_STEP or fine_r[0] >= lr or lr >= fine_r[-1]
-    edge_b = abs(lb) >= LOG_RANGE - FINE_STEP or fine_b[0] >= lb or lb >= fine_b[-1]
-    colours = film_colours(sc.best_thickness_nm(lr, lb))
+    per = sc.per_thickness(lr, lb)                                              # (T, D)
+    best = float(per.min(axis=1).mean())
+    edge_r = _at_edge(lr) or fine_r[0] >= lr or lr >= fine_r[-1]
+    edge_b = _at_edge(lb) or fine_b[0] >= lb or lb >= fine_b[-1]
+    colours = film_colours(sc.grid[per.argmin(axis=1)])
     several = colours >= MIN_FILM_COLOURS
     determined = (bool(sd[0] < DETERMINED_LOG_SD and not edge_r and several),
                   bool(sd[1] < DETERMINED_LOG_SD and not edge_b and several))
