@@ -36,7 +36,8 @@ from .options import FitOptions
 from .white_balance import LOG_RANGE
 
 __all__ = ["Judgement", "Reason", "analysis_warnings", "colour_tilt_contrast",
-           "gains_unconstrained", "mean_plane_tilt_deg", "ndf_judgement", "order_check",
+           "gains_unconstrained", "mask_warning", "mean_plane_tilt_deg", "ndf_judgement",
+           "order_check",
            "seed_ndf_judgement", "self_check_judgement", "self_check_passes",
            "thickness_judgement"]
 
@@ -537,6 +538,50 @@ def _misread_warning(fit) -> Reason | None:
                   f"than the populations' were set aside, not counted as populations: {each} "
                   f"(summary.json thickness.mixture.misread_components; their thicknesses stay "
                   f"in thickness_nm.npy)", "optics.film")
+
+
+#: Share of the image masked above which :func:`mask_warning` says what is masked and why.
+MASKED_WARN_FRACTION = 0.3
+
+#: Per mask reason (:data:`~.mask.MASK_REASONS`): what its pixels are and what would show
+#: them, and the option that sets it (None: the acquisition, not an option).
+_MASK_REMEDY = {
+    "clipped": ("a channel at the top code value (over-exposed: their colour is not the "
+                "film's); slices taken with a shorter exposure would show them", None),
+    "low_saturation": ("grey (HSV saturation below `mask.saturation_min`, in areas "
+                       "narrower than `mask.grey_film_min_px`)", "mask.saturation_min"),
+    "dark": ("too dark to read (HSV value below `mask.value_min`); a longer exposure would "
+             "show them", "mask.value_min"),
+    "shadow": ("darker than their neighbourhood (`mask.shadow_ratio`)", "mask.shadow_ratio"),
+    "steep": ("tilted past the objective's acceptance (censored in the NDF); a higher "
+              "numerical aperture would see them", None),
+    "dark_feature": ("scratches, pits and rims darker than the film (`mask.dark_film_min_px`)",
+                     "mask.dark_film_min_px"),
+    "invalid": ("not numbers in the input", None),
+}
+
+
+def mask_warning(fractions: dict) -> Reason | None:
+    """A warning where more than :data:`MASKED_WARN_FRACTION` of the image is masked
+    (``fractions``: :meth:`~.mask.ColourMask.fractions`): the distributions are of the rest
+    only, so a population under the mask is not in them; it names the largest reason and
+    what would show those pixels.
+
+    >>> mask_warning({"clipped": 0.62, "low_saturation": 0.01, "any": 0.63}).code
+    'masked'
+    >>> mask_warning({"clipped": 0.02, "any": 0.04}) is None
+    True
+    """
+    share = float(fractions.get("any", 0.0))
+    reasons = {k: float(fractions.get(k, 0.0)) for k in _MASK_REMEDY}
+    if share <= MASKED_WARN_FRACTION or max(reasons.values()) <= 0:
+        return None
+    top = max(reasons, key=reasons.get)
+    what, parameter = _MASK_REMEDY[top]
+    return Reason("masked", f"{100 * share:.0f} % of the image is masked, "
+                  f"{100 * reasons[top]:.0f} % of it {what}: the distributions are of the other "
+                  f"{100 * (1 - share):.0f} % only, and a population that lies under the mask "
+                  f"is not in them (summary.json mask)", parameter)
 
 
 def _white_balance_warning(wb) -> Reason | None:

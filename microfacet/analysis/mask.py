@@ -3,7 +3,8 @@
 The seed masks pixels whose HSV saturation is below 15 (on the 0-255 scale): the specular
 highlights and the shadows. We also mask dark pixels (facets tilted past the objective's
 acceptance reflect outside it) and pixels with a clipped channel (their colour is not the
-film's).
+film's). A wide grey area in an image of coloured film is a film of a grey colour, and is
+analysed (:func:`grey_film`), as a wide dark one is a film of a dark colour.
 
 References
 ----------
@@ -24,7 +25,7 @@ from .options import MaskOptions
 
 cv2 = load("cv2")
 
-__all__ = ["ColourMask", "colour_mask"]
+__all__ = ["ColourMask", "colour_mask", "grey_film"]
 
 #: The mask's reasons, in the order summary.json and the report give them.
 MASK_REASONS = ("low_saturation", "dark", "clipped", "invalid", "shadow", "steep",
@@ -40,8 +41,8 @@ class ColourMask:
     mask : ndarray of bool
         Any reason below.
     low_saturation, dark, clipped, invalid : ndarray of bool
-        HSV saturation below the threshold; HSV value below the threshold; a channel at
-        the clip level; NaN input.
+        HSV saturation below the threshold (outside areas of grey film, below); HSV value
+        below the threshold; a channel at the clip level; NaN input.
     shadow : ndarray of bool
         HSV value below ``shadow_ratio`` × the median value of the 9×9 neighbourhood:
         partly shadowed pixels (the walls of the steps between facets), whose hue is the
@@ -55,6 +56,9 @@ class ColourMask:
         ``dark_film_min_px`` (:func:`steep_facet_mask`): scratches, pit and groove walls and
         rims, stains — masked, not censored. A wider dark area is a film of a dark colour
         and is analysed.
+    grey_film : ndarray of bool or None
+        Below the saturation threshold but analysed, not masked: a film of a grey colour
+        (:func:`grey_film`). None: not looked for.
     """
 
     mask: np.ndarray
@@ -65,6 +69,17 @@ class ColourMask:
     shadow: np.ndarray
     steep: np.ndarray
     dark_feature: np.ndarray
+    grey_film: np.ndarray | None = None
+
+    @property
+    def coloured(self) -> np.ndarray:
+        """Pixels not masked that are film by their colour, not only by their shape (grey
+        film left out): the white balance is estimated from these alone. A grey is what
+        fixes the gains most, so a grey area taken for film by its width — a stain, bare
+        metal — would set them; on the generalization sweep the grey part of a one-colour
+        film (seed 4 g014) passed for a second film colour and let its wrong order be
+        called established."""
+        return ~self.mask if self.grey_film is None else ~self.mask & ~self.grey_film
 
     @property
     def fraction(self) -> float:
@@ -72,9 +87,12 @@ class ColourMask:
         return float(self.mask.mean()) if self.mask.size else 1.0
 
     def fractions(self) -> dict:
-        """Masked fraction per reason (a pixel may have several)."""
+        """Masked fraction per reason (a pixel may have several), all of them (``any``), and
+        the fraction of grey film analysed though below the saturation threshold
+        (``grey_film``; 0 where none was looked for)."""
+        grey = 0.0 if self.grey_film is None else float(self.grey_film.mean())
         return {k: float(getattr(self, k).mean()) for k in MASK_REASONS} | {
-            "any": self.fraction}
+            "any": self.fraction, "grey_film": grey}
 
 
 def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
@@ -130,6 +148,9 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
     low_sat = sat < o.saturation_min
     dark = vmax * 255.0 < o.value_min
     clipped = vmax >= clip_level
+    other = dark | clipped | invalid
+    grey = grey_film(low_sat & ~other, ~(low_sat | other), o)
+    low_sat &= ~grey
     if o.shadow_ratio > 0:
         v8 = np.clip(np.round(vmax * 255.0), 0, 255).astype(np.uint8)
         local = cv2.medianBlur(v8, 9).astype(np.float32) / 255.0
@@ -142,7 +163,63 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
         steep, feature = dark_classes(_channel_max(safe, decode=True), mask, invalid, o)
         mask = mask | steep | feature
     return ColourMask(mask, low_sat & ~invalid, dark & ~invalid, clipped & ~invalid, invalid,
-                      shadow, steep, feature)
+                      shadow, steep, feature, grey)
+
+
+#: Least share of the image that must be film of colour (no reason to mask it) before a wide
+#: grey area is taken for film too: an image that is grey all over is a monochrome camera's or
+#: a sample without an oxide, not a grey film.
+GREY_FILM_MIN_COLOURED = 0.05
+#: Radius (px) of the closing that joins a grey film's pixels where noise lifts some of them
+#: above the saturation threshold (a film of saturation 14-16 against the seed's 15).
+GREY_SPECKLE_PX = 2
+
+
+def grey_film(grey, coloured, options: MaskOptions) -> np.ndarray:
+    """The low-saturation pixels that are a film of a grey colour, not a highlight or a rim.
+
+    The seed masks every pixel of HSV saturation below 15 (highlights and shadows). Some
+    films are that grey: TiO2 near 50 nm on titanium reads (0.80, 0.81, 0.80) in sRGB with
+    Devore's rutile on Werner's Ti, saturation 6 — and a population of them, two thirds of a
+    scene of the generalization sweep, was masked and lost (docs/accuracy.md). Under coaxial
+    light a highlight is clipped (masked as such) or narrow, a rim or a glint; a film fills
+    its regions. So, as for a film of a dark colour (:func:`steep_facet_mask`), a grey area
+    at least ``options.grey_film_min_px`` wide (a morphological opening, after a closing
+    of :data:`GREY_SPECKLE_PX` that joins a film speckled by noise about the threshold) is
+    analysed, where
+    at least :data:`GREY_FILM_MIN_COLOURED` of the image is film of colour (``coloured``).
+    The film model then reads it like any other film, and colours it does not explain are
+    set aside as they are elsewhere.
+
+    Parameters
+    ----------
+    grey : ndarray of bool, shape (H, W)
+        Below the saturation threshold, neither dark, clipped nor invalid.
+    coloured : ndarray of bool, shape (H, W)
+        Pixels without any of the seed's reasons to mask them.
+    options : MaskOptions
+        ``grey_film_min_px`` (0: none, every grey pixel masked as the seed does).
+
+    Examples
+    --------
+    >>> grey = np.zeros((40, 40), bool)
+    >>> grey[5:30, 5:30] = True               # a grey region 25 px wide
+    >>> grey[35, :] = True                    # a grey rim 1 px wide
+    >>> g = grey_film(grey, ~grey, MaskOptions())
+    >>> bool(g[15, 15]), bool(g[35, 20])
+    (True, False)
+    >>> bool(grey_film(grey, np.zeros((40, 40), bool), MaskOptions()).any())  # all grey
+    False
+    """
+    g = np.asarray(grey, bool)
+    if (options.grey_film_min_px <= 0 or not g.any()
+            or float(np.mean(coloured)) < GREY_FILM_MIN_COLOURED):
+        return np.zeros(g.shape, bool)
+    # noise speckles a film whose saturation lies near the threshold: close the speckle
+    # first, then keep what is wide
+    closed = cv2.morphologyEx(g.astype(np.uint8), cv2.MORPH_CLOSE, _disc(GREY_SPECKLE_PX))
+    wide = cv2.morphologyEx(closed, cv2.MORPH_OPEN, _disc(0.5 * options.grey_film_min_px))
+    return wide.astype(bool) & g
 
 
 

@@ -97,6 +97,12 @@ class MaskOptions(Options):
                    "`mask.steep_ratio` of the film's median, no steep core) taken for a film "
                    "of a dark colour; narrower ones are scratches, walls and rims, masked "
                    "(`dark_feature`) but not censored", unit="px", low=1, high=1000)
+    grey_film_min_px: float = option(
+        17.0, help="the narrowest low-saturation area (below `mask.saturation_min`, neither "
+                   "dark nor clipped) taken for a film of a grey colour and analysed, where "
+                   "the image also holds film of colour; narrower ones (highlights, rims) stay "
+                   "masked. 0 masks every low-saturation pixel, as the seed does",
+        unit="px", low=0, high=1000)
 
 
 @dataclass(frozen=True)

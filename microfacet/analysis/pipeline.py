@@ -52,6 +52,7 @@ from .flat_field import (
 from .identification import (
     analysis_warnings,
     map_check_judgement,
+    mask_warning,
     mean_plane_tilt_deg,
     order_check,
     self_check_judgement,
@@ -194,11 +195,13 @@ class AnalysisResult:
         """What a user must know before trusting the distributions
         (:class:`~.identification.Reason` each;
         :func:`~microfacet.analysis.identification.analysis_warnings`)."""
-        return analysis_warnings(self.distributions, delta_e_median=self.delta_e_stats["median"],
-                                 noise_de=self.colour.noise_de,
-                                 mean_plane_tilt=mean_plane_tilt_deg(self.joint),
-                                 options=self.options.fits, white_balance=self.white_balance,
-                                 map_check=self.map_check, roi_check=self.roi_check)
+        out = analysis_warnings(self.distributions, delta_e_median=self.delta_e_stats["median"],
+                                noise_de=self.colour.noise_de,
+                                mean_plane_tilt=mean_plane_tilt_deg(self.joint),
+                                options=self.options.fits, white_balance=self.white_balance,
+                                map_check=self.map_check, roi_check=self.roi_check)
+        masked = mask_warning(self.colour.mask.fractions())
+        return out if masked is None else [masked, *out]
 
     @functools.cached_property
     def order(self) -> dict:
@@ -278,7 +281,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
     with timer.stage(Stage.COLOUR_TABLE):
         model = film_model(scene, options.optics)
     with timer.stage(Stage.ROI):
-        wb = choose_white_balance(st, colour.encoded, surface.tilt_deg, ~colour.mask.mask,
+        wb = choose_white_balance(st, colour.encoded, surface.tilt_deg, colour.mask.coloured,
                                   model, options.optics, illuminant=scene.illuminant,
                                   seed=scene.seed)
         flat_ref = reference_flat_field(st, options.optics.flat_reference,

@@ -603,3 +603,22 @@ def test_a_mixture_that_does_not_summarize_its_map_is_not_identified():
     other = Judgement(False, Reason("order_ambiguous", "x", "optics.film"))
     assert map_check_judgement(other, spike) is other
     assert map_check_judgement(Judgement(True), None).identified
+
+
+def test_a_mostly_masked_image_says_what_masks_it_and_what_would_show_it():
+    from microfacet.analysis.identification import MASKED_WARN_FRACTION, mask_warning
+    from microfacet.analysis.mask import colour_mask
+    from microfacet.analysis.options import MaskOptions
+
+    img = np.full((50, 50, 3), [0.6, 0.3, 0.8], np.float32)    # film of colour
+    img[:35, :, 0] = 1.0                                       # 70 % over-exposed in red
+    w = mask_warning(colour_mask(img, MaskOptions(shadow_ratio=0)).fractions())
+    assert w.code == "masked" and w.parameter is None
+    assert "70 % of the image is masked, 70 % of it a channel at the top" in w.text
+    assert "shorter exposure" in w.text and "other 30 % only" in w.text
+    img[:35] = [0.05, 0.04, 0.06]                              # too dark instead
+    f = colour_mask(img, MaskOptions(shadow_ratio=0, steep_ratio=0)).fractions()
+    assert f["any"] > MASKED_WARN_FRACTION
+    assert mask_warning(f).parameter == "mask.value_min"
+    img[:35] = [0.6, 0.3, 0.8]
+    assert mask_warning(colour_mask(img, MaskOptions(shadow_ratio=0)).fractions()) is None

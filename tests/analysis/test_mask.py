@@ -20,7 +20,7 @@ def test_each_reason_is_detected_and_named():
     assert m.mask.sum() == 5
     assert m.fraction == pytest.approx(5 / 400)
     assert set(m.fractions()) == {"low_saturation", "dark", "clipped", "invalid", "shadow",
-                                   "steep", "dark_feature", "any"}
+                                   "steep", "dark_feature", "any", "grey_film"}
 
 
 def test_saturation_threshold_is_on_the_0_255_scale():
@@ -105,3 +105,31 @@ def test_a_nan_pixel_is_no_steep_core():
     m = colour_mask(img, MaskOptions(shadow_ratio=0, dark_film_min_px=1))
     assert m.invalid[6, 6] and not m.steep.any()
     assert not m.dark_feature.any()            # 3 px is a film at dark_film_min_px 1
+
+
+def test_a_wide_grey_film_is_analysed_but_a_grey_rim_and_a_grey_image_are_masked():
+    from microfacet.colour.srgb import srgb_encode
+
+    # Airy's formula: rutile near 51 nm on Werner's Ti is grey (a population of a sweep
+    # scene that the seed's saturation test masked whole)
+    grey, blue = _film_linear_rgb([51.0, 158.0], "TiO2_Devore1951_rutile_e",
+                                  "Ti_Werner2009_REELS")
+    enc = srgb_encode(np.stack([grey, blue]), dtype=np.float32)
+    sat = (enc.max(axis=-1) - enc.min(axis=-1)) / enc.max(axis=-1) * 255
+    assert sat[0] < 15 < sat[1]                              # the premise
+    rng = np.random.default_rng(5)
+    lin = np.broadcast_to(blue, (60, 90, 3)).copy()
+    lin[:, 60:] = grey                                       # a third of the field: grey film
+    lin[20, 5:50] = grey                                     # a grey rim, 1 px wide
+    lin[40:45, 10:15] = grey                                 # a grey glint, 5 px
+    lin *= rng.normal(1.0, 0.01, lin.shape)                  # noise: the grey film speckles
+    img = srgb_encode(np.clip(lin, 0, 1), dtype=np.float32)
+    m = colour_mask(img, MaskOptions(shadow_ratio=0))
+    low = colour_mask(img, MaskOptions(shadow_ratio=0, grey_film_min_px=0)).low_saturation
+    assert low[:, 60:].mean() > 0.5                          # the seed's test masks most of it
+    assert not m.mask[:, 62:].any() and m.grey_film[:, 62:].all()
+    assert m.low_saturation[20, 5:50].all() and m.low_saturation[40:45, 10:15].all()
+    assert m.fractions()["grey_film"] == pytest.approx(m.grey_film.mean())
+    # every pixel grey (a monochrome camera, a bare sample): nothing is film of colour
+    allgrey = srgb_encode(np.broadcast_to(grey, (60, 90, 3)).copy(), dtype=np.float32)
+    assert colour_mask(allgrey, MaskOptions(shadow_ratio=0)).mask.all()

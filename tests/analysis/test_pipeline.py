@@ -295,3 +295,31 @@ def test_white_balance_is_not_called_determined_where_the_order_is_not(monkeypat
     assert wb.determined == (False, False) and wb.estimate_rgb == est.estimate_rgb
     assert "the interference order is not established" in wb.withdrawn
     assert build_summary(r).thickness.order == r.order
+
+
+@pytest.mark.slow
+def test_a_population_of_a_grey_film_is_measured_not_masked(tmp_path):
+    """Rutile near 50 nm on Werner's Ti is grey (HSV saturation ~6 < the seed's 15): the
+    seed's saturation test masks that population whole. Beside a film of colour it is a
+    wide grey area, analysed as film (mask.grey_film): both populations within 1 nm of their
+    regions' true means; with ``mask.grey_film_min_px`` 0 (the seed's rule) the grey one is
+    masked and missing."""
+    from microfacet.analysis.options import MaskOptions
+    from microfacet.forward.synth import generate_stack, preset
+    from microfacet.forward.synth_params import ThicknessComponent
+
+    p = preset("nd", height_px=128, width_px=128, n_slices=8, seed=7, exposure=0.85,
+               region_size_um=8.0, film="TiO2_Devore1951_rutile_e",
+               substrate="Ti_Werner2009_REELS",
+               thickness=(ThicknessComponent(0.5, 51.0, 1.5),
+                          ThicknessComponent(0.5, 158.0, 1.5)))
+    generate_stack(tmp_path / "s", p)
+    truth = json.loads((tmp_path / "s" / "truth" / "params.json").read_text())
+    true_means = sorted(q["mean_thickness_nm"] for q in truth["populations"])
+    r = analyse_stack(tmp_path / "s")
+    assert r.colour.mask.fractions()["grey_film"] > 0.2
+    np.testing.assert_allclose(np.sort(r.thickness_fit.mixture.means_nm), true_means, atol=1.0)
+    seed_rule = analyse_stack(tmp_path / "s", AnalysisOptions(mask=MaskOptions(
+        grey_film_min_px=0)))
+    assert seed_rule.colour.mask.fractions()["low_saturation"] > 0.2
+    assert np.min(np.abs(seed_rule.thickness_fit.mixture.means_nm - true_means[0])) > 5.0
