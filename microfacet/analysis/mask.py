@@ -57,8 +57,8 @@ class ColourMask:
         rims, stains — masked, not censored. A wider dark area is a film of a dark colour
         and is analysed.
     grey_film : ndarray of bool or None
-        Below the saturation threshold but analysed, not masked: a film of a grey colour
-        (:func:`grey_film`). None: not looked for.
+        Below the saturation threshold but analysed, not masked (by this or another
+        reason): a film of a grey colour (:func:`grey_film`). None: not looked for.
     """
 
     mask: np.ndarray
@@ -163,7 +163,7 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
         steep, feature = dark_classes(_channel_max(safe, decode=True), mask, invalid, o)
         mask = mask | steep | feature
     return ColourMask(mask, low_sat & ~invalid, dark & ~invalid, clipped & ~invalid, invalid,
-                      shadow, steep, feature, grey)
+                      shadow, steep, feature, grey & ~mask)
 
 
 #: Least share of the image that must be film of colour (no reason to mask it) before a wide
@@ -186,8 +186,8 @@ def grey_film(grey, coloured, options: MaskOptions) -> np.ndarray:
     its regions. So, as for a film of a dark colour (:func:`steep_facet_mask`), a grey area
     at least ``options.grey_film_min_px`` wide (a morphological opening, after a closing
     of :data:`GREY_SPECKLE_PX` that joins a film speckled by noise about the threshold) is
-    analysed, where
-    at least :data:`GREY_FILM_MIN_COLOURED` of the image is film of colour (``coloured``).
+    analysed, where at least :data:`GREY_FILM_MIN_COLOURED` of the image is film of colour
+    (``coloured``).
     The film model then reads it like any other film, and colours it does not explain are
     set aside as they are elsewhere.
 
