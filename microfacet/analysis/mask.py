@@ -187,9 +187,8 @@ def grey_film(grey, coloured, options: MaskOptions) -> np.ndarray:
     at least ``options.grey_film_min_px`` wide (a morphological opening, after a closing
     of :data:`GREY_SPECKLE_PX` that joins a film speckled by noise about the threshold) is
     analysed, where at least :data:`GREY_FILM_MIN_COLOURED` of the image is film of colour
-    (``coloured``).
-    The film model then reads it like any other film, and colours it does not explain are
-    set aside as they are elsewhere.
+    (``coloured``). The film model then reads it like any other film, and colours it does
+    not explain are set aside as they are elsewhere.
 
     Parameters
     ----------
@@ -218,8 +217,7 @@ def grey_film(grey, coloured, options: MaskOptions) -> np.ndarray:
     # noise speckles a film whose saturation lies near the threshold: close the speckle
     # first, then keep what is wide
     closed = cv2.morphologyEx(g.astype(np.uint8), cv2.MORPH_CLOSE, _disc(GREY_SPECKLE_PX))
-    wide = cv2.morphologyEx(closed, cv2.MORPH_OPEN, _disc(0.5 * options.grey_film_min_px))
-    return wide.astype(bool) & g
+    return _wide(closed, options.grey_film_min_px) & g
 
 
 
@@ -288,9 +286,14 @@ def steep_facet_mask(linear_max, reference, options: MaskOptions):
     if o.steep_rim_px > 0:               # the rim: dark pixels beside a core
         steep |= rest & cv2.dilate(core.astype(np.uint8), _disc(o.steep_rim_px)).astype(bool)
     rest &= ~steep
-    wide = cv2.morphologyEx(dark.astype(np.uint8), cv2.MORPH_OPEN,
-                            _disc(0.5 * o.dark_film_min_px)).astype(bool)
-    return steep, rest & ~wide
+    return steep, rest & ~_wide(dark, o.dark_film_min_px)
+
+
+def _wide(mask, min_px) -> np.ndarray:
+    """The parts of ``mask`` (H, W) at least ``min_px`` wide: its opening by a disc of that
+    diameter (a dark or a grey film, against the narrower features beside it)."""
+    return cv2.morphologyEx(np.asarray(mask).astype(np.uint8), cv2.MORPH_OPEN,
+                            _disc(0.5 * min_px)).astype(bool)
 
 
 def _disc(radius_px):
