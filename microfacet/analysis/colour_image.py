@@ -52,6 +52,10 @@ class ColourImage:
         (:func:`compression_noise_de`); 0 for lossless slices.
     block_px : int
         Pixels that share that error (the chroma block: 64, or 256 with 4:2:0 subsampling).
+    clip_rgb : tuple of 3 float or None
+        Where pixels with a clipped channel are analysed (``mask.clipped_one``): the linear
+        level of each channel in ``lab``'s values at which the camera clipped them (1; ``1/g``
+        once divided by gains ``g``), the film model's ``clip_rgb``. None: none analysed.
     """
 
     encoded: np.ndarray
@@ -61,6 +65,7 @@ class ColourImage:
     bit_depth: int
     block_noise_de: float = 0.0
     block_px: int = 64
+    clip_rgb: tuple | None = None
 
 
 def mean_colour_noise(noise_de, block_noise, n_px):
@@ -107,17 +112,20 @@ def measure_colour(all_in_focus, options: MaskOptions, *, color_space, bit_depth
     enc.flags.writeable = False      # may be the composite itself (12 bytes a pixel not copied)
     cm = colour_mask(enc, options, bit_depth=bit_depth)
     lab = srgb_to_lab(enc, illuminant=illuminant).astype(np.float32)
-    noise = estimate_colour_noise(lab, cm.mask, delta_e_method=delta_e_method)
-    floor = quantization_noise_de(enc, cm.mask, bit_depth=bit_depth, illuminant=illuminant,
+    # the noise of unclipped film: a clipped channel has none
+    quiet = cm.mask | cm.clipped_one if cm.clip_analysed else cm.mask
+    noise = estimate_colour_noise(lab, quiet, delta_e_method=delta_e_method)
+    floor = quantization_noise_de(enc, quiet, bit_depth=bit_depth, illuminant=illuminant,
                                   delta_e_method=delta_e_method)
     if np.isfinite(floor) and not noise >= floor:
         log.info("colour noise %.4g below the quantization floor; using %.4g ΔE00", noise, floor)
         noise = floor
     block = (0.0 if jpeg is None else
-             compression_noise_de(enc, cm.mask, jpeg, illuminant=illuminant,
+             compression_noise_de(enc, quiet, jpeg, illuminant=illuminant,
                                   delta_e_method=delta_e_method))
     return ColourImage(enc, lab, cm, noise, bit_depth, block if np.isfinite(block) else 0.0,
-                       64 if jpeg is None else jpeg.chroma_block_px)
+                       64 if jpeg is None else jpeg.chroma_block_px,
+                       (1.0, 1.0, 1.0) if cm.clip_analysed else None)
 
 
 def no_colour_message(stack, mask: ColourMask, what: str, options: MaskOptions) -> str:

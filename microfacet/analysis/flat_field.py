@@ -465,15 +465,16 @@ def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, mask_o
     ColourImage
         Lab of the linear values divided by ``field`` and ``gains_rgb``; the steep mask
         and the dark features recomputed; pixels with less than e^-:data:`MAX_LOG_LOSS` of
-        the centre's light masked as dark (too little light to read); the other masks kept.
-        The noise is kept too, though a corner's grows as 1/V.
+        the centre's light masked as dark (too little light to read); every clipped pixel
+        masked (divided by the field their clip level varies across the image); the other
+        masks kept. The noise is kept too, though a corner's grows as 1/V.
     """
     enc = np.asarray(colour.encoded, np.float32)
     v = np.asarray(field, np.float32)
     dim = v < math.exp(-MAX_LOG_LOSS)
     lin = srgb_decode(enc) / np.maximum(v, math.exp(-MAX_LOG_LOSS))[..., None]
     lab = balanced_lab(lin, gains_rgb, illuminant=illuminant, linear=True)
-    cm = colour.mask
+    cm = colour.mask.clipped_masked()
     dark = cm.dark | (dim & ~cm.invalid)
     base = cm.low_saturation | dark | cm.clipped | cm.invalid | cm.shadow
     steep = feature = np.zeros_like(cm.steep)
@@ -482,4 +483,4 @@ def flat_fielded(colour, field, *, gains_rgb=(1.0, 1.0, 1.0), illuminant, mask_o
                                       mask_options)
     mask = dataclasses.replace(cm, mask=base | steep | feature, dark=dark, steep=steep,
                                dark_feature=feature)
-    return dataclasses.replace(colour, lab=lab, mask=mask)
+    return dataclasses.replace(colour, lab=lab, mask=mask, clip_rgb=None)

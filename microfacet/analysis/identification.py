@@ -546,8 +546,10 @@ MASKED_WARN_FRACTION = 0.3
 #: Per mask reason (:data:`~.mask.MASK_REASONS`): what its pixels are and what would show
 #: them, and the option that sets it (None: the acquisition, not an option).
 _MASK_REMEDY = {
-    "clipped": ("a channel at the top code value (over-exposed: their colour is not the "
-                "film's); slices taken with a shorter exposure would show them", None),
+    "clipped": ("two or more channels at the top code value (over-exposed: their colour is "
+                "not the film's; one clipped channel is analysed, `mask.clipped_one_channel`, "
+                "unless a flat field is divided out); slices taken with a shorter exposure "
+                "would show them", None),
     "low_saturation": ("grey (HSV saturation below `mask.saturation_min`, in areas "
                        "narrower than `mask.grey_film_min_px`)", "mask.saturation_min"),
     "dark": ("too dark to read (HSV value below `mask.value_min`); a longer exposure would "

@@ -15,6 +15,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,6 +60,10 @@ class ColourMask:
     grey_film : ndarray of bool or None
         Below the saturation threshold but analysed, not masked (by this or another
         reason): a film of a grey colour (:func:`grey_film`). None: not looked for.
+    clipped_one : ndarray of bool or None
+        One channel at the clip level, analysed, not masked (by this or another reason):
+        the film's model colour is clipped alike (``FilmColourModel.clip_rgb``). None: every
+        clipped pixel is masked (``clipped``).
     """
 
     mask: np.ndarray
@@ -70,6 +75,20 @@ class ColourMask:
     steep: np.ndarray
     dark_feature: np.ndarray
     grey_film: np.ndarray | None = None
+    clipped_one: np.ndarray | None = None
+
+    @property
+    def clip_analysed(self) -> bool:
+        """Whether any clipped pixel is analysed (the model must then be clipped alike)."""
+        return self.clipped_one is not None and bool(self.clipped_one.any())
+
+    def clipped_masked(self) -> "ColourMask":
+        """The mask with every clipped pixel masked (where the clip level varies across the
+        image: a flat field divided out)."""
+        if self.clipped_one is None:
+            return self
+        return dataclasses.replace(self, mask=self.mask | self.clipped_one,
+                                   clipped=self.clipped | self.clipped_one, clipped_one=None)
 
     @property
     def coloured(self) -> np.ndarray:
@@ -78,8 +97,13 @@ class ColourMask:
         fixes the gains most, so a grey area taken for film by its width — a stain, bare
         metal — would set them; on the generalization sweep the grey part of a one-colour
         film (seed 4 g014) passed for a second film colour and let its wrong order be
-        called established."""
-        return ~self.mask if self.grey_film is None else ~self.mask & ~self.grey_film
+        called established. Clipped pixels are left out too: a clipped channel is not the
+        film's colour, and the gains' estimate does not model the clip."""
+        out = ~self.mask
+        for extra in (self.grey_film, self.clipped_one):
+            if extra is not None:
+                out = out & ~extra
+        return out
 
     @property
     def fraction(self) -> float:
@@ -87,12 +111,14 @@ class ColourMask:
         return float(self.mask.mean()) if self.mask.size else 1.0
 
     def fractions(self) -> dict:
-        """Masked fraction per reason (a pixel may have several), all of them (``any``), and
-        the fraction of grey film analysed though below the saturation threshold
-        (``grey_film``; 0 where none was looked for)."""
-        grey = 0.0 if self.grey_film is None else float(self.grey_film.mean())
+        """Masked fraction per reason (a pixel may have several), all of them (``any``), the
+        fraction of grey film analysed though below the saturation threshold (``grey_film``)
+        and of pixels analysed with one channel clipped (``clipped_one``; each 0 where none
+        was looked for)."""
+        grey, one = (0.0 if a is None else float(a.mean())
+                     for a in (self.grey_film, self.clipped_one))
         return {k: float(getattr(self, k).mean()) for k in MASK_REASONS} | {
-            "any": self.fraction, "grey_film": grey}
+            "any": self.fraction, "grey_film": grey, "clipped_one": one}
 
 
 def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
@@ -148,8 +174,14 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
     low_sat = sat < o.saturation_min
     dark = vmax * 255.0 < o.value_min
     clipped = vmax >= clip_level
+    one = None
+    if o.clipped_one_channel and clipped.any():
+        n_at = sum((safe[..., c] >= clip_level).astype(np.uint8) for c in range(3))
+        one = clipped & (n_at == 1)
     other = dark | clipped | invalid
     grey = grey_film(low_sat & ~other, ~(low_sat | other), o)
+    if one is not None:       # analysed: masked only for another reason (not grey film)
+        clipped = clipped & ~one
     low_sat &= ~grey
     if o.shadow_ratio > 0:
         v8 = np.clip(np.round(vmax * 255.0), 0, 255).astype(np.uint8)
@@ -162,8 +194,11 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
     if o.steep_ratio > 0 and (~mask).any():
         steep, feature = dark_classes(_channel_max(safe, decode=True), mask, invalid, o)
         mask = mask | steep | feature
+    if one is not None:       # masked for another reason: clipped is one of its reasons
+        clipped = clipped | (one & mask)
+        one = one & ~mask
     return ColourMask(mask, low_sat & ~invalid, dark & ~invalid, clipped & ~invalid, invalid,
-                      shadow, steep, feature, grey & ~mask)
+                      shadow, steep, feature, grey & ~mask, one)
 
 
 #: Least share of the image that must be film of colour (no reason to mask it) before a wide

@@ -103,6 +103,11 @@ class MaskOptions(Options):
                    "the image also holds film of colour; narrower ones (highlights, rims) stay "
                    "masked. 0 masks every low-saturation pixel, as the seed does",
         unit="px", low=0, high=1000)
+    clipped_one_channel: bool = option(
+        True, help="analyse pixels with one channel at the clip level, the film's model colour "
+                   "clipped alike (the other two channels still carry the colour); off masks "
+                   "every clipped pixel. Where the light varies across the image (a flat field "
+                   "divided out) the clip level varies too and they are masked")
 
 
 @dataclass(frozen=True)

@@ -247,6 +247,7 @@ def _roi(st, colour, surface, model, options, scene, *, exposure=None):
     """The ROI stage at the scene's exposure (None: estimated; in the joint mode with the
     blocks' second reading, :mod:`.roi`), or at ``exposure``: the second reading, still
     reported as estimated."""
+    model = model.with_clip(colour.clip_rgb)
     if exposure is not None:
         return dataclasses.replace(thickness_per_roi(colour, surface.tilt_deg, model,
                                                      options.roi, exposure=exposure,
@@ -293,9 +294,10 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                                   mask_options=options.mask)
         elif wb.applied:
             colour = dataclasses.replace(colour, lab=balanced_lab(
-                colour.encoded, wb.gains_rgb, illuminant=scene.illuminant))
+                colour.encoded, wb.gains_rgb, illuminant=scene.illuminant), clip_rgb=None
+                if colour.clip_rgb is None else tuple(1.0 / g for g in wb.gains_rgb))
         roi = _roi(st, colour, surface, model, options, scene)
-    model = model.with_exposure(roi.exposure)
+    model = model.with_exposure(roi.exposure).with_clip(colour.clip_rgb)
     grid = tilt_grid(scene.max_tilt_deg, options.tilt.step_deg)
     joint = check = None
     if options.mode == "seed":
@@ -312,7 +314,8 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
 
             def facets(c, r):
                 return facets_at_exposure_readings(
-                    geometry, c, r, model.with_exposure(r.exposure), scene, options,
+                    geometry, c, r, model.with_exposure(r.exposure).with_clip(c.clip_rgb),
+                    scene, options,
                     refit_roi=lambda e: _roi(st, c, surface, model, options, scene,
                                              exposure=e))
             if flat_ref is None:
@@ -322,7 +325,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                     model=model, options=options, scene=scene, wb=wb)
             else:
                 (joint, roi, readings), flat = facets(colour, roi), flat_ref
-            model = model.with_exposure(joint.exposure)
+            model = model.with_exposure(joint.exposure).with_clip(colour.clip_rgb)
             image = facet_image(geometry, colour, roi, options.joint)   # the colours are final
             cols = image.colours()
             fits = _fit_options(options, model)
@@ -446,10 +449,13 @@ def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):
         return first, colour, FlatField(reason="joint.flat_field is off")
     shape = colour.lab.shape[:2]
     best, best_colour, total = first, colour, None
-    de0 = float(np.nanmedian(first[0].thickness.delta_e))
+    same = _unclipped_facets(first[0].facets, colour.mask)
+    de0 = float(np.nanmedian(first[0].thickness.delta_e[same]))
     for k in range(MAX_ROUNDS):
         joint = best[0]
-        ff = estimate_flat_field(joint, best_colour.lab, model.with_exposure(joint.exposure),
+        ff = estimate_flat_field(joint, best_colour.lab,
+                                 model.with_exposure(joint.exposure).with_clip(
+                                     best_colour.clip_rgb),
                                  unexplained_mads=options.fits.unexplained_mads)
         if ff.reason:
             break
@@ -461,7 +467,7 @@ def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):
                             gains_rgb=wb.gains_rgb if wb.applied else (1.0, 1.0, 1.0),
                             illuminant=scene.illuminant, mask_options=options.mask)
         second = facets_in(flat)
-        de = tuple(float(np.nanmedian(j.thickness.delta_e)) for j in (joint, second[0]))
+        de = tuple(float(np.nanmedian(j.thickness.delta_e[same])) for j in (joint, second[0]))
         log.info("flat field, round %d: corner loss %.3f; median facet dE00 %.3f -> %.3f",
                  k + 1, trial.corner_loss(shape), *de)
         if not de[1] < de[0]:
@@ -475,6 +481,16 @@ def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):
     de1 = float(np.nanmedian(best[0].thickness.delta_e))
     return best, best_colour, dataclasses.replace(total, applied=True,
                                                   median_delta_e=(de0, de1))
+
+
+def _unclipped_facets(facets, mask) -> np.ndarray:
+    """Per facet, whether none of its pixels is analysed with a clipped channel: the colours
+    with and without a flat field are compared on these alone (divided by a field, every
+    clipped pixel is masked, and facets that lose their clipped pixels would not compare)."""
+    n = int(facets.max()) + 1
+    if not mask.clip_analysed:
+        return np.ones(n, bool)
+    return np.bincount(facets.ravel(), weights=mask.clipped_one.ravel(), minlength=n) == 0
 
 
 def _self_check(st, focus, joint, scene, options, *, cells) -> SelfCheck | None:

@@ -40,6 +40,7 @@ from ..optics.constants import optical_constants
 from ..optics.thinfilm import reflectance_period_nm
 from .colorimetry import xyz_to_lab
 from .difference import METHODS, delta_e
+from .srgb import image_white_xyz, linear_srgb_to_xyz, model_xyz_to_linear_srgb
 
 __all__ = ["FilmColourModel"]
 
@@ -60,6 +61,13 @@ class FilmColourModel:
         Scale from the model's XYZ (perfect reflector Y = 1) to the image's.
     delta_e_method : {"CIEDE2000", "CIE94", "CIE76"}
         The colour difference every comparison uses.
+    clip_rgb : tuple of 3 float, optional
+        The linear sRGB level of each channel at which the camera clipped the image the
+        model is compared with (1 for an image as recorded; ``1/g`` where the analysis divided
+        it by a gain ``g``). Where the film's colour at this exposure exceeds it, the model
+        shows the clipped colour the camera records (:meth:`lab_from_xyz`). None: no
+        clipped pixel is compared (the clip at 0 of colours outside the sRGB gamut holds
+        always).
 
     Attributes
     ----------
@@ -70,6 +78,7 @@ class FilmColourModel:
     table: object
     exposure: float = 1.0
     delta_e_method: str = "CIEDE2000"
+    clip_rgb: tuple | None = None
     white: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -78,11 +87,21 @@ class FilmColourModel:
                              f"{self.delta_e_method!r}")
         if not (np.isfinite(self.exposure) and self.exposure > 0):
             raise ValueError(f"exposure: must be > 0, got {self.exposure!r}")
+        if self.clip_rgb is not None:
+            c = tuple(float(v) for v in self.clip_rgb)
+            if len(c) != 3 or not all(np.isfinite(v) and v > 0 for v in c):
+                raise ValueError(f"clip_rgb: must be three levels > 0, got {self.clip_rgb!r}")
+            object.__setattr__(self, "clip_rgb", c)
         object.__setattr__(self, "white", self.table.white_xyz.astype(np.float32))
 
     def with_exposure(self, exposure: float) -> "FilmColourModel":
         """The same model at another exposure."""
         return dataclasses.replace(self, exposure=float(exposure))
+
+    def with_clip(self, clip_rgb) -> "FilmColourModel":
+        """The same model compared with an image clipped at ``clip_rgb`` (None: not)."""
+        return self if clip_rgb == self.clip_rgb else dataclasses.replace(self,
+                                                                          clip_rgb=clip_rgb)
 
     # -- colours ----------------------------------------------------------------------
     def xyz(self, theta_deg, thickness_nm) -> np.ndarray:
@@ -91,8 +110,52 @@ class FilmColourModel:
         return self.table.xyz_at(theta_deg, thickness_nm)
 
     def lab_from_xyz(self, xyz) -> np.ndarray:
-        """CIELAB (float32) of XYZ from :meth:`xyz` at this model's exposure."""
-        return xyz_to_lab((xyz * self.exposure).astype(np.float32), white=self.white)
+        """CIELAB (float32) of XYZ from :meth:`xyz` at this model's exposure, as an sRGB
+        camera records it: a linear sRGB channel below 0 (a film colour outside the sRGB
+        gamut: TiO2 of about 150-180 nm on Ti is a cyan of negative red, 3-4.5 ΔE00 from
+        what any sRGB image holds) is recorded at 0, and with ``clip_rgb`` a channel above
+        its level at that level (an over-exposed film of one clipped channel is compared
+        with pixels clipped alike); the other channels as they are. Colours inside the
+        gamut are the table's XYZ in CIELAB relative to its white, exactly.
+
+        >>> from microfacet.colour.table import build_colour_table
+        >>> m = FilmColourModel(build_colour_table(thickness_range_nm=(40, 180),
+        ...                                        theta_range_deg=(0, 5)), exposure=2.5)
+        >>> xyz = m.xyz(0.0, 50.0)
+        >>> rgb = model_xyz_to_linear_srgb(xyz * 2.5, white=m.table.white_xyz)
+        >>> int((rgb > 1.0).sum()), bool(m.with_clip((1, 1, 1)).delta_e(m.lab(0.0, 50.0),
+        ...                                                               0.0, 50.0) > 1.0)
+        (1, True)
+        >>> round(float(m.with_clip((1, 1, 1)).with_exposure(99.0).lab(0.0, 50.0)[0]), 1)
+        100.0
+        >>> raw = xyz_to_lab(m.xyz(0.0, 172.0) * 2.5, white=m.table.white_xyz)   # cyan
+        >>> round(float(m.difference(m.lab(0.0, 172.0), raw)), 1)
+        3.3
+        """
+        x = (np.asarray(xyz) * self.exposure).astype(np.float32)
+        lab = xyz_to_lab(x, white=self.white)
+        rgb = x @ self._xyz_to_rgb
+        with np.errstate(invalid="ignore"):       # NaN outside the table stays NaN
+            out = rgb < 0.0
+            if self.clip_rgb is not None:
+                out |= rgb > np.asarray(self.clip_rgb, np.float32)
+        out = out.any(axis=-1)
+        if out.any():
+            t = self.table
+            rec = np.clip(rgb[out], 0.0, None if self.clip_rgb is None else
+                          np.asarray(self.clip_rgb, np.float32))
+            lab[out] = xyz_to_lab(
+                linear_srgb_to_xyz(rec, illuminant=t.illuminant, observer=t.observer),
+                white=image_white_xyz(illuminant=t.illuminant, observer=t.observer))
+        return lab
+
+    @functools.cached_property
+    def _xyz_to_rgb(self) -> np.ndarray:
+        """(3, 3) float32: ``xyz @ this`` is the linear sRGB of the table's XYZ
+        (:func:`~.srgb.model_xyz_to_linear_srgb`, linear in XYZ)."""
+        t = self.table
+        return model_xyz_to_linear_srgb(np.eye(3), white=t.white_xyz, illuminant=t.illuminant,
+                                        observer=t.observer).astype(np.float32)
 
     def lab(self, theta_deg, thickness_nm) -> np.ndarray:
         """Model CIELAB (float32, shape broadcast(θ, d) + (3,)) at tilt ``theta_deg``

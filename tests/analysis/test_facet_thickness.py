@@ -24,6 +24,7 @@ from microfacet.analysis.facet_thickness import (
 from microfacet.analysis.options import JointOptions
 from microfacet.analysis.planes import facet_edge_distance
 from microfacet.colour.model import FilmColourModel
+from microfacet.colour.srgb import image_white_xyz
 from microfacet.colour.table import build_colour_table, direct_xyz
 
 OPTIONS = JointOptions()
@@ -55,10 +56,11 @@ def _thickness(labels, lab, usable, tilt, roi_px, model, *, exposure, interior=N
 
 def _facet_image(labels, d_facet, t_facet, exposure):
     """Lab image of facets at thickness ``d_facet`` and tilt ``t_facet`` (per label), by
-    1 nm spectral integration."""
+    1 nm spectral integration, as an sRGB image holds it (a negative channel at 0)."""
     xyz = direct_xyz(t_facet[labels], d_facet[labels], spectral_step_nm=1.0) * exposure
     white = color.spectral_weights(np.arange(380.0, 781.0, 1.0)).sum(axis=0)
-    return color.xyz_to_lab(xyz, white=white).astype(np.float32)
+    rgb = np.maximum(color.model_xyz_to_linear_srgb(xyz, white=white), 0.0)
+    return color.xyz_to_lab(color.linear_srgb_to_xyz(rgb), white=image_white_xyz())
 
 
 @pytest.mark.slow

@@ -22,6 +22,7 @@ from microfacet.analysis.colour_image import measure_colour
 from microfacet.analysis.flat_field import FlatField, estimate_flat_field, flat_fielded
 from microfacet.analysis.options import FitOptions, MaskOptions
 from microfacet.colour.model import FilmColourModel
+from microfacet.colour.srgb import image_white_xyz
 from microfacet.colour.table import build_colour_table, direct_xyz
 from microfacet.colour.transfer import srgb_encode
 from microfacet.forward.synth import generate_stack, preset
@@ -51,7 +52,9 @@ def _scene(field, *, seed=0, side=SIDE, rows=ROWS):
     light = field((xx - (w - 1) / 2.0) / r, (yy - (h - 1) / 2.0) / r)
     xyz = direct_xyz(t[labels], d[labels], spectral_step_nm=1.0) * light[..., None]
     white = color.spectral_weights(np.arange(380.0, 781.0, 1.0)).sum(axis=0)
-    lab = color.xyz_to_lab(xyz, white=white).astype(np.float32)
+    rgb = np.maximum(color.model_xyz_to_linear_srgb(xyz, white=white), 0.0)  # as sRGB holds it
+    lab = color.xyz_to_lab(color.linear_srgb_to_xyz(rgb), white=image_white_xyz())
+    lab = lab.astype(np.float32)
     thick = types.SimpleNamespace(thickness_nm=d, delta_e=np.full(n, 0.5))
     joint = types.SimpleNamespace(facets=labels, usable=np.ones(labels.shape, bool),
                                   censored=np.zeros(labels.shape, bool), prior_deg=t,
@@ -160,6 +163,22 @@ def test_flat_fielded_colours_are_those_of_even_light():
     both = flat_fielded(biased, v, gains_rgb=gains, illuminant="D65",
                         mask_options=opts)
     assert np.abs(both.lab - even.lab).max() < 0.05
+
+
+def test_clipped_pixels_analysed_are_masked_once_a_field_is_divided_out():
+    """Divided by a field, a pixel clipped at the camera's top code reads above or below it
+    by where it lies: the clip level varies, and the model cannot be clipped alike."""
+    lin = np.broadcast_to(np.array([0.45, 0.30, 0.12], np.float32), (30, 40, 3)).copy()
+    lin[5:15, 5:15, 0] = 1.0                                   # red clipped
+    opts = MaskOptions(shadow_ratio=0)
+    c = measure_colour(srgb_encode(lin, dtype=np.float32), opts, color_space="sRGB",
+                       bit_depth=8, illuminant="D65", delta_e_method="CIEDE2000")
+    assert c.mask.clipped_one.sum() == 100 and c.clip_rgb == (1.0, 1.0, 1.0)
+    fixed = flat_fielded(c, FlatField(coefficients=(0.0, 0.0, -0.3, 0.0, -0.3)).map((30, 40)),
+                         illuminant="D65", mask_options=opts)
+    assert fixed.clip_rgb is None and fixed.mask.clipped_one is None
+    assert fixed.mask.clipped[5:15, 5:15].all() and fixed.mask.mask[5:15, 5:15].all()
+    assert not fixed.mask.mask[20:, 20:].any()
 
 
 def test_too_little_light_is_masked_not_amplified():

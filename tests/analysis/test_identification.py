@@ -612,9 +612,11 @@ def test_a_mostly_masked_image_says_what_masks_it_and_what_would_show_it():
 
     img = np.full((50, 50, 3), [0.6, 0.3, 0.8], np.float32)    # film of colour
     img[:35, :, 0] = 1.0                                       # 70 % over-exposed in red
+    assert mask_warning(colour_mask(img, MaskOptions(shadow_ratio=0)).fractions()) is None
+    img[:35, :, 2] = 1.0                                       # ... and in blue
     w = mask_warning(colour_mask(img, MaskOptions(shadow_ratio=0)).fractions())
     assert w.code == "masked" and w.parameter is None
-    assert "70 % of the image is masked, 70 % of it a channel at the top" in w.text
+    assert "70 % of the image is masked, 70 % of it two or more channels at the top" in w.text
     assert "shorter exposure" in w.text and "other 30 % only" in w.text
     img[:35] = [0.05, 0.04, 0.06]                              # too dark instead
     f = colour_mask(img, MaskOptions(shadow_ratio=0, steep_ratio=0)).fractions()

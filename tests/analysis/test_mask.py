@@ -11,16 +11,38 @@ def test_each_reason_is_detected_and_named():
     img = np.full((20, 20, 3), [0.6, 0.3, 0.8], np.float32)  # saturated purple
     img[0, 0] = [0.5, 0.5, 0.52]      # grey: saturation (0.02/0.52*255 = 9.8) < 15
     img[0, 1] = [0.05, 0.02, 0.06]    # dark: value 15 < 20
-    img[0, 2] = [1.0, 0.4, 0.3]       # clipped red channel
+    img[0, 2] = [1.0, 1.0, 0.3]       # clipped red and green channels
     img[0, 3] = [np.nan, 0.1, 0.1]    # invalid
     img[10, 10] = img[10, 10] * 0.5   # a shadowed pixel: same hue, half the value
+    img[5, 5] = [1.0, 0.4, 0.6]       # one clipped channel: analysed, not masked
     m = colour_mask(img)
     assert m.low_saturation[0, 0] and m.dark[0, 1] and m.clipped[0, 2] and m.invalid[0, 3]
     assert m.shadow[10, 10] and not m.low_saturation[10, 10]
     assert m.mask.sum() == 5
     assert m.fraction == pytest.approx(5 / 400)
     assert set(m.fractions()) == {"low_saturation", "dark", "clipped", "invalid", "shadow",
-                                   "steep", "dark_feature", "any", "grey_film"}
+                                   "steep", "dark_feature", "any", "grey_film", "clipped_one"}
+    assert np.argwhere(m.clipped_one).tolist() == [[5, 5]] and m.clip_analysed
+    assert not m.coloured[5, 5] and m.coloured[6, 6]     # not for the white balance
+
+
+def test_one_clipped_channel_is_analysed_unless_told_or_divided_by_a_field():
+    img = np.full((16, 16, 3), [0.6, 0.3, 0.8], np.float32)
+    img[2:6, 2:6, 2] = 1.0                     # blue clipped
+    img[8:10, 8:10, :2] = 1.0                  # red and green clipped
+    img[12, 12] = [1.0, 0.97, 0.98]            # one channel clipped, but grey: low saturation
+    o = MaskOptions(shadow_ratio=0, steep_ratio=0)
+    m = colour_mask(img, o)
+    assert m.clipped_one.sum() == 16 and not m.mask[2:6, 2:6].any()
+    assert m.clipped[8:10, 8:10].all() and m.mask[8:10, 8:10].all()
+    assert m.mask[12, 12] and m.clipped[12, 12] and m.low_saturation[12, 12]
+    off = colour_mask(img, MaskOptions(shadow_ratio=0, steep_ratio=0, clipped_one_channel=False))
+    assert off.clipped_one is None and not off.clip_analysed
+    np.testing.assert_array_equal(off.clipped, np.any(img >= 1.0, axis=-1))
+    again = m.clipped_masked()          # a flat field divided out: the clip level varies
+    np.testing.assert_array_equal(again.mask, off.mask)
+    np.testing.assert_array_equal(again.clipped, off.clipped)
+    assert again.clipped_one is None and off.clipped_masked() is off
 
 
 def test_saturation_threshold_is_on_the_0_255_scale():
@@ -35,8 +57,11 @@ def test_saturation_threshold_is_on_the_0_255_scale():
 def test_sixteen_bit_clip_level():
     img = np.full((4, 4, 3), [0.9, 0.5, 0.2], np.float32)
     img[0, 0, 0] = 65534.0 / 65535
-    assert not colour_mask(img, bit_depth=16).clipped[0, 0]
+    m = colour_mask(img, bit_depth=16)
+    assert not m.clipped[0, 0] and m.clipped_one is None
     img[0, 0, 0] = 1.0
+    assert colour_mask(img, bit_depth=16).clipped_one[0, 0]
+    img[0, 0, 1] = 1.0
     assert colour_mask(img, bit_depth=16).clipped[0, 0]
 
 

@@ -32,16 +32,26 @@ def points():
 @pytest.mark.slow
 @pytest.mark.parametrize("exposure", [0.4, 1.0, 1.7])
 def test_lab_is_the_tables_xyz_at_the_exposure_in_cielab(table, points, exposure):
+    """Inside the sRGB gamut (the rest: the recorded colour, the tests below)."""
     theta, d = points
     model = FilmColourModel(table, exposure=exposure)
     lab = model.lab(theta, d)
     assert lab.dtype == np.float32 and lab.shape == (500, 3)
     xyz = table.xyz_at(theta, d) * exposure
+    inside = _in_gamut(table, xyz)
+    assert 0.8 < inside.mean() < 1.0           # cyan films (~150-180 nm) are outside
     white = table.white_xyz.astype(np.float32)
-    np.testing.assert_allclose(lab, xyz_to_lab(xyz.astype(np.float32), white=white),
-                               rtol=0, atol=1e-5)
+    np.testing.assert_allclose(lab[inside], xyz_to_lab(xyz.astype(np.float32),
+                                                       white=white)[inside], rtol=0, atol=1e-5)
     # float64 all through: the model's float32 is within its rounding
-    np.testing.assert_allclose(lab, xyz_to_lab(xyz, white=table.white_xyz), rtol=0, atol=5e-3)
+    np.testing.assert_allclose(lab[inside], xyz_to_lab(xyz, white=table.white_xyz)[inside],
+                               rtol=0, atol=5e-3)
+
+
+def _in_gamut(table, xyz):
+    from microfacet.colour.srgb import model_xyz_to_linear_srgb
+
+    return np.all(model_xyz_to_linear_srgb(xyz, white=table.white_xyz) >= 0.0, axis=-1)
 
 
 def test_lab_against_colour_science(table, points, colour_science):
@@ -51,7 +61,8 @@ def test_lab_against_colour_science(table, points, colour_science):
     ref = colour_science.XYZ_to_Lab(table.xyz_at(theta, d) * 0.8, w[:2] / w.sum())
     # colour-science's white is Y = 1: the table's white has Y = 1 too
     assert w[1] == pytest.approx(1.0)
-    np.testing.assert_allclose(model.lab(theta, d), ref, rtol=0, atol=5e-3)
+    inside = _in_gamut(table, table.xyz_at(theta, d))
+    np.testing.assert_allclose(model.lab(theta, d)[inside], ref[inside], rtol=0, atol=5e-3)
 
 
 def test_lab_broadcasts_and_exposure_is_the_only_change(table):
@@ -126,10 +137,78 @@ def test_thickness_per_tilt_keeps_the_phase(table):
                                                                               abs=1e-9)
 
 
+@pytest.mark.parametrize("exposure", [1.4, 1.8])
+def test_a_clipped_model_is_the_colour_an_over_exposed_camera_records(table, exposure):
+    """An over-exposed film as an 8-bit camera records it (the thin-film spectra integrated
+    here on their own grid, encoded and clipped to [0, 255]): the model clipped at 1 matches
+    it to the quantization, cyan films outside the gamut included; the model not clipped at
+    1 does not, where a channel clipped there."""
+    from microfacet.colour.srgb import colours_from_spectra, srgb_to_lab
+    from microfacet.optics.thinfilm import reflectance
+
+    wl = np.arange(380.0, 781.0, 5.0)
+    d = np.arange(40.0, 290.0, 3.0)
+    r = reflectance(wl[None, :], 0.0, d[:, None], table.film, table.substrate)
+    rgb8 = colours_from_spectra(r, wl, exposure=exposure)[2]
+    recorded = srgb_to_lab(rgb8)
+    clipped = (rgb8 == 255).any(axis=-1)
+    assert 10 <= clipped.sum() <= d.size - 5           # both cases are there
+    m = FilmColourModel(table, exposure=exposure)
+    camera = m.with_clip((1.0, 1.0, 1.0))
+    assert np.max(camera.delta_e(recorded, 0.0, d)) < 1.0
+    unclipped = m.delta_e(recorded[clipped], 0.0, d[clipped])
+    assert np.median(unclipped) > 1.0 and np.max(unclipped) > 3.0
+    np.testing.assert_array_equal(camera.lab(0.0, d[~clipped]), m.lab(0.0, d[~clipped]))
+
+
+@pytest.mark.parametrize("film, thickness_nm", [("TiO2_Jolivet2023_amorphous", 170.0),
+                                                ("TiO2_Jolivet2023_amorphous", 175.0),
+                                                ("TiO2_Devore1951_rutile_o", 160.0)])
+def test_a_cyan_film_outside_the_srgb_gamut_is_read_at_its_thickness(film, thickness_nm):
+    """A cyan film (negative linear red) as an 8-bit sRGB image holds it (red at 0): the
+    thickness of least ΔE00 is its own, the misfit the quantization's; the table's colour
+    taken unclipped into Lab, as the model did before, misfits it by more than 2 ΔE00 and
+    moves the thickness."""
+    from microfacet.colour.srgb import colours_from_spectra, srgb_to_lab
+    from microfacet.optics.thinfilm import reflectance
+
+    t = build_colour_table(thickness_range_nm=(100.0, 250.0), theta_range_deg=(0.0, 5.0),
+                           film=film)
+    wl = np.arange(380.0, 781.0, 5.0)
+    r = reflectance(wl, 0.0, thickness_nm, film, t.substrate)
+    recorded = srgb_to_lab(colours_from_spectra(r, wl)[2])
+    m = FilmColourModel(t)
+    grid = np.arange(100.0, 250.0, 0.05)
+    de = m.delta_e(recorded, 0.0, grid)
+    assert abs(grid[np.argmin(de)] - thickness_nm) < 0.15 and de.min() < 0.25
+    raw = delta_e(xyz_to_lab(m.xyz(0.0, grid).astype(np.float32), white=m.white), recorded)
+    assert raw.min() > 2.0 and abs(grid[np.argmin(raw)] - thickness_nm) > 0.3
+
+
+def test_clip_levels_apply_per_channel(table):
+    """A level per channel (an image divided by gains g clips at 1/g): only the channel
+    over its level is clipped, and a level above every colour changes nothing."""
+    from microfacet.colour.srgb import model_xyz_to_linear_srgb
+
+    m = FilmColourModel(table, exposure=1.8)
+    d = np.arange(40.0, 290.0, 3.0)
+    xyz = m.xyz(0.0, d)
+    rgb = model_xyz_to_linear_srgb(xyz * 1.8, white=table.white_xyz)
+    top = float(rgb.max()) * 1.01
+    np.testing.assert_array_equal(m.with_clip((top, top, top)).lab(0.0, d), m.lab(0.0, d))
+    red_only = m.with_clip((1.0, top, top))
+    changed = np.any(red_only.lab(0.0, d) != m.lab(0.0, d), axis=-1)
+    np.testing.assert_array_equal(changed, rgb[:, 0] > 1.0)
+    assert m.with_clip(None) is m and red_only.with_exposure(1.0).clip_rgb == (1.0, top, top)
+
+
 @pytest.mark.parametrize("kw, match", [({"delta_e_method": "CMC"}, "delta_e_method"),
                                        ({"exposure": 0.0}, "exposure"),
                                        ({"exposure": math.nan}, "exposure"),
-                                       ({"exposure": -1.0}, "exposure")])
+                                       ({"exposure": -1.0}, "exposure"),
+                                       ({"clip_rgb": (1.0, 1.0)}, "clip_rgb"),
+                                       ({"clip_rgb": (1.0, 0.0, 1.0)}, "clip_rgb"),
+                                       ({"clip_rgb": (1.0, math.nan, 1.0)}, "clip_rgb")])
 def test_bad_arguments_are_refused_naming_them(table, kw, match):
     with pytest.raises(ValueError, match=match):
         FilmColourModel(table, **kw)
