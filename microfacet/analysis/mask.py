@@ -137,7 +137,8 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
         ``steep_ratio``, ``steep_core_ratio``, ``steep_rim_px`` and ``dark_film_min_px``
         (mask pixels far darker than the median of the other unmasked pixels as steep, or
         as dark features where they are not, :func:`steep_facet_mask`; ``steep_ratio`` 0
-        disables).
+        disables), ``clipped_one_channel`` (pixels with one channel at the clip level are
+        analysed, ``clipped_one``, not masked).
     bit_depth : int
         Bit depth of the source images, for the default clip level.
     clip_level : float, optional
@@ -151,9 +152,11 @@ def colour_mask(image, options: MaskOptions | None = None, *, bit_depth=8,
     Examples
     --------
     >>> import numpy as np
-    >>> img = np.array([[[0.5, 0.2, 0.8], [0.5, 0.5, 0.5], [1.0, 0.4, 0.2]]], np.float32)
-    >>> colour_mask(img).mask.tolist()
-    [[False, True, True]]
+    >>> img = np.array([[[0.5, 0.2, 0.8], [0.5, 0.5, 0.5], [1.0, 1.0, 0.2], [1.0, 0.4, 0.2]]],
+    ...                np.float32)
+    >>> m = colour_mask(img)
+    >>> m.mask.tolist(), m.clipped_one.tolist()     # grey, two clipped; one clipped: analysed
+    ([[False, True, True, False]], [[False, False, False, True]])
     """
     o = MaskOptions() if options is None else options
     img = np.asarray(image, dtype=np.float32)

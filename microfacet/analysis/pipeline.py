@@ -449,7 +449,7 @@ def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):
         return first, colour, FlatField(reason="joint.flat_field is off")
     shape = colour.lab.shape[:2]
     best, best_colour, total = first, colour, None
-    same = _unclipped_facets(first[0].facets, colour.mask)
+    same = _unclipped_facets(first[0], colour.mask)
     de0 = float(np.nanmedian(first[0].thickness.delta_e[same]))
     for k in range(MAX_ROUNDS):
         joint = best[0]
@@ -483,14 +483,16 @@ def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):
                                                   median_delta_e=(de0, de1))
 
 
-def _unclipped_facets(facets, mask) -> np.ndarray:
-    """Per facet, whether none of its pixels is analysed with a clipped channel: the colours
-    with and without a flat field are compared on these alone (divided by a field, every
-    clipped pixel is masked, and facets that lose their clipped pixels would not compare)."""
-    n = int(facets.max()) + 1
+def _unclipped_facets(joint, mask) -> np.ndarray:
+    """Per facet of ``joint``, whether none of its pixels is analysed with a clipped channel:
+    the colours with and without a flat field are compared on these alone (divided by a
+    field, every clipped pixel is masked, and facets that lose their clipped pixels would not
+    compare)."""
+    n = joint.area_px.size
     if not mask.clip_analysed:
         return np.ones(n, bool)
-    return np.bincount(facets.ravel(), weights=mask.clipped_one.ravel(), minlength=n) == 0
+    return np.bincount(joint.facets.ravel(), weights=mask.clipped_one.ravel(),
+                       minlength=n)[:n] == 0
 
 
 def _self_check(st, focus, joint, scene, options, *, cells) -> SelfCheck | None:

@@ -100,8 +100,8 @@ class FilmColourModel:
 
     def with_clip(self, clip_rgb) -> "FilmColourModel":
         """The same model compared with an image clipped at ``clip_rgb`` (None: not)."""
-        return self if clip_rgb == self.clip_rgb else dataclasses.replace(self,
-                                                                          clip_rgb=clip_rgb)
+        c = None if clip_rgb is None else tuple(float(v) for v in clip_rgb)
+        return self if c == self.clip_rgb else dataclasses.replace(self, clip_rgb=c)
 
     # -- colours ----------------------------------------------------------------------
     def xyz(self, theta_deg, thickness_nm) -> np.ndarray:

@@ -200,6 +200,7 @@ def test_clip_levels_apply_per_channel(table):
     changed = np.any(red_only.lab(0.0, d) != m.lab(0.0, d), axis=-1)
     np.testing.assert_array_equal(changed, rgb[:, 0] > 1.0)
     assert m.with_clip(None) is m and red_only.with_exposure(1.0).clip_rgb == (1.0, top, top)
+    assert red_only.with_clip(np.array([1.0, top, top])) is red_only
 
 
 @pytest.mark.parametrize("kw, match", [({"delta_e_method": "CMC"}, "delta_e_method"),
