@@ -52,7 +52,6 @@ from .flat_field import (
 from .identification import (
     analysis_warnings,
     map_check_judgement,
-    mask_warning,
     mean_plane_tilt_deg,
     order_check,
     self_check_judgement,
@@ -195,13 +194,12 @@ class AnalysisResult:
         """What a user must know before trusting the distributions
         (:class:`~.identification.Reason` each;
         :func:`~microfacet.analysis.identification.analysis_warnings`)."""
-        out = analysis_warnings(self.distributions, delta_e_median=self.delta_e_stats["median"],
-                                noise_de=self.colour.noise_de,
-                                mean_plane_tilt=mean_plane_tilt_deg(self.joint),
-                                options=self.options.fits, white_balance=self.white_balance,
-                                map_check=self.map_check, roi_check=self.roi_check)
-        masked = mask_warning(self.colour.mask.fractions())
-        return out if masked is None else [masked, *out]
+        return analysis_warnings(self.distributions, delta_e_median=self.delta_e_stats["median"],
+                                 noise_de=self.colour.noise_de,
+                                 mean_plane_tilt=mean_plane_tilt_deg(self.joint),
+                                 options=self.options.fits, white_balance=self.white_balance,
+                                 map_check=self.map_check, roi_check=self.roi_check,
+                                 mask_fractions=self.colour.mask.fractions())
 
     @functools.cached_property
     def order(self) -> dict:
@@ -241,6 +239,12 @@ def film_model(scene: Scene, options) -> FilmColourModel:
                                film=scene.film, substrate=scene.substrate,
                                illuminant=scene.illuminant)
     return FilmColourModel(table, delta_e_method=options.delta_e_method)
+
+
+def _model_for(model, colour, exposure) -> FilmColourModel:
+    """``model`` at ``exposure``, clipped as ``colour``'s analysed pixels are
+    (``ColourImage.clip_rgb``)."""
+    return model.with_exposure(exposure).with_clip(colour.clip_rgb)
 
 
 def _roi(st, colour, surface, model, options, scene, *, exposure=None):
@@ -297,7 +301,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                 colour.encoded, wb.gains_rgb, illuminant=scene.illuminant), clip_rgb=None
                 if colour.clip_rgb is None else tuple(1.0 / g for g in wb.gains_rgb))
         roi = _roi(st, colour, surface, model, options, scene)
-    model = model.with_exposure(roi.exposure).with_clip(colour.clip_rgb)
+    model = _model_for(model, colour, roi.exposure)
     grid = tilt_grid(scene.max_tilt_deg, options.tilt.step_deg)
     joint = check = None
     if options.mode == "seed":
@@ -314,8 +318,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
 
             def facets(c, r):
                 return facets_at_exposure_readings(
-                    geometry, c, r, model.with_exposure(r.exposure).with_clip(c.clip_rgb),
-                    scene, options,
+                    geometry, c, r, _model_for(model, c, r.exposure), scene, options,
                     refit_roi=lambda e: _roi(st, c, surface, model, options, scene,
                                              exposure=e))
             if flat_ref is None:
@@ -325,7 +328,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                     model=model, options=options, scene=scene, wb=wb)
             else:
                 (joint, roi, readings), flat = facets(colour, roi), flat_ref
-            model = model.with_exposure(joint.exposure).with_clip(colour.clip_rgb)
+            model = _model_for(model, colour, joint.exposure)
             image = facet_image(geometry, colour, roi, options.joint)   # the colours are final
             cols = image.colours()
             fits = _fit_options(options, model)
@@ -454,8 +457,7 @@ def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):
     for k in range(MAX_ROUNDS):
         joint = best[0]
         ff = estimate_flat_field(joint, best_colour.lab,
-                                 model.with_exposure(joint.exposure).with_clip(
-                                     best_colour.clip_rgb),
+                                 _model_for(model, best_colour, joint.exposure),
                                  unexplained_mads=options.fits.unexplained_mads)
         if ff.reason:
             break
@@ -492,7 +494,7 @@ def _unclipped_facets(joint, mask) -> np.ndarray:
     if not mask.clip_analysed:
         return np.ones(n, bool)
     return np.bincount(joint.facets.ravel(), weights=mask.clipped_one.ravel(),
-                       minlength=n)[:n] == 0
+                       minlength=n) == 0
 
 
 def _self_check(st, focus, joint, scene, options, *, cells) -> SelfCheck | None:

@@ -135,15 +135,12 @@ class FilmColourModel:
         x = (np.asarray(xyz) * self.exposure).astype(np.float32)
         lab = xyz_to_lab(x, white=self.white)
         rgb = x @ self._xyz_to_rgb
+        hi = np.float32(np.inf) if self.clip_rgb is None else np.float32(self.clip_rgb)
         with np.errstate(invalid="ignore"):       # NaN outside the table stays NaN
-            out = rgb < 0.0
-            if self.clip_rgb is not None:
-                out |= rgb > np.asarray(self.clip_rgb, np.float32)
-        out = out.any(axis=-1)
+            out = ((rgb < 0.0) | (rgb > hi)).any(axis=-1)
         if out.any():
             t = self.table
-            rec = np.clip(rgb[out], 0.0, None if self.clip_rgb is None else
-                          np.asarray(self.clip_rgb, np.float32))
+            rec = np.clip(rgb[out], 0.0, hi)
             lab[out] = xyz_to_lab(
                 linear_srgb_to_xyz(rec, illuminant=t.illuminant, observer=t.observer),
                 white=image_white_xyz(illuminant=t.illuminant, observer=t.observer))

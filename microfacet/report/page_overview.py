@@ -137,10 +137,10 @@ def _mask_rows(ctx):
                         ("invalid", "invalid (NaN)")):
             if k in m:
                 rows.append([f"   {name}", fmt(pct(m[k]), ".1f", "%")])
-        if m.get("grey_film"):
-            rows.append(["grey film analysed (S below it)", fmt(pct(m["grey_film"]), ".1f", "%")])
-        if m.get("clipped_one"):
-            rows.append(["one channel clipped, analysed", fmt(pct(m["clipped_one"]), ".1f", "%")])
+        for k, name in (("grey_film", "grey film analysed (S below it)"),
+                        ("clipped_one", "one channel clipped, analysed")):
+            if m.get(k):
+                rows.append([name, fmt(pct(m[k]), ".1f", "%")])
     s_min, v_min = res.parameter("mask.saturation_min"), res.parameter("mask.value_min")
     if s_min is not None or v_min is not None:
         rows.append(["thresholds (0–255 HSV)", f"S ≥ {fmt(s_min, '.4g')}, V ≥ {fmt(v_min, '.4g')}"])
