@@ -615,7 +615,7 @@ def _white_balance_warning(wb) -> Reason | None:
 
 def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
                       options: FitOptions, white_balance=None, map_check=None,
-                      roi_check=None, mask_fractions=None) -> list[Reason]:
+                      roi_check=None) -> list[Reason]:
     """One :class:`Reason` per thing a user must know before trusting the distributions.
 
     An unidentified (or missing) thickness mixture or NDF, ambiguous interference orders
@@ -638,12 +638,8 @@ def analysis_warnings(dist, *, delta_e_median, noise_de, mean_plane_tilt,
     roi_check : tuple, optional
         ``(pixel_median_nm, disagrees)`` per ROI (:func:`~.consistency.roi_pixel_check`):
         a warning naming the ROIs whose single fit disagrees with their pixels.
-    mask_fractions : dict, optional
-        :meth:`~.mask.ColourMask.fractions`: first, a warning where most of the image is
-        masked (:func:`mask_warning`).
     """
-    out = [r for r in (None if mask_fractions is None else mask_warning(mask_fractions),
-                       _spike_warning(dist.thickness), _candidate_warning(dist.thickness),
+    out = [r for r in (_spike_warning(dist.thickness), _candidate_warning(dist.thickness),
                        _misread_warning(dist.thickness)) if r is not None]
     judged = dist.thickness_judgement.reason
     if (map_check is not None and not map_check.consistent

@@ -52,6 +52,7 @@ from .flat_field import (
 from .identification import (
     analysis_warnings,
     map_check_judgement,
+    mask_warning,
     mean_plane_tilt_deg,
     order_check,
     self_check_judgement,
@@ -194,12 +195,13 @@ class AnalysisResult:
         """What a user must know before trusting the distributions
         (:class:`~.identification.Reason` each;
         :func:`~microfacet.analysis.identification.analysis_warnings`)."""
-        return analysis_warnings(self.distributions, delta_e_median=self.delta_e_stats["median"],
-                                 noise_de=self.colour.noise_de,
-                                 mean_plane_tilt=mean_plane_tilt_deg(self.joint),
-                                 options=self.options.fits, white_balance=self.white_balance,
-                                 map_check=self.map_check, roi_check=self.roi_check,
-                                 mask_fractions=self.colour.mask.fractions())
+        out = analysis_warnings(self.distributions, delta_e_median=self.delta_e_stats["median"],
+                                noise_de=self.colour.noise_de,
+                                mean_plane_tilt=mean_plane_tilt_deg(self.joint),
+                                options=self.options.fits, white_balance=self.white_balance,
+                                map_check=self.map_check, roi_check=self.roi_check)
+        masked = mask_warning(self.colour.mask.fractions())     # the colours', not the fits'
+        return out if masked is None else [masked, *out]
 
     @functools.cached_property
     def order(self) -> dict:
