@@ -36,11 +36,12 @@ import numpy as np
 from ..core import threads
 from ..core.threads import chunks
 from .mixtures import colour_explained
-from .sampling import weighted_median
+from .sampling import SCATTERED_MAX_FACETS, facets_per_region, weighted_median
 
 __all__ = ["MapCheck", "OrderMove", "candidate_alias", "component_orders",
            "distinct_populations", "misread_components", "mixture_map_check",
-           "nearest_component", "order_alias_of", "order_move", "roi_pixel_check"]
+           "nearest_component", "order_alias_of", "order_move", "roi_pixel_check",
+           "scattered_components"]
 
 #: The per-pixel map's error floor (nm) each component is widened by: the thickness per true
 #: region errs by a median 0.6-0.8 nm on the generalization sweep (docs/accuracy.md).
@@ -284,6 +285,62 @@ def misread_components(mixture, thickness_nm, delta_e, *,
         if not colour_explained(de_k, de_rest):
             kept.remove(k)
             out.append((k, de_k, de_rest, own == k))
+    return out
+
+
+def scattered_components(mixture, thickness_nm, regions, patch_area, *,
+                         max_weight=MISREAD_MAX_WEIGHT,
+                         max_facets=SCATTERED_MAX_FACETS) -> list:
+    """The minor components of ``mixture`` whose samples lie scattered, in thickness regions
+    of a few facets each: misread facets, not a population.
+
+    Each sample (a facet, a patch of ``regions``) belongs to its most likely component
+    within :data:`UNEXPLAINED_SD` widened SD. A component of weight at most ``max_weight``
+    is scattered where its samples' regions hold fewer than ``max_facets`` of them
+    (:func:`~.sampling.facets_per_region`, area-weighted); at least one component is kept.
+    The field grows the number of independent regions, and facets misread alike, a few
+    percent of a large field, then pay for a component (on the generalization sweep at
+    1024² px: a population's other interference order, 1.7-3.6 facets per region, where
+    the populations' regions hold tens).
+
+    Parameters
+    ----------
+    mixture : ThicknessMixture
+    thickness_nm : array_like, shape (S,)
+        Each sample's thickness (nm; NaN: none).
+    regions : Regions
+        The samples' thickness regions (:func:`~.sampling.thickness_regions`).
+    patch_area : array_like, shape (S,)
+        Each sample's area (px).
+    max_weight, max_facets : float, optional
+
+    Returns
+    -------
+    list of (int, float, ndarray of bool)
+        Per scattered component: its index, its samples' facets per region, its samples.
+
+    Examples
+    --------
+    >>> from microfacet.analysis.sampling import Regions
+    >>> from microfacet.core.distributions import ThicknessMixture
+    >>> m = ThicknessMixture([(0.9, 130.0, 1.0), (0.1, 250.0, 1.0)])
+    >>> d = np.r_[np.full(9, 130.0), np.full(10, 250.0)]        # 9 facets in one region,
+    >>> pr = np.r_[np.zeros(9, int), np.arange(1, 11)]          # 10 each in a region of its own
+    >>> reg = Regions(pr, np.r_[130.0, np.full(10, 250.0)], np.ones(11),
+    ...               np.r_[900.0, np.full(10, 100.0)], 0.0)
+    >>> [(k, f, int(s.sum())) for k, f, s in scattered_components(m, d, reg, np.full(19, 100.0))]
+    [(1, 1.0, 10)]
+    """
+    own, _, _ = _own_component(mixture, thickness_nm)
+    out = []
+    for k in sorted(range(len(mixture.components)), key=lambda i: mixture.components[i][0]):
+        mine = own == k
+        if (len(out) == len(mixture.components) - 1 or not mine.any()
+                or mixture.components[k][0] > max_weight):
+            continue
+        f = facets_per_region(regions.patch_region, regions.area, patch_area, mine)
+        if f < max_facets:
+            out.append((k, f, mine))
     return out
 
 

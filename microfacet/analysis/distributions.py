@@ -43,6 +43,7 @@ from .consistency import (
     misread_components,
     nearest_component,
     order_move,
+    scattered_components,
 )
 from .identification import (
     NO_SAMPLES,
@@ -155,14 +156,37 @@ def _thickness_fit(joint, ok, regions, options, seed) -> MixtureFit:
 MAX_MISREAD_ROUNDS = 2
 
 
+def _median(x) -> float | None:
+    x = x[np.isfinite(x)]
+    return float(np.median(x)) if x.size else None
+
+
+def _misread(fit, th, ok, regions, area) -> list:
+    """The components of ``fit`` that are misread facets: ``(k, record, facets)`` each,
+    by colour (:func:`~.consistency.misread_components`) or scattered in regions of a few
+    facets (:func:`~.consistency.scattered_components`; ``area``: the facets' px); at least
+    one component is kept."""
+    thick = np.where(ok, th.thickness_nm, np.nan)
+    out = {k: (k, {"why": "colour", "delta_e": a, "delta_e_populations": b}, mine)
+           for k, a, b, mine in misread_components(fit.mixture, thick, th.delta_e)}
+    for k, f, mine in scattered_components(fit.mixture, thick, regions, area):
+        if k not in out and len(out) < len(fit.mixture.components) - 1:
+            de = th.delta_e
+            out[k] = (k, {"why": "scattered", "delta_e": _median(de[mine & ok]),
+                          "delta_e_populations": _median(de[ok & ~mine]),
+                          "facets_per_region": f}, mine)
+    return list(out.values())
+
+
 def _set_aside_misread(joint, fit, samples, options, seed):
     """The mixture refitted without the facets of its misread components
-    (:func:`~.consistency.misread_components`: minor components whose colours the film
-    explains much worse than the populations', by the rule a candidate population's colours
-    must pass); up to :data:`MAX_MISREAD_ROUNDS` times. Their facets join the unexplained
-    ones. Returns the fit, the samples ``(ok, unexplained, regions)`` and one record per
-    component set aside (mean and weight in the mixture it was found in, its facets' and the
-    populations' median ΔE00, its facets).
+    (:func:`_misread`: minor components whose colours the film explains much worse than the
+    populations', by the rule a candidate population's colours must pass, or whose facets
+    lie scattered, in regions of a few facets); up to
+    :data:`MAX_MISREAD_ROUNDS` times. Their facets join the unexplained ones. Returns the
+    fit, the samples ``(ok, unexplained, regions)`` and one record per component set aside
+    (mean and weight in the mixture it was found in, why, its facets' and the populations'
+    median ΔE00, for scattered ones their facets per region, its facets).
 
     The number of independent regions grows with the field, and facets misread the same way
     (a stain's colour, an order's look-alike) then pay for a component of their own: on the
@@ -173,18 +197,17 @@ def _set_aside_misread(joint, fit, samples, options, seed):
     ok, unexplained, regions = samples
     records = []
     for _ in range(MAX_MISREAD_ROUNDS):
-        bad = misread_components(fit.mixture, np.where(ok, th.thickness_nm, np.nan),
-                                 th.delta_e)
+        bad = _misread(fit, th, ok, regions, joint.area_px.astype(np.float64))
         if not bad:
             break
         drop = np.logical_or.reduce([mine for *_, mine in bad])
         left = _regions(joint, ok & ~drop)
         if left is None:
             break
-        for k, de_k, de_rest, mine in bad:
+        for k, rec, mine in bad:
             w, mu, _ = fit.mixture.components[k]
-            records.append({"mean_nm": float(mu), "weight": float(w), "delta_e": de_k,
-                            "delta_e_populations": de_rest, "facets": int(mine.sum())})
+            records.append({"mean_nm": float(mu), "weight": float(w), **rec,
+                            "facets": int(mine.sum())})
         ok, unexplained, regions = ok & ~drop, unexplained | drop, left
         fit = _thickness_fit(joint, ok, regions, options, seed)
     return fit, (ok, unexplained, regions), records

@@ -525,17 +525,24 @@ def _candidate_warning(fit) -> Reason | None:
                   "fits.thickness_min_component_samples")
 
 
+def _misread_one(m) -> str:
+    """One component set aside, with why (``why``: colour or scattered)."""
+    if m.get("why") == "scattered":
+        return (f"{m['mean_nm']:.1f} nm ({100 * m['weight']:.0f} %, scattered: "
+                f"{m['facets_per_region']:.1f} facets per region)")
+    return (f"{m['mean_nm']:.1f} nm ({100 * m['weight']:.0f} %, median dE00 "
+            f"{m['delta_e']:.2f} against the populations' {m['delta_e_populations']:.2f})")
+
+
 def _misread_warning(fit) -> Reason | None:
     """Minor components set aside as misread facets (``info["misread_components"]``,
-    :func:`~.distributions.fit_joint_distributions`)."""
+    :func:`~.distributions.fit_joint_distributions`): colours the film explains much worse
+    than the populations', or facets scattered in regions of a few facets."""
     gone = (fit.info.get("misread_components") or []) if fit is not None else []
     if not gone:
         return None
-    each = "; ".join(f"{m['mean_nm']:.1f} nm ({100 * m['weight']:.0f} %, median dE00 "
-                     f"{m['delta_e']:.2f} against the populations' {m['delta_e_populations']:.2f})"
-                     for m in gone)
-    return Reason("thickness_misread", f"facets whose colours the film explains much worse "
-                  f"than the populations' were set aside, not counted as populations: {each} "
+    return Reason("thickness_misread", f"facets misread, set aside and not counted as "
+                  f"populations: {'; '.join(_misread_one(m) for m in gone)} "
                   f"(summary.json thickness.mixture.misread_components; their thicknesses stay "
                   f"in thickness_nm.npy)", "optics.film")
 

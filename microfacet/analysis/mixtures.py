@@ -75,7 +75,7 @@ from ..core.distributions import ThicknessMixture
 from ..core.lazy import load
 from ..io.jsonfile import json_safe
 from .options import FitOptions
-from .sampling import Regions, Samples, collapse, prepare
+from .sampling import GRAIN_MIN_SCALE, Regions, Samples, collapse, prepare, region_scale_px
 
 threadpoolctl = load("threadpoolctl")
 
@@ -499,19 +499,17 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
             fits[k] = (bic_score(lls[k], W, n_eff, 3 * k - 1 + (bg > 0)), w, not good)
     k_best, margin, ok = choose_k(fits, n_count, d.min_samples)
     bics = {k: f[0] for k, f in fits.items()}
-    w, mu, s2 = sols[k_best]
-    w = w / w.sum()             # the populations' distribution, without the background
-    comps = [(float(a_), float(m_), float(math.sqrt(c_))) for a_, m_, c_ in zip(w, mu, s2)
-             if a_ > 1e-12]
-    mixture = ThicknessMixture(comps)
+    mixture = _as_mixture(*sols[k_best])
     info = {"inadmissible_k": sorted(set(bics) - set(ok)), "background_weight": bgw[k_best],
             "sd_at_floor": [i for i, c in enumerate(mixture.components)
                             if c[2] <= sd_floor_nm * 1.0001],
             "sd_ceiling_nm": opts.thickness_max_sd_nm}
+    bic = bics[k_best]
     if n_regions is not None:
-        info["candidates"] = population_candidates(d, (sols[k_best], lls[k_best], bg),
-                                                   regions, k_best)
-    return MixtureFit(mixture, bics[k_best], bics, n, n_eff,
+        sol, ll, k = _grains_taken(d, (sols[k_best], lls[k_best], bg), regions, k_max, info)
+        if k > k_best:
+            mixture, bic = _as_mixture(*sol), bic_score(ll, W, n_eff, 3 * k - 1 + (bg > 0))
+    return MixtureFit(mixture, bic, bics, n, n_eff,
                       k_note(k_max, opts.max_components, uniq.size, n_count, "values"), x.size,
                       lls, bic_margin=margin, info=info)
 
@@ -614,6 +612,22 @@ class PopulationCandidate:
                 and self.field_scale is not None
                 and self.field_scale <= CANDIDATE_MAX_FIELD_SCALE)
 
+    def is_grain(self, regions: Regions) -> bool:
+        """Whether it is a grain of the surface, taken into the mixture as a population:
+        its regions are at least :data:`~.sampling.GRAIN_MIN_SCALE` × as large
+        (:func:`~.sampling.region_scale_px`) as the other regions, and a field of at most
+        :data:`CANDIDATE_MAX_FIELD_SCALE` × the area would decide it. The model choice
+        counts a region as one draw and cannot decide a population on one or two; a
+        coherent patch far (:data:`CANDIDATE_Z`) from every population holds a thickness
+        of its own, whose spread only the field does not measure; scattered facets do not."""
+        if self.field_scale is None or self.field_scale > CANDIDATE_MAX_FIELD_SCALE:
+            return False
+        patch = np.arange(regions.count)
+        mine = np.isin(patch, self.region_index)
+        rest = ~mine & np.isfinite(regions.value)
+        return bool(region_scale_px(patch, regions.area, mine)
+                    >= GRAIN_MIN_SCALE * region_scale_px(patch, regions.area, rest))
+
     def to_json(self) -> dict:
         out = {k: v for k, v in asdict(self).items() if k != "region_index"}
         out.update(colour_explained=self.colour_explained, reported=self.reported)
@@ -658,6 +672,42 @@ def population_candidates(d, chosen, regions: Regions, k) -> list[PopulationCand
                                        int(m.sum()), _field_scale(d, chosen, comp, k),
                                        idx[m]))
     return sorted(out, key=lambda c: -c.area_fraction)
+
+
+def _as_mixture(w, mu, s2) -> ThicknessMixture:
+    """The populations' distribution of an EM solution, without the background."""
+    w = w / w.sum()
+    return ThicknessMixture([(float(a_), float(m_), float(math.sqrt(c_)))
+                             for a_, m_, c_ in zip(w, mu, s2) if a_ > 1e-12])
+
+
+def _grains_taken(d, chosen, regions: Regions, k_max, info):
+    """The candidates of the ``chosen = ((w, mu, s2), ℓ, bg)`` solution, with those that
+    are grains (:meth:`PopulationCandidate.is_grain`, up to ``k_max`` components) taken in
+    as components. Sets ``info["candidates"]`` (those left; and ``info["grains_nm"]``, the
+    ones taken); returns the solution ``(w, mu, s2)``, its ℓ and its K."""
+    k = len(chosen[0][0])
+    cands = population_candidates(d, chosen, regions, k)
+    grains = [c for c in cands if c.is_grain(regions)][:max(0, k_max - k)]
+    if grains:
+        chosen, k = _with_grains(d, chosen, grains), k + len(grains)
+        cands = population_candidates(d, chosen, regions, k)
+        info["grains_nm"] = [c.mean_nm for c in grains]
+    info["candidates"] = cands
+    return chosen[0], chosen[1], k
+
+
+def _with_grains(d, chosen, grains):
+    """``chosen = ((w, mu, s2), ℓ, bg)`` with the candidates ``grains`` added as components
+    (:meth:`PopulationCandidate.is_grain`), converged by the EM."""
+    (w, mu, s2), _, bg = chosen
+    frac = np.array([c.area_fraction for c in grains])
+    var = np.array([max((c.sd_nm or 0.0) ** 2, float(np.median(s2)), d.s2_floor)
+                    for c in grains])
+    start = (np.append(w / w.sum() * (1.0 - frac.sum()), frac),
+             np.append(mu, [c.mean_nm for c in grains]), np.append(s2, var))
+    w2, mu2, s22, ll, _ = _xd_em(d.collapsed, start, d.s2_floor, bg=bg, s2_max=d.max_s2)
+    return (w2, mu2, s22), ll, bg
 
 
 def _field_scale(d, chosen, comp, k) -> float | None:

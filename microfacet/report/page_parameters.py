@@ -246,10 +246,12 @@ def _order_rows(res):
                      f"{fmt(m.get('to_nm'), '.1f', 'nm')} "
                      f"({fmt(pct(m.get('area_share')), '.0f', '%')} of a component)"])
     for m in res.get("thickness", "mixture", "misread_components") or []:
+        why = (f"scattered, {fmt(m.get('facets_per_region'), '.1f')} facets per region"
+               if m.get("why") == "scattered" else
+               f"{DE} {fmt(m.get('delta_e'), '.1f')} vs "
+               f"{fmt(m.get('delta_e_populations'), '.1f')}")
         rows.append(["set aside (misread)", f"{fmt(m.get('mean_nm'), '.1f', 'nm')} "
-                     f"({fmt(pct(m.get('weight')), '.0f', '%')}; {DE} "
-                     f"{fmt(m.get('delta_e'), '.1f')} vs "
-                     f"{fmt(m.get('delta_e_populations'), '.1f')})"])
+                     f"({fmt(pct(m.get('weight')), '.0f', '%')}; {why})"])
     return rows
 
 

@@ -245,6 +245,52 @@ def test_a_minor_component_the_film_explains_far_worse_is_misread():
     assert misread_components(one, d[:1800], de[:1800] + 10.0) == []
 
 
+def _grain_scene(minor, seed=0, grains=4):
+    """16 × 16 facets of 8 px: a 130 nm population in ``grains`` grains (4: one per quadrant,
+    each ±1.5 nm about it; 1: one region) and about 10 % of the facets at 250 nm,
+    ``"scattered"`` (facets apart from each other), ``"grain"`` (one block of 26) or
+    ``"grains"`` (three blocks of 9); the facets' areas and their thickness regions."""
+    from microfacet.analysis.sampling import thickness_regions
+
+    rng = np.random.default_rng(seed)
+    row, col = np.arange(256) // 16, np.arange(256) % 16
+    labels = np.arange(256).reshape(16, 16).repeat(8, 0).repeat(8, 1)
+    quadrant = row // 8 * 2 + col // 8
+    d = 130.0 + (np.array([-1.5, 0.5, 1.5, -0.5])[quadrant] if grains == 4 else 0.0) \
+        + rng.normal(0, 0.1, 256)
+    if minor == "scattered":        # a checkerboard's cells never touch by a side
+        at = rng.choice(np.flatnonzero((row + col) % 2 == 0), 26, replace=False)
+    elif minor == "grain":
+        at = np.flatnonzero((row >= 10) & (row < 15) & (col >= 10))[:26]
+    else:
+        at = np.concatenate([np.flatnonzero((row >= r) & (row < r + 3) & (col >= c)
+                                            & (col < c + 3)) for r, c in ((1, 1), (6, 9),
+                                                                          (11, 3))])
+    d[at] = 250.0 + rng.normal(0, 0.1, at.size)
+    reg = thickness_regions(labels, d, np.full(256, 0.1))
+    mix = ThicknessMixture([(1 - at.size / 256, 130.0, 1.2), (at.size / 256, 250.0, 0.1)])
+    return mix, d, np.full(256, 64.0), reg
+
+
+def test_a_minor_component_scattered_over_single_facets_is_set_aside():
+    """26 facets of 250 nm, each apart (regions of one facet): scattered; the same share as
+    one block of the surface (a grain of 26 facets), or as three grains of 9 facets beside
+    one region of all the rest (regions 0.04 × its size), is kept."""
+    from microfacet.analysis.consistency import scattered_components
+
+    mix, d, area, reg = _grain_scene("scattered")
+    ((k, f, mine),) = scattered_components(mix, d, reg, area)
+    assert mix.components[k][1] == 250.0 and mine.sum() == 26 and f == 1.0
+    mix, d, area, reg = _grain_scene("grain")
+    assert scattered_components(mix, d, reg, area) == []
+    mix, d, area, reg = _grain_scene("grains", grains=1)
+    assert reg.area.max() > 20 * 9 * 64.0           # one region of all the rest
+    assert scattered_components(mix, d, reg, area) == []
+    # the population itself is never set aside, nor a component above max_weight
+    mix, d, area, reg = _grain_scene("scattered")
+    assert scattered_components(mix, d, reg, area, max_weight=0.05) == []
+
+
 @pytest.mark.parametrize("share, de_minor", [(0.1, (0.3, 3.0)), (0.3, (3.5, 5.5))])
 def test_a_population_explained_as_well_or_a_major_one_is_not_misread(share, de_minor):
     """Colours as well explained as the population's, or a component above

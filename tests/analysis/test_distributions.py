@@ -264,10 +264,10 @@ def test_a_population_split_between_orders_is_pooled_into_one():
 
 
 
-def _misread_joint(seed=2, n_minor=90, de_minor=(3.5, 5.5)):
+def _misread_joint(seed=2, n_minor=90, de_minor=(3.5, 5.5), grains=False):
     """Facets of 8×8 px on a 240×240 image: blocks of 3×3 facets (regions) of a 130 nm and
-    a 175 nm population, a checkerboard (ΔE00 0.3-3.0), and ``n_minor`` facets scattered over
-    both read at 250 nm with ΔE00 drawn from ``de_minor``."""
+    a 175 nm population, a checkerboard (ΔE00 0.3-3.0), and ``n_minor`` facets read at 250
+    nm with ΔE00 drawn from ``de_minor``: scattered over both, or (``grains``) whole blocks."""
     from types import SimpleNamespace
 
     from microfacet.analysis.facet_thickness import FacetThickness
@@ -278,7 +278,11 @@ def _misread_joint(seed=2, n_minor=90, de_minor=(3.5, 5.5)):
     d = np.where((row // 3 + col // 3) % 2, 130.0, 175.0) + rng.normal(0, 0.8, 900)
     de = rng.uniform(0.3, 3.0, 900)
     minor = np.zeros(900, bool)
-    minor[rng.choice(900, n_minor, replace=False)] = True
+    if grains:
+        minor[np.isin(row // 3 * 10 + col // 3, rng.choice(100, n_minor // 9, replace=False))] \
+            = True
+    else:
+        minor[rng.choice(900, n_minor, replace=False)] = True
     d[minor] = rng.normal(250, 0.8, n_minor)
     de[minor] = rng.uniform(*de_minor, n_minor)
     ft = FacetThickness(d, np.full(900, 0.5), de, np.zeros(900, bool), np.full(900, 64),
@@ -287,33 +291,42 @@ def _misread_joint(seed=2, n_minor=90, de_minor=(3.5, 5.5)):
                            censored=np.zeros(labels.shape, bool)), minor
 
 
-@pytest.mark.parametrize("de_minor, misread", [((3.5, 5.5), True), ((0.3, 3.0), False)])
-def test_facets_the_film_explains_far_worse_are_set_aside_not_a_population(de_minor, misread):
-    """Scattered facets read at 250 nm form a third component; where their colours fit the
-    film far worse than the two populations' (median ΔE00 4.5 against 1.65) they are set
-    aside: the refit has the two populations, the record says what went, and their facets
-    join the unexplained ones. Where they fit as well, the component stays."""
+@pytest.mark.parametrize("de_minor, grains, why", [((3.5, 5.5), False, "colour"),
+                                                   ((0.3, 3.0), False, "scattered"),
+                                                   ((0.3, 3.0), True, None)])
+def test_misread_facets_are_set_aside_not_a_population(de_minor, grains, why):
+    """Facets read at 250 nm form a third component. Scattered one by one with colours that
+    fit the film far worse than the two populations' (median ΔE00 4.5 against 1.65), or as
+    well but scattered (regions of a facet or two, where the populations' hold nine), they
+    are set aside: the refit has the two populations, the record says what went and why,
+    and their facets join the unexplained ones. As whole blocks (grains of nine facets)
+    with the populations' colours, the component stays."""
     from microfacet.analysis.distributions import (
         _set_aside_misread,
         _thickness_fit,
         _thickness_samples,
     )
 
-    joint, minor = _misread_joint(de_minor=de_minor)
+    joint, minor = _misread_joint(de_minor=de_minor, grains=grains)
     samples = _thickness_samples(joint, OPTIONS)
     assert not (samples[1] & minor).any()       # not robust outliers of the ΔE00 alone
     before = _thickness_fit(joint, samples[0], samples[2], OPTIONS, 0)
     assert before.n_components == 3
     fit, (ok, unexplained, _), records = _set_aside_misread(joint, before, samples, OPTIONS, 0)
-    if not misread:
+    if why is None:
         assert fit is before and records == []
         return
     assert [round(m) for m in fit.mixture.means_nm] == [130, 175]
     ((r,),) = (records,)
     assert r["mean_nm"] == pytest.approx(250, abs=1) and r["facets"] == minor.sum()
-    assert r["delta_e"] > 1.5 * r["delta_e_populations"] + 0.5
+    assert r["why"] == why
+    if why == "colour":
+        assert r["delta_e"] > 1.5 * r["delta_e_populations"] + 0.5
+    else:
+        assert r["facets_per_region"] < 6.0 and r["delta_e"] < 2.0
     np.testing.assert_array_equal(unexplained, minor)
     np.testing.assert_array_equal(ok, ~minor)
+
 
 def test_an_order_move_most_facets_refuse_is_not_made():
     """Solved again in the other order, most of the 163 nm facets keep their own (it fits

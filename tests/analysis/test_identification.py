@@ -411,6 +411,10 @@ def test_a_component_set_aside_as_misread_is_a_warning_naming_it():
                      info={"misread_components": gone})
     (w,) = [r for r in _warn(_dist(thickness_fit=fit)) if r.code == "thickness_misread"]
     assert "367.0 nm (5 %, median dE00 1.33 against the populations' 0.55)" in w.text
+    gone.append({"mean_nm": 215.1, "weight": 0.093, "why": "scattered", "delta_e": 0.6,
+                 "delta_e_populations": 0.5, "facets_per_region": 3.31, "facets": 582})
+    (w,) = [r for r in _warn(_dist(thickness_fit=fit)) if r.code == "thickness_misread"]
+    assert "215.1 nm (9 %, scattered: 3.3 facets per region)" in w.text and "367.0" in w.text
     fit.info["misread_components"] = []
     assert not [r for r in _warn(_dist(thickness_fit=fit)) if r.code == "thickness_misread"]
 

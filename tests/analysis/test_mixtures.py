@@ -492,14 +492,15 @@ def test_a_small_far_population_counts_its_regions_not_their_kish_size():
     assert sorted(round(m) for m in with_regions.mixture.means_nm) == [51, 241]
 
 
-def _small_population_scene(copies, seed=0):
-    """Facet thicknesses of ``copies`` × (8 regions at 120 nm, 6 at 150 nm, 1 small region at
-    230 nm: 3 % of the area), 10 facets per region, and their Regions."""
+def _small_population_scene(copies, seed=0, pieces=10):
+    """Facet thicknesses of ``copies`` × (8 regions at 120 nm, 6 at 150 nm, and 3 % of the
+    area at 230 nm in ``pieces`` regions: scattered, 1/(2.3 pieces) of the others' size),
+    10 facets per region, and their Regions."""
     from microfacet.analysis.sampling import Regions
 
     rng = np.random.default_rng(seed)
-    means = np.array(([120.0] * 8 + [150.0] * 6 + [230.0]) * copies)
-    areas = np.array(([5000.0] * 14 + [2200.0]) * copies)
+    means = np.array(([120.0] * 8 + [150.0] * 6 + [230.0] * pieces) * copies)
+    areas = np.array(([5000.0] * 14 + [2200.0 / pieces] * pieces) * copies)
     value = means + rng.normal(0.0, 1.0, means.size)          # each region a draw, SD 1 nm
     x = np.repeat(value, 10) + rng.normal(0.0, 0.3, 10 * means.size)
     w = np.repeat(areas / 10.0, 10)
@@ -509,11 +510,11 @@ def _small_population_scene(copies, seed=0):
 
 
 @pytest.mark.slow
-def test_a_population_on_one_region_is_a_candidate_with_the_field_that_decides_it():
-    """A population on one small region is not drawn as a component (it does not pay for its
-    parameters) and not dropped either: it is a candidate, with its mean, area and the field
-    (area ×) at which the model choice would take it; grown to that field (more copies of
-    the same composition, new draws) the mixture does take it."""
+def test_a_population_on_small_scattered_regions_is_a_candidate_with_the_field_that_decides_it():
+    """A population on a few small regions is not drawn as a component (it does not pay for
+    its parameters) and not dropped either: it is a candidate, with its mean, area and the
+    field (area ×) at which the model choice would take it; grown to that field (more copies
+    of the same composition, new draws) the mixture does take it."""
     from microfacet.analysis.mixtures import CANDIDATE_MAX_FIELD_SCALE
 
     x, w, regions = _small_population_scene(1)
@@ -521,14 +522,14 @@ def test_a_population_on_one_region_is_a_candidate_with_the_field_that_decides_i
                                 background=True)
     np.testing.assert_allclose(sorted(fit.mixture.means_nm), [120, 150], atol=1.5)
     (cand,) = fit.info["candidates"]
-    assert cand.mean_nm == pytest.approx(regions.value[-1], abs=1e-9)
-    assert cand.regions == 1 and cand.sd_nm is None
+    assert cand.mean_nm == pytest.approx(np.mean(regions.value[-10:]), abs=1e-9)
+    assert cand.regions == 10 and not cand.is_grain(regions) and "grains_nm" not in fit.info
     assert cand.area_fraction == pytest.approx(2200.0 / (14 * 5000 + 2200))
     assert 1.0 < cand.field_scale <= CANDIDATE_MAX_FIELD_SCALE and cand.reported
     js = fit.to_json()["candidates"][0]
     assert js["mean_nm"] == cand.mean_nm and "region_index" not in js
     json.dumps(fit.to_json())
-    # the prediction (3.6× here) holds: at 1.25× it the population is decided, at 0.6× not
+    # the prediction holds: at 1.25× it the population is decided, at 0.6× not
     for scale, k in ((1.25, 3), (0.6, 2)):
         xb, wb, rb = _small_population_scene(int(math.ceil(scale * cand.field_scale)) if k == 3
                                              else int(scale * cand.field_scale), seed=1)
@@ -537,6 +538,26 @@ def test_a_population_on_one_region_is_a_candidate_with_the_field_that_decides_i
         assert grown.n_components == k
         assert len(grown.info["candidates"]) == 3 - k
     np.testing.assert_allclose(sorted(grown.mixture.means_nm), [120, 150], atol=1.5)
+
+
+def test_a_population_on_one_grain_is_a_component():
+    """The same 3 % at 230 nm as one region of 2200 px, 0.44 × the others' 5000 px: a grain
+    of the surface with a thickness of its own (80 nm and ≫ 4 SD from the populations), a
+    population although BIC alone, counting the region as one draw, does not take it; its
+    mean is the region's. As ten regions of 220 px (0.044 ×) it stays a candidate (above)."""
+    from microfacet.analysis.sampling import GRAIN_MIN_SCALE
+
+    x, w, regions = _small_population_scene(1, pieces=1)
+    fit = fit_thickness_mixture(x, sigma_nm=0.3, weights=w, n_effective=regions,
+                                background=True)
+    least = min(fit.bic_by_k.values())
+    assert min(k for k, b in fit.bic_by_k.items() if b <= least + 2.0) == 2  # BIC alone: two
+    np.testing.assert_allclose(sorted(fit.mixture.means_nm), [120, 150, regions.value[-1]],
+                               atol=1.5)
+    assert fit.info["grains_nm"] == [pytest.approx(regions.value[-1])]
+    assert fit.info["candidates"] == []
+    assert fit.mixture.components[-1][0] == pytest.approx(2200.0 / 72200.0, rel=0.05)
+    assert 2200.0 / 5000.0 > GRAIN_MIN_SCALE
 
 
 @pytest.mark.slow
