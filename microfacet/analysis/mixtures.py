@@ -501,14 +501,14 @@ def fit_thickness_mixture(thickness_nm, *, sigma_nm=None, weights=None, group=No
     bics = {k: f[0] for k, f in fits.items()}
     mixture = _as_mixture(*sols[k_best])
     info = {"inadmissible_k": sorted(set(bics) - set(ok)), "background_weight": bgw[k_best],
-            "sd_at_floor": [i for i, c in enumerate(mixture.components)
-                            if c[2] <= sd_floor_nm * 1.0001],
             "sd_ceiling_nm": opts.thickness_max_sd_nm}
     bic = bics[k_best]
     if n_regions is not None:
         sol, ll, k = _grains_taken(d, (sols[k_best], lls[k_best], bg), regions, k_max, info)
         if k > k_best:
             mixture, bic = _as_mixture(*sol), bic_score(ll, W, n_eff, 3 * k - 1 + (bg > 0))
+    info["sd_at_floor"] = [i for i, c in enumerate(mixture.components)
+                           if c[2] <= sd_floor_nm * 1.0001]
     return MixtureFit(mixture, bic, bics, n, n_eff,
                       k_note(k_max, opts.max_components, uniq.size, n_count, "values"), x.size,
                       lls, bic_margin=margin, info=info)

@@ -83,13 +83,13 @@ class Regions:
 #: weighted, :func:`facets_per_region`) is scattered facets, not a population
 #: (:func:`~.consistency.scattered_components`). On the generalization sweeps
 #: (docs/accuracy.md, "Grains and scattered facets") the components that were no true
-#: population measured 1.5-5.3 of them where a population's measured 3.0-4.2 only on
-#: scenes read an interference order off, else 6 and more.
+#: population mostly measured 1.5-5.3 of them, where a population measured 3.0-5.3 only on
+#: three scenes read an interference order off, else 6 and more.
 SCATTERED_MAX_FACETS = 6.0
 #: A candidate population whose regions are at least this share of the other regions' size
 #: (area-weighted mean area, :func:`region_scale_px`) is a grain of the surface and taken as
 #: a population (:meth:`~.mixtures.PopulationCandidate.is_grain`); candidates with a true
-#: population measured 0.12-0.97 on the sweeps, the others mostly 0.01-0.11.
+#: population measured 0.11-0.97 on the sweeps (19 of 22), the others mostly 0.01-0.09.
 GRAIN_MIN_SCALE = 0.1
 
 
