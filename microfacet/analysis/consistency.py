@@ -300,8 +300,10 @@ def scattered_components(mixture, thickness_nm, regions, patch_area, *,
     (:func:`~.sampling.facets_per_region`, area-weighted); at least one component is kept.
     The field grows the number of independent regions, and facets misread alike, a few
     percent of a large field, then pay for a component (on the generalization sweep at
-    1024² px: a population's other interference order, 1.7-3.6 facets per region, where
-    the populations' regions hold tens).
+    1024² px: a population's other interference order in hundreds of separate regions).
+    A facet merged into another component's region counts that region's size: the measure
+    reads high where misread facets sit inside a population's regions (docs/accuracy.md,
+    "Grains and scattered facets").
 
     Parameters
     ----------

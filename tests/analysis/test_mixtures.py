@@ -560,6 +560,33 @@ def test_a_population_on_one_grain_is_a_component():
     assert 2200.0 / 5000.0 > GRAIN_MIN_SCALE
 
 
+def test_a_region_near_a_population_of_few_regions_is_no_grain():
+    """A population read from two large regions (172.4 and 173.6 nm: SD 0.61) and a third
+    region of it at 168.1 nm of a grain's size: > 4 of the fitted SD away, a candidate of
+    grain size, but within 4 SD at the widest its two regions allow (the 95 % upper bound,
+    × 13 the SD for one degree of freedom), so no population of its own; 100 nm away the
+    same region is one."""
+    from microfacet.analysis.sampling import Regions
+
+    def fit_with(third_nm):
+        rng = np.random.default_rng(5)
+        value = np.r_[120.0 + rng.normal(0, 1.0, 8), 172.4, 173.6, third_nm]
+        areas = np.r_[np.full(8, 5000.0), 15000.0, 15000.0, 1500.0]
+        x = np.repeat(value, 10) + rng.normal(0.0, 0.1, 10 * value.size)
+        regions = Regions(np.repeat(np.arange(value.size), 10), value,
+                          np.full(value.size, 0.1 / math.sqrt(10)), areas, 0.0)
+        fit = fit_thickness_mixture(x, sigma_nm=0.1, weights=np.repeat(areas / 10.0, 10),
+                                    n_effective=regions, background=True)
+        return fit, regions
+
+    near, regions = fit_with(168.1)
+    (cand,) = near.info["candidates"]
+    assert cand.mean_nm == pytest.approx(168.1) and cand.is_grain(regions)
+    assert "grains_nm" not in near.info and near.n_components == 2
+    far, _ = fit_with(273.0)
+    assert far.info["grains_nm"] == [pytest.approx(273.0)] and far.n_components == 3
+
+
 @pytest.mark.slow
 def test_candidates_only_with_regions_and_a_misfit_one_is_not_reported():
     """Without the regions (seed mode's groups) there are no candidates; a candidate whose
