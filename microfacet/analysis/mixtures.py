@@ -75,7 +75,7 @@ from ..core.distributions import ThicknessMixture
 from ..core.lazy import load
 from ..io.jsonfile import json_safe
 from .options import FitOptions
-from .sampling import GRAIN_MIN_SCALE, Regions, Samples, collapse, prepare, region_scale_px
+from .sampling import GRAIN_MIN_SCALE, Regions, Samples, area_weighted_size, collapse, prepare
 from .sampling import special as _special
 
 threadpoolctl = load("threadpoolctl")
@@ -610,24 +610,27 @@ class PopulationCandidate:
         reported as such) and a field of at most :data:`CANDIDATE_MAX_FIELD_SCALE` × the
         area would decide it."""
         return (self.colour_explained is not False and self.alias_of_nm is None
-                and self.field_scale is not None
-                and self.field_scale <= CANDIDATE_MAX_FIELD_SCALE)
+                and self.decidable)
+
+    @property
+    def decidable(self) -> bool:
+        """A field of at most :data:`CANDIDATE_MAX_FIELD_SCALE` × the area would decide it."""
+        return self.field_scale is not None and self.field_scale <= CANDIDATE_MAX_FIELD_SCALE
 
     def is_grain(self, regions: Regions) -> bool:
         """Whether it is a grain of the surface, taken into the mixture as a population:
         its regions are at least :data:`~.sampling.GRAIN_MIN_SCALE` × as large
-        (:func:`~.sampling.region_scale_px`) as the other regions, and a field of at most
-        :data:`CANDIDATE_MAX_FIELD_SCALE` × the area would decide it. The model choice
+        (:func:`~.sampling.area_weighted_size`) as the other regions, and it is
+        :attr:`decidable`. The model choice
         counts a region as one draw and cannot decide a population on one or two; a
         coherent patch far (:data:`CANDIDATE_Z`) from every population holds a thickness
         of its own, whose spread only the field does not measure; scattered facets do not."""
-        if self.field_scale is None or self.field_scale > CANDIDATE_MAX_FIELD_SCALE:
+        if not self.decidable:
             return False
-        patch = np.arange(regions.count)
-        mine = np.isin(patch, self.region_index)
-        rest = ~mine & np.isfinite(regions.value)
-        return bool(region_scale_px(patch, regions.area, mine)
-                    >= GRAIN_MIN_SCALE * region_scale_px(patch, regions.area, rest))
+        rest = np.isfinite(regions.value)
+        rest[self.region_index] = False
+        return bool(area_weighted_size(regions.area[self.region_index])
+                    >= GRAIN_MIN_SCALE * area_weighted_size(regions.area[rest]))
 
     def to_json(self) -> dict:
         out = {k: v for k, v in asdict(self).items() if k != "region_index"}

@@ -37,9 +37,9 @@ from .segmentation import merge_adjacent, neighbour_pairs
 # scipy.special, not scipy.stats (0.19 s more to import) for a χ² quantile
 special = load("scipy.special")
 
-__all__ = ["GRAIN_MIN_SCALE", "SCATTERED_MAX_FACETS", "Regions", "Samples", "collapse",
-           "facets_per_region", "prepare", "region_scale_px", "thickness_regions",
-           "weighted_median"]
+__all__ = ["GRAIN_MIN_SCALE", "SCATTERED_MAX_FACETS", "Regions", "Samples",
+           "area_weighted_size", "collapse", "facets_per_region", "prepare", "region_scale_px",
+           "thickness_regions", "weighted_median"]
 
 
 @dataclass
@@ -108,7 +108,17 @@ def region_scale_px(patch_region, region_area, members) -> float:
     10.0
     """
     r = np.unique(np.asarray(patch_region)[np.asarray(members, bool)])
-    a = np.asarray(region_area, dtype=np.float64)[r[r >= 0]]
+    return area_weighted_size(np.asarray(region_area)[r[r >= 0]])
+
+
+def area_weighted_size(area) -> float:
+    """``Σ a² / Σ a``: the mean area of the pieces ``area``, each weighted by its area (the
+    size a random pixel's piece has); NaN for none.
+
+    >>> area_weighted_size([400.0, 10.0, 10.0])
+    381.42857142857144
+    """
+    a = np.asarray(area, dtype=np.float64)
     return float(np.sum(a * a) / a.sum()) if a.size and a.sum() > 0 else float("nan")
 
 
@@ -122,9 +132,8 @@ def facets_per_region(patch_region, region_area, patch_area, members) -> float:
     2.0
     """
     m = np.asarray(members, bool)
-    a = np.asarray(patch_area, dtype=np.float64)[m]
-    own = float(np.sum(a * a) / a.sum()) if a.size and a.sum() > 0 else float("nan")
-    return region_scale_px(patch_region, region_area, m) / own
+    return (region_scale_px(patch_region, region_area, m)
+            / area_weighted_size(np.asarray(patch_area)[m]))
 
 
 def thickness_regions(labels, value, sigma, *, alpha=1e-4) -> Regions:
