@@ -29,6 +29,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,8 +41,8 @@ from .sampling import SCATTERED_MAX_FACETS, facets_per_region, weighted_median
 
 __all__ = ["MapCheck", "OrderMove", "candidate_alias", "component_orders",
            "distinct_populations", "misread_components", "mixture_map_check",
-           "nearest_component", "order_alias_of", "order_move", "roi_pixel_check",
-           "scattered_components"]
+           "nearest_component", "order_alias_of", "order_move", "region_components",
+           "roi_pixel_check", "scattered_components"]
 
 #: The per-pixel map's error floor (nm) each component is widened by: the thickness per true
 #: region errs by a median 0.6-0.8 nm on the generalization sweep (docs/accuracy.md).
@@ -295,15 +296,15 @@ def scattered_components(mixture, thickness_nm, regions, patch_area, *,
     of a few facets each: misread facets, not a population.
 
     Each sample (a facet, a patch of ``regions``) belongs to its most likely component
-    within :data:`UNEXPLAINED_SD` widened SD. A component of weight at most ``max_weight``
-    is scattered where its samples' regions hold fewer than ``max_facets`` of them
-    (:func:`~.sampling.facets_per_region`, area-weighted); at least one component is kept.
-    The field grows the number of independent regions, and facets misread alike, a few
-    percent of a large field, then pay for a component (on the generalization sweep at
-    1024² px: a population's other interference order in hundreds of separate regions).
-    A facet merged into another component's region counts that region's size: the measure
-    reads high where misread facets sit inside a population's regions (docs/accuracy.md,
-    "Grains and scattered facets").
+    within :data:`UNEXPLAINED_SD` widened SD, and each region to the component its mean lies
+    nearest (:func:`region_components`). A component of weight at most ``max_weight`` is
+    scattered where its own regions hold fewer than ``max_facets`` facets
+    (:func:`~.sampling.facets_per_region` over the facets of those regions, area-weighted),
+    or where no region is its own (its facets all lie in regions of other components: the
+    tail of a population, not one); at least one component is kept. The field grows the
+    number of independent regions, and facets misread alike, a few percent of a large field,
+    then pay for a component (on the generalization sweep at 1024² px: a population's other
+    interference order in hundreds of separate regions).
 
     Parameters
     ----------
@@ -334,16 +335,43 @@ def scattered_components(mixture, thickness_nm, regions, patch_area, *,
     [(1, 1.0, 10)]
     """
     own, _, _ = _own_component(mixture, thickness_nm)
+    region_own = region_components(mixture, regions)
     out = []
     for k in sorted(range(len(mixture.components)), key=lambda i: mixture.components[i][0]):
         mine = own == k
         if (len(out) == len(mixture.components) - 1 or not mine.any()
                 or mixture.components[k][0] > max_weight):
             continue
-        f = facets_per_region(regions.patch_region, regions.area, patch_area, mine)
+        in_own = np.isin(regions.patch_region, np.flatnonzero(region_own == k))
+        f = facets_per_region(regions.patch_region, regions.area, patch_area, in_own)
+        f = f if math.isfinite(f) else 0.0
         if f < max_facets:
             out.append((k, f, mine))
     return out
+
+
+def region_components(mixture, regions) -> np.ndarray:
+    """Per thickness region (:class:`~.sampling.Regions`), the component of ``mixture`` its
+    mean lies nearest: in units of the component's SD widened by the region mean's σ and
+    :data:`MAP_FLOOR_NM`; -1 for a region without a value.
+
+    >>> from microfacet.analysis.sampling import Regions
+    >>> from microfacet.core.distributions import ThicknessMixture
+    >>> m = ThicknessMixture([(0.9, 200.0, 3.0), (0.1, 215.0, 1.0)])
+    >>> reg = Regions(np.zeros(3, int), np.array([201.0, 212.0, np.nan]), np.full(3, 0.5),
+    ...               np.full(3, 100.0), 0.0)
+    >>> region_components(m, reg).tolist()
+    [0, 1, -1]
+    """
+    comps = mixture.components
+    mu = np.array([c[1] for c in comps])
+    sd = np.array([c[2] for c in comps])
+    v = np.asarray(regions.value, dtype=np.float64)
+    sig = np.nan_to_num(np.asarray(regions.sigma, dtype=np.float64), nan=0.0)
+    ok = np.isfinite(v)
+    z = (np.abs(np.where(ok, v, 0.0)[:, None] - mu)
+         / np.sqrt(sd ** 2 + sig[:, None] ** 2 + MAP_FLOOR_NM ** 2))
+    return np.where(ok, np.argmin(z, axis=1), -1) if mu.size else np.full(v.size, -1)
 
 
 def nearest_component(mixture, values_nm, *, exclude=None) -> np.ndarray:

@@ -161,14 +161,18 @@ def _median(x) -> float | None:
     return float(np.median(x)) if x.size else None
 
 
-def _misread(fit, th, ok, regions, area) -> list:
+def _misread(fit, th, ok, regions, area, delta_e_at_estimate=None) -> list:
     """The components of ``fit`` that are misread facets: ``(k, record, facets)`` each,
-    by colour (:func:`~.consistency.misread_components`) or scattered in regions of a few
-    facets (:func:`~.consistency.scattered_components`; ``area``: the facets' px); at least
-    one component is kept."""
+    by colour (:func:`~.consistency.misread_components`; where ``delta_e_at_estimate`` is
+    given, at the image's balance and at the white-balance estimate's alike) or scattered in
+    regions of a few facets (:func:`~.consistency.scattered_components`; ``area``: the
+    facets' px); at least one component is kept."""
     thick = np.where(ok, th.thickness_nm, np.nan)
     out = {k: (k, {"why": "colour", "delta_e": a, "delta_e_populations": b}, mine)
            for k, a, b, mine in misread_components(fit.mixture, thick, th.delta_e)}
+    if delta_e_at_estimate is not None and out:
+        also = {k for k, *_ in misread_components(fit.mixture, thick, delta_e_at_estimate)}
+        out = {k: v for k, v in out.items() if k in also}
     for k, f, mine in scattered_components(fit.mixture, thick, regions, area):
         if k not in out and len(out) < len(fit.mixture.components) - 1:
             de = th.delta_e
@@ -178,7 +182,7 @@ def _misread(fit, th, ok, regions, area) -> list:
     return list(out.values())
 
 
-def _set_aside_misread(joint, fit, samples, options, seed):
+def _set_aside_misread(joint, fit, samples, options, seed, delta_e_at_estimate=None):
     """The mixture refitted without the facets of its misread components
     (:func:`_misread`: minor components whose colours the film explains much worse than the
     populations', by the rule a candidate population's colours must pass, or whose facets
@@ -197,7 +201,8 @@ def _set_aside_misread(joint, fit, samples, options, seed):
     ok, unexplained, regions = samples
     records = []
     for _ in range(MAX_MISREAD_ROUNDS):
-        bad = _misread(fit, th, ok, regions, joint.area_px.astype(np.float64))
+        bad = _misread(fit, th, ok, regions, joint.area_px.astype(np.float64),
+                       delta_e_at_estimate)
         if not bad:
             break
         drop = np.logical_or.reduce([mine for *_, mine in bad])
@@ -314,7 +319,7 @@ def _on_component(thickness_nm, mixture, mean_nm) -> np.ndarray:
 
 
 def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders | None = None,
-                     gain_shifts_nm=None):
+                     gain_shifts_nm=None, delta_e_at_estimate=None):
     """The thickness mixture of the facets, and its judgement; each candidate population
     with the side of the square field (µm) that would decide it, each component's mean with
     its uncertainty (:func:`mean_uncertainty`). ``pooled``: the samples and mixture
@@ -328,7 +333,7 @@ def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders
         return None, NO_SAMPLES["thickness"]
     fit = pooled.fit if ready else _thickness_fit(joint, ok, regions, options, scene.seed)
     fit, (ok, unexplained, regions), misread = _set_aside_misread(
-        joint, fit, (ok, unexplained, regions), options, scene.seed)
+        joint, fit, (ok, unexplained, regions), options, scene.seed, delta_e_at_estimate)
     fit.info["misread_components"] = misread
     _describe_candidates(fit, regions, th, area, ok,
                          joint.facets.size * float(np.prod(scene.pixel_size_um)))
@@ -608,7 +613,7 @@ def _dome_share(dome, pl, use, area) -> float | None:
 
 def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
                             pooled: PooledOrders | None = None,
-                            gain_shifts_nm=None) -> Distributions:
+                            gain_shifts_nm=None, delta_e_at_estimate=None) -> Distributions:
     """Thickness mixture and NDF of a :class:`~.joint.JointResult`, with identification.
 
     Parameters
@@ -629,9 +634,15 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
         Each facet's thickness move for a 1σ error of the R and B gains
         (:func:`~.joint.gain_thickness_shifts`): the white-balance part of the components'
         mean uncertainty (``info["mean_uncertainty"]``, :func:`mean_uncertainty`).
+    delta_e_at_estimate : ndarray, shape (S,), optional
+        Each facet's colour misfit at the scene's white-balance estimate, where it was not
+        applied (:func:`~.joint.delta_e_rebalanced`): a component is misread by colour only
+        where its colours fit worse than the populations' at the image's balance and at the
+        estimate's alike (a white-balance error fits some thicknesses worse than others).
     """
     cens_frac = _censored_fraction(joint)
-    tfit, tj = _joint_thickness(joint, roi, options, scene, cens_frac, pooled, gain_shifts_nm)
+    tfit, tj = _joint_thickness(joint, roi, options, scene, cens_frac, pooled, gain_shifts_nm,
+                                delta_e_at_estimate)
     if tfit is not None and pooled is not None:
         tfit.info["order_moves"] = [m.to_json() for m in pooled.moves]
     nfit, nj = _joint_ndf(joint, model, cens_frac, scene.max_tilt_deg, options, scene.seed)

@@ -60,6 +60,7 @@ from .identification import (
 from .iso25178 import areal_parameters
 from .joint import (
     bootstrap_labels,
+    delta_e_rebalanced,
     facet_geometry,
     facet_image,
     facet_labels,
@@ -341,7 +342,9 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         with timer.stage(Stage.MIXTURES):
             dist = fit_joint_distributions(
                 joint, roi, model, scene, fits, pooled=pooled,
-                gain_shifts_nm=_gain_shifts(joint, cols, model, options, scene, wb))
+                gain_shifts_nm=_gain_shifts(joint, cols, model, options, scene, wb),
+                delta_e_at_estimate=_delta_e_at_estimate(joint, cols, model, options, scene,
+                                                         wb))
             dist.exposure_readings = readings
             # read by the facet stages only: freed (and given back at the stage's end)
             # before the self-check's peak
@@ -392,6 +395,18 @@ def _gain_shifts(joint, cols, model, options, scene, wb):
         return None
     return gain_thickness_shifts(cols, joint.thickness.thickness_nm, joint.prior_deg, model,
                                  options.joint, log_gain_rb=sigma, illuminant=scene.illuminant)
+
+
+def _delta_e_at_estimate(joint, cols, model, options, scene, wb):
+    """Each facet's colour misfit at the scene's white-balance estimate
+    (:func:`~.joint.delta_e_rebalanced`, at the tilt it was solved at); None where the
+    colours were balanced already (a reference, or the estimate applied) or nothing was
+    estimated."""
+    if wb.applied or wb.estimate_rgb is None:
+        return None
+    log_gain = (math.log(wb.estimate_rgb[0]), math.log(wb.estimate_rgb[2]))
+    return delta_e_rebalanced(cols, joint.thickness.thickness_nm, joint.prior_deg, model,
+                              options.joint, log_gain_rb=log_gain, illuminant=scene.illuminant)
 
 
 def _order_window_nm(options, model) -> float:

@@ -79,14 +79,13 @@ class Regions:
 
 #: A population covers grains of the surface, each of many facets; facets misread alike
 #: (groove walls, facets read in another interference order, dust) lie apart, in regions of
-#: a facet or a few. A minor component whose regions hold fewer facets than this (area-
-#: weighted, :func:`facets_per_region`) is scattered facets, not a population
-#: (:func:`~.consistency.scattered_components`). Read off the generalization sweeps with a
-#: scratch measure that counts the regions whose mean lies on the component
+#: a facet or a few. A minor component whose own regions (those whose mean lies on it,
+#: :func:`~.consistency.region_components`) hold fewer facets than this (area-weighted,
+#: :func:`facets_per_region`) is scattered facets, not a population
+#: (:func:`~.consistency.scattered_components`). Read off the generalization sweeps
 #: (docs/accuracy.md, "Grains and scattered facets"): the components that were no true
 #: population mostly measured 1.5-5.3, a population 3.0-5.3 only on three scenes read an
-#: interference order off, else 6 and more; the analysis counts the regions its facets lie
-#: in, which reads higher where they sit inside other components' regions.
+#: interference order off, else 6 and more.
 SCATTERED_MAX_FACETS = 6.0
 #: A candidate population whose regions are at least this share of the other regions' size
 #: (area-weighted mean area, :func:`region_scale_px`) is a grain of the surface and taken as

@@ -299,3 +299,32 @@ def test_a_population_explained_as_well_or_a_major_one_is_not_misread(share, de_
 
     mix, d, de = _misread_scene(share=share, de_minor=de_minor)
     assert misread_components(mix, d, de) == []
+
+
+def test_a_minor_component_without_a_region_of_its_own_is_set_aside():
+    """26 facets read at 212 nm with errors of 8 nm beside a 200 nm population: their thickness
+    regions are the population's (their values agree within their errors), so no region's
+    mean lies on the 212 nm component: the tail of a population, set aside although its
+    facets lie in a region of hundreds of facets; with errors of 0.1 nm they are regions of
+    their own, one facet each: set aside as scattered."""
+    from microfacet.analysis.consistency import region_components, scattered_components
+    from microfacet.analysis.sampling import thickness_regions
+
+    rng = np.random.default_rng(1)
+    labels = np.arange(256).reshape(16, 16).repeat(8, 0).repeat(8, 1)
+    row, col = np.arange(256) // 16, np.arange(256) % 16
+    at = rng.choice(np.flatnonzero((row + col) % 2 == 0), 26, replace=False)
+    d = 200.0 + rng.normal(0, 0.1, 256)
+    d[at] = 212.0 + rng.normal(0, 0.5, at.size)
+    mix = ThicknessMixture([(0.9, 200.0, 0.2), (0.1, 212.0, 0.5)])
+    sigma = np.full(256, 0.1)
+    sigma[at] = 8.0
+    reg = thickness_regions(labels, d, sigma)
+    assert np.unique(reg.patch_region[at]).size < 5          # inside the population's regions
+    assert not np.any(region_components(mix, reg) == 1)
+    ((k, f, mine),) = scattered_components(mix, d, reg, np.full(256, 64.0))
+    assert k == 1 and f == 0.0 and mine.sum() == 26
+    sigma[at] = 0.1
+    reg = thickness_regions(labels, d, sigma)
+    ((k, f, _),) = scattered_components(mix, d, reg, np.full(256, 64.0))
+    assert k == 1 and f == 1.0

@@ -539,3 +539,28 @@ def test_no_correction_outside_the_range_or_when_switched_off(nd, nd_analysis):
     before = [(c["weight"], c["sd_deg"]) for c in j.ndf_fit.info["width_correction"][
         "uncorrected"]]
     assert np.ravel(same.mixture.components) == pytest.approx(np.ravel(before), rel=1e-6)
+
+
+def test_a_component_misfit_only_at_the_images_balance_is_not_misread():
+    """A minor component whose colours fit the film 4× worse than the population's is misread
+    facets; where the scene's white-balance estimate (not applied) fits them as well as the
+    population's, the misfit is the camera's balance and the component stays; where it
+    fits them as badly, they are set aside as before."""
+    from types import SimpleNamespace
+
+    from microfacet.analysis.distributions import _misread
+    from microfacet.analysis.sampling import Regions
+    from microfacet.core.distributions import ThicknessMixture
+
+    d = np.r_[np.full(85, 130.0), np.full(15, 250.0)]
+    de = np.r_[np.full(85, 1.0), np.full(15, 4.0)]
+    fit = SimpleNamespace(mixture=ThicknessMixture([(0.85, 130.0, 1.0), (0.15, 250.0, 1.0)]))
+    th = SimpleNamespace(thickness_nm=d, delta_e=de)
+    region = (d > 200).astype(int)             # two grains: neither component is scattered
+    area = np.full(100, 64.0)
+    reg = Regions(region, np.array([130.0, 250.0]), np.full(2, 0.1),
+                  np.bincount(region, area), 0.0)
+    ok = np.ones(100, bool)
+    assert [(k, rec["why"]) for k, rec, _ in _misread(fit, th, ok, reg, area)] == [(1, "colour")]
+    assert _misread(fit, th, ok, reg, area, np.full(100, 1.1)) == []
+    assert [k for k, *_ in _misread(fit, th, ok, reg, area, de + 0.2)] == [1]

@@ -312,3 +312,41 @@ def test_gain_shifts_predict_the_move_of_a_camera_balanced_otherwise(tmp_path):
     err = np.abs(predicted[ok] - actual[ok])
     assert np.median(err) < 0.1 * scale                       # measured: 0.03 x
     assert np.percentile(err, 90) < 0.3 * scale               # measured: 0.18 x
+
+
+@pytest.mark.slow
+def test_misfit_at_the_cameras_gains_is_that_of_a_balanced_camera(tmp_path):
+    """joint.delta_e_rebalanced against the renderer's white balance: a camera that
+    multiplies R and B by 1.12 and 0.90, analysed without its gains, misfits the film;
+    its facets balanced again with those gains fit as the same scene's facets do where the
+    gains are given (stack.json), and at gains of 1 as the analysis found them."""
+    from microfacet.analysis.joint import FacetGeometry, delta_e_rebalanced, facet_image
+
+    gains = (1.12, 1.0, 0.90)
+    path = tmp_path / "wb"
+    generate_stack(path, preset("nd", height_px=96, width_px=96, n_slices=N_SLICES, seed=4,
+                                white_balance_gains=gains))
+    options = AnalysisOptions(mode="joint").replace(joint={"flat_field": "off"},
+                                                    optics={"white_balance": "off"})
+    r = analyse_stack(path, options)
+    j, opts, il = r.joint, r.options.joint, r.scene.illuminant
+    g = FacetGeometry(j.facets, j.planes, j.evidence_planes, j.area_px,
+                      facet_edge_distance(j.facets), j.prior_deg, j.prior_sigma_deg,
+                      j.dome_ms_slope)
+    cols = facet_image(g, r.colour, r.roi, opts).colours()
+    d = j.thickness.thickness_nm
+    ok = np.isfinite(d) & (j.area_px > 20)
+
+    def misfit(log_gain):
+        return delta_e_rebalanced(cols, d, j.prior_deg, r.model, opts, log_gain_rb=log_gain,
+                                  illuminant=il)[ok]
+    as_is, at_gains = misfit((0.0, 0.0)), misfit((np.log(gains[0]), np.log(gains[2])))
+    meta = json.loads((path / "stack.json").read_text())
+    meta["white_balance"] = list(gains)
+    (path / "stack.json").write_text(json.dumps(meta))
+    given = analyse_stack(path, options).joint.thickness.delta_e
+    assert ok.sum() > 50
+    assert np.median(as_is) == pytest.approx(np.median(j.thickness.delta_e[ok]), rel=0.1)
+
+    assert np.median(at_gains) < 0.5 * np.median(as_is)
+    assert np.median(at_gains) == pytest.approx(np.nanmedian(given), rel=0.25)
