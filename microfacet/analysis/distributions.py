@@ -163,7 +163,7 @@ def _median(x) -> float | None:
 
 def _misread(fit, th, ok, regions, area, delta_e_at_estimate=None) -> list:
     """The components of ``fit`` that are misread facets: ``(k, record, facets)`` each,
-    by colour (:func:`~.consistency.misread_components`; where ``delta_e_at_estimate`` is
+    by colour (:func:`~.consistency.misread_components`; where ``delta_e_at_estimate()`` is
     given, at the image's balance and at the white-balance estimate's alike) or scattered in
     regions of a few facets (:func:`~.consistency.scattered_components`; ``area``: the
     facets' px); at least one component is kept."""
@@ -171,7 +171,7 @@ def _misread(fit, th, ok, regions, area, delta_e_at_estimate=None) -> list:
     out = {k: (k, {"why": "colour", "delta_e": a, "delta_e_populations": b}, mine)
            for k, a, b, mine in misread_components(fit.mixture, thick, th.delta_e)}
     if delta_e_at_estimate is not None and out:
-        also = {k for k, *_ in misread_components(fit.mixture, thick, delta_e_at_estimate)}
+        also = {k for k, *_ in misread_components(fit.mixture, thick, delta_e_at_estimate())}
         out = {k: v for k, v in out.items() if k in also}
     for k, f, mine in scattered_components(fit.mixture, thick, regions, area):
         if k not in out and len(out) < len(fit.mixture.components) - 1:
@@ -634,11 +634,13 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
         Each facet's thickness move for a 1σ error of the R and B gains
         (:func:`~.joint.gain_thickness_shifts`): the white-balance part of the components'
         mean uncertainty (``info["mean_uncertainty"]``, :func:`mean_uncertainty`).
-    delta_e_at_estimate : ndarray, shape (S,), optional
-        Each facet's colour misfit at the scene's white-balance estimate, where it was not
-        applied (:func:`~.joint.delta_e_rebalanced`): a component is misread by colour only
-        where its colours fit worse than the populations' at the image's balance and at the
-        estimate's alike (a white-balance error fits some thicknesses worse than others).
+    delta_e_at_estimate : callable, optional
+        ``delta_e_at_estimate()``: each facet's colour misfit (shape (S,)) at the scene's
+        white-balance estimate, where it was not applied (:func:`~.joint.delta_e_rebalanced`;
+        called only where a component would be set aside by colour): a component is misread
+        by colour only where its colours fit worse than the populations' at the image's
+        balance and at the estimate's alike (a white-balance error fits some thicknesses
+        worse than others).
     """
     cens_frac = _censored_fraction(joint)
     tfit, tj = _joint_thickness(joint, roi, options, scene, cens_frac, pooled, gain_shifts_nm,

@@ -562,5 +562,5 @@ def test_a_component_misfit_only_at_the_images_balance_is_not_misread():
                   np.bincount(region, area), 0.0)
     ok = np.ones(100, bool)
     assert [(k, rec["why"]) for k, rec, _ in _misread(fit, th, ok, reg, area)] == [(1, "colour")]
-    assert _misread(fit, th, ok, reg, area, np.full(100, 1.1)) == []
-    assert [k for k, *_ in _misread(fit, th, ok, reg, area, de + 0.2)] == [1]
+    assert _misread(fit, th, ok, reg, area, lambda: np.full(100, 1.1)) == []
+    assert [k for k, *_ in _misread(fit, th, ok, reg, area, lambda: de + 0.2)] == [1]
