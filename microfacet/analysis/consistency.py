@@ -173,13 +173,23 @@ ALIAS_SD = 3.0
 def _own_component(mixture, thickness_nm):
     """Each sample's most likely component within :data:`UNEXPLAINED_SD` widened SD, -1 for
     none (or NaN); and the components' means and widened SDs."""
+    z, ok, mu, sd = _component_z(mixture, thickness_nm)
+    return np.where(ok & (z.min(axis=1) <= UNEXPLAINED_SD), np.argmin(z, axis=1), -1), mu, sd
+
+
+def _component_z(mixture, values_nm, sigma_nm=0.0):
+    """``(z, ok, mu, sd)``: each value's distance (S, K) from each component of ``mixture``
+    in units of its SD widened by :data:`MAP_FLOOR_NM` (``sd``) and the value's own error
+    ``sigma_nm``, in quadrature; ``ok`` the finite values, ``mu`` the means."""
     comps = mixture.components
     mu = np.array([c[1] for c in comps])
     sd = np.sqrt(np.array([c[2] for c in comps]) ** 2 + MAP_FLOOR_NM ** 2)
-    d = np.asarray(thickness_nm, dtype=np.float64)
+    d = np.asarray(values_nm, dtype=np.float64)
     ok = np.isfinite(d)
-    z = np.abs(np.where(ok, d, 0.0)[:, None] - mu) / sd
-    return np.where(ok & (z.min(axis=1) <= UNEXPLAINED_SD), np.argmin(z, axis=1), -1), mu, sd
+    sig = np.nan_to_num(np.asarray(sigma_nm, dtype=np.float64), nan=0.0)
+    z = np.abs(np.where(ok, d, 0.0)[:, None] - mu) / np.sqrt(
+        sd ** 2 + np.broadcast_to(sig, d.shape)[:, None] ** 2)
+    return z, ok, mu, sd
 
 
 def component_orders(mixture, thickness_nm, other_thickness_nm, weights, ambiguous) -> list:
@@ -363,15 +373,8 @@ def region_components(mixture, regions) -> np.ndarray:
     >>> region_components(m, reg).tolist()
     [0, 1, -1]
     """
-    comps = mixture.components
-    mu = np.array([c[1] for c in comps])
-    sd = np.array([c[2] for c in comps])
-    v = np.asarray(regions.value, dtype=np.float64)
-    sig = np.nan_to_num(np.asarray(regions.sigma, dtype=np.float64), nan=0.0)
-    ok = np.isfinite(v)
-    z = (np.abs(np.where(ok, v, 0.0)[:, None] - mu)
-         / np.sqrt(sd ** 2 + sig[:, None] ** 2 + MAP_FLOOR_NM ** 2))
-    return np.where(ok, np.argmin(z, axis=1), -1) if mu.size else np.full(v.size, -1)
+    z, ok, mu, _ = _component_z(mixture, regions.value, regions.sigma)
+    return np.where(ok, np.argmin(z, axis=1), -1) if mu.size else np.full(ok.size, -1)
 
 
 def nearest_component(mixture, values_nm, *, exclude=None) -> np.ndarray:

@@ -400,12 +400,12 @@ def _gain_shifts(joint, cols, model, options, scene, wb):
 def _delta_e_at_estimate(joint, cols, model, options, scene, wb):
     """``misfit()``: each facet's colour misfit at the scene's white-balance estimate
     (:func:`~.joint.delta_e_rebalanced`, at the tilt it was solved at), computed at the
-    first call (only a component the colour rule would set aside asks for it; 0.1 s per
-    thousand facets); None where the colours were balanced already (a reference, or the
-    estimate applied) or nothing was estimated."""
-    if wb.applied or wb.estimate_rgb is None:
+    first call (only a component the colour rule would set aside asks for it: 0.1 s for the
+    fixture's 936 facets, docs/accuracy.md); None where the colours were balanced already
+    (a reference, or the estimate applied) or nothing was estimated."""
+    log_gain = wb.estimate_log_rb()
+    if wb.applied or log_gain is None:
         return None
-    log_gain = (math.log(wb.estimate_rgb[0]), math.log(wb.estimate_rgb[2]))
     return functools.cache(lambda: delta_e_rebalanced(
         cols, joint.thickness.thickness_nm, joint.prior_deg, model, options.joint,
         log_gain_rb=log_gain, illuminant=scene.illuminant))

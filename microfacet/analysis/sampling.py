@@ -88,7 +88,7 @@ class Regions:
 #: interference order off, else 6 and more.
 SCATTERED_MAX_FACETS = 6.0
 #: A candidate population whose regions are at least this share of the other regions' size
-#: (area-weighted mean area, :func:`region_scale_px`) is a grain of the surface and taken as
+#: (area-weighted mean area, :func:`area_weighted_size`) is a grain of the surface and taken as
 #: a population (:meth:`~.mixtures.PopulationCandidate.is_grain`); candidates with a true
 #: population measured 0.11-0.97 on the sweeps (19 of 22), the others mostly 0.01-0.09.
 GRAIN_MIN_SCALE = 0.1

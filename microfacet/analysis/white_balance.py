@@ -167,9 +167,18 @@ class WhiteBalance:
         >>> WhiteBalance(estimate_rgb=(0.818, 1.0, 1.05)).at_search_edge()
         (True, False)
         """
+        logs = self.estimate_log_rb()
+        return (False, False) if logs is None else tuple(_at_edge(v) for v in logs)
+
+    def estimate_log_rb(self) -> tuple | None:
+        """The estimate's log R and B gains (None without an estimate).
+
+        >>> [round(v, 4) for v in WhiteBalance(estimate_rgb=(1.1, 1.0, 0.9)).estimate_log_rb()]
+        [0.0953, -0.1054]
+        """
         if self.estimate_rgb is None:
-            return (False, False)
-        return tuple(_at_edge(math.log(g)) for g in (self.estimate_rgb[0], self.estimate_rgb[2]))
+            return None
+        return (math.log(self.estimate_rgb[0]), math.log(self.estimate_rgb[2]))
 
     def log_gain_sigma(self) -> tuple | None:
         """1σ of the log R and B gains the colours were corrected with, as far as the
