@@ -36,8 +36,8 @@ from .options import FitOptions
 from .white_balance import LOG_RANGE
 
 __all__ = ["Judgement", "Reason", "analysis_warnings", "colour_tilt_contrast",
-           "gains_unconstrained", "mask_warning", "mean_plane_tilt_deg", "ndf_judgement",
-           "order_check",
+           "gains_off_one", "gains_unconstrained", "mask_warning", "mean_plane_tilt_deg",
+           "ndf_judgement", "order_check",
            "seed_ndf_judgement", "self_check_judgement", "self_check_passes",
            "thickness_judgement"]
 
@@ -225,17 +225,20 @@ class NdfEvidence:
 def self_check_passes(check, options: FitOptions) -> bool:
     """Whether the self-check (:class:`~.self_check.SelfCheck`, or None) says the stack
     resolves the facets' slopes: its slope gain (``transfer``) and its width transfer both
-    in ``fits.self_check_range`` (False where either was not measured)."""
+    in ``fits.self_check_range``, and the gain's half-range over the injected widths
+    (``spread``) at most ``fits.self_check_max_spread`` (False where any was not measured)."""
     if check is None:
         return False
     low, high = options.self_check_range
-    return bool(low <= check.transfer <= high and low <= check.width_transfer <= high)
+    return bool(low <= check.transfer <= high and low <= check.width_transfer <= high
+                and check.spread <= options.self_check_max_spread)
 
 
 def self_check_judgement(judgement: Judgement, check, options: FitOptions) -> Judgement:
     """The NDF's judgement after its self-check (:mod:`.self_check`): an NDF the stack
     cannot resolve — the recovered/injected slope gain (``transfer``) or the width the NDF
-    would see over the true width (``width_transfer``) outside ``fits.self_check_range``, or
+    would see over the true width (``width_transfer``) outside ``fits.self_check_range``, a
+    gain that changes with the injected width by more than ``fits.self_check_max_spread``, or
     not measurable — is not identified, whatever its other evidence says."""
     if not judgement.identified or check is None or self_check_passes(check, options):
         return judgement
@@ -245,6 +248,14 @@ def self_check_judgement(judgement: Judgement, check, options: FitOptions) -> Ju
         said = "had fewer than 3 facet planes with measurable slopes to inject on"
     elif not math.isfinite(t):
         said = "could not recover injected slopes"
+    elif low <= t <= high and low <= wt <= high:
+        return Judgement(False, Reason(
+            "self_check", f"the self-check on this stack recovers the injected slopes at "
+            f"{min(check.ratio):.2f}-{max(check.ratio):.2f}× depending on their width (a "
+            f"half-range of {check.spread:.2f}; identified only up to "
+            f"{options.self_check_max_spread:g}, `fits.self_check_max_spread`): the stack's "
+            f"slope transfer is not one number to correct by (ndf.self_check in summary.json)",
+            "fits.self_check_max_spread"))
     elif low <= t <= high:
         said = (f"recovers the injected slopes ({t:.2f}×) but the NDF would see "
                 f"{wt:.2f}× their RMS once their noise is removed")
@@ -421,7 +432,10 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions,
     :func:`gains_unconstrained`, not checked without an estimate of the gains; the order
     then rests on the image being balanced: on an
     independent draw of the sweep a one-colour scene with R × 1.14, B × 0.91 was read
-    241 nm off so, with no ambiguity), or where the thickness is not identified. Returns
+    241 nm off so, with no ambiguity), or where the scene's estimate asks for gains off 1
+    and no reference gives them (:func:`gains_off_one`: on the held-out draws of 2026-12-02
+    a one-population scene under R × 1.09, B × 1.04 was read 239 nm off with its estimate
+    asking for R × 1.07, B × 0.95), or where the thickness is not identified. Returns
     ``{"established": bool, "reasons": [str]}`` (summary.json ``thickness.order``).
     """
     why = []
@@ -441,6 +455,10 @@ def order_check(dist, *, delta_e_median, noise_de, options: FitOptions,
     if gains_unconstrained(white_balance):
         why.append("the colours leave the white balance free and no reference gives it: the "
                    "order rests on the image being balanced")
+    elif off := gains_off_one(white_balance):
+        why.append("the colours ask for white-balance gains " + ", ".join(
+            f"{n} x{g:.3f}" for n, g, _ in off) + " and no reference gives them: the order "
+            "rests on the image being balanced")
     for a in _aliases(dist.thickness):
         why.append(f"the {a[0]:.1f} nm component may be the {a[1]:.1f} nm one read in "
                    f"another order")
@@ -593,6 +611,32 @@ def mask_warning(fractions: dict) -> Reason | None:
                   f"is not in them (summary.json mask)", parameter)
 
 
+#: A gain the scene's own white-balance estimate asks for is "off 1" beyond this many of its
+#: SDs (:func:`gains_off_one`) ...
+GAIN_OFF_SIGMAS = 3.0
+#: ... and beyond this relative size (the estimate's bias on balanced scenes: the film model
+#: does not hold every scene effect, docs/accuracy.md "White balance").
+GAIN_OFF_MIN = 0.03
+
+
+def gains_off_one(wb) -> list:
+    """The gains the scene's own estimate asks for that differ from 1 by more than
+    :data:`GAIN_OFF_SIGMAS` σ and :data:`GAIN_OFF_MIN` in log, where no reference gives them:
+    ``[(name, gain, sigma)]`` for R and B (empty without an estimate with a spread, or with
+    a reference). Either the image is not balanced for the illuminant, or the film model does
+    not fit it; the scene cannot tell which.
+
+    >>> from microfacet.analysis.white_balance import WhiteBalance
+    >>> gains_off_one(WhiteBalance(estimate_rgb=(1.101, 1.0, 0.98), estimate_sigma=(0.008, 0.01)))
+    [('R', 1.101, 0.008)]
+    """
+    if wb is None or wb.estimate_rgb is None or wb.source != "none" or not wb.estimate_sigma:
+        return []
+    return [(name, g, s) for name, g, s in (("R", wb.estimate_rgb[0], wb.estimate_sigma[0]),
+                                             ("B", wb.estimate_rgb[2], wb.estimate_sigma[1]))
+            if abs(math.log(g)) > max(GAIN_OFF_SIGMAS * s, GAIN_OFF_MIN)]
+
+
 def _white_balance_warning(wb) -> Reason | None:
     """The colours leave the gains free (:func:`gains_unconstrained`), or look unbalanced:
     an estimate, no reference, a gain off 1 by > 3σ, > 3 %."""
@@ -606,11 +650,7 @@ def _white_balance_warning(wb) -> Reason | None:
                       f"illuminant; a white or bare-substrate reference "
                       f"(`optics.white_reference`, `optics.substrate_reference`) settles it",
                       "optics.white_reference")
-    if wb is None or wb.estimate_rgb is None or wb.source != "none" or not wb.estimate_sigma:
-        return None
-    off = [(name, g, s) for name, g, s in (("R", wb.estimate_rgb[0], wb.estimate_sigma[0]),
-                                            ("B", wb.estimate_rgb[2], wb.estimate_sigma[1]))
-           if abs(math.log(g)) > max(3.0 * s, 0.03)]
+    off = gains_off_one(wb)
     if not off:
         return None
     gains = ", ".join(f"{n} x{g:.3f} (+-{100 * s:.1f} %)" for n, g, s in off)

@@ -271,6 +271,12 @@ class FitOptions(Options):
         (0.8, 1.25), help="recovered/injected RMS slope outside this range: the NDF is not "
                           "identified", kind=tuple, check=lambda v: None if (
                               len(v) == 2 and 0 < v[0] < 1 < v[1]) else "need 0 < low < 1 < high")
+    self_check_max_spread: float = option(
+        0.1, help="largest half-range of the self-check's slope gains over its injected widths "
+                  "for an identified NDF: a gain that changes more with the width is not one "
+                  "transfer of the stack (on the 256^2 sweep's seeds 0-17 the two identified "
+                  "NDFs off by more than 25 % had 0.12 and 0.14, the right ones at most 0.07; "
+                  "docs/accuracy.md)", low=0)
     self_check_correct: bool = option(
         True, help="divide the facet planes' slopes by the self-check's width transfer before "
                    "the NDF's lobes are fitted, where the self-check passes (both transfers "

@@ -582,8 +582,33 @@ def test_gains_the_colours_leave_free_leave_the_order_unestablished():
     for wb in (None, WhiteBalance(), dataclasses.replace(free, source="stack.json"),
                dataclasses.replace(free, estimate_sigma=(0.05, 0.9 * LOG_RANGE)),
                dataclasses.replace(free, estimate_rgb=(math.exp(-0.8 * LOG_RANGE), 1.0, 1.1),
-                                   estimate_sigma=(0.04, 0.02))):
+                                   estimate_sigma=(0.06, 0.04))):
         assert check(wb)["established"]
+
+
+def test_gains_the_colours_ask_for_off_one_leave_the_order_unestablished():
+    """No reference and an estimate, bracketed and with a finite spread, that asks for a gain
+    off 1 by more than 3σ and 3 % (the held-out seed-21 g020: R x1.101 ± 0.85 % on a balanced
+    scene; seed-23 g028: read 239 nm off under R x1.09, B x1.04, its estimate asking for
+    R x1.074 ± 1.8 %, B x0.951 ± 1.7 %): the order rests on the image being balanced, so it is not
+    established; within 3σ or 3 %, or with a reference, it is."""
+    from microfacet.analysis.identification import order_check
+    from microfacet.analysis.white_balance import WhiteBalance
+
+    def check(est, sigma, source="none"):
+        wb = WhiteBalance(source=source, estimate_rgb=est, estimate_sigma=sigma)
+        return order_check(_dist(), delta_e_median=1.0, noise_de=1.0, options=OPTIONS,
+                           white_balance=wb)
+
+    out = check((1.074, 1.0, 0.951), (0.018, 0.017))
+    assert not out["established"] and out["reasons"] == [
+        "the colours ask for white-balance gains R x1.074 and no reference gives them: the "
+        "order rests on the image being balanced"]          # B: 0.951 is within 3 sigma
+    assert "B x0.940" in check((1.074, 1.0, 0.94), (0.018, 0.017))["reasons"][0]
+    assert not check((1.101, 1.0, 0.982), (0.0085, 0.012))["established"]
+    assert check((1.074, 1.0, 0.951), (0.03, 0.02))["established"]        # within 3 sigma
+    assert check((1.02, 1.0, 0.98), (0.001, 0.001))["established"]        # within 3 %
+    assert check((1.074, 1.0, 0.951), (0.018, 0.017), source="stack.json")["established"]
 
 
 def test_a_mixture_that_does_not_summarize_its_map_is_not_identified():

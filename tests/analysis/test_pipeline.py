@@ -240,12 +240,14 @@ def test_the_thickness_populations_do_not_follow_encoding_or_exposure(tmp_path, 
 def test_white_balance_is_not_called_determined_where_the_thickness_is_not(monkeypatch):
     """A white-balance estimate whose spread calls it determined stays so where the
     thickness is identified, and is withdrawn (the estimate kept, with why) where it is not:
-    the gains the colours ask for are those of the thicknesses they were read at."""
+    the gains the colours ask for are those of the thicknesses they were read at. (Gains
+    within 3 % of 1: farther off, the order rests on the image being balanced and is not
+    established, which withdraws them too.)"""
     import microfacet.analysis.pipeline as pl
     from microfacet.analysis.identification import Judgement, Reason
     from microfacet.analysis.white_balance import WhiteBalance
 
-    est = WhiteBalance(estimate_rgb=(1.04, 1.0, 0.97), estimate_sigma=(0.005, 0.006),
+    est = WhiteBalance(estimate_rgb=(1.025, 1.0, 0.98), estimate_sigma=(0.005, 0.006),
                        determined=(True, True), tiles=40)
     monkeypatch.setattr(pl, "choose_white_balance", lambda *a, **k: est)
     ok = analyse_stack(FIXTURE, AnalysisOptions(mode="joint"))

@@ -115,6 +115,29 @@ def test_the_judgement_follows_the_self_check():
     assert not none.identified and "fewer than 3 facet planes" in none.reason.plain()
 
 
+def test_a_gain_that_changes_with_the_width_is_not_a_transfer():
+    """Both transfers in range, but the slope gain differs between the injected widths by more
+    than ``fits.self_check_max_spread`` (half its range): not identified, and the reason names
+    the gains and the option; within it, identified."""
+    ok = Judgement(True)
+    opts = FitOptions()
+
+    def check(ratios):
+        t = float(np.median(ratios))
+        spread = 0.5 * (max(ratios) - min(ratios))
+        return SelfCheck([0.05, 0.1, 0.2], [r * i for r, i in zip(ratios, [0.05, 0.1, 0.2])],
+                         list(ratios), t, spread, 50, [0.9] * 3, 0.9)
+
+    steady = check([0.86, 0.88, 0.92])
+    assert self_check_judgement(ok, steady, opts) is ok
+    varying = check([0.74, 0.98, 0.83])                  # seed-12 g008's gains: transfer 0.83
+    assert 0.8 <= varying.transfer <= 1.25 and varying.spread > opts.self_check_max_spread
+    bad = self_check_judgement(ok, varying, opts)
+    assert not bad.identified and bad.reason.parameter == "fits.self_check_max_spread"
+    assert "0.74-0.98" in bad.reason.plain()
+    assert self_check_judgement(ok, varying, FitOptions(self_check_max_spread=0.2)) is ok
+
+
 def test_a_self_check_with_too_few_planes_measures_nothing_and_identifies_nothing():
     """Heights from focus but fewer than 3 facet planes with measurable slopes: the
     self-check runs on nothing, so it reports nothing measured (not "no check"), and the NDF
