@@ -275,12 +275,13 @@ class FitOptions(Options):
         0.1, help="largest half-range of the self-check's slope gains over its injected widths "
                   "for an identified NDF: a gain that changes more with the width is not one "
                   "transfer of the stack (on the 256^2 sweep's seeds 0-17 the two identified "
-                  "NDFs off by more than 25 % had 0.12 and 0.14, the right ones at most 0.07; "
-                  "docs/accuracy.md)", low=0)
+                  "NDFs off by more than 25 % had 0.12 and 0.14, eleven of the twelve others "
+                  "at most 0.07; docs/accuracy.md)", low=0)
     self_check_correct: bool = option(
         True, help="divide the facet planes' slopes by the self-check's width transfer before "
                    "the NDF's lobes are fitted, where the self-check passes (both transfers "
-                   "in self_check_range; the correction's size stays in the width's error)")
+                   "in self_check_range, the spread within self_check_max_spread; the "
+                   "correction's size stays in the width's error)")
     max_dome_share: float = option(
         0.3, help="largest mean square slope inside the facets (which planes miss) as a share "
                   "of the planes' own, for an identified NDF (0.3: the planes' RMS slope at "
