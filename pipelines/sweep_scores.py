@@ -10,8 +10,8 @@ into one column, their per-seed numbers listed. Prints a markdown table: the NDF
 (identified, off by more than 25 % and within 15 % of the true lobe RMS slope, their W1,
 censored against truly past the limit, height 2σ coverage) and the thickness's (true count
 of components and of distinct populations, region MAE with and without a white-balance
-error, scenes read in a wrong order and those not flagged, white-balance gains called
-determined and those within 2 %).
+error, scenes read in a wrong order and those not flagged, scenes whose order is said
+established, white-balance gains called determined and those within 2 %).
 """
 
 from __future__ import annotations
@@ -110,6 +110,7 @@ def scores(d: Runs) -> dict:
                                                f"{_median(mae[~wb]):.2f}"),
         "read in a wrong order (not flagged)": (
             f"{int(wrong.sum())} ({int((wrong & (d.col('order_flagged') == 0)).sum())})"),
+        "order said established": f"{int((d.col('order_flagged') == 0).sum())}",
         "white-balance gains determined (within 2 %)": (
             f"{gains.size} ({int((gains <= WB_TOLERANCE).sum())})"),
     }

@@ -123,6 +123,7 @@ def test_sweep_scores_count_the_targets_from_a_runs_files(tmp_path):
     assert s["… off by more than 25 %"] == "1" and s["… within 15 %"] == "1 of 2"
     assert s["true population count"] == "1"
     assert s["… counting order aliases with their component"] == "2"
+    assert s["order said established"] == "3"
     assert s["read in a wrong order (not flagged)"] == "1 (1)"
     assert s["white-balance gains determined (within 2 %)"] == "2 (1)"
     assert s["region MAE, median (nm)"] == "0.400"

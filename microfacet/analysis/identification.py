@@ -632,9 +632,10 @@ def gains_off_one(wb) -> list:
     """
     if wb is None or wb.estimate_rgb is None or wb.source != "none" or not wb.estimate_sigma:
         return []
-    return [(name, g, s) for name, g, s in (("R", wb.estimate_rgb[0], wb.estimate_sigma[0]),
-                                             ("B", wb.estimate_rgb[2], wb.estimate_sigma[1]))
-            if abs(math.log(g)) > max(GAIN_OFF_SIGMAS * s, GAIN_OFF_MIN)]
+    return [(name, g, s) for name, g, log_g, s in zip(
+                ("R", "B"), (wb.estimate_rgb[0], wb.estimate_rgb[2]), wb.estimate_log_rb(),
+                wb.estimate_sigma)
+            if abs(log_g) > max(GAIN_OFF_SIGMAS * s, GAIN_OFF_MIN)]
 
 
 def _white_balance_warning(wb) -> Reason | None:
