@@ -27,7 +27,7 @@ import numpy as np
 from ..colour.model import FilmColourModel
 from ..colour.table import build_colour_table
 from ..core.errors import InputError, one_line
-from ..core.threads import return_free_memory
+from ..core.threads import Background, return_free_memory
 from ..core.timing import StageTimer
 from ..io.limits import check_memory
 from ..io.stack import Stack, read_stack
@@ -331,6 +331,14 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
                     model=model, options=options, scene=scene, wb=wb)
             else:
                 (joint, roi, readings), flat = facets(colour, roi), flat_ref
+            # the facets, their planes and the colours are final: the self-check runs on its
+            # own thread while the facets' thicknesses, the per-pixel tilts and the mixtures
+            # are computed (it reads none of them; docs/benchmarks.md)
+            check_job = Background(functools.partial(
+                _self_check, st, focus, joint, scene, options,
+                cells=lambda crop, c=colour: bootstrap_labels(
+                    c, seg, scene, options.joint, rng=np.random.default_rng([scene.seed, 22]),
+                    crop=crop)))
             model = _model_for(model, colour, joint.exposure)
             image = facet_image(geometry, colour, roi, options.joint)   # the colours are final
             cols = image.colours()
@@ -350,10 +358,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
             # before the self-check's peak
             del facets, geometry, image, cols, pooled
         with timer.stage(Stage.SELF_CHECK):
-            check = _self_check(st, focus, joint, scene, options,
-                                cells=lambda crop: bootstrap_labels(
-                                    colour, seg, scene, options.joint,
-                                    rng=np.random.default_rng([scene.seed, 22]), crop=crop))
+            check = check_job.result()
             dist.ndf_judgement = self_check_judgement(dist.ndf_judgement, check, options.fits)
             dist = correct_ndf_width(dist, joint, scene, fits, check)
             if check is not None and dist.ndf is not None:

@@ -64,7 +64,9 @@ class Stage(enum.Enum):
                            "analysis.self_check.self_check_ndf / "
                            "analysis.distributions.correct_ndf_width",
                            "`SelfCheck`: recovered/injected RMS slope of known facet slopes "
-                           "rendered in the scene's own conditions; the NDF's judgement, and "
+                           "rendered in the scene's own conditions (on a thread of its own "
+                           "from the facets' planes on, beside the stages before this one; its "
+                           "time here is the wait for it); the NDF's judgement, and "
                            "its lobes refitted to the slopes over the width transfer where the "
                            "self-check passes (joint mode)")
     WRITE = StageInfo("write", "write", 0.3, "analysis.output.save_results",

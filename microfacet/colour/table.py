@@ -150,6 +150,18 @@ def choose_spectral_step(*, thickness_range_nm, theta_range_deg=(0.0, 45.0), fil
 _XYZ_CHUNK = 1 << 16
 
 
+def _unrepeated(a):
+    """The smallest array that broadcasts to ``a``: each axis along which ``a`` repeats
+    itself (a broadcast view's zero stride) cut to length 1.
+
+    >>> a = np.broadcast_to(np.arange(3.0)[:, None], (3, 4))
+    >>> _unrepeated(a).shape, _unrepeated(np.ones((2, 5))).shape
+    ((3, 1), (2, 5))
+    """
+    return a[tuple(slice(0, 1) if st == 0 and n > 1 else slice(None)
+                   for st, n in zip(a.strides, a.shape))]
+
+
 @dataclass
 class ColourTable:
     """Tabulated colour of the film over incidence angle and thickness.
@@ -229,20 +241,59 @@ class ColourTable:
         """
         th, d = np.broadcast_arrays(np.asarray(theta_deg, np.float64),
                                     np.asarray(thickness_nm, np.float64))
-        if th.size > _XYZ_CHUNK:
-            # in chunks: the temporaries (~200 bytes per point) stay bounded
-            out = np.empty(th.shape + (3,))
-            th_f, d_f, o_f = th.reshape(-1), d.reshape(-1), out.reshape(-1, 3)
-            for a in range(0, th.size, _XYZ_CHUNK):
-                o_f[a:a + _XYZ_CHUNK] = self._xyz_at(th_f[a:a + _XYZ_CHUNK],
-                                                     d_f[a:a + _XYZ_CHUNK])
+        th_c, d_c = _unrepeated(th), _unrepeated(d)
+        if (th.ndim == 2 and th_c.shape[1] == 1 and d_c.shape[0] == 1
+                and th.shape[0] >= self.theta_deg.size > 1 and self.thickness_nm.size > 1):
+            return self._xyz_outer(th_c, d_c)
+        if th.size <= _XYZ_CHUNK:
+            return self._xyz_at(th, d)
+        # in chunks: the temporaries (~200 bytes per point) stay bounded; blocks of leading
+        # rows where a row fits (each keeps the inputs' repeated axes, computed once)
+        out = np.empty(th.shape + (3,))
+        row = th.size // th.shape[0]
+        if row <= _XYZ_CHUNK:
+            k = _XYZ_CHUNK // row
+            for a in range(0, th.shape[0], k):
+                out[a:a + k] = self._xyz_at(th[a:a + k], d[a:a + k])
             return out
-        return self._xyz_at(th, d)
+        th_f, d_f, o_f = th.reshape(-1), d.reshape(-1), out.reshape(-1, 3)
+        for a in range(0, th.size, _XYZ_CHUNK):
+            o_f[a:a + _XYZ_CHUNK] = self._xyz_at(th_f[a:a + _XYZ_CHUNK], d_f[a:a + _XYZ_CHUNK])
+        return out
+
+    def _xyz_outer(self, th_col, d_row):
+        """:meth:`xyz_at` of a tilt per row (n, 1) and a thickness per column (1, D), to the
+        bit: the bilinear terms that depend on the thickness alone (``a + b·fj`` and
+        ``c + e·fj`` of each cell) are computed once per table row and column, not once
+        per point, then gathered by each point's table row (a quarter of the arithmetic;
+        the ROI samples' n is thousands, the table's rows tens)."""
+        with np.errstate(invalid="ignore"):
+            i, fi, ok_i = self._coords(th_col, self.theta_deg)
+            j, fj, ok_j = self._coords(d_row, self.thickness_nm)
+        t = self.xyz
+        cell = self._bilinear_coefficients()[
+            np.arange(t.shape[0] - 1)[:, None] * (t.shape[1] - 1) + j]   # (T-1, D, 4, 3)
+        fj_ = fj[..., None]
+        p = cell[..., 0, :] + cell[..., 1, :] * fj_
+        q = cell[..., 2, :] + cell[..., 3, :] * fj_
+        cell = None
+        n, D = th_col.shape[0], d_row.shape[1]
+        out = np.empty((n, D, 3))
+        k = max(1, _XYZ_CHUNK // D)
+        for a in range(0, n, k):
+            ii = i[a:a + k, 0]
+            o = p[ii] + q[ii] * fi[a:a + k, :, None]
+            bad = ~(ok_i[a:a + k] & ok_j)
+            out[a:a + k] = np.where(bad[..., None], np.nan, o) if np.any(bad) else o
+        return out
 
     def _xyz_at(self, th, d):
+        # the table coordinates of each distinct input value: of the inputs' own arrays,
+        # not of their broadcast (a tilt per row and a thickness per column: rows + columns
+        # of them, not rows × columns), then broadcast like the inputs
         with np.errstate(invalid="ignore"):
-            i, fi, ok_i = self._coords(th, self.theta_deg)
-            j, fj, ok_j = self._coords(d, self.thickness_nm)
+            i, fi, ok_i = self._coords(_unrepeated(th), self.theta_deg)
+            j, fj, ok_j = self._coords(_unrepeated(d), self.thickness_nm)
         t = self.xyz
         if self.theta_deg.size == 1 or self.thickness_nm.size == 1:
             if self.theta_deg.size == 1:
@@ -263,6 +314,8 @@ class ColourTable:
         bad = ~(ok_i & ok_j)
         if np.any(bad):
             out = np.where(bad[..., None], np.nan, out)
+        if out.shape[:-1] != th.shape:      # both inputs repeat along an axis
+            out = np.broadcast_to(out, th.shape + (3,)).copy()
         return out
 
     def _bilinear_coefficients(self):

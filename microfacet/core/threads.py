@@ -27,9 +27,9 @@ from numbers import Integral
 
 from .errors import InputError
 
-__all__ = ["BLOCK_VALUES", "ENV_VAR", "chunk_starts", "chunks", "limit_malloc_arenas",
-           "limited_threads", "num_threads", "return_free_memory", "row_chunks",
-           "set_num_threads", "thread_map", "threads_from_text"]
+__all__ = ["BLOCK_VALUES", "ENV_VAR", "Background", "chunk_starts", "chunks",
+           "limit_malloc_arenas", "limited_threads", "num_threads", "return_free_memory",
+           "row_chunks", "set_num_threads", "thread_map", "threads_from_text"]
 
 #: The environment variable the command line reads (:func:`threads_from_text`).
 ENV_VAR = "MICROFACET_NUM_THREADS"
@@ -167,17 +167,79 @@ def thread_map(fn: Callable, items: Sequence) -> list:
         return list(pool.map(call, items))
 
 
+class Background:
+    """``fn()`` computed on a thread of its own while the caller goes on, when
+    :func:`num_threads` allows more than one thread; with one, computed by the first
+    :meth:`result` (where a sequential program would compute it). For work that depends on
+    nothing the caller changes meanwhile: the value is the same either way. numpy's error
+    state is the caller's, as in :func:`thread_map`.
+
+    >>> job = Background(lambda: sum(range(10)))
+    >>> job.result(), job.seconds >= 0
+    (45, True)
+    >>> with limited_threads(1):
+    ...     Background(lambda: 1 // 0).result()
+    Traceback (most recent call last):
+    ...
+    ZeroDivisionError: integer division or modulo by zero
+    """
+
+    def __init__(self, fn: Callable[[], object]):
+        import threading
+
+        import numpy as np
+
+        self._fn, self._err = fn, np.geterr()
+        self._value = self._exc = None
+        #: Seconds ``fn`` took (NaN until it has run).
+        self.seconds = math.nan
+        self._thread = None
+        if num_threads() > 1:
+            self._thread = threading.Thread(target=self._run, name="microfacet-background",
+                                            daemon=True)
+            self._thread.start()
+
+    def _run(self) -> None:
+        import time
+
+        import numpy as np
+
+        t0 = time.perf_counter()
+        try:
+            with np.errstate(**self._err):
+                self._value = self._fn()
+        except BaseException as exc:  # noqa: BLE001 - raised again by result()
+            self._exc = exc
+        finally:
+            self._fn = None
+            self.seconds = time.perf_counter() - t0
+
+    def result(self):
+        """``fn()``'s value, once it has run (waiting for it), or what it raised."""
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+        elif self._fn is not None:
+            self._run()
+        if self._exc is not None:
+            raise self._exc
+        return self._value
+
+
 #: ``mallopt`` parameter number of ``M_ARENA_MAX`` (glibc's malloc.h).
 _M_ARENA_MAX = -8
 
 
-def limit_malloc_arenas(n: int = 2) -> bool:
+def limit_malloc_arenas(n: int = 1) -> bool:
     """Let glibc's malloc keep at most ``n`` arenas in this process (``mallopt(M_ARENA_MAX)``).
 
     glibc gives each new thread an arena of its own, and memory freed in an arena stays in
     the process: with :func:`thread_map`'s threads the analysis of a 1-megapixel stack peaks
     ~50 MB higher for that alone (590-600 MB against 552 MB with one arena,
-    docs/benchmarks.md). A process-wide setting, made by ``microfacet analyze``, ``microfacet
+    docs/benchmarks.md). One arena since the self-check runs on a thread of its own beside
+    the other stages (2026-12-02): with two, what that thread freed stayed in its arena and
+    the 1 MP peak read 397-416 MB, with one 384-387 MB (378-383 MB before), in the same time.
+    A process-wide setting, made by ``microfacet analyze``, ``microfacet
     batch`` and the batch workers before the analysis' threads start (not for every command:
     a renderer's own threads may want their arenas); elsewhere (another C library, another
     system) nothing is done.

@@ -46,8 +46,8 @@ from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE
 from . import brdf, eq6
 from .halfvector import half_angle_deg
 
-__all__ = ["DISPLAY_CORE_DEG", "display_exposure", "simulate_map", "simulate_memory_bytes",
-           "with_exposure"]
+__all__ = ["DISPLAY_CORE_DEG", "display_exposure", "film_average_inplane", "simulate_map",
+           "simulate_memory_bytes", "with_exposure"]
 
 MODELS = ("microfacet", "eq6", "half-vector")
 #: Light and view angles up to this set the display scale of a microfacet or eq. 6 map.
@@ -86,7 +86,7 @@ def simulate_map(*, model="microfacet", thickness, ndf=None, n=None, theta_light
                  theta_view_deg=None, exposure=1.0, wavelength_nm=None, film=DEFAULT_FILM,
                  substrate=DEFAULT_SUBSTRATE, illuminant=DEFAULT_ILLUMINANT,
                  observer=DEFAULT_OBSERVER, n_ambient=1.0,
-                 theta_m_step_deg=0.5) -> AngularMap:
+                 theta_m_step_deg=0.5, film_average=None) -> AngularMap:
     """Angular map of a forward model over an in-plane (θ_light, θ_view) grid.
 
     Parameters
@@ -104,6 +104,11 @@ def simulate_map(*, model="microfacet", thickness, ndf=None, n=None, theta_light
         Scale applied to the spectra before colours.
     wavelength_nm : array_like (N,), optional
         Default 380-780 nm in 5 nm steps.
+    film_average : brdf.FilmAverage, optional
+        The film's reflectance averaged over ``thickness`` at the grid's half angles
+        (:func:`film_average_inplane`), which the half-vector and microfacet maps of one
+        thickness share: given, it is not built again (its wavelengths must be
+        ``wavelength_nm``; the caller vouches for its thickness and optics).
 
     Returns
     -------
@@ -133,15 +138,18 @@ def simulate_map(*, model="microfacet", thickness, ndf=None, n=None, theta_light
     opt = dict(film=film, substrate=substrate, n_ambient=n_ambient)
     t0 = time.perf_counter()
     TL, TV = tl[:, None], tv[None, :]
-    if model == "half-vector":
-        th_d = np.broadcast_to(half_angle_deg(TL, TV), (tl.size, tv.size))
-        fa = brdf.FilmAverage.build(th_d, thickness, wavelength_nm=wl, **opt)
-        spectra = fa.lookup(th_d)
-    elif model == "microfacet":
-        if ndf is None:
+    if model in ("half-vector", "microfacet"):
+        if model == "microfacet" and ndf is None:
             raise ValueError("ndf: the microfacet model needs an NDF")
+        fa = _film_average(film_average, tl, tv, thickness, wl, opt)
+    if model == "half-vector":
+        spectra = fa.lookup(np.broadcast_to(half_angle_deg(TL, TV), (tl.size, tv.size)))
+    elif model == "microfacet":
+        # ⟨R⟩ at θ_d: the half angles (the directions' θ_d equal them to ~1e-14°, but
+        # rounding makes 426 distinct values of the report's 171, each evaluated)
         spectra = math.pi * brdf.microfacet_brdf_inplane(TL, TV, thickness=thickness, ndf=ndf,
-                                                         wavelength_nm=wl, **opt)
+                                                         wavelength_nm=wl, film_average=fa,
+                                                         **opt)
     else:
         if ndf is None:
             raise ValueError("ndf: eq. 6 needs an NDF")
@@ -160,6 +168,37 @@ def simulate_map(*, model="microfacet", thickness, ndf=None, n=None, theta_light
     if model == "eq6":
         meta["n"] = float(n)
     return AngularMap(tl, tv, lab, xyz, srgb, spectra, wl, illuminant, str(observer), meta)
+
+
+def film_average_inplane(theta_light_deg, theta_view_deg, *, thickness, wavelength_nm=None,
+                         film=DEFAULT_FILM, substrate=DEFAULT_SUBSTRATE, n_ambient=1.0):
+    """The film's reflectance averaged over ``thickness`` at the half angles of an in-plane
+    (θ_light, θ_view) grid (:class:`~microfacet.forward.brdf.FilmAverage`): what
+    :func:`simulate_map`'s half-vector and microfacet maps of that grid read; built once, it
+    serves both (its ``film_average``).
+
+    Examples
+    --------
+    >>> fa = film_average_inplane([0, 30], [0, 30, 60], thickness=51.0,
+    ...                           wavelength_nm=[450, 550, 650])
+    >>> fa.theta_deg.tolist(), fa.spectra.shape
+    ([0.0, 15.0, 30.0, 45.0], (4, 3))
+    """
+    tl = check_angles(theta_light_deg, "theta_light_deg")
+    tv = check_angles(theta_view_deg, "theta_view_deg")
+    return _film_average(None, tl, tv, thickness, brdf.wavelength_grid(wavelength_nm),
+                         dict(film=film, substrate=substrate, n_ambient=n_ambient))
+
+
+def _film_average(given, tl, tv, thickness, wl, opt):
+    """``given`` (its wavelengths checked against ``wl``) or the film average built at the
+    half angles of the grid ``tl`` × ``tv``."""
+    if given is not None:
+        if not np.array_equal(given.wavelength_nm, wl):
+            raise ValueError("film_average: built at other wavelengths than wavelength_nm")
+        return given
+    th_d = half_angle_deg(tl[:, None], tv[None, :])
+    return brdf.FilmAverage.build(th_d, thickness, wavelength_nm=wl, **opt)
 
 
 def display_exposure(m: AngularMap, *, core_deg=DISPLAY_CORE_DEG) -> float:

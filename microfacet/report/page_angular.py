@@ -1,6 +1,7 @@
 """Page 5 of the report, **angular colour**: the colour predicted over in-plane light × view
 zenith angles from the fitted distributions — the microfacet thin-film BRDF and the
-half-vector model (seed §2.3) of :func:`microfacet.forward.angular.simulate_map` (≈0.2 s),
+half-vector model (seed §2.3) of :func:`microfacet.forward.angular.simulate_map`, sharing one
+film average (:func:`~microfacet.forward.angular.film_average_inplane`),
 each shown at its :func:`~microfacet.forward.angular.display_exposure`, the one display rule
 of every picture of an angular map (``microfacet simulate`` uses it too).
 
@@ -13,7 +14,13 @@ import numpy as np
 
 from ..colour.colorimetry import illuminant_key
 from ..core.defaults import DEFAULT_ILLUMINANT
-from ..forward.angular import DISPLAY_CORE_DEG, display_exposure, simulate_map, with_exposure
+from ..forward.angular import (
+    DISPLAY_CORE_DEG,
+    display_exposure,
+    film_average_inplane,
+    simulate_map,
+    with_exposure,
+)
 from ..optics.constants import DEFAULT_FILM, DEFAULT_SUBSTRATE, known_sets
 from .layout import blank_panel, shorten
 
@@ -75,9 +82,11 @@ def predicted_maps(ctx) -> list:
         return []
     kw = dict(thickness=ctx.thick, theta_light_deg=ANGLES_DEG, theta_view_deg=ANGLES_DEG,
               wavelength_nm=WAVELENGTH_NM, **optics(ctx))
+    # the film's reflectance at the grid's half angles, built once for both maps
+    fa = film_average_inplane(**{k: v for k, v in kw.items() if k != "illuminant"})
     out = []
     for model in ("microfacet", "half-vector") if ctx.ndf is not None else ("half-vector",):
-        m = simulate_map(model=model, ndf=ctx.ndf, **kw)
+        m = simulate_map(model=model, ndf=ctx.ndf, film_average=fa, **kw)
         e = display_exposure(m)
         m = with_exposure(m, e) if e != 1.0 else m
         if model == "microfacet":

@@ -14,6 +14,7 @@ from PIL import Image
 
 from microfacet.analysis import AnalysisOptions, analyse_stack
 from microfacet.analysis.options import FitOptions, OpticsOptions, RoiOptions
+from microfacet.analysis.output import build_summary
 from microfacet.analysis.stages import JOINT_ONLY, Stage
 from microfacet.cli import main
 from microfacet.core.densities import wasserstein1
@@ -42,6 +43,29 @@ def test_joint_mode_beats_the_seed_method_on_truth(nd_analysis):
     assert j["d"] < s["d"] and j["t"] < s["t"] and j["w1"] < s["w1"] and j["de"] < s["de"]
     # Absolute bars measured on this fixture (docs/accuracy.md has the per-preset table).
     assert j["d"] < 2.0 and j["w1"] < 2.0 and j["t"] < 6.0
+
+
+def test_the_self_check_on_its_own_thread_changes_nothing(nd_analysis):
+    """With two threads the self-check runs beside the facet, tilt and mixture stages
+    (core.threads.Background); with one it runs where it did. The results are the same to
+    the bit: it reads nothing they change."""
+    from microfacet.core.threads import default_num_threads, limited_threads
+
+    if default_num_threads() > 1:
+        two = nd_analysis("joint")
+    else:
+        with limited_threads(2):
+            two = analyse_stack(FIXTURE, AnalysisOptions(mode="joint"))
+    with limited_threads(1):
+        one = analyse_stack(FIXTURE, AnalysisOptions(mode="joint"))
+    assert one.self_check is not None and one.self_check.facets > 0
+    assert one.self_check.to_json() == two.self_check.to_json()
+    s1, s2 = build_summary(one).to_json(), build_summary(two).to_json()
+    for key in ("thickness", "ndf", "white_balance", "exposure", "delta_e", "warnings"):
+        assert s1[key] == s2[key], key
+    for a, b in ((one.pixels.thickness_nm, two.pixels.thickness_nm),
+                 (one.pixels.tilt_deg, two.pixels.tilt_deg)):
+        np.testing.assert_array_equal(a, b)
 
 
 @pytest.mark.slow

@@ -159,3 +159,22 @@ def test_a_float32_input_at_the_tables_edge_is_inside():
     a = t.xyz_at(np.float32(edge), 110.0)
     np.testing.assert_allclose(a, t.xyz_at(edge, 110.0), rtol=1e-6)
     assert np.isnan(t.xyz_at(edge + 1e-3, 110.0)).all()       # past rounding: outside
+
+
+def test_a_tilt_per_row_and_a_thickness_per_column_give_the_pointwise_values_to_the_bit(table):
+    """xyz_at of a tilt per row (n, 1) and a thickness per column (1, D) — the ROI and
+    white-balance scans — computes the thickness-only bilinear terms once per table cell
+    (ColourTable._xyz_outer); each value equals the one xyz_at gives for that point alone,
+    to the bit, NaN and points outside the table (NaN) included, in any chunking."""
+    rng = np.random.default_rng(3)
+    t_lo, t_hi = table.theta_deg[0], table.theta_deg[-1]
+    d_lo, d_hi = table.thickness_nm[0], table.thickness_nm[-1]
+    th = rng.uniform(t_lo - 2, t_hi + 2, (300, 1))
+    th[:3, 0] = [np.nan, t_lo, t_hi]
+    d = np.concatenate([[np.nan, d_lo - 1, d_lo, d_hi], rng.uniform(d_lo, d_hi, 400)])[None, :]
+    got = table.xyz_at(th, d)
+    assert got.shape == (300, 404, 3)
+    pointwise = np.stack([table.xyz_at(np.full(d.shape[1], t), d[0]) for t in th[:, 0]])
+    np.testing.assert_array_equal(got, pointwise)
+    assert np.isnan(got[0]).all() and np.isnan(got[:, :2]).all()
+    assert np.isfinite(got[1:3, 2:]).all()

@@ -190,3 +190,35 @@ def test_thread_map_carries_the_callers_numpy_error_state():
             threads.thread_map(divide, range(4))
     with threads.limited_threads(2), np.errstate(divide="ignore"):
         assert all(np.isinf(threads.thread_map(divide, range(4))))
+
+
+def test_background_work_runs_beside_the_caller_and_gives_its_value_or_its_error():
+    """Background runs fn on a thread of its own when more than one thread is allowed (the
+    caller goes on meanwhile: fn waits for the caller here, so it can only finish if the
+    caller is not blocked), and by the first result() with one thread (on the caller's
+    thread, where a sequential program would run it); result() gives fn's value, or raises
+    what fn raised, with numpy's error state the caller's."""
+    import threading
+
+    go = threading.Event()
+
+    def waits_for_the_caller():
+        assert go.wait(timeout=30)
+        return threading.current_thread().name
+
+    with threads.limited_threads(2):
+        job = threads.Background(waits_for_the_caller)
+        go.set()                                    # the caller went on: fn may finish
+        assert job.result() == "microfacet-background"
+        assert job.result() == "microfacet-background"          # the value stays
+        assert job.seconds >= 0
+    ran = []
+    with threads.limited_threads(1):
+        job = threads.Background(lambda: ran.append(threading.current_thread().name) or 7)
+        assert ran == []                            # not run before it is asked for
+        assert job.result() == 7 and ran == [threading.current_thread().name]
+    for n in (1, 2):
+        with threads.limited_threads(n), np.errstate(divide="raise"):
+            job = threads.Background(lambda: np.float64(1.0) / np.float64(0.0))
+            with pytest.raises(FloatingPointError):
+                job.result()
