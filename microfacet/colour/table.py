@@ -265,8 +265,8 @@ class ColourTable:
         """:meth:`xyz_at` of a tilt per row (n, 1) and a thickness per column (1, D), to the
         bit: the bilinear terms that depend on the thickness alone (``a + b·fj`` and
         ``c + e·fj`` of each cell) are computed once per table row and column, not once
-        per point, then gathered by each point's table row (a quarter of the arithmetic;
-        the ROI samples' n is thousands, the table's rows tens)."""
+        per point, then gathered by each point's table row: the same operations in the same
+        order, for the table's tens of rows instead of the ROI samples' thousands."""
         with np.errstate(invalid="ignore"):
             i, fi, ok_i = self._coords(th_col, self.theta_deg)
             j, fj, ok_j = self._coords(d_row, self.thickness_nm)

@@ -174,9 +174,8 @@ class Background:
     nothing the caller changes meanwhile: the value is the same either way. numpy's error
     state is the caller's, as in :func:`thread_map`.
 
-    >>> job = Background(lambda: sum(range(10)))
-    >>> job.result(), job.seconds >= 0
-    (45, True)
+    >>> Background(lambda: sum(range(10))).result()
+    45
     >>> with limited_threads(1):
     ...     Background(lambda: 1 // 0).result()
     Traceback (most recent call last):
@@ -191,8 +190,6 @@ class Background:
 
         self._fn, self._err = fn, np.geterr()
         self._value = self._exc = None
-        #: Seconds ``fn`` took (NaN until it has run).
-        self.seconds = math.nan
         self._thread = None
         if num_threads() > 1:
             self._thread = threading.Thread(target=self._run, name="microfacet-background",
@@ -200,11 +197,8 @@ class Background:
             self._thread.start()
 
     def _run(self) -> None:
-        import time
-
         import numpy as np
 
-        t0 = time.perf_counter()
         try:
             with np.errstate(**self._err):
                 self._value = self._fn()
@@ -212,7 +206,6 @@ class Background:
             self._exc = exc
         finally:
             self._fn = None
-            self.seconds = time.perf_counter() - t0
 
     def result(self):
         """``fn()``'s value, once it has run (waiting for it), or what it raised."""

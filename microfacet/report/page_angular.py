@@ -80,10 +80,13 @@ def predicted_maps(ctx) -> list:
     """
     if ctx.thick is None:
         return []
+    opt = optics(ctx)
     kw = dict(thickness=ctx.thick, theta_light_deg=ANGLES_DEG, theta_view_deg=ANGLES_DEG,
-              wavelength_nm=WAVELENGTH_NM, **optics(ctx))
+              wavelength_nm=WAVELENGTH_NM, **opt)
     # the film's reflectance at the grid's half angles, built once for both maps
-    fa = film_average_inplane(**{k: v for k, v in kw.items() if k != "illuminant"})
+    fa = film_average_inplane(ANGLES_DEG, ANGLES_DEG, thickness=ctx.thick,
+                              wavelength_nm=WAVELENGTH_NM, film=opt["film"],
+                              substrate=opt["substrate"])
     out = []
     for model in ("microfacet", "half-vector") if ctx.ndf is not None else ("half-vector",):
         m = simulate_map(model=model, ndf=ctx.ndf, film_average=fa, **kw)
