@@ -174,8 +174,12 @@ def _invert_chunk(lab_px, ri, rows, sens, th, model, stride):
     if prior:
         p_deg, p_sd = rows.prior_deg[ri], rows.prior_sigma_deg[ri]
 
+    # the rows' model Lab as one (R·K, 3) table: a flat take of row·K + node gathers the
+    # same values as lab[row, node], ~2.5× faster (a view where the rows are contiguous)
+    table, first = rows.lab.reshape(-1, 3), (ri * rows.lab.shape[1])[:, None]
+
     def objective(nodes):  # q on grid nodes (m, w) of each pixel
-        de = model.difference(rows.lab[ri[:, None], nodes], lab_px[:, None, :])
+        de = model.difference(np.take(table, first + nodes, axis=0), lab_px[:, None, :])
         q = (de.astype(np.float64) / noise[:, None]) ** 2
         if prior:
             q += ((th[nodes] - p_deg[:, None]) / p_sd[:, None]) ** 2
