@@ -108,7 +108,8 @@ def simulate_map(*, model="microfacet", thickness, ndf=None, n=None, theta_light
         The film's reflectance averaged over ``thickness`` at the grid's half angles
         (:func:`film_average_inplane`), which the half-vector and microfacet maps of one
         thickness share: given, it is not built again (its wavelengths must be
-        ``wavelength_nm``; the caller vouches for its thickness and optics).
+        ``wavelength_nm``; the caller vouches for its thickness and optics). Eq. 6 reads the
+        film at other angles and builds its own.
 
     Returns
     -------

@@ -138,18 +138,24 @@ def test_a_90x90_map_evaluates_the_film_once_per_distinct_angle(monkeypatch):
             np.testing.assert_array_equal(fa.theta_deg, half_angles)
 
 
-def test_one_film_average_serves_the_half_vector_and_microfacet_maps():
+def test_one_film_average_serves_the_half_vector_and_microfacet_maps(monkeypatch):
     """A film average built once (film_average_inplane) gives each model's map as it builds
-    it itself, to rounding; one of other wavelengths is refused, naming the argument."""
+    it itself, to rounding, and no map builds another; one of other wavelengths is refused,
+    naming the argument."""
     from microfacet.forward.angular import film_average_inplane
 
     kw = dict(thickness=G3, theta_light_deg=GRID, theta_view_deg=GRID)
     fa = film_average_inplane(GRID, GRID, thickness=G3)
+    own = {m: simulate_map(model=m, ndf=F2, **kw) for m in ("half-vector", "microfacet")}
+    builds = []
+    build = brdf.FilmAverage.build.__func__
+    monkeypatch.setattr(brdf.FilmAverage, "build", classmethod(
+        lambda cls, *a, **k: builds.append(1) or build(cls, *a, **k)))
     for model in ("half-vector", "microfacet"):
-        own = simulate_map(model=model, ndf=F2, **kw)
         shared = simulate_map(model=model, ndf=F2, film_average=fa, **kw)
-        np.testing.assert_allclose(shared.spectra, own.spectra, rtol=1e-12, atol=0)
-        np.testing.assert_array_equal(shared.srgb, own.srgb)
+        np.testing.assert_allclose(shared.spectra, own[model].spectra, rtol=1e-12, atol=0)
+        np.testing.assert_array_equal(shared.srgb, own[model].srgb)
+    assert builds == []                          # the given film average, not a new one
     other = film_average_inplane(GRID, GRID, thickness=G3, wavelength_nm=[450, 550, 650])
     with pytest.raises(ValueError, match="film_average"):
         simulate_map(model="half-vector", film_average=other, **kw)

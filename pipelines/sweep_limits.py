@@ -1,0 +1,186 @@
+"""What holds issues 22 and 23's counts where they are, tallied over accuracy-sweep runs
+(docs/accuracy.md, "What limits the two issues' counts").
+
+    python -m pipelines.sweep_limits OUT:WORK [OUT:WORK ...]
+
+Each ``OUT:WORK`` is one ``accuracy-sweep --set mode=joint --set work=WORK --out OUT`` run
+(``OUT/generalization.csv``, ``WORK/results/joint/NAME/summary.json``,
+``WORK/stacks/NAME/truth/``); all are pooled. Prints, one line each:
+
+* the NDF: the textured scenes by world and by the reason their NDF is not identified; those
+  that pass the self-check's three conditions (both transfers in range, the gain's spread
+  within its limit) by reason, and of those refused only as ``curved_facets`` how many are
+  off by more than 25 %; the correlation of the self-check's width transfer with the
+  scene's true width ratio, and, on the textured scenes without rounded facets whose spread
+  is within the limit, the median ratio and the quartiles of the ratio over the transfer;
+* the thickness: the scenes with too few and too many components, and the kinds (two true
+  populations under one wide component; a population split into close components; a
+  component far above every true population: another interference order), with the model
+  choice's independent count over the Kish count of the true regions' areas on each kind;
+* the white balance: the estimate's median error per gain, its median error in units of its
+  own σ, the median error by the number of film colours, and the range of the medians with
+  and without each of the sweep's variations.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from microfacet.analysis.options import FitOptions
+
+#: A component this wide (nm) spanning two true means within :data:`SPAN_SD` of its SD is two
+#: populations fitted as one; two components this close (nm) nearest one true population are
+#: a split; a component this far (nm) above every true population is another order.
+WIDE_SD_NM, SPAN_SD, SPLIT_NM, FAR_NM = 4.5, 2.5, 8.0, 60.0
+
+
+def scenes(specs):
+    """``(row, summary, truth params, truth folder)`` of every joint-mode scene."""
+    for spec in specs:
+        out, _, work = spec.partition(":")
+        with open(Path(out) / "generalization.csv", newline="") as f:
+            for r in csv.DictReader(f):
+                res = Path(work) / "results" / "joint" / r["name"] / "summary.json"
+                if r["mode"] != "joint" or r["status"] != "done" or not res.is_file():
+                    continue
+                truth = Path(work) / "stacks" / r["name"] / "truth"
+                yield (r, json.loads(res.read_text()),
+                       json.loads((truth / "params.json").read_text())["params"], truth)
+
+
+def _f(x) -> float:
+    return float(x) if x not in ("", None) else float("nan")
+
+
+def ndf_lines(rows, fits: FitOptions) -> list:
+    tex = [(r, s) for r, s, _, _ in rows if r["textured"] == "True"]
+    low, high = fits.self_check_range
+    out = [f"textured scenes: {len(tex)}; by world "
+           + _counts(r["world"] for r, _ in tex),
+           "refused, by reason (faceted world): "
+           + _counts(s["ndf"].get("reason_code") or "identified" for r, s in tex
+                     if r["world"] == "faceted")]
+    sc = [(r, s["ndf"].get("reason_code"), s["ndf"].get("self_check") or {}) for r, s in tex]
+
+    def passes(c):
+        vals = [c.get("transfer"), c.get("width_transfer"), c.get("spread")]
+        return None not in vals and low <= vals[0] <= high and low <= vals[1] <= high \
+            and vals[2] <= fits.self_check_max_spread
+    ok = [(r, why) for r, why, c in sc if passes(c)]
+    curved = [_f(r["lobe_rms_ratio"]) for r, why in ok if why == "curved_facets"]
+    out.append(f"pass the self-check: {len(ok)}, by reason "
+               + _counts(why or "identified" for _, why in ok)
+               + f"; of the curved_facets ones {sum(abs(v - 1) > 0.25 for v in curved)} off by "
+               f"more than 25 % ({_range([v for v in curved if abs(v - 1) > 0.25])})")
+    wt = np.array([_f(c.get("width_transfer")) for _, _, c in sc])
+    ratio = np.array([_f(r["lobe_rms_ratio"]) for r, _, _ in sc])
+    use = np.isfinite(wt) & np.isfinite(ratio) & (wt > 0.3)
+    out.append(f"width transfer against the true width ratio: correlation "
+               f"{np.corrcoef(wt[use], ratio[use])[0, 1]:.2f} ({int(use.sum())} scenes)")
+    steady = np.array([r["v_rounded"] == "0" and _f(c.get("spread")) <= fits.self_check_max_spread
+                       for r, _, c in sc]) & use
+    q = np.percentile(ratio[steady] / wt[steady], [25, 50, 75])
+    out.append(f"no rounded facets, spread within the limit ({int(steady.sum())} scenes): ratio "
+               f"median {np.median(ratio[steady]):.2f}; ratio / width transfer median "
+               f"{q[1]:.2f}, quartiles {q[0]:.2f}-{q[2]:.2f}")
+    return out
+
+
+def _counts(items) -> str:
+    keys, n = np.unique(list(items), return_counts=True)
+    return ", ".join(f"{k} {c}" for k, c in zip(keys, n))
+
+
+def _range(v) -> str:
+    return f"{min(v):.2f}-{max(v):.2f}" if v else "none"
+
+
+def true_kish(truth: Path) -> float:
+    """Kish count of the true regions' areas."""
+    rid = np.load(truth / "region_id.npy")
+    a = np.bincount(rid[rid >= 0].ravel()).astype(np.float64)
+    a = a[a > 0]
+    return float(a.sum() ** 2 / np.sum(a * a))
+
+
+def kind(row, mixture, params) -> str | None:
+    """The kind of a wrong count (None: the count is right, or another kind)."""
+    found, true = int(row["pops_found"]), int(row["pops_true"])
+    tm = np.array([t["mean_nm"] for t in params["thickness"]])
+    comps = mixture["components"]
+    if found < true:
+        wide = any(c["sd_nm"] >= WIDE_SD_NM
+                   and np.sum(np.abs(tm - c["mean_nm"]) <= SPAN_SD * c["sd_nm"]) >= 2
+                   for c in comps)
+        return "merged" if wide else "too few, other"
+    if found > true:
+        mu = np.sort([c["mean_nm"] for c in comps])
+        near = np.argmin(np.abs(tm[None, :] - mu[:, None]), axis=1)
+        if np.any((near[1:] == near[:-1]) & (np.diff(mu) <= SPLIT_NM)):
+            return "split"
+        return "another order" if np.any(mu > tm.max() + FAR_NM) else "too many, other"
+    return None
+
+
+def thickness_lines(rows) -> list:
+    kinds, ratios = [], {}
+    for r, s, p, truth in rows:
+        k = kind(r, s["thickness"]["mixture"], p)
+        if k is None:
+            continue
+        kinds.append(k)
+        if k in ("merged", "split"):
+            ratios.setdefault(k, []).append(
+                s["thickness"]["mixture"]["n_effective"] / true_kish(truth))
+    out = [f"wrong counts: {len(kinds)}; " + _counts(kinds)]
+    for k, v in ratios.items():
+        v = np.array(v)
+        out.append(f"{k}: n_effective / the true regions' Kish count median {np.median(v):.2f}, "
+                   f"range {v.min():.2f}-{v.max():.2f}, below 1 on {int((v < 1).sum())} of "
+                   f"{v.size}")
+    return out
+
+
+def white_balance_lines(rows) -> list:
+    err, z, colours, flags = [], [], [], []
+    for r, s, _, _ in rows:
+        wb = s.get("white_balance") or {}
+        est, sig = wb.get("estimate_rgb"), wb.get("estimate_sigma_rb")
+        if not est or not sig:
+            continue
+        e = (np.log(est[0] / float(r["wb_true_r"])), np.log(est[2] / float(r["wb_true_b"])))
+        err.append(e)
+        z.append(tuple(abs(v) / (_f(g) if g else float("nan")) for v, g in zip(e, sig)))
+        colours.append(wb.get("film_colours"))
+        flags.append({k: v == "1" for k, v in r.items() if k.startswith("v_")})
+    err, z = np.abs(np.array(err)), np.array(z)
+    by = ", ".join(f"{c}: {np.median(err[np.array(colours) == c], axis=0)[0]:.3f} / "
+                   f"{np.median(err[np.array(colours) == c], axis=0)[1]:.3f}"
+                   for c in sorted(set(colours) - {None}))
+    meds = [np.median(err[np.array([f[k] == on for f in flags])], axis=0)
+            for k in flags[0] for on in (True, False)
+            if any(f[k] == on for f in flags)]
+    return [f"white-balance estimate, |log error| median R {np.median(err[:, 0]):.3f}, "
+            f"B {np.median(err[:, 1]):.3f} ({len(err)} scenes); in its own σ "
+            f"{np.nanmedian(z[:, 0]):.2f} / {np.nanmedian(z[:, 1]):.2f}",
+            f"by film colours (R / B): {by}",
+            f"with and without each variation of the sweep: medians "
+            f"{np.min(meds):.3f}-{np.max(meds):.3f}"]
+
+
+def main(argv) -> None:
+    if not argv:
+        raise SystemExit(__doc__.splitlines()[2].strip())
+    rows = list(scenes(argv))
+    for line in (ndf_lines(rows, FitOptions()) + thickness_lines(rows)
+                 + white_balance_lines(rows)):
+        print(line)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
