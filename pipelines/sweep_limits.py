@@ -17,6 +17,9 @@ Each ``OUT:WORK`` is one ``accuracy-sweep --set mode=joint --set work=WORK --out
   populations under one wide component; a population split into close components; a
   component far above every true population: another interference order), with the model
   choice's independent count over the Kish count of the true regions' areas on each kind;
+  the components set aside as misread facets, by why, that lie within :data:`MATCH_NM` of a
+  true population (≥ 2 % of the area) no kept component lies on — a population lost — and
+  the others;
 * the white balance: the estimate's median error per gain, its median error in units of its
   own σ, the median error by the number of film colours, and the range of the medians with
   and without each of the sweep's variations.
@@ -37,6 +40,8 @@ from microfacet.analysis.options import FitOptions
 #: populations fitted as one; two components this close (nm) nearest one true population are
 #: a split; a component this far (nm) above every true population is another order.
 WIDE_SD_NM, SPAN_SD, SPLIT_NM, FAR_NM = 4.5, 2.5, 8.0, 60.0
+#: A component within this (nm) of a true population's mean lies on it.
+MATCH_NM = 5.0
 
 
 def scenes(specs):
@@ -127,6 +132,25 @@ def kind(row, mixture, params) -> str | None:
     return None
 
 
+def set_aside_line(rows) -> str:
+    """The misread components set aside, by why: how many lie on a true population that no
+    kept component lies on."""
+    lost, other = [], []
+    for r, s, p, truth in rows:
+        mix = s["thickness"]["mixture"]
+        pops = json.loads((truth / "params.json").read_text())["populations"]
+        tm = np.array([q["mean_nm"] for q in pops if q["area_fraction"] >= 0.02])
+        kept = np.array([c["mean_nm"] for c in mix["components"]])
+        for m in mix.get("misread_components") or []:
+            on = tm[np.abs(tm - m["mean_nm"]) <= MATCH_NM] if tm.size else tm
+            alone = on.size and not (kept.size and np.any(
+                np.abs(kept[:, None] - on[None, :]) <= MATCH_NM))
+            (lost if alone else other).append(m["why"])
+    return (f"set aside as misread: {len(lost) + len(other)}; on a true population no kept "
+            f"component lies on: {len(lost)} ({_counts(lost) or 'none'}); others: "
+            f"{_counts(other) or 'none'}")
+
+
 def thickness_lines(rows) -> list:
     kinds, ratios = [], {}
     for r, s, p, truth in rows:
@@ -137,7 +161,7 @@ def thickness_lines(rows) -> list:
         if k in ("merged", "split"):
             ratios.setdefault(k, []).append(
                 s["thickness"]["mixture"]["n_effective"] / true_kish(truth))
-    out = [f"wrong counts: {len(kinds)}; " + _counts(kinds)]
+    out = [f"wrong counts: {len(kinds)}; " + _counts(kinds), set_aside_line(rows)]
     for k, v in ratios.items():
         v = np.array(v)
         out.append(f"{k}: n_effective / the true regions' Kish count median {np.median(v):.2f}, "

@@ -161,17 +161,20 @@ def _median(x) -> float | None:
     return float(np.median(x)) if x.size else None
 
 
-def _misread(fit, th, ok, regions, area, delta_e_at_estimate=None) -> list:
+def _misread(fit, th, ok, regions, area, delta_e_at_estimate=None, *, pairs=None) -> list:
     """The components of ``fit`` that are misread facets: ``(k, record, facets)`` each,
-    by colour (:func:`~.consistency.misread_components`; where ``delta_e_at_estimate()`` is
-    given, at the image's balance and at the white-balance estimate's alike) or scattered in
-    regions of a few facets (:func:`~.consistency.scattered_components`; ``area``: the
-    facets' px); at least one component is kept."""
+    by colour where they do not cover grains (:func:`~.consistency.misread_components`,
+    ``pairs`` the facets' neighbours; where ``delta_e_at_estimate()`` is given, at the
+    image's balance and at the white-balance estimate's alike) or scattered in regions of a
+    few facets (:func:`~.consistency.scattered_components`; ``area``: the facets' px); at
+    least one component is kept."""
     thick = np.where(ok, th.thickness_nm, np.nan)
     out = {k: (k, {"why": "colour", "delta_e": a, "delta_e_populations": b}, mine)
-           for k, a, b, mine in misread_components(fit.mixture, thick, th.delta_e)}
+           for k, a, b, mine in misread_components(fit.mixture, thick, th.delta_e,
+                                                   pairs=pairs, area=area)}
     if delta_e_at_estimate is not None and out:
-        also = {k for k, *_ in misread_components(fit.mixture, thick, delta_e_at_estimate())}
+        also = {k for k, *_ in misread_components(fit.mixture, thick, delta_e_at_estimate(),
+                                                  pairs=pairs, area=area)}
         out = {k: v for k, v in out.items() if k in also}
     for k, f, mine in scattered_components(fit.mixture, thick, regions, area):
         if k not in out and len(out) < len(fit.mixture.components) - 1:
@@ -185,9 +188,9 @@ def _misread(fit, th, ok, regions, area, delta_e_at_estimate=None) -> list:
 def _set_aside_misread(joint, fit, samples, options, seed, delta_e_at_estimate=None):
     """The mixture refitted without the facets of its misread components
     (:func:`_misread`: minor components whose colours the film explains much worse than the
-    populations', by the rule a candidate population's colours must pass, or whose facets
-    lie scattered, in regions of a few facets); up to
-    :data:`MAX_MISREAD_ROUNDS` times. Their facets join the unexplained ones. Returns the
+    populations', by the rule a candidate population's colours must pass, and that do not
+    cover grains of the surface, or whose facets lie scattered, in regions of a few facets);
+    up to :data:`MAX_MISREAD_ROUNDS` times. Their facets join the unexplained ones. Returns the
     fit, the samples ``(ok, unexplained, regions)`` and one record per component set aside
     (mean and weight in the mixture it was found in, why, its facets' and the populations'
     median ΔE00, for scattered ones their facets per region, its facets).
@@ -200,9 +203,10 @@ def _set_aside_misread(joint, fit, samples, options, seed, delta_e_at_estimate=N
     th = joint.thickness
     ok, unexplained, regions = samples
     records = []
+    pairs = neighbour_pairs(joint.facets)
     for _ in range(MAX_MISREAD_ROUNDS):
         bad = _misread(fit, th, ok, regions, joint.area_px.astype(np.float64),
-                       delta_e_at_estimate)
+                       delta_e_at_estimate, pairs=pairs)
         if not bad:
             break
         drop = np.logical_or.reduce([mine for *_, mine in bad])

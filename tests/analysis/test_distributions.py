@@ -564,3 +564,18 @@ def test_a_component_misfit_only_at_the_images_balance_is_not_misread():
     assert [(k, rec["why"]) for k, rec, _ in _misread(fit, th, ok, reg, area)] == [(1, "colour")]
     assert _misread(fit, th, ok, reg, area, lambda: np.full(100, 1.1)) == []
     assert [k for k, *_ in _misread(fit, th, ok, reg, area, lambda: de + 0.2)] == [1]
+    # the same facets as one corner block of a 10 × 10 grid of facets cover a grain: kept;
+    # each apart from the others (a checkerboard's cells), they are misread as before
+    from microfacet.analysis.segmentation import neighbour_pairs
+
+    grid = np.arange(100).reshape(10, 10)
+    order = np.r_[np.flatnonzero((grid < 70).ravel() | (grid % 10 < 5).ravel()),
+                  np.flatnonzero((grid >= 70).ravel() & (grid % 10 >= 5).ravel())]
+    labels = np.argsort(order)[grid]           # facet i (d[i]) at the cell order[i]
+    assert (d[labels[7:, 5:]] == 250.0).all()
+    assert _misread(fit, th, ok, reg, area, pairs=neighbour_pairs(labels)) == []
+    apart = np.flatnonzero(((grid // 10 + grid % 10) % 2 == 0).ravel())[::3][:15]
+    order = np.r_[np.setdiff1d(np.arange(100), apart), apart]   # the same facets, apart
+    labels = np.argsort(order)[grid]
+    assert [(k, rec["why"]) for k, rec, _ in _misread(
+        fit, th, ok, reg, area, pairs=neighbour_pairs(labels))] == [(1, "colour")]
