@@ -104,14 +104,26 @@ def region_thickness_errors(est_nm, region_id, true_mean_nm, *, erode_px=3, min_
             "median_ae_nm": float(np.median(np.abs(errs))) if errs.size else math.nan}
 
 
+def present_means_nm(populations, *, min_area_fraction=0.02) -> list:
+    """The means of the true thickness populations present (``populations`` of
+    params.json: at least ``min_area_fraction`` of the area).
+
+    >>> present_means_nm([{"mean_nm": 120.0, "area_fraction": 0.7},
+    ...                   {"mean_nm": 250.0, "area_fraction": 0.01}])
+    [120.0]
+    """
+    return [q["mean_nm"] for q in populations if q["area_fraction"] >= min_area_fraction]
+
+
 def true_population_count(populations, *, min_area_fraction=0.02):
     """Number of true thickness populations present (``populations`` of params.json).
 
-    >>> true_population_count([{"area_fraction": 0.7}, {"area_fraction": 0.29},
-    ...                        {"area_fraction": 0.01}])
+    >>> true_population_count([{"mean_nm": 1.0, "area_fraction": 0.7},
+    ...                        {"mean_nm": 2.0, "area_fraction": 0.29},
+    ...                        {"mean_nm": 3.0, "area_fraction": 0.01}])
     2
     """
-    return sum(1 for q in populations if q["area_fraction"] >= min_area_fraction)
+    return len(present_means_nm(populations, min_area_fraction=min_area_fraction))
 
 
 def mean_coverage(components, uncertainty, populations, *, gate_nm=15.0, min_area_fraction=0.02):
@@ -133,7 +145,7 @@ def mean_coverage(components, uncertainty, populations, *, gate_nm=15.0, min_are
     """
     mu = [c["mean_nm"] for c in components]
     sig = [u.get("sigma_nm") for u in (uncertainty or [{}] * len(mu))]
-    true = [q["mean_nm"] for q in populations if q["area_fraction"] >= min_area_fraction]
+    true = present_means_nm(populations, min_area_fraction=min_area_fraction)
     cand = sorted((abs(m - t), i, j) for i, m in enumerate(mu) for j, t in enumerate(true)
                   if abs(m - t) <= gate_nm)
     used_c, used_t, errs, sigs = set(), set(), [], []

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from microfacet.analysis.options import FitOptions
+from pipelines._scoring import present_means_nm
 
 #: A component this wide (nm) spanning two true means within :data:`SPAN_SD` of its SD is two
 #: populations fitted as one; two components this close (nm) nearest one true population are
@@ -45,7 +46,7 @@ MATCH_NM = 5.0
 
 
 def scenes(specs):
-    """``(row, summary, truth params, truth folder)`` of every joint-mode scene."""
+    """``(row, summary, truth/params.json, truth folder)`` of every joint-mode scene."""
     for spec in specs:
         out, _, work = spec.partition(":")
         with open(Path(out) / "generalization.csv", newline="") as f:
@@ -55,7 +56,7 @@ def scenes(specs):
                     continue
                 truth = Path(work) / "stacks" / r["name"] / "truth"
                 yield (r, json.loads(res.read_text()),
-                       json.loads((truth / "params.json").read_text())["params"], truth)
+                       json.loads((truth / "params.json").read_text()), truth)
 
 
 def _f(x) -> float:
@@ -136,10 +137,9 @@ def set_aside_line(rows) -> str:
     """The misread components set aside, by why: how many lie on a true population that no
     kept component lies on."""
     lost, other = [], []
-    for r, s, p, truth in rows:
+    for r, s, meta, truth in rows:
         mix = s["thickness"]["mixture"]
-        pops = json.loads((truth / "params.json").read_text())["populations"]
-        tm = np.array([q["mean_nm"] for q in pops if q["area_fraction"] >= 0.02])
+        tm = np.array(present_means_nm(meta["populations"]))
         kept = np.array([c["mean_nm"] for c in mix["components"]])
         for m in mix.get("misread_components") or []:
             on = tm[np.abs(tm - m["mean_nm"]) <= MATCH_NM] if tm.size else tm
@@ -154,7 +154,7 @@ def set_aside_line(rows) -> str:
 def thickness_lines(rows) -> list:
     kinds, ratios = [], {}
     for r, s, p, truth in rows:
-        k = kind(r, s["thickness"]["mixture"], p)
+        k = kind(r, s["thickness"]["mixture"], p["params"])
         if k is None:
             continue
         kinds.append(k)

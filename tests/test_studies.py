@@ -134,8 +134,6 @@ def test_sweep_limits_tell_a_lost_population_from_misread_facets(tmp_path):
     """Two scenes' set-aside components: 178.7 nm lies on a true population no kept
     component lies on (lost); 330 nm on none, and 130.5 nm on one a kept component already
     covers (both misread facets, not losses)."""
-    import json
-
     from pipelines.sweep_limits import set_aside_line
 
     rows = []
@@ -143,14 +141,11 @@ def test_sweep_limits_tell_a_lost_population_from_misread_facets(tmp_path):
             ("g000", [(119.0, 0.8), (178.0, 0.2)], [118.9], [(178.7, "colour")]),
             ("g001", [(130.0, 0.9), (250.0, 0.01)], [130.2],
              [(330.0, "colour"), (130.5, "scattered")])):
-        truth = tmp_path / name / "truth"
-        truth.mkdir(parents=True)
-        (truth / "params.json").write_text(json.dumps(
-            {"populations": [{"mean_nm": m, "area_fraction": a} for m, a in pops]}))
+        meta = {"populations": [{"mean_nm": m, "area_fraction": a} for m, a in pops]}
         summary = {"thickness": {"mixture": {
             "components": [{"mean_nm": m} for m in kept],
             "misread_components": [{"mean_nm": m, "why": w} for m, w in gone]}}}
-        rows.append(({}, summary, {}, truth))
+        rows.append(({}, summary, meta, tmp_path / name / "truth"))
     assert set_aside_line(rows) == ("set aside as misread: 3; on a true population no kept "
                                     "component lies on: 1 (colour 1); others: colour 1, "
                                     "scattered 1")

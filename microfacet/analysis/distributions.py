@@ -185,7 +185,8 @@ def _misread(fit, th, ok, regions, area, delta_e_at_estimate=None, *, pairs=None
     return list(out.values())
 
 
-def _set_aside_misread(joint, fit, samples, options, seed, delta_e_at_estimate=None):
+def _set_aside_misread(joint, fit, samples, options, seed, delta_e_at_estimate=None, *,
+                       pairs=None):
     """The mixture refitted without the facets of its misread components
     (:func:`_misread`: minor components whose colours the film explains much worse than the
     populations', by the rule a candidate population's colours must pass, and that do not
@@ -193,7 +194,9 @@ def _set_aside_misread(joint, fit, samples, options, seed, delta_e_at_estimate=N
     up to :data:`MAX_MISREAD_ROUNDS` times. Their facets join the unexplained ones. Returns the
     fit, the samples ``(ok, unexplained, regions)`` and one record per component set aside
     (mean and weight in the mixture it was found in, why, its facets' and the populations'
-    median ΔE00, for scattered ones their facets per region, its facets).
+    median ΔE00, for scattered ones their facets per region, its facets). ``pairs``: the
+    facets' neighbour pairs (:func:`~.segmentation.neighbour_pairs` of ``joint.facets``),
+    where the caller has them.
 
     The number of independent regions grows with the field, and facets misread the same way
     (a stain's colour, an order's look-alike) then pay for a component of their own: on the
@@ -203,7 +206,7 @@ def _set_aside_misread(joint, fit, samples, options, seed, delta_e_at_estimate=N
     th = joint.thickness
     ok, unexplained, regions = samples
     records = []
-    pairs = neighbour_pairs(joint.facets)
+    pairs = neighbour_pairs(joint.facets) if pairs is None else pairs
     for _ in range(MAX_MISREAD_ROUNDS):
         bad = _misread(fit, th, ok, regions, joint.area_px.astype(np.float64),
                        delta_e_at_estimate, pairs=pairs)
@@ -336,14 +339,16 @@ def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders
     if regions is None:
         return None, NO_SAMPLES["thickness"]
     fit = pooled.fit if ready else _thickness_fit(joint, ok, regions, options, scene.seed)
+    pairs = neighbour_pairs(joint.facets)       # the facets' neighbours, one scan of the map
     fit, (ok, unexplained, regions), misread = _set_aside_misread(
-        joint, fit, (ok, unexplained, regions), options, scene.seed, delta_e_at_estimate)
+        joint, fit, (ok, unexplained, regions), options, scene.seed, delta_e_at_estimate,
+        pairs=pairs)
     fit.info["misread_components"] = misread
     _describe_candidates(fit, regions, th, area, ok,
                          joint.facets.size * float(np.prod(scene.pixel_size_um)))
     fit.info["mean_uncertainty"] = mean_uncertainty(
         fit.mixture, regions, np.where(ok, th.thickness_nm, np.nan), area,
-        touching=touching_regions(joint.facets, regions.patch_region),
+        touching=touching_regions(pairs, regions.patch_region),
         gain_shifts_nm=gain_shifts_nm)
     a_t = area[ok].sum()
     edge = float(area[ok & th.at_window_edge].sum() / a_t)
@@ -468,12 +473,13 @@ def _region_groups(component, touching) -> np.ndarray:
     return csgraph.connected_components(graph, directed=False)[1]
 
 
-def touching_regions(labels, patch_region) -> np.ndarray:
-    """Pairs of regions (indices, shape (P, 2)) whose patches touch in ``labels``
-    (4-connectivity; patches without a region, -1, take no part). The region image is
-    int32 (4 B/px)."""
-    pairs = neighbour_pairs((np.asarray(patch_region) + 1).astype(np.int32)[labels])
-    return pairs[pairs[:, 0] > 0] - 1
+def touching_regions(patch_pairs, patch_region) -> np.ndarray:
+    """Pairs of regions (indices, shape (P, 2), i < j, sorted) whose patches touch: the
+    patches' own neighbour pairs (:func:`~.segmentation.neighbour_pairs` of the patch
+    labels) mapped to their regions (patches without a region, -1, take no part)."""
+    r = np.asarray(patch_region, dtype=np.int64)[np.asarray(patch_pairs, np.int64).reshape(-1, 2)]
+    r = r[(r >= 0).all(axis=1) & (r[:, 0] != r[:, 1])]
+    return np.unique(np.sort(r, axis=1), axis=0).reshape(-1, 2)
 
 
 def _round(v):

@@ -443,11 +443,12 @@ def test_a_component_on_pieces_of_one_region_has_no_measured_spread():
 
 def test_touching_regions_from_the_facet_labels():
     from microfacet.analysis.distributions import touching_regions
+    from microfacet.analysis.segmentation import neighbour_pairs
 
     labels = np.array([[0, 0, 1, 2],
                        [0, 0, 1, 2],
                        [3, 3, 3, 2]])
-    pairs = touching_regions(labels, np.array([0, 0, 1, -1]))        # facet 3 has none
+    pairs = touching_regions(neighbour_pairs(labels), np.array([0, 0, 1, -1]))  # 3: none
     assert pairs.tolist() == [[0, 1]]
 
 
