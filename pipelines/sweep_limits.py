@@ -31,9 +31,11 @@ import csv
 import json
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
+from microfacet.analysis.identification import self_check_passes
 from microfacet.analysis.options import FitOptions
 from pipelines._scoring import present_means_nm
 
@@ -65,7 +67,6 @@ def _f(x) -> float:
 
 def ndf_lines(rows, fits: FitOptions) -> list:
     tex = [(r, s) for r, s, _, _ in rows if r["textured"] == "True"]
-    low, high = fits.self_check_range
     out = [f"textured scenes: {len(tex)}; by world "
            + _counts(r["world"] for r, _ in tex),
            "refused, by reason (faceted world): "
@@ -73,10 +74,10 @@ def ndf_lines(rows, fits: FitOptions) -> list:
                      if r["world"] == "faceted")]
     sc = [(r, s["ndf"].get("reason_code"), s["ndf"].get("self_check") or {}) for r, s in tex]
 
-    def passes(c):
-        vals = [c.get("transfer"), c.get("width_transfer"), c.get("spread")]
-        return None not in vals and low <= vals[0] <= high and low <= vals[1] <= high \
-            and vals[2] <= fits.self_check_max_spread
+    def passes(c):          # the analysis' own rule (standard errors 0 where not recorded)
+        keys = ("transfer", "width_transfer", "spread", "transfer_se", "width_transfer_se")
+        return self_check_passes(SimpleNamespace(**{k: _f(c.get(k, 0.0)) for k in keys}),
+                                 fits)
     ok = [(r, why) for r, why, c in sc if passes(c)]
     curved = [_f(r["lobe_rms_ratio"]) for r, why in ok if why == "curved_facets"]
     out.append(f"pass the self-check: {len(ok)}, by reason "

@@ -668,7 +668,8 @@ def correct_ndf_width(dist: Distributions, joint, scene, options: FitOptions,
     The self-check (:mod:`.self_check`) measures, on the stack itself, the RMS slope the
     NDF sees of injected planes over their true one (``check.width_transfer``). Where the
     self-check passes — that and the slopes' gain (``check.transfer``) both in
-    ``options.self_check_range``, the gain's spread over the injected widths within
+    ``options.self_check_range`` by ``options.self_check_sigmas`` of their standard errors,
+    the gain's spread over the injected widths within
     ``options.self_check_max_spread``: the stack resolves the slopes, at a gain it measured —
     the planes' slopes and their noise are divided by the width transfer before the lobes
     are fitted again (``fits.self_check_correct``); the uncorrected lobes and the gain are

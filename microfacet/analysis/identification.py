@@ -222,22 +222,32 @@ class NdfEvidence:
     thickness_nm: float
 
 
+def _within(value, se, options: FitOptions) -> bool:
+    """``value`` in ``fits.self_check_range`` by at least ``fits.self_check_sigmas`` of its
+    standard error ``se`` on either side (False for NaN)."""
+    low, high = options.self_check_range
+    margin = options.self_check_sigmas * se
+    return bool(low + margin <= value <= high - margin)
+
+
 def self_check_passes(check, options: FitOptions) -> bool:
     """Whether the self-check (:class:`~.self_check.SelfCheck`, or None) says the stack
     resolves the facets' slopes: its slope gain (``transfer``) and its width transfer both
-    in ``fits.self_check_range``, and the gain's half-range over the injected widths
-    (``spread``) at most ``fits.self_check_max_spread`` (False where any was not measured)."""
+    in ``fits.self_check_range`` by ``fits.self_check_sigmas`` of their standard errors, and
+    the gain's half-range over the injected widths (``spread``) at most
+    ``fits.self_check_max_spread`` (False where any was not measured)."""
     if check is None:
         return False
-    low, high = options.self_check_range
-    return bool(low <= check.transfer <= high and low <= check.width_transfer <= high
-                and check.spread <= options.self_check_max_spread)
+    return (_within(check.transfer, check.transfer_se, options)
+            and _within(check.width_transfer, check.width_transfer_se, options)
+            and check.spread <= options.self_check_max_spread)
 
 
 def self_check_judgement(judgement: Judgement, check, options: FitOptions) -> Judgement:
     """The NDF's judgement after its self-check (:mod:`.self_check`): an NDF the stack
     cannot resolve — the recovered/injected slope gain (``transfer``) or the width the NDF
-    would see over the true width (``width_transfer``) outside ``fits.self_check_range``, a
+    would see over the true width (``width_transfer``) outside ``fits.self_check_range`` or
+    within ``fits.self_check_sigmas`` of their standard errors of its edge, a
     gain that changes with the injected width by more than ``fits.self_check_max_spread``, or
     not measurable — is not identified, whatever its other evidence says."""
     if not judgement.identified or check is None or self_check_passes(check, options):
@@ -248,6 +258,18 @@ def self_check_judgement(judgement: Judgement, check, options: FitOptions) -> Ju
         said = "had fewer than 3 facet planes with measurable slopes to inject on"
     elif not math.isfinite(t):
         said = "could not recover injected slopes"
+    elif (low <= t <= high and low <= wt <= high
+          and not (_within(t, check.transfer_se, options)
+                   and _within(wt, check.width_transfer_se, options))):
+        k = options.self_check_sigmas
+        return Judgement(False, Reason(
+            "self_check", f"the self-check on this stack recovers the injected slopes at "
+            f"{t:.2f} ± {check.transfer_se:.2f}× and the width at {wt:.2f} ± "
+            f"{check.width_transfer_se:.2f}× (standard errors over its facets): within "
+            f"{k:g} standard error of the edge of {low:g}-{high:g} "
+            f"(`fits.self_check_sigmas`, `fits.self_check_range`), its own measurement does "
+            f"not establish that the heights resolve the facets' slopes "
+            f"(ndf.self_check in summary.json)", "fits.self_check_sigmas"))
     elif low <= t <= high and low <= wt <= high:
         return Judgement(False, Reason(
             "self_check", f"the self-check on this stack recovers the injected slopes at "

@@ -277,10 +277,16 @@ class FitOptions(Options):
                   "transfer of the stack (on the 256^2 sweep's seeds 0-17 the two identified "
                   "NDFs off by more than 25 % had 0.12 and 0.14, eleven of the twelve others "
                   "at most 0.07; docs/accuracy.md)", low=0)
+    self_check_sigmas: float = option(
+        1.0, help="standard errors of the self-check's transfers (over the facets it measured "
+                  "them on) that must lie between them and the edges of self_check_range for "
+                  "an identified NDF: a transfer the stack measures too noisily to place "
+                  "inside the range does not establish it", low=0)
     self_check_correct: bool = option(
         True, help="divide the facet planes' slopes by the self-check's width transfer before "
                    "the NDF's lobes are fitted, where the self-check passes (both transfers "
-                   "in self_check_range, the spread within self_check_max_spread; the "
+                   "in self_check_range by self_check_sigmas of their standard errors, the "
+                   "spread within self_check_max_spread; the "
                    "correction's size stays in the width's error)")
     max_dome_share: float = option(
         0.3, help="largest mean square slope inside the facets (which planes miss) as a share "

@@ -35,6 +35,7 @@ References
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -70,6 +71,9 @@ SIGMA_COVERAGE = 0.95
 
 #: Injected lobe widths, as multiples of the scene's own measured RMS slope.
 WIDTH_FACTORS = (0.5, 1.0, 2.0)
+#: Resamplings of the self-check's facets (with replacement) that give its transfers' standard
+#: errors.
+BOOTSTRAP_REPLICATES = 200
 #: Blur of an in-focus pixel (px) and the blur levels the renderer interpolates between
 #: (:func:`_level_index` computes a blur's place among them from this spacing).
 _BASE_BLUR_PX = 0.5
@@ -110,6 +114,12 @@ class SelfCheck:
         height σ times this factor.
     height_coverage : float
         The share of those errors within the focus stage's own 2σ.
+    transfer_se, width_transfer_se : float
+        Standard errors of ``transfer`` and ``width_transfer`` from the facets the self-check
+        measured them on: the SD of the two medians over :data:`BOOTSTRAP_REPLICATES`
+        resamplings of each injection's facets with replacement. A noisy stack, or one with
+        few facets, measures its own transfer only to within this (NaN where nothing was
+        measured; 0 for a check built by hand).
     """
 
     injected_rms_slope: list
@@ -122,6 +132,8 @@ class SelfCheck:
     width_transfer: float = math.nan
     height_sigma_scale: float = math.nan
     height_coverage: float = math.nan
+    transfer_se: float = 0.0
+    width_transfer_se: float = 0.0
 
     @classmethod
     def unmeasured(cls) -> SelfCheck:
@@ -131,19 +143,27 @@ class SelfCheck:
         >>> SelfCheck.unmeasured().facets, math.isnan(SelfCheck.unmeasured().transfer)
         (0, True)
         """
-        return cls([], [], [], math.nan, math.nan, 0)
+        return cls([], [], [], math.nan, math.nan, 0, transfer_se=math.nan,
+                   width_transfer_se=math.nan)
 
     def width_error(self, noise_relative_error) -> float:
         """Relative error of the NDF's width with its systematic part: the noise's
         (``noise_relative_error``, :func:`~.ndf_fit.width_relative_error`), the self-check's
-        bias (1 − ``width_transfer``) and its spread over the injected widths, in
+        bias (1 − ``width_transfer``), its spread over the injected widths and the relative
+        standard error of the width transfer (what a correction by it carries), in
         quadrature (NaN where the self-check measured nothing).
 
         >>> SelfCheck([0.1], [0.09], [0.9], 0.9, 0.05, 50, [0.8], 0.8).width_error(0.02)
         0.2071
+        >>> SelfCheck([0.1], [0.09], [0.9], 0.9, 0.05, 50, [0.8], 0.8,
+        ...           width_transfer_se=0.08).width_error(0.02)
+        0.23
         """
         noise = noise_relative_error if noise_relative_error is not None else 0.0
-        err = math.sqrt(noise ** 2 + (1.0 - self.width_transfer) ** 2 + self.spread ** 2)
+        # the correction's own error, relative (none where there is no width to divide by)
+        wt = self.width_transfer
+        corr = self.width_transfer_se / wt if wt > 0 else 0.0
+        err = math.sqrt(noise ** 2 + (1.0 - wt) ** 2 + self.spread ** 2 + corr ** 2)
         return round(err, 4) if math.isfinite(err) else math.nan
 
     def to_json(self) -> dict:
@@ -152,6 +172,8 @@ class SelfCheck:
             return float(v) if math.isfinite(v) else None
         return {"transfer": num(self.transfer), "spread": num(self.spread),
                 "width_transfer": num(self.width_transfer), "facets": int(self.facets),
+                "transfer_se": num(self.transfer_se),
+                "width_transfer_se": num(self.width_transfer_se),
                 "height_sigma_scale": num(self.height_sigma_scale),
                 "height_coverage": num(self.height_coverage),
                 "width_ratio": [num(v) for v in self.width_ratio],
@@ -464,7 +486,7 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
     runs = [run(k) for k in range(len(WIDTH_FACTORS) + 1)]
     base = runs[0][1][0]
     area = np.bincount(sc.labels.ravel()).astype(np.float64)
-    inj, rec, widths, n_fac = [], [], [], 0
+    inj, rec, widths, n_fac, sums = [], [], [], 0, []
     for (delta, a_cell, b_cell), (fit, _) in runs[1:]:
         ok = _usable(fit) & _usable(base)
         n_fac = max(n_fac, int(ok.sum()))
@@ -472,6 +494,7 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
             inj.append(math.nan)
             rec.append(math.nan)
             widths.append(math.nan)
+            sums.append(None)
             continue
         # the injection as each segment holds it (its plane through the exact heights)
         seg = fit_facet_planes(sc.labels, delta, height_sigma_um=1.0, reliable=everywhere,
@@ -489,17 +512,80 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
         # pixel by pixel over the segments it is made of
         px = ok[sc.labels]
         cell = sc.cells[px]
-        true = _rms(np.hypot(pattern[0][cell] + a_cell[cell], pattern[1][cell] + b_cell[cell]),
-                    np.ones(cell.size))
+        t2 = (pattern[0][cell] + a_cell[cell]) ** 2 + (pattern[1][cell] + b_cell[cell]) ** 2
+        true = _rms(np.sqrt(t2), np.ones(cell.size))
         widths.append(deconvolved_rms_slope(fit, ok, w) / true if true > 0 else math.nan)
+        sums.append(_facet_sums(fit, ok, w, a, b, (fit.slope_x[ok] - base.slope_x[ok],
+                                                   fit.slope_y[ok] - base.slope_y[ok]),
+                                np.bincount(sc.labels[px], t2, ok.size)[ok],
+                                np.bincount(sc.labels[px], minlength=ok.size)[ok]))
     ratio = [r / i if i > 0 else math.nan for r, i in zip(rec, inj)]
     good = [v for v in ratio if math.isfinite(v)]
     transfer = float(np.median(good)) if good else math.nan
     spread = 0.5 * (max(good) - min(good)) if good else math.nan
     wgood = [v for v in widths if math.isfinite(v)]
+    se = _bootstrap_se(sums, np.random.default_rng([c.seed, 99]))
     return SelfCheck(inj, rec, ratio, transfer, spread, n_fac, widths,
                      float(np.median(wgood)) if wgood else math.nan,
-                     *_sigma_scale(np.concatenate([z for _, (_, z) in runs[1:]])))
+                     *_sigma_scale(np.concatenate([z for _, (_, z) in runs[1:]])), *se)
+
+
+def _facet_sums(fit, ok, weights, true_x, true_y, change, true_sq, n_px) -> np.ndarray:
+    """Per facet of ``fit[ok]``, the terms whose sums over the facets give the self-check's two
+    ratios (:func:`_ratios`): the slope gain's numerator and denominator (:func:`slope_gain`
+    of the recovered ``change`` on the injected ``true_x``, ``true_y``), the noise-removed mean
+    square slope's (:func:`~.planes.deconvolved_rms_slope`) and the true mean square's
+    (``true_sq`` summed over the facet's ``n_px`` pixels): (6, facets)."""
+    keep = fit.slope_sigma[ok] < MAX_SLOPE_SIGMA
+    g2 = np.tan(np.radians(fit.tilt_deg[ok])) ** 2 - 2.0 * fit.slope_sigma[ok] ** 2
+    return np.stack([weights * (change[0] * true_x + change[1] * true_y),
+                     weights * (true_x * true_x + true_y * true_y),
+                     np.where(keep, weights * g2, 0.0), np.where(keep, weights, 0.0),
+                     np.asarray(true_sq, np.float64), np.asarray(n_px, np.float64)])
+
+
+def _ratios(s) -> tuple[np.ndarray, np.ndarray]:
+    """The slope gain and the width ratio from the facet sums ``s`` (6, …) of
+    :func:`_facet_sums`."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        width = np.sqrt(np.maximum(s[2] / s[3], 0.0)) / np.sqrt(s[4] / s[5])
+        return s[0] / s[1], width
+
+
+def _bootstrap_se(sums, rng, replicates=BOOTSTRAP_REPLICATES) -> tuple[float, float]:
+    """Standard errors of the median slope gain and of the median width ratio over the
+    injections, each injection's facets (``sums``: :func:`_facet_sums` per injection, None
+    where it measured nothing) resampled with replacement ``replicates`` times (NaN, NaN
+    without any measured injection).
+
+    >>> rng = np.random.default_rng(0)
+    >>> x = rng.normal(0, 1, 400)
+    >>> s = np.stack([x * (0.9 * x + rng.normal(0, 0.1, 400)), x * x, np.ones(400),
+    ...               np.ones(400), np.ones(400), np.ones(400)])
+    >>> se, _ = _bootstrap_se([s], np.random.default_rng(1))
+    >>> 0.002 < se < 0.01                      # the regression's own SE: 0.1 / √400 = 0.005
+    True
+    """
+    gains, widths = [], []
+    for s in sums:
+        if s is None:
+            continue
+        counts = rng.multinomial(s.shape[1], np.full(s.shape[1], 1.0 / s.shape[1]),
+                                 size=replicates).astype(np.float64)
+        g, w = _ratios((counts @ s.T).T)
+        gains.append(g)
+        widths.append(w)
+    if not gains:
+        return math.nan, math.nan
+    return _sd_of_median(gains), _sd_of_median(widths)
+
+
+def _sd_of_median(replicates) -> float:
+    """SD over the replicates (columns) of their median over the injections (rows), NaN
+    injections left out (NaN where a replicate has none)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)       # all-NaN replicates: NaN
+        return float(np.std(np.nanmedian(np.array(replicates), axis=0)))
 
 
 def _sigma_scale(z) -> tuple[float, float]:

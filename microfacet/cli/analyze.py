@@ -95,7 +95,8 @@ def _text_summary(result, out: Path, elapsed_s: float) -> str:
     if result.self_check is not None and dist.ndf:
         c = result.self_check
         fixed = "width_correction" in dist.ndf.info
-        lobes += ((f", self-check {c.transfer:.2f}x slopes, {c.width_transfer:.2f}x width"
+        lobes += ((f", self-check {c.transfer:.2f}±{c.transfer_se:.2f}x slopes, "
+                   f"{c.width_transfer:.2f}±{c.width_transfer_se:.2f}x width"
                    + (" (widths corrected for it)" if fixed else ""))
                   if math.isfinite(c.transfer) else ", self-check measured nothing")
     if not dist.ndf_judgement.identified:

@@ -65,6 +65,12 @@ def draw(pg, ctx):
     _delta_e_panel(ax_e, ctx)
 
 
+def _se(check, key) -> str:
+    """`` ± SE`` of a self-check's transfer (``key`` in ``ndf.self_check``), or nothing."""
+    v = check.get(key)
+    return "" if v is None else f" ± {v:.2f}"
+
+
 def _self_check_note(ax, check, correction=None):
     """The NDF's self-check (``ndf.self_check``) in the panel's lower left corner: the
     recovered/injected slope gain, per injected width, and the width the NDF would see;
@@ -73,10 +79,12 @@ def _self_check_note(ax, check, correction=None):
         return
     per = ", ".join("–" if v is None else f"{v:.2f}" for v in check.get("ratio") or [])
     wt = check.get("width_transfer")
-    width = "" if wt is None else f"; width after noise removal {wt:.2f}×"
+    width = ("" if wt is None else
+             f"; width after noise removal {wt:.2f}{_se(check, 'width_transfer_se')}×")
     fixed = ("\nlobes fitted to the slopes over it (ndf.mixture.width_correction)"
              if isinstance(correction, dict) else "")
-    ax.text(0.01, 0.02, f"self-check: injected slopes recovered at {check['transfer']:.2f}×"
+    ax.text(0.01, 0.02, f"self-check: injected slopes recovered at {check['transfer']:.2f}"
+            f"{_se(check, 'transfer_se')}×"
             f"{width}\n({per} at 0.5, 1, 2× the width; ndf.self_check){fixed}",
             transform=ax.transAxes, ha="left", va="bottom", fontsize=6.5, color="0.25")
 

@@ -188,8 +188,57 @@ def test_the_analysis_records_the_self_check_when_asked(tmp_path):
     assert s["ndf"]["self_check"]["transfer"] == pytest.approx(c.transfer)
     low, high = r.options.fits.self_check_range
     assert r.distributions.ndf_judgement.identified <= (low <= c.transfer <= high)
+    # the transfers' standard errors: measured, recorded, and the identification keeps them
+    # clear of the range's edges
+    assert 0 < c.transfer_se < 0.2 and 0 < c.width_transfer_se < 0.2
+    assert s["ndf"]["self_check"]["transfer_se"] == pytest.approx(c.transfer_se)
+    assert r.distributions.ndf_judgement.identified <= (
+        low + c.transfer_se <= c.transfer <= high - c.transfer_se)
     off = AnalysisOptions(fits=FitOptions(self_check=False))
     assert analyse_stack(stack, off).self_check is None
+
+
+def test_a_transfer_within_its_standard_error_of_the_edge_is_not_established():
+    """Both transfers inside ``fits.self_check_range`` but within ``fits.self_check_sigmas``
+    of their standard errors of its edge: the stack measured its own transfer too noisily to
+    place it inside, so the NDF is not identified, and the reason gives the transfers with
+    their errors and names the option; with a smaller error, or no margin asked, identified."""
+    ok = Judgement(True)
+    opts = FitOptions()
+
+    def check(t, se, width=0.95, width_se=0.01):
+        return SelfCheck([0.1], [0.1 * t], [t], t, 0.0, 50, [width], width,
+                         transfer_se=se, width_transfer_se=width_se)
+
+    assert self_check_judgement(ok, check(0.85, 0.01), opts) is ok
+    noisy = self_check_judgement(ok, check(0.85, 0.08), opts)
+    assert not noisy.identified and noisy.reason.parameter == "fits.self_check_sigmas"
+    assert "0.85 ± 0.08" in noisy.reason.plain()
+    assert not self_check_judgement(ok, check(1.2, 0.08), opts).identified     # upper edge
+    assert not self_check_judgement(ok, check(1.0, 0.01, 0.82, 0.05), opts).identified
+    assert not self_check_judgement(ok, check(1.0, math.nan), opts).identified
+    assert self_check_judgement(ok, check(0.85, 0.08), FitOptions(self_check_sigmas=0)) is ok
+
+
+def test_the_bootstrap_error_of_the_gain_is_the_regressions_own():
+    """The self-check's gain is a regression through 0 of the recovered slope changes on the
+    injected slopes; resampling the facets gives its standard error: over many independent
+    sets of facets the bootstrap SE matches the scatter of the gain itself."""
+    from microfacet.analysis.self_check import _bootstrap_se
+
+    gains, ses = [], []
+    for k in range(60):
+        rng = np.random.default_rng([5, k])
+        n = 300
+        x, y = rng.normal(0, 0.1, n), rng.normal(0, 0.1, n)
+        w = rng.uniform(20, 200, n)                       # facet areas
+        noise = 0.05 / np.sqrt(w / 50)                   # smaller facets, noisier slopes
+        gx, gy = 0.85 * x + rng.normal(0, noise), 0.85 * y + rng.normal(0, noise)
+        s = np.stack([w * (gx * x + gy * y), w * (x * x + y * y), w, w, w, w])
+        gains.append(s[0].sum() / s[1].sum())
+        ses.append(_bootstrap_se([s], np.random.default_rng([6, k]))[0])
+    assert np.mean(gains) == pytest.approx(0.85, abs=0.01)
+    assert np.mean(ses) == pytest.approx(np.std(gains), rel=0.25)
 
 
 def test_the_width_error_carries_the_self_checks_bias_and_spread():
@@ -199,8 +248,13 @@ def test_the_width_error_carries_the_self_checks_bias_and_spread():
     assert c.width_error(0.04) == pytest.approx(math.sqrt(0.04 ** 2 + 0.2 ** 2 + 0.03 ** 2),
                                                 abs=1e-4)
     assert c.width_error(None) == pytest.approx(math.sqrt(0.2 ** 2 + 0.03 ** 2), abs=1e-4)
+    c.width_transfer_se = 0.04                           # a correction by 0.8 ± 0.04: ± 5 %
+    assert c.width_error(None) == pytest.approx(math.sqrt(0.2 ** 2 + 0.03 ** 2 + 0.05 ** 2),
+                                                abs=1e-4)
     nothing = SelfCheck([math.nan], [math.nan], [math.nan], math.nan, math.nan, 0)
     assert math.isnan(nothing.width_error(0.04))
+    flat = SelfCheck([0.1], [0.0], [0.0], 0.0, 0.0, 50, [0.0], 0.0, width_transfer_se=0.01)
+    assert flat.width_error(0.04) == pytest.approx(math.sqrt(0.04 ** 2 + 1.0), abs=1e-4)
 
 
 def test_a_rendered_stack_is_the_same_whenever_it_is_read():

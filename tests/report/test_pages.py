@@ -56,7 +56,8 @@ def test_header_and_units_are_on_the_pages(results, report, pdf_text):
     assert "SD not measured" in p3 and sum(c[2] <= floor * 1.0001
                                           for c in res.thickness_mixture().components) == 1
     check = res.get("ndf", "self_check")
-    assert f"self-check: injected slopes recovered at {check['transfer']:.2f}×" in p3
+    assert (f"self-check: injected slopes recovered at {check['transfer']:.2f} ± "
+            f"{check['transfer_se']:.2f}×") in p3
     p5 = pdf_text(out, 5)
     assert "microfacet thin-film BRDF" in p5 and "light zenith" in p5
     assert "half-vector model" in p5
