@@ -515,10 +515,11 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
         t2 = (pattern[0][cell] + a_cell[cell]) ** 2 + (pattern[1][cell] + b_cell[cell]) ** 2
         true = _rms(np.sqrt(t2), np.ones(cell.size))
         widths.append(deconvolved_rms_slope(fit, ok, w) / true if true > 0 else math.nan)
+        seg_px = sc.labels[px]
         sums.append(_facet_sums(fit, ok, w, a, b, (fit.slope_x[ok] - base.slope_x[ok],
                                                    fit.slope_y[ok] - base.slope_y[ok]),
-                                np.bincount(sc.labels[px], t2, ok.size)[ok],
-                                np.bincount(sc.labels[px], minlength=ok.size)[ok]))
+                                np.bincount(seg_px, t2, ok.size)[ok],
+                                np.bincount(seg_px, minlength=ok.size)[ok]))
     ratio = [r / i if i > 0 else math.nan for r, i in zip(rec, inj)]
     good = [v for v in ratio if math.isfinite(v)]
     transfer = float(np.median(good)) if good else math.nan

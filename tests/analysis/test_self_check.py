@@ -241,6 +241,36 @@ def test_the_bootstrap_error_of_the_gain_is_the_regressions_own():
     assert np.mean(ses) == pytest.approx(np.std(gains), rel=0.25)
 
 
+def test_the_facet_sums_give_the_self_checks_own_gain_and_width():
+    """The bootstrap resamples per-facet sums (``_facet_sums``); summed over all the facets
+    once they give the self-check's own point estimates — the gain of :func:`slope_gain` and
+    the noise-removed width of :func:`~microfacet.analysis.planes.deconvolved_rms_slope` over
+    the true per-pixel RMS — so its standard errors are of those numbers, slivers (slope
+    noise above ``MAX_SLOPE_SIGMA``) left out alike."""
+    from microfacet.analysis.planes import MAX_SLOPE_SIGMA, FacetFit, deconvolved_rms_slope
+    from microfacet.analysis.self_check import _facet_sums, _ratios, slope_gain
+
+    rng = np.random.default_rng(7)
+    n = 50
+    tx, ty = rng.normal(0, 0.1, n), rng.normal(0, 0.1, n)
+    sx, sy = 0.9 * tx + rng.normal(0, 0.02, n), 0.9 * ty + rng.normal(0, 0.02, n)
+    sigma = rng.uniform(0.005, 0.03, n)
+    sigma[:4] = MAX_SLOPE_SIGMA * 1.5                                   # four slivers
+    fit = FacetFit(sx, sy, np.zeros((n, 2, 2)), sigma,
+                   np.degrees(np.arctan(np.hypot(sx, sy))), np.zeros(n), np.full(n, 30),
+                   np.ones(n), np.ones(n, bool))
+    ok = np.ones(n, bool)
+    ok[10] = False
+    w = rng.uniform(20, 200, n)[ok]
+    px = rng.integers(5, 40, n)[ok]                                      # pixels per facet
+    t2 = (tx[ok] ** 2 + ty[ok] ** 2) * px
+    s = _facet_sums(fit, ok, w, tx[ok], ty[ok], (sx[ok], sy[ok]), t2, px)
+    gain, width = _ratios(s.sum(axis=1))
+    assert gain == pytest.approx(slope_gain(sx[ok], sy[ok], tx[ok], ty[ok], w), rel=1e-12)
+    true = math.sqrt(t2.sum() / px.sum())
+    assert width == pytest.approx(deconvolved_rms_slope(fit, ok, w) / true, rel=1e-12)
+
+
 def test_the_width_error_carries_the_self_checks_bias_and_spread():
     """The width's error with its systematic part: noise, bias (1 − width transfer) and
     spread in quadrature; without a measured width transfer, not a number."""
