@@ -65,8 +65,8 @@ from .planes import deconvolved_rms_slope
 from .sampling import thickness_regions
 from .segmentation import neighbour_pairs
 
-__all__ = ["Distributions", "PooledOrders", "correct_ndf_width", "fit_joint_distributions",
-           "fit_seed_distributions", "pool_interference_orders"]
+__all__ = ["Distributions", "PooledOrders", "calibrate_dome_share", "correct_ndf_width",
+           "fit_joint_distributions", "fit_seed_distributions", "pool_interference_orders"]
 
 sparse = load("scipy.sparse")
 csgraph = load("scipy.sparse.csgraph")
@@ -659,6 +659,40 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
         tfit.info["order_moves"] = [m.to_json() for m in pooled.moves]
     nfit, nj = _joint_ndf(joint, model, cens_frac, scene.max_tilt_deg, options, scene.seed)
     return Distributions(tfit, nfit, tj, nj, *_roi_flags(roi, options))
+
+
+def calibrate_dome_share(dist: Distributions, check, options: FitOptions) -> Distributions:
+    """The planar-facet check over what the heights show of a facet's curvature.
+
+    The dome term the analysis measures inside its facets (``ndf.info["dome_share"]``, the
+    upper end of its mean square slope over the planes') is what the heights show of it: the
+    self-check's ``dome_transfer`` g (:class:`~.self_check.SelfCheck`: recovered over
+    injected dome coefficients) says how much that is. The share is divided by g² (g capped
+    at 1: heights that exaggerate domes are not credited) and the NDF judged again
+    (:func:`~.identification.dome_judgement`); the measured share is kept as
+    ``info["dome_share_measured"]``. Heights that flatten domes to nothing (g ≤ 0) cannot
+    show the facets planar: the share is infinite. Unchanged without a self-check, an NDF,
+    a measured share or a measured transfer.
+
+    >>> from microfacet.analysis.identification import Judgement
+    >>> from microfacet.analysis.ndf_fit import MixtureFit
+    >>> from microfacet.analysis.self_check import SelfCheck
+    >>> fit = MixtureFit.__new__(MixtureFit); fit.info = {"dome_share": 0.1}
+    >>> d = Distributions(None, fit, Judgement(True), Judgement(True))
+    >>> check = SelfCheck([], [], [], 1.0, 0.0, 10, dome_transfer=0.5)
+    >>> out = calibrate_dome_share(d, check, FitOptions())
+    >>> out.ndf.info["dome_share"], out.ndf_judgement.identified
+    (0.4, False)
+    """
+    g = math.nan if check is None else check.dome_transfer
+    share = None if dist.ndf is None else dist.ndf.info.get("dome_share")
+    if share is None or not math.isfinite(share) or not math.isfinite(g):
+        return dist
+    cal = share / min(g, 1.0) ** 2 if g > 0 else (math.inf if share > 0 else 0.0)
+    dist.ndf.info["dome_share_measured"] = share
+    dist.ndf.info["dome_share"] = cal
+    return dataclasses.replace(dist, ndf_judgement=dome_judgement(dist.ndf_judgement, cal,
+                                                                  options))
 
 
 def correct_ndf_width(dist: Distributions, joint, scene, options: FitOptions,

@@ -36,6 +36,7 @@ from .consistency import ALIAS_SD, MapCheck, mixture_map_check, roi_pixel_check
 from .distributions import (
     Distributions,
     PooledOrders,
+    calibrate_dome_share,
     correct_ndf_width,
     fit_joint_distributions,
     fit_seed_distributions,
@@ -360,6 +361,7 @@ def run_stages(st: Stack, options: AnalysisOptions, *, progress=None) -> Analysi
         with timer.stage(Stage.SELF_CHECK):
             check = check_job.result()
             dist.ndf_judgement = self_check_judgement(dist.ndf_judgement, check, options.fits)
+            dist = calibrate_dome_share(dist, check, options.fits)
             dist = correct_ndf_width(dist, joint, scene, fits, check)
             if check is not None and dist.ndf is not None:
                 err = check.width_error(dist.ndf.info.get("width_relative_error"))

@@ -315,6 +315,44 @@ def dome_mean_square_slope(labels, height_um, *, height_sigma_um, reliable, pixe
     >>> round(ms / float(np.mean(0.01 * ((xx - cx) ** 2 + (yy - cy) ** 2))), 3)
     1.0
     """
+    c = dome_coefficients(labels, height_um, height_sigma_um=height_sigma_um,
+                          reliable=reliable, pixel_size_um=pixel_size_um,
+                          correlation_px=correlation_px, min_pixels=min_pixels)
+    if c.ok.sum() < 3:
+        return None
+    d, var_d, r2, area = c.d[c.ok], c.var_d[c.ok], c.r2[c.ok], c.area[c.ok]
+    # the dome's slope 2 d r, its mean square over the facet's pixels (all of them)
+    ms = float(np.sum(area * 4.0 * (d * d - var_d) * r2) / np.sum(area))
+    # Var(d̂²) = 4 d² v + 2 v² for d̂ ~ N(d, v), with d² estimated by max(d̂² − v, 0)
+    var_t = (4.0 * r2) ** 2 * (4.0 * np.maximum(d * d - var_d, 0.0) * var_d + 2.0 * var_d ** 2)
+    return ms, float(np.sqrt(np.sum(area ** 2 * var_t)) / np.sum(area))
+
+
+@dataclass
+class DomeCoefficients:
+    """Per facet (arrays of length S): the dome coefficient ``d`` (µm⁻¹) of
+    ``z = a x + b y + c + d r²``, its noise variance ``var_d``, whether it was measured
+    (``ok``), the mean r² over the facet's pixels ``r2`` (µm²) and its pixels ``area``."""
+
+    d: np.ndarray
+    var_d: np.ndarray
+    ok: np.ndarray
+    r2: np.ndarray
+    area: np.ndarray
+
+
+def dome_coefficients(labels, height_um, *, height_sigma_um, reliable, pixel_size_um,
+                      correlation_px=1.0, min_pixels=12) -> DomeCoefficients:
+    """Each facet's dome term: the weighted fit of ``z = a x + b y + c + d r²`` (r from the
+    centroid of its weighted heights) of :func:`dome_mean_square_slope`, per facet.
+
+    >>> yy, xx = np.mgrid[0:20, 0:20] * 0.5
+    >>> h = -0.05 * ((xx - 4.75) ** 2 + (yy - 4.75) ** 2) + 0.1 * xx
+    >>> c = dome_coefficients(np.zeros((20, 20), np.int32), h, height_sigma_um=0.001,
+    ...                       reliable=np.ones(h.shape, bool), pixel_size_um=0.5)
+    >>> bool(c.ok[0]), round(float(c.d[0]), 4)
+    (True, -0.05)
+    """
     S = int(labels.max()) + 1
     sums = _dome_sums(labels, np.asarray(height_um), height_sigma_um, reliable,
                       pixel_size_um, S)
@@ -322,20 +360,17 @@ def dome_mean_square_slope(labels, height_um, *, height_sigma_um, reliable, pixe
     ok = n >= max(min_pixels, 5)
     ok[ok] &= np.abs(np.linalg.det(A[ok])) > 1e-12 * np.prod(np.diagonal(A[ok], axis1=1,
                                                                          axis2=2), axis=1)
-    if ok.sum() < 3:
-        return None
-    inv = np.linalg.inv(A[ok])
-    coef = np.einsum("sij,sj->si", inv, rhs[ok])
-    rss = szz[ok] - np.einsum("si,si->s", coef, rhs[ok])
-    chi2 = np.maximum(rss / np.maximum(n[ok] - 4, 1), 1.0)
-    d, var_d = coef[:, 3], inv[:, 3, 3] * chi2 * _correlation_factor(n[ok], correlation_px)
-    # the dome's slope 2 d r, its mean square over the facet's pixels (all of them)
-    r2 = r2sum[ok] / area[ok]
-    area = area[ok]
-    ms = float(np.sum(area * 4.0 * (d * d - var_d) * r2) / np.sum(area))
-    # Var(d̂²) = 4 d² v + 2 v² for d̂ ~ N(d, v), with d² estimated by max(d̂² − v, 0)
-    var_t = (4.0 * r2) ** 2 * (4.0 * np.maximum(d * d - var_d, 0.0) * var_d + 2.0 * var_d ** 2)
-    return ms, float(np.sqrt(np.sum(area ** 2 * var_t)) / np.sum(area))
+    d, var_d = np.full(S, np.nan), np.full(S, np.nan)
+    if ok.any():
+        inv = np.linalg.inv(A[ok])
+        coef = np.einsum("sij,sj->si", inv, rhs[ok])
+        rss = szz[ok] - np.einsum("si,si->s", coef, rhs[ok])
+        chi2 = np.maximum(rss / np.maximum(n[ok] - 4, 1), 1.0)
+        d[ok] = coef[:, 3]
+        var_d[ok] = inv[:, 3, 3] * chi2 * _correlation_factor(n[ok], correlation_px)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r2 = np.where(area > 0, r2sum / np.maximum(area, 1), 0.0)
+    return DomeCoefficients(d, var_d, ok, r2, area)
 
 def _dome_sums(labels, height_um, height_sigma_um, reliable, pixel_size_um, S):
     """:func:`dome_mean_square_slope`'s sums per facet (arrays of length S): the normal

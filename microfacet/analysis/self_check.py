@@ -16,11 +16,16 @@ its heights are borrowed from a pit or scratch micrometres away), and the RMS sl
 would report, noise removed, over the true per-pixel RMS of the rendered surface (the *width
 transfer*, which also pays for segments that are not the cells). Outside
 ``fits.self_check_range`` the NDF is not identified
-(:func:`~.identification.self_check_judgement`). How well it predicts the truth on
+(:func:`~.identification.self_check_judgement`). A fifth stack adds domes (rounded facets)
+to the 1× injection, rendered with the same noise: the gain of the segments' dome
+coefficients (the *dome transfer*) says how much of a facet's curvature the heights show,
+and the analysis' planar-facet check is judged over it
+(:func:`~.distributions.calibrate_dome_share`). How well it predicts the truth on
 randomized scenes: docs/accuracy.md (``python -m pipelines run accuracy-ndf-worlds``).
 
 What it cannot see: a surface unlike the injected one — steps at the facet edges, rounded
-facets (the planar-facet check, :func:`~.planes.dome_mean_square_slope`, looks for those),
+facets that the segments straddle (their domes then do not show as domes of the segments;
+the injected domes sit on the cells, which are a segmentation of the image, so they do),
 brightness that fades with tilt and so selects the flatter facets.
 
 References
@@ -52,6 +57,7 @@ from .planes import (
     MAX_SLOPE_SIGMA,
     at_least_px,
     deconvolved_rms_slope,
+    dome_coefficients,
     facet_edge_distance,
     fit_facet_planes,
 )
@@ -71,6 +77,9 @@ SIGMA_COVERAGE = 0.95
 
 #: Injected lobe widths, as multiples of the scene's own measured RMS slope.
 WIDTH_FACTORS = (0.5, 1.0, 2.0)
+#: Mean square slope of the domes injected with the 1× planes, over the planes' own (the
+#: dome transfer's signal: about what the rounded facets of the generator's worlds add).
+DOME_SHARE_INJECTED = 1.0
 #: Resamplings of the self-check's facets (with replacement) that give its transfers' standard
 #: errors.
 BOOTSTRAP_REPLICATES = 200
@@ -120,6 +129,14 @@ class SelfCheck:
         resamplings of each injection's facets with replacement. A noisy stack, or one with
         few facets, measures its own transfer only to within this (NaN where nothing was
         measured; 0 for a check built by hand).
+    dome_transfer, dome_transfer_se : float
+        How much of a facet's curvature its heights show: the gain of the recovered dome
+        coefficients (:func:`~.planes.dome_coefficients`) on those of domes injected on
+        the cells with the 1× planes (mean square slope :data:`DOME_SHARE_INJECTED` times
+        the planes'), per segment, weighted by its area and mean r², and its bootstrap
+        standard error. The planar-facet check divides the dome term it measures by its
+        square (:func:`~.distributions.calibrate_dome_share`): heights that flatten domes
+        cannot show the facets planar. NaN where not measured.
     """
 
     injected_rms_slope: list
@@ -134,6 +151,8 @@ class SelfCheck:
     height_coverage: float = math.nan
     transfer_se: float = 0.0
     width_transfer_se: float = 0.0
+    dome_transfer: float = math.nan
+    dome_transfer_se: float = math.nan
 
     @classmethod
     def unmeasured(cls) -> SelfCheck:
@@ -174,6 +193,8 @@ class SelfCheck:
                 "width_transfer": num(self.width_transfer), "facets": int(self.facets),
                 "transfer_se": num(self.transfer_se),
                 "width_transfer_se": num(self.width_transfer_se),
+                "dome_transfer": num(self.dome_transfer),
+                "dome_transfer_se": num(self.dome_transfer_se),
                 "height_sigma_scale": num(self.height_sigma_scale),
                 "height_coverage": num(self.height_coverage),
                 "width_ratio": [num(v) for v in self.width_ratio],
@@ -290,11 +311,7 @@ def _planes(labels, rms_slope, pixel_yx, rng, pattern=None):
     is flat or not given, slopes N(0, s²) per axis with 2 s² = ``rms_slope``²; returns the
     height map and the slopes per facet."""
     S = int(labels.max()) + 1
-    yy, xx = np.indices(labels.shape, dtype=np.float64)
-    y_um, x_um = yy * pixel_yx[0], xx * pixel_yx[1]
-    n = np.maximum(np.bincount(labels.ravel(), minlength=S), 1)
-    cy = np.bincount(labels.ravel(), y_um.ravel(), S) / n
-    cx = np.bincount(labels.ravel(), x_um.ravel(), S) / n
+    dy, dx = _from_centroids(labels, pixel_yx)
     if pattern is None or _flat(pattern):
         s = rms_slope / math.sqrt(2.0)
         a, b = rng.normal(0, s, S), rng.normal(0, s, S)
@@ -302,9 +319,20 @@ def _planes(labels, rms_slope, pixel_yx, rng, pattern=None):
         a, b = pattern
         k = rms_slope / math.sqrt(float(np.mean(a * a + b * b)))
         a, b = k * a, k * b
-    plane = a[labels] * (x_um - cx[labels]) + b[labels] * (y_um - cy[labels])
+    plane = a[labels] * dx + b[labels] * dy
     offset = _joined_offsets(labels, plane)
     return offset[labels] + plane, a, b
+
+
+def _from_centroids(labels, pixel_yx):
+    """Each pixel's offset (µm; y, x, (H, W) each) from the centroid of its label's pixels."""
+    S = int(labels.max()) + 1
+    yy, xx = np.indices(labels.shape, dtype=np.float64)
+    y_um, x_um = yy * pixel_yx[0], xx * pixel_yx[1]
+    n = np.maximum(np.bincount(labels.ravel(), minlength=S), 1)
+    cy = np.bincount(labels.ravel(), y_um.ravel(), S) / n
+    cx = np.bincount(labels.ravel(), x_um.ravel(), S) / n
+    return y_um - cy[labels], x_um - cx[labels]
 
 
 def _joined_offsets(labels, plane, *, pull=1e-3):
@@ -404,10 +432,12 @@ class Conditions:
     seed: int = 0
 
 
-def _recovered_planes(sc, height_um, focus_options, joint, seed):
+def _recovered_planes(sc, height_um, focus_options, joint, seed, *, domes=False):
     """Render ``height_um`` in the scene's conditions (:class:`RenderedStack`, noise keyed by
     ``seed``); the facet planes of its height from focus, fitted as the analysis fits them,
-    and the errors of the focus stage's reliable heights in units of their σ."""
+    the errors of the focus stage's reliable heights in units of their σ, and with ``domes``
+    the segments' dome coefficients (:func:`~.planes.dome_coefficients`, as the analysis'
+    planar-facet check fits them; else None)."""
     slices = RenderedStack(sc.texture, height_um, sc.z_um, blur_px_per_um=sc.blur_px_per_um,
                            noise_sd=sc.noise_sd, seed=seed, levels=sc.levels)
     # the next slice is rendered (numpy, the GIL let go) while this one is measured (OpenCV):
@@ -417,11 +447,14 @@ def _recovered_planes(sc, height_um, focus_options, joint, seed):
     rel = foc.reliable & np.isfinite(sig) & (sig > 0)
     z_scores = np.abs(foc.height_fit_um[rel] - height_um[rel]) / sig[rel]
     got = focus_heights(foc, joint)
-    interior = at_least_px(facet_edge_distance(sc.labels), joint.plane_edge_px)
-    return fit_facet_planes(sc.labels, got.height_um, height_sigma_um=got.sigma_um,
-                            reliable=got.reliable & interior, pixel_size_um=sc.pixel_yx,
-                            min_pixels=joint.min_plane_pixels,
-                            correlation_px=got.correlation_px), z_scores
+    reliable = got.reliable & at_least_px(facet_edge_distance(sc.labels), joint.plane_edge_px)
+    fit = fit_facet_planes(sc.labels, got.height_um, height_sigma_um=got.sigma_um,
+                           reliable=reliable, pixel_size_um=sc.pixel_yx,
+                           min_pixels=joint.min_plane_pixels, correlation_px=got.correlation_px)
+    dome = (dome_coefficients(sc.labels, got.height_um, height_sigma_um=got.sigma_um,
+                              reliable=reliable, pixel_size_um=sc.pixel_yx,
+                              correlation_px=got.correlation_px) if domes else None)
+    return fit, z_scores, dome
 
 
 def _usable(fit):
@@ -481,13 +514,15 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
         else:
             injected = _planes(sc.cells, width, sc.pixel_yx,
                                np.random.default_rng([c.seed, k]))
-        return injected, _recovered_planes(sc, sc.base_um + injected[0], fo, joint, (c.seed, k))
+        return injected, _recovered_planes(sc, sc.base_um + injected[0], fo, joint, (c.seed, k),
+                                           domes=WIDTH_FACTORS[k - 1] == 1.0)
 
     runs = [run(k) for k in range(len(WIDTH_FACTORS) + 1)]
+    dome = _dome_transfer(sc, runs[1 + WIDTH_FACTORS.index(1.0)], fo, joint, c.seed)
     base = runs[0][1][0]
     area = np.bincount(sc.labels.ravel()).astype(np.float64)
     inj, rec, widths, n_fac, sums = [], [], [], 0, []
-    for (delta, a_cell, b_cell), (fit, _) in runs[1:]:
+    for (delta, a_cell, b_cell), (fit, _, _) in runs[1:]:
         ok = _usable(fit) & _usable(base)
         n_fac = max(n_fac, int(ok.sum()))
         if ok.sum() < 3:
@@ -528,7 +563,51 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
     se = _bootstrap_se(sums, np.random.default_rng([c.seed, 99]))
     return SelfCheck(inj, rec, ratio, transfer, spread, n_fac, widths,
                      float(np.median(wgood)) if wgood else math.nan,
-                     *_sigma_scale(np.concatenate([z for _, (_, z) in runs[1:]])), *se)
+                     *_sigma_scale(np.concatenate([z for _, (_, z, _) in runs[1:]])), *se,
+                     *dome)
+
+
+def _domes(cells, rms_slope, pixel_yx):
+    """Caps ``−κ r²/2`` per cell about its centroid, joined at the edges as well as they can
+    be (:func:`_joined_offsets`), κ such that their RMS slope κ·√⟨r²⟩ is ``rms_slope``:
+    rounded facets, (H, W) µm."""
+    dy, dx = _from_centroids(cells, pixel_yx)
+    r2 = dy * dy + dx * dx
+    mean_r2 = float(np.mean(r2))
+    if not mean_r2 > 0:
+        return np.zeros(cells.shape)
+    cap = -0.5 * rms_slope / math.sqrt(mean_r2) * r2
+    return _joined_offsets(cells, cap)[cells] + cap
+
+
+def _dome_transfer(sc, planes_run, focus_options, joint, seed) -> tuple[float, float]:
+    """:attr:`SelfCheck.dome_transfer` and its standard error: the 1× injection
+    (``planes_run``, its planes and recovered dome coefficients) rendered again with domes
+    on the cells, with the same noise; the gain of the segments' recovered dome coefficients'
+    change on those of the injected domes (NaN, NaN with fewer than 3 segments measured)."""
+    (delta, a_cell, b_cell), (_, _, before) = planes_run
+    rms = math.sqrt(float(np.mean(a_cell ** 2 + b_cell ** 2))) if a_cell.size else 0.0
+    caps = _domes(sc.cells, math.sqrt(DOME_SHARE_INJECTED) * rms, sc.pixel_yx)
+    if not np.any(caps):
+        return math.nan, math.nan
+    _, _, after = _recovered_planes(sc, sc.base_um + delta + caps, focus_options, joint,
+                                    (seed, 1 + WIDTH_FACTORS.index(1.0)), domes=True)
+    true = dome_coefficients(sc.labels, caps, height_sigma_um=1.0,
+                             reliable=np.ones(sc.labels.shape, bool), pixel_size_um=sc.pixel_yx,
+                             min_pixels=3)
+    ok = before.ok & after.ok & true.ok & (true.area > 0)
+    if ok.sum() < 3:
+        return math.nan, math.nan
+    w = true.area[ok] * true.r2[ok]
+    x, y = true.d[ok], after.d[ok] - before.d[ok]
+    sums = np.stack([w * x * y, w * x * x])
+    gain = float(sums[0].sum() / sums[1].sum())
+    rng = np.random.default_rng([seed, 98])
+    counts = rng.multinomial(x.size, np.full(x.size, 1.0 / x.size),
+                             size=BOOTSTRAP_REPLICATES).astype(np.float64)
+    boot = counts @ sums.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return gain, float(np.nanstd(boot[:, 0] / boot[:, 1]))
 
 
 def _facet_sums(fit, ok, weights, true_x, true_y, change, true_sq, n_px) -> np.ndarray:

@@ -73,7 +73,8 @@ def _se(check, key) -> str:
 
 def _self_check_note(ax, check, correction=None):
     """The NDF's self-check (``ndf.self_check``) in the panel's lower left corner: the
-    recovered/injected slope gain, per injected width, and the width the NDF would see;
+    recovered/injected slope gain, per injected width, the width the NDF would see and the
+    injected domes' gain;
     where the lobes were corrected for that width (``ndf.mixture.width_correction``), so."""
     if not isinstance(check, dict) or check.get("transfer") is None:
         return
@@ -83,9 +84,13 @@ def _self_check_note(ax, check, correction=None):
              f"; width after noise removal {wt:.2f}{_se(check, 'width_transfer_se')}×")
     fixed = ("\nlobes fitted to the slopes over it (ndf.mixture.width_correction)"
              if isinstance(correction, dict) else "")
+    dome = check.get("dome_transfer")
+    domes = "" if dome is None else (f"; domes {dome:.2f}"
+                                     f"{_se(check, 'dome_transfer_se')}× (planar-facet check "
+                                     f"over it)")
     ax.text(0.01, 0.02, f"self-check: injected slopes recovered at {check['transfer']:.2f}"
             f"{_se(check, 'transfer_se')}×"
-            f"{width}\n({per} at 0.5, 1, 2× the width; ndf.self_check){fixed}",
+            f"{width}{domes}\n({per} at 0.5, 1, 2× the width; ndf.self_check){fixed}",
             transform=ax.transAxes, ha="left", va="bottom", fontsize=6.5, color="0.25")
 
 

@@ -489,6 +489,42 @@ def test_the_dome_share_is_over_the_planes_that_carry_slope():
     assert _dome_share((0.001, 0.0005), planes, np.zeros(n, bool), area) is None
 
 
+@pytest.mark.parametrize("gain, share, expected", [
+    (0.5, 0.1, 0.4),           # heights that show half a dome: its mean square is 4× the shown
+    (1.0, 0.2, 0.2),
+    (1.6, 0.2, 0.2),           # heights that exaggerate domes are not credited
+    (0.0, 0.1, math.inf),      # domes flattened to nothing: the facets are not shown planar
+    (-0.2, 0.0, 0.0),
+])
+def test_the_dome_share_is_over_what_the_heights_show_of_a_dome(gain, share, expected):
+    """:func:`calibrate_dome_share`: the measured share over the self-check's dome transfer
+    squared, the measured one kept, and the NDF judged again at fits.max_dome_share; without a
+    transfer (NaN) or a measured share (None, NaN) nothing changes."""
+    from microfacet.analysis.distributions import Distributions, calibrate_dome_share
+    from microfacet.analysis.identification import Judgement
+    from microfacet.analysis.mixtures import MixtureFit
+    from microfacet.analysis.self_check import SelfCheck
+
+    def dist(s):
+        fit = MixtureFit.__new__(MixtureFit)
+        fit.info = {"dome_share": s}
+        return Distributions(None, fit, Judgement(True), Judgement(True))
+
+    check = SelfCheck([], [], [], 1.0, 0.0, 10, dome_transfer=gain)
+    out = calibrate_dome_share(dist(share), check, FitOptions())
+    assert out.ndf.info["dome_share"] == pytest.approx(expected)
+    assert out.ndf.info["dome_share_measured"] == share
+    assert out.ndf_judgement.identified == (expected <= FitOptions().max_dome_share)
+    if not out.ndf_judgement.identified:
+        assert out.ndf_judgement.reason.parameter == "fits.max_dome_share"
+    for s in (None, math.nan):
+        assert calibrate_dome_share(dist(s), check, FitOptions()).ndf_judgement.identified
+    unmeasured = SelfCheck([], [], [], 1.0, 0.0, 10)
+    kept = calibrate_dome_share(dist(0.2), unmeasured, FitOptions())
+    assert kept.ndf.info == {"dome_share": 0.2} and kept.ndf_judgement.identified
+    assert calibrate_dome_share(dist(0.2), None, FitOptions()).ndf_judgement.identified
+
+
 def _rms_slope(lobes, limit_deg):
     """RMS slope (E[tan² θ]^½) of Gaussian-slope lobes ``[(weight, sd_deg)]`` truncated at
     ``limit_deg``: the lobe density in tan θ (m = tan θ, Rayleigh in m) integrated on a grid."""

@@ -73,6 +73,53 @@ def test_slopes_come_back_where_every_facet_has_texture_and_not_where_none_has(f
 
 
 @pytest.mark.slow
+def test_injected_domes_come_back_where_every_facet_has_texture(focus_result):
+    """The dome transfer: caps injected on large, richly textured facets come back through
+    the focus stage nearly whole (their dome coefficients' gain 0.8-1.25, its bootstrap
+    error small); on small facets textured only by sparse pits their heights are borrowed
+    and the caps flattened (a gain below the range, well below the textured one's)."""
+    rng = np.random.default_rng(3)
+    labels = _voronoi((160, 160), 15, np.random.default_rng(4))
+    good = _check(focus_result, rng.random(labels.shape).astype(np.float32), labels)
+    assert 0.8 <= good.dome_transfer <= 1.25, good.to_json()
+    assert 0 < good.dome_transfer_se < 0.1
+    small = _voronoi((160, 160), 60, rng)
+    sparse = np.full(small.shape, 0.6, np.float32)
+    sparse[rng.random(small.shape) < 0.005] = 0.1
+    bad = _check(focus_result, sparse, small)
+    assert bad.dome_transfer < min(0.8, good.dome_transfer - 0.2), (good.dome_transfer,
+                                                                    bad.to_json())
+
+
+def test_injected_domes_are_caps_of_the_asked_rms_slope():
+    """:func:`_domes`: inside each cell a cap −κ r²/2 about its centroid (the dome
+    coefficient of each cell's exact heights is −κ/2, the same for every cell) with RMS
+    slope κ √⟨r²⟩ = the one asked for."""
+    from microfacet.analysis.planes import dome_coefficients
+    from microfacet.analysis.self_check import _domes
+
+    cells = _voronoi((96, 96), 12, np.random.default_rng(5))
+    caps = _domes(cells, 0.1, (0.25, 0.25))
+    c = dome_coefficients(cells, caps, height_sigma_um=1.0, reliable=np.ones(cells.shape, bool),
+                          pixel_size_um=0.25, min_pixels=3)
+    assert c.ok.all()
+    kappa = -2.0 * c.d
+    np.testing.assert_allclose(kappa, kappa[0], rtol=1e-6)
+    assert kappa[0] * math.sqrt(float(np.sum(c.area * c.r2) / c.area.sum())) == pytest.approx(
+        0.1, rel=1e-6)
+    # the slopes inside one cell, by central differences, are κ r there
+    gy, gx = np.gradient(caps, 0.25)
+    inner = (cells[1:-1, 1:-1] == cells[:-2, 1:-1]) & (cells[1:-1, 1:-1] == cells[2:, 1:-1]) & (
+        cells[1:-1, 1:-1] == cells[1:-1, :-2]) & (cells[1:-1, 1:-1] == cells[1:-1, 2:])
+    g = np.hypot(gy, gx)[1:-1, 1:-1][inner]
+    yy, xx = np.indices(cells.shape) * 0.25
+    n = np.bincount(cells.ravel())
+    cy, cx = (np.bincount(cells.ravel(), v.ravel()) / n for v in (yy, xx))
+    r = np.hypot(yy - cy[cells], xx - cx[cells])[1:-1, 1:-1][inner]
+    np.testing.assert_allclose(g, kappa[0] * r, atol=1e-9)
+
+
+@pytest.mark.slow
 def test_segments_that_are_not_the_facets_cost_width_not_gain(focus_result):
     """Planes injected on facets independent of the segments: every segment straddles
     several, its plane averages theirs, so the width the NDF would see drops well below 1
@@ -194,6 +241,14 @@ def test_the_analysis_records_the_self_check_when_asked(tmp_path):
     assert s["ndf"]["self_check"]["transfer_se"] == pytest.approx(c.transfer_se)
     assert r.distributions.ndf_judgement.identified <= (
         low + c.transfer_se <= c.transfer <= high - c.transfer_se)
+    # the dome transfer: measured, recorded, and the planar-facet check is judged over it
+    assert 0 < c.dome_transfer_se < 0.2 and 0.2 < c.dome_transfer < 1.25
+    assert s["ndf"]["self_check"]["dome_transfer"] == pytest.approx(c.dome_transfer)
+    info = r.distributions.ndf.info
+    assert info["dome_share"] == pytest.approx(
+        info["dome_share_measured"] / min(c.dome_transfer, 1.0) ** 2)
+    assert r.distributions.ndf_judgement.identified <= (
+        info["dome_share"] <= r.options.fits.max_dome_share)
     off = AnalysisOptions(fits=FitOptions(self_check=False))
     assert analyse_stack(stack, off).self_check is None
 

@@ -58,6 +58,7 @@ def test_header_and_units_are_on_the_pages(results, report, pdf_text):
     check = res.get("ndf", "self_check")
     assert (f"self-check: injected slopes recovered at {check['transfer']:.2f} ± "
             f"{check['transfer_se']:.2f}×") in p3
+    assert f"domes {check['dome_transfer']:.2f} ± {check['dome_transfer_se']:.2f}×" in p3
     p5 = pdf_text(out, 5)
     assert "microfacet thin-film BRDF" in p5 and "light zenith" in p5
     assert "half-vector model" in p5
