@@ -297,9 +297,16 @@ def dome_judgement(judgement: Judgement, dome_share, options: FitOptions) -> Jud
     planes' NDF may be too narrow and is not identified (rounded grains, or facets too small
     for their heights to show whether they are). NaN: not measured (fewer than 3 facets with
     enough heights for a dome term, or planes whose slope is all noise), so not shown planar
-    either: not identified. None (no planes): unchanged."""
+    either: not identified; infinite: heights that show none of an injected dome
+    (:func:`~.distributions.calibrate_dome_share`), likewise. None (no planes): unchanged."""
     if not judgement.identified or dome_share is None or dome_share <= options.max_dome_share:
         return judgement
+    if math.isinf(dome_share):
+        return Judgement(False, Reason(
+            "curved_facets", "whether the facets are planar is not measured: the self-check's "
+            "heights show none of the domes it injected (ndf.self_check.dome_transfer), so "
+            "an NDF of the planes may be too narrow; larger facets in pixels (a higher "
+            "magnification) would show them", "fits.max_dome_share"))
     if math.isnan(dome_share):
         return Judgement(False, Reason(
             "curved_facets", "whether the facets are planar is not measured: fewer than 3 "

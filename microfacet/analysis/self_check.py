@@ -584,7 +584,9 @@ def _dome_transfer(sc, planes_run, focus_options, joint, seed) -> tuple[float, f
     """:attr:`SelfCheck.dome_transfer` and its standard error: the 1× injection
     (``planes_run``, its planes and recovered dome coefficients) rendered again with domes
     on the cells, with the same noise; the gain of the segments' recovered dome coefficients'
-    change on those of the injected domes (NaN, NaN with fewer than 3 segments measured)."""
+    change on those of the injected domes (NaN, NaN with fewer than 3 segments measured or
+    flat 1× planes). The domes' RMS slope is that of the 1× planes' slopes over the cells
+    (cells weighted alike) times √:data:`DOME_SHARE_INJECTED`."""
     (delta, a_cell, b_cell), (_, _, before) = planes_run
     rms = math.sqrt(float(np.mean(a_cell ** 2 + b_cell ** 2))) if a_cell.size else 0.0
     caps = _domes(sc.cells, math.sqrt(DOME_SHARE_INJECTED) * rms, sc.pixel_yx)

@@ -355,6 +355,10 @@ def test_an_ndf_of_planes_is_refused_where_the_facets_may_be_curved():
     assert not unmeasured.identified and unmeasured.reason.code == "curved_facets"
     assert "not measured" in unmeasured.reason.plain()
     assert not dome_judgement(ok, math.nan, FitOptions(max_dome_share=1e9)).identified
+    # heights that show none of an injected dome: not measured either, whatever the limit
+    blind = dome_judgement(ok, math.inf, FitOptions(max_dome_share=1e9))
+    assert not blind.identified and "none of the domes" in blind.reason.plain()
+    assert blind.reason.parameter == "fits.max_dome_share" and "inf" not in blind.reason.plain()
 
 
 def test_a_white_balance_estimate_off_one_beyond_its_sigma_is_a_warning():
