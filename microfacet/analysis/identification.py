@@ -301,18 +301,15 @@ def dome_judgement(judgement: Judgement, dome_share, options: FitOptions) -> Jud
     (:func:`~.distributions.calibrate_dome_share`), likewise. None (no planes): unchanged."""
     if not judgement.identified or dome_share is None or dome_share <= options.max_dome_share:
         return judgement
-    if math.isinf(dome_share):
+    if not math.isfinite(dome_share):
+        why = ("the self-check's heights show none of the domes it injected "
+               "(ndf.self_check.dome_transfer)" if math.isinf(dome_share) else
+               "fewer than 3 facets have enough heights inside their edges for a dome term (or "
+               "their planes' slope is all noise)")
         return Judgement(False, Reason(
-            "curved_facets", "whether the facets are planar is not measured: the self-check's "
-            "heights show none of the domes it injected (ndf.self_check.dome_transfer), so "
-            "an NDF of the planes may be too narrow; larger facets in pixels (a higher "
-            "magnification) would show them", "fits.max_dome_share"))
-    if math.isnan(dome_share):
-        return Judgement(False, Reason(
-            "curved_facets", "whether the facets are planar is not measured: fewer than 3 "
-            "facets have enough heights inside their edges for a dome term (or their planes' "
-            "slope is all noise), so an NDF of the planes may be too narrow; larger facets "
-            "in pixels (a higher magnification) would show it", "fits.max_dome_share"))
+            "curved_facets", f"whether the facets are planar is not measured: {why}, so an "
+            f"NDF of the planes may be too narrow; larger facets in pixels (a higher "
+            f"magnification) would show it", "fits.max_dome_share"))
     return Judgement(False, Reason(
         "curved_facets", f"the facets may not be planar: the slopes inside them may add up to "
         f"{100 * dome_share:.0f} % to the mean square slope of their planes (identified up "
