@@ -95,7 +95,23 @@ def ndf_lines(rows, fits: FitOptions) -> list:
     out.append(f"no rounded facets, spread within the limit ({int(steady.sum())} scenes): ratio "
                f"median {np.median(ratio[steady]):.2f}; ratio / width transfer median "
                f"{q[1]:.2f}, quartiles {q[0]:.2f}-{q[2]:.2f}")
+    out.append(_dome_line(sc))
     return out
+
+
+def _dome_line(sc) -> str:
+    """The self-check's dome transfer over the textured scenes that measured it: percentiles,
+    its standard error's median and its correlation with the slope transfer."""
+    d = np.array([[_f(c.get(k)) for k in ("dome_transfer", "dome_transfer_se", "transfer")]
+                  for _, _, c in sc]).reshape(-1, 3)
+    d = d[np.isfinite(d).all(axis=1)]
+    if len(d) < 3:
+        return "dome transfer: measured on fewer than 3 textured scenes"
+    q = np.percentile(d[:, 0], [10, 50, 90])
+    return (f"dome transfer ({len(d)} textured scenes): 10th / 50th / 90th percentile "
+            f"{q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f}, standard error median "
+            f"{np.median(d[:, 1]):.2f}; correlation with the slope transfer "
+            f"{np.corrcoef(d[:, 0], d[:, 2])[0, 1]:.2f}")
 
 
 def _counts(items) -> str:

@@ -149,3 +149,22 @@ def test_sweep_limits_tell_a_lost_population_from_misread_facets(tmp_path):
     assert set_aside_line(rows) == ("set aside as misread: 3; on a true population no kept "
                                     "component lies on: 1 (colour 1); others: colour 1, "
                                     "scattered 1")
+
+
+def test_sweep_limits_summarize_the_dome_transfer():
+    """The dome transfer's line: percentiles and the standard error's median over the scenes
+    that measured it (a scene with a null transfer, or none recorded, left out), and its
+    correlation with the slope transfer."""
+    import numpy as np
+
+    from pipelines.sweep_limits import _dome_line
+
+    g = np.linspace(0.5, 0.9, 11)
+    sc = [({}, None, {"dome_transfer": v, "dome_transfer_se": 0.05, "transfer": 2 * v})
+          for v in g]
+    sc += [({}, None, {"dome_transfer": None, "transfer": 0.8}), ({}, None, {})]
+    q = np.percentile(g, [10, 50, 90])
+    assert _dome_line(sc) == (f"dome transfer (11 textured scenes): 10th / 50th / 90th "
+                              f"percentile {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f}, standard "
+                              f"error median 0.05; correlation with the slope transfer 1.00")
+    assert _dome_line(sc[:2]).startswith("dome transfer: measured on fewer than 3")

@@ -77,6 +77,8 @@ SIGMA_COVERAGE = 0.95
 
 #: Injected lobe widths, as multiples of the scene's own measured RMS slope.
 WIDTH_FACTORS = (0.5, 1.0, 2.0)
+#: The run (0: the scene's own surface) of the 1× injection, which the domes are added to.
+_ONE_X_RUN = 1 + WIDTH_FACTORS.index(1.0)
 #: Mean square slope of the domes injected with the 1× planes, over the planes' own (the
 #: dome transfer's signal: about what the rounded facets of the generator's worlds add).
 DOME_SHARE_INJECTED = 1.0
@@ -432,9 +434,10 @@ class Conditions:
     seed: int = 0
 
 
-def _recovered_planes(sc, height_um, focus_options, joint, seed, *, domes=False):
+def _recovered_planes(sc, height_um, focus_options, joint, seed, interior, *, domes=False):
     """Render ``height_um`` in the scene's conditions (:class:`RenderedStack`, noise keyed by
-    ``seed``); the facet planes of its height from focus, fitted as the analysis fits them,
+    ``seed``); the facet planes of its height from focus, fitted as the analysis fits them
+    (through the heights ``interior`` to the segments, :func:`_interior`),
     the errors of the focus stage's reliable heights in units of their σ, and with ``domes``
     the segments' dome coefficients (:func:`~.planes.dome_coefficients`, as the analysis'
     planar-facet check fits them; else None)."""
@@ -447,7 +450,7 @@ def _recovered_planes(sc, height_um, focus_options, joint, seed, *, domes=False)
     rel = foc.reliable & np.isfinite(sig) & (sig > 0)
     z_scores = np.abs(foc.height_fit_um[rel] - height_um[rel]) / sig[rel]
     got = focus_heights(foc, joint)
-    reliable = got.reliable & at_least_px(facet_edge_distance(sc.labels), joint.plane_edge_px)
+    reliable = got.reliable & interior
     fit = fit_facet_planes(sc.labels, got.height_um, height_sigma_um=got.sigma_um,
                            reliable=reliable, pixel_size_um=sc.pixel_yx,
                            min_pixels=joint.min_plane_pixels, correlation_px=got.correlation_px)
@@ -455,6 +458,12 @@ def _recovered_planes(sc, height_um, focus_options, joint, seed, *, domes=False)
                               reliable=reliable, pixel_size_um=sc.pixel_yx,
                               correlation_px=got.correlation_px) if domes else None)
     return fit, z_scores, dome
+
+
+def _interior(sc, joint):
+    """The pixels far enough inside the segments for their planes (``joint.plane_edge_px``),
+    the same for every run of one self-check."""
+    return at_least_px(facet_edge_distance(sc.labels), joint.plane_edge_px)
 
 
 def _usable(fit):
@@ -501,13 +510,15 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
     pattern = (np.nan_to_num(own.slope_x), np.nan_to_num(own.slope_y))
     unit = None if _flat(pattern) else _planes(sc.cells, 1.0, sc.pixel_yx, None, pattern=pattern)
 
+    interior = _interior(sc, joint)
+
     def run(k):
         # run 0: the scene's own surface; run k: the injection of WIDTH_FACTORS[k - 1], each
         # from its own random streams (the runs share nothing). One after the other: OpenCV
         # already spreads each run's filters over the cores (two runs on two threads took as
         # long, 2.9-3.6 s against 3.1 s at 1 MP, and held twice the memory)
         if k == 0:
-            return None, _recovered_planes(sc, sc.base_um, fo, joint, (c.seed, 0))
+            return None, _recovered_planes(sc, sc.base_um, fo, joint, (c.seed, 0), interior)
         width = min(max(WIDTH_FACTORS[k - 1] * rms_slope, 0.02), 0.6)
         if unit is not None:          # the pattern's joined planes are linear in its scale
             injected = tuple(width * v for v in unit)
@@ -515,10 +526,10 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
             injected = _planes(sc.cells, width, sc.pixel_yx,
                                np.random.default_rng([c.seed, k]))
         return injected, _recovered_planes(sc, sc.base_um + injected[0], fo, joint, (c.seed, k),
-                                           domes=WIDTH_FACTORS[k - 1] == 1.0)
+                                           interior, domes=k == _ONE_X_RUN)
 
     runs = [run(k) for k in range(len(WIDTH_FACTORS) + 1)]
-    dome = _dome_transfer(sc, runs[1 + WIDTH_FACTORS.index(1.0)], fo, joint, c.seed)
+    dome = _dome_transfer(sc, runs[_ONE_X_RUN], fo, joint, c.seed, interior)
     base = runs[0][1][0]
     area = np.bincount(sc.labels.ravel()).astype(np.float64)
     inj, rec, widths, n_fac, sums = [], [], [], 0, []
@@ -580,7 +591,8 @@ def _domes(cells, rms_slope, pixel_yx):
     return _joined_offsets(cells, cap)[cells] + cap
 
 
-def _dome_transfer(sc, planes_run, focus_options, joint, seed) -> tuple[float, float]:
+def _dome_transfer(sc, planes_run, focus_options, joint, seed, interior
+                   ) -> tuple[float, float]:
     """:attr:`SelfCheck.dome_transfer` and its standard error: the 1× injection
     (``planes_run``, its planes and recovered dome coefficients) rendered again with domes
     on the cells, with the same noise; the gain of the segments' recovered dome coefficients'
@@ -588,12 +600,12 @@ def _dome_transfer(sc, planes_run, focus_options, joint, seed) -> tuple[float, f
     flat 1× planes). The domes' RMS slope is that of the 1× planes' slopes over the cells
     (cells weighted alike) times √:data:`DOME_SHARE_INJECTED`."""
     (delta, a_cell, b_cell), (_, _, before) = planes_run
-    rms = math.sqrt(float(np.mean(a_cell ** 2 + b_cell ** 2))) if a_cell.size else 0.0
+    rms = math.sqrt(float(np.mean(a_cell ** 2 + b_cell ** 2)))
     caps = _domes(sc.cells, math.sqrt(DOME_SHARE_INJECTED) * rms, sc.pixel_yx)
     if not np.any(caps):
         return math.nan, math.nan
     _, _, after = _recovered_planes(sc, sc.base_um + delta + caps, focus_options, joint,
-                                    (seed, 1 + WIDTH_FACTORS.index(1.0)), domes=True)
+                                    (seed, _ONE_X_RUN), interior, domes=True)
     true = dome_coefficients(sc.labels, caps, height_sigma_um=1.0,
                              reliable=np.ones(sc.labels.shape, bool), pixel_size_um=sc.pixel_yx,
                              min_pixels=3)
@@ -604,12 +616,9 @@ def _dome_transfer(sc, planes_run, focus_options, joint, seed) -> tuple[float, f
     x, y = true.d[ok], after.d[ok] - before.d[ok]
     sums = np.stack([w * x * y, w * x * x])
     gain = float(sums[0].sum() / sums[1].sum())
-    rng = np.random.default_rng([seed, 98])
-    counts = rng.multinomial(x.size, np.full(x.size, 1.0 / x.size),
-                             size=BOOTSTRAP_REPLICATES).astype(np.float64)
-    boot = counts @ sums.T
+    boot = _resampled(sums, np.random.default_rng([seed, 98]), BOOTSTRAP_REPLICATES)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return gain, float(np.nanstd(boot[:, 0] / boot[:, 1]))
+        return gain, float(np.nanstd(boot[0] / boot[1]))
 
 
 def _facet_sums(fit, ok, weights, true_x, true_y, change, true_sq, n_px) -> np.ndarray:
@@ -652,14 +661,20 @@ def _bootstrap_se(sums, rng, replicates=BOOTSTRAP_REPLICATES) -> tuple[float, fl
     for s in sums:
         if s is None:
             continue
-        counts = rng.multinomial(s.shape[1], np.full(s.shape[1], 1.0 / s.shape[1]),
-                                 size=replicates).astype(np.float64)
-        g, w = _ratios((counts @ s.T).T)
+        g, w = _ratios(_resampled(s, rng, replicates))
         gains.append(g)
         widths.append(w)
     if not gains:
         return math.nan, math.nan
     return _sd_of_median(gains), _sd_of_median(widths)
+
+
+def _resampled(sums, rng, replicates) -> np.ndarray:
+    """Per-facet ``sums`` (k, facets) summed over ``replicates`` resamplings of the facets
+    with replacement (multinomial counts from ``rng``): (k, replicates)."""
+    n = sums.shape[1]
+    counts = rng.multinomial(n, np.full(n, 1.0 / n), size=replicates).astype(np.float64)
+    return (counts @ sums.T).T
 
 
 def _sd_of_median(replicates) -> float:
