@@ -188,7 +188,7 @@ def thickness_lines(rows) -> list:
 
 
 def white_balance_lines(rows) -> list:
-    err, z, colours, flags = [], [], [], []
+    err, z, sd, colours, flags = [], [], [], [], []
     for r, s, _, _ in rows:
         wb = s.get("white_balance") or {}
         est, sig = wb.get("estimate_rgb"), wb.get("estimate_sigma_rb")
@@ -196,7 +196,8 @@ def white_balance_lines(rows) -> list:
             continue
         e = (np.log(est[0] / float(r["wb_true_r"])), np.log(est[2] / float(r["wb_true_b"])))
         err.append(e)
-        z.append(tuple(abs(v) / (_f(g) if g else float("nan")) for v, g in zip(e, sig)))
+        sd.append(tuple(_f(g) if g else float("nan") for g in sig))
+        z.append(tuple(abs(v) / g for v, g in zip(e, sd[-1])))
         colours.append(wb.get("film_colours"))
         flags.append({k: v == "1" for k, v in r.items() if k.startswith("v_")})
     err, z = np.abs(np.array(err)), np.array(z)
@@ -206,9 +207,14 @@ def white_balance_lines(rows) -> list:
     meds = [np.median(err[np.array([f[k] == on for f in flags])], axis=0)
             for k in flags[0] for on in (True, False)
             if any(f[k] == on for f in flags)]
+    fin = np.isfinite(z)
+    within = [f"{int((z[fin[:, i], i] <= 2.0).sum())} of {int(fin[:, i].sum())}"
+              for i in (0, 1)]
     return [f"white-balance estimate, |log error| median R {np.median(err[:, 0]):.3f}, "
             f"B {np.median(err[:, 1]):.3f} ({len(err)} scenes); in its own σ "
-            f"{np.nanmedian(z[:, 0]):.2f} / {np.nanmedian(z[:, 1]):.2f}",
+            f"{np.nanmedian(z[:, 0]):.2f} / {np.nanmedian(z[:, 1]):.2f}; within 2σ (R / B, "
+            f"of the scenes with a finite σ) {within[0]} / {within[1]}; σ median "
+            f"{np.nanmedian(np.array(sd)[:, 0]):.3f} / {np.nanmedian(np.array(sd)[:, 1]):.3f}",
             f"by film colours (R / B): {by}",
             f"with and without each variation of the sweep: medians "
             f"{np.min(meds):.3f}-{np.max(meds):.3f}"]

@@ -168,3 +168,24 @@ def test_sweep_limits_summarize_the_dome_transfer():
                               f"percentile {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f}, standard "
                               f"error median 0.05; correlation with the slope transfer 1.00")
     assert _dome_line(sc[:2]).startswith("dome transfer: measured on fewer than 3")
+
+
+def test_sweep_limits_score_the_white_balance_estimate_against_the_truth():
+    """The white-balance lines: the estimate's |log error| against each scene's true gains,
+    in its own σ, the share within 2σ over the scenes whose σ is finite (a null σ, one film
+    colour, counts in the errors but not in the coverage), and by film colours."""
+    import math
+
+    from pipelines.sweep_limits import white_balance_lines
+
+    flags = {"v_jpeg": "0", "v_white_balance": "1"}
+    rows = [({"wb_true_r": "1.1", "wb_true_b": "0.9", **flags}, {"white_balance": {
+        "estimate_rgb": [1.1 * math.exp(e), 1.0, 0.9 * math.exp(-e)],
+        "estimate_sigma_rb": sig, "film_colours": c}}, None, None)
+        for e, sig, c in ((0.01, [0.01, 0.01], 2), (0.05, [0.02, 0.1], 3),
+                          (0.1, [None, None], 1))]
+    first, by, _ = white_balance_lines(rows)
+    assert first == ("white-balance estimate, |log error| median R 0.050, B 0.050 (3 scenes); "
+                     "in its own σ 1.75 / 0.75; within 2σ (R / B, of the scenes with a finite "
+                     "σ) 1 of 2 / 2 of 2; σ median 0.015 / 0.055")
+    assert by == "by film colours (R / B): 1: 0.100 / 0.100, 2: 0.010 / 0.010, 3: 0.050 / 0.050"
