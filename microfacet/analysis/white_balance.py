@@ -117,7 +117,9 @@ class WhiteBalance:
     estimate_rgb : tuple of 3 float or None
         The gains the film's colours ask for (None: not estimated).
     estimate_sigma : tuple of 2 float or None
-        1σ of the R and B estimates (bootstrap over the image's tiles), relative.
+        1σ of the R and B estimates, relative (each distinct film colour one observation of
+        the model's error; at least the bootstrap spread over the tiles; inf with fewer
+        than two colours: module notes).
     determined : tuple of 2 bool or None
         Per gain (R, B): the estimate's spread is below 1 %, its best lies inside the
         search, and the tiles hold at least :data:`MIN_FILM_COLOURS` distinct film colours
@@ -130,7 +132,8 @@ class WhiteBalance:
     tiles : int
         Tiles the estimate used.
     film_colours : int or None
-        Distinct film colours among the tiles at the estimate (:func:`film_colours`).
+        Distinct film colours among the tiles, in colour and in the thickness each reads
+        at the estimate (:func:`film_colours`).
     withdrawn : str or None
         Why the analysis no longer calls the estimate determined, where it did before
         (:meth:`withdraw`).
@@ -514,6 +517,17 @@ def colour_groups(log_chroma, *, gap=COLOUR_GAP_LOG, min_tiles=MIN_COLOUR_TILES
     return out
 
 
+def _distinct_colours(log_chroma, thickness_nm) -> int:
+    """Film colours distinct in colour (whatever the gains: :func:`film_colours`) and in
+    the thickness each tile reads at the estimate (:func:`_thickness_groups`): a population
+    whose colour changes fast with thickness spreads over several groups of colour, one of
+    thickness. Groups of at least :data:`MIN_COLOUR_TILES` tiles and
+    :data:`MIN_COLOUR_SHARE` of them."""
+    least = max(MIN_COLOUR_TILES, math.ceil(MIN_COLOUR_SHARE * len(thickness_nm)))
+    return min(film_colours(log_chroma, min_tiles=least),
+               _thickness_groups(thickness_nm, min_tiles=least))
+
+
 def _thickness_groups(thickness_nm, *, min_tiles) -> int:
     """How many groups of at least ``min_tiles`` tiles their best thicknesses form, split
     where sorted neighbours lie more than :data:`COLOUR_GAP_NM` apart.
@@ -538,12 +552,12 @@ def _argmin_2d(scores, ax_r, ax_b):
     return ax_r[i] + di * (ax_r[1] - ax_r[0]), ax_b[j] + dj * (ax_b[1] - ax_b[0])
 
 
-def _systematic_sd(scores, ax_r, ax_b, n_tiles):
-    """1σ of the log gains when each tile's misfit is one observation of the model's error
-    (not only of the noise): a quadratic fitted to the mean misfit on the fine grid, and the
-    region where it rises by its least value / n_tiles (a χ² of one per tile, with the
-    least misfit as the variance). A scene of one film colour leaves a direction of gains
-    that a thickness change compensates: the region is long along it."""
+def _systematic_sd(scores, ax_r, ax_b, n_obs):
+    """1σ of the log gains when the tiles' misfit holds ``n_obs`` independent observations
+    of the model's error (not only of the noise; the caller passes its film colours): a
+    quadratic fitted to the mean misfit on the fine grid, and the region where it rises by
+    its least value / ``n_obs`` (a χ² of one per observation, with the least misfit as the
+    variance)."""
     rr, bb = np.meshgrid(ax_r - ax_r.mean(), ax_b - ax_b.mean(), indexing="ij")
     a = np.stack([np.ones(rr.size), rr.ravel(), bb.ravel(), rr.ravel() ** 2,
                   rr.ravel() * bb.ravel(), bb.ravel() ** 2], axis=1)
@@ -551,7 +565,7 @@ def _systematic_sd(scores, ax_r, ax_b, n_tiles):
     h = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
     f0 = float(scores.min())
     try:
-        cov = 2.0 * (f0 / max(n_tiles, 1)) * np.linalg.inv(h)
+        cov = 2.0 * (f0 / max(n_obs, 1)) * np.linalg.inv(h)
     except np.linalg.LinAlgError:
         return np.array([np.inf, np.inf])
     if np.any(np.linalg.eigvalsh(h) <= 0):
@@ -604,20 +618,15 @@ def estimate_white_balance(encoded, tilt_deg, usable, model, *, illuminant, seed
     best = float(per.min(axis=1).mean())
     edge_r = _at_edge(lr) or fine_r[0] >= lr or lr >= fine_r[-1]
     edge_b = _at_edge(lb) or fine_b[0] >= lb or lb >= fine_b[-1]
-    # distinct in colour (whatever the gains) and in the thickness each reads at the
-    # estimate (a population whose colour changes fast with thickness spreads over several
-    # groups of colour, one of thickness)
-    least = max(MIN_COLOUR_TILES, math.ceil(MIN_COLOUR_SHARE * sc.n_tiles))
-    colours = min(film_colours(tiles.u, min_tiles=least),
-                  _thickness_groups(sc.grid[per.argmin(axis=1)], min_tiles=least))
+    colours = _distinct_colours(tiles.u, sc.grid[per.argmin(axis=1)])
+    several = colours >= MIN_FILM_COLOURS
     # the tiles of one film colour share its model error (one trade of gain for thickness,
     # one set of scene effects): each colour is one observation of it, not each tile; one
     # colour leaves a direction of gains that its thickness compensates (the misfit's
     # valley is curved, and its width across the best says nothing of how far along it)
     sd = (np.maximum(np.std(np.array(boot), axis=0),
                      _systematic_sd(fine.mean(axis=2), fine_r, fine_b, colours))
-          if colours >= MIN_FILM_COLOURS else np.full(2, np.inf))
-    several = colours >= MIN_FILM_COLOURS
+          if several else np.full(2, np.inf))
     determined = (bool(sd[0] < DETERMINED_LOG_SD and not edge_r and several),
                   bool(sd[1] < DETERMINED_LOG_SD and not edge_b and several))
     return WhiteBalance(estimate_rgb=(math.exp(lr), 1.0, math.exp(lb)),
