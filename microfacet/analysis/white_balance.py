@@ -6,26 +6,19 @@ the same way. For one film colour a gain and a thickness are interchangeable, bu
 film's colours at several thicknesses and tilts lie on one physical curve, and two gains
 shared by the whole image are over-determined once the scene holds a few distinct film
 colours. :func:`estimate_white_balance` therefore fits the R and B gains (G = 1: the
-exposure takes the overall scale) to the image's tiles, each tile at its own thickness, in
-log chromaticity ``(log R/G, log B/G)``, which the exposure does not move. A tile is 16 px
-and holds one film (its pixels within 0.1 of its median log chromaticity); its colour is
-the log chromaticity of its pixels' summed linear R, G and B (the pixel noise averages out
-before the logarithm) and its model colour the film's averaged over its pixels' tilts. Its
-thickness is free: what pins the gains is that one pair of gains must put every tile's
-colour on the film's curve. The uncertainty counts each distinct film colour as one
-observation of the model's error (the tiles of one colour share it: one trade of a gain
-for a thickness, one set of scene effects), not each tile: the least misfit sets the
-scale, the misfit's curvature the width; at least the spread over bootstrap resamples of
-the tiles. A scene of one film colour leaves a direction of gains a thickness change
-compensates, and the width says so. Measured on the generalization sweep
-(docs/accuracy.md, "A white-balance estimate from tile colours"): the median |error| is
-0.027-0.035 (R) and 0.041-0.046 (B) in log gain, about two thirds of what the per-pixel
-estimate before it gave, and the σ covers it (median |error|/σ 0.66-0.77), so at 256 × 256
-px the gains are rarely determined to 1 % without a reference. A gain is called determined
-only where the tiles hold at least two distinct film colours (:func:`film_colours`): for one
-colour the misfit's valley, along which a gain and the thickness trade, is curved, and its
-narrow width across the best can pass for a spread below 1 % while the best lies far along
-it.
+exposure takes the overall scale) to the image's tiles, each tile at its own thickness and
+every pixel at its own tilt, in log chromaticity ``(log R/G, log B/G)``, which the exposure
+does not move. The uncertainty counts each tile as one observation of the model's error,
+not only of the noise (the least misfit per tile sets the scale, the misfit's curvature the
+width; at least the spread over bootstrap resamples of the tiles): a scene of one film
+colour leaves a direction of gains a thickness change compensates, and the width says so.
+Measured on the generalization sweep (docs/accuracy.md): this σ covers the errors (median
+|error|/σ 0.6), and at 256 × 256 px it is 1–15 %, so the gains are rarely determined to 1 %
+without a reference. A gain is called determined only where the tiles hold at least two
+distinct film colours (:func:`film_colours`): for one colour the misfit's valley, along
+which a gain and the thickness trade, is curved, and its narrow width across the best can
+pass for a spread below 1 % while the best lies far along it (a 200 nm film over a 5° tilt
+spread: B 19 % off at σ 0.85 %, tests/analysis/test_white_balance.py).
 
 A reference wins over the estimate: ``white_balance`` gains in stack.json, a
 ``white_reference`` image of a white standard (its median linear R, G, B, divided by G, are
@@ -60,10 +53,9 @@ from ..core.errors import InputError
 from ..core.lazy import load
 from .search import parabola
 
-hierarchy = load("scipy.cluster.hierarchy")
+ndimage = load("scipy.ndimage")
 
-__all__ = ["WhiteBalance", "balanced_lab", "colour_groups", "estimate_white_balance",
-           "film_colours",
+__all__ = ["WhiteBalance", "balanced_lab", "estimate_white_balance", "film_colours",
            "rebalanced_lab",
            "reference_gains", "substrate_colour_rgb", "substrate_gain_sigma",
            "substrate_gains"]
@@ -71,33 +63,24 @@ __all__ = ["WhiteBalance", "balanced_lab", "colour_groups", "estimate_white_bala
 #: The gains searched: log gain in ±LOG_RANGE (about 0.82-1.22), a coarse grid then a fine
 #: one about its best.
 LOG_RANGE = 0.2
-COARSE_STEPS = 41
-FINE_STEP = 0.002
-#: Tiles of the estimate (px), the most tiles used, the film colours a tile may hold (the
-#: pixels within TILE_CHROMA_RANGE of the tile's median log chromaticity in R/G and B/G: one
-#: film, not the edge of two), the fewest such pixels a tile needs, and the tilt quantiles
-#: its model colour is averaged over (at the colour table's thickness nodes).
-TILE_PX = 16
-MAX_TILES = 256
-TILE_CHROMA_RANGE = 0.1
-MIN_TILE_PIXELS = 16
-TILT_QUANTILES = 8
+COARSE_STEPS = 9
+FINE_STEP = 0.01
+#: Tiles of the estimate (px; a tile mostly lies in one thickness region), pixels per tile,
+#: the most tiles used, and the per-pixel thickness freedom inside a tile (nm).
+TILE_PX = 32
+TILE_SAMPLE_PX = 24
+MAX_TILES = 64
+PIXEL_FREEDOM_NM = 3.0
 #: Bootstrap resamples of the tiles, and the spread (1σ of the log gain) below which the
 #: gains are determined.
 BOOTSTRAP = 64
 DETERMINED_LOG_SD = 0.01
-#: Distinct film colours a determined gain needs: the tiles' log chromaticities in groups
-#: joined within COLOUR_GAP_LOG (10 nm of thickness moves a film's by 0.23 or more, its 5th
-#: percentile over 10-300 nm; 8° of tilt by 0.02, its 95th percentile 0.13), each of at least
-#: MIN_COLOUR_TILES tiles and MIN_COLOUR_SHARE of them (a few tiles of dust or a defect
-#: are no colour of the scene).
+#: Distinct film colours a determined gain needs: the tiles' best thicknesses at the
+#: estimate, in groups split where sorted neighbours lie more than COLOUR_GAP_NM apart
+#: (~2 ΔE00 per nm: a distinct colour), each of at least MIN_COLOUR_TILES tiles.
 MIN_FILM_COLOURS = 2
-COLOUR_GAP_LOG = 0.1
-#: ... and whose best thicknesses at the estimate lie more than COLOUR_GAP_NM apart
-#: (~2 ΔE00 per nm: a distinct colour).
 COLOUR_GAP_NM = 10.0
 MIN_COLOUR_TILES = 4
-MIN_COLOUR_SHARE = 0.05
 #: 1σ of a reference's log gains (a white standard's or stack.json's): the neutrality of the
 #: standard and the light's drift between it and the stack, taken as 1 % (not measured here).
 REFERENCE_LOG_SD = 0.01
@@ -117,9 +100,7 @@ class WhiteBalance:
     estimate_rgb : tuple of 3 float or None
         The gains the film's colours ask for (None: not estimated).
     estimate_sigma : tuple of 2 float or None
-        1σ of the R and B estimates, relative (each distinct film colour one observation of
-        the model's error; at least the bootstrap spread over the tiles; inf with fewer
-        than two colours: module notes).
+        1σ of the R and B estimates (bootstrap over the image's tiles), relative.
     determined : tuple of 2 bool or None
         Per gain (R, B): the estimate's spread is below 1 %, its best lies inside the
         search, and the tiles hold at least :data:`MIN_FILM_COLOURS` distinct film colours
@@ -132,8 +113,7 @@ class WhiteBalance:
     tiles : int
         Tiles the estimate used.
     film_colours : int or None
-        Distinct film colours among the tiles, in colour and in the thickness each reads
-        at the estimate (:func:`film_colours`).
+        Distinct film colours among the tiles at the estimate (:func:`film_colours`).
     withdrawn : str or None
         Why the analysis no longer calls the estimate determined, where it did before
         (:meth:`withdraw`).
@@ -348,125 +328,61 @@ def substrate_gain_sigma(model, *, oxide_nm=NATIVE_OXIDE_NM,
 
 
 # ----------------------------------------------------------------------------- estimate
-@dataclass(frozen=True)
-class _Tiles:
-    """Per tile: its film's log chromaticity ``u`` (T, 2), from the sums of its pixels'
-    linear R, G and B (the exposure and any shading cancel, and the noise averages before
-    the logarithm), and the tilts its model colour is averaged over (T, TILT_QUANTILES)."""
-
-    u: np.ndarray
-    tilt: np.ndarray
-
-
-def _blocks(a, t) -> np.ndarray:
-    """The whole ``t`` × ``t`` tiles of ``a`` (H, W, ...), row by row: (tiles, t·t, ...).
-
-    >>> _blocks(np.arange(16).reshape(4, 4), 2)[1].tolist()
-    [2, 3, 6, 7]
-    """
-    hh, ww = a.shape[0] // t * t, a.shape[1] // t * t
-    return a[:hh, :ww].reshape(hh // t, t, ww // t, t, *a.shape[2:]).swapaxes(1, 2).reshape(
-        (hh // t) * (ww // t), t * t, *a.shape[2:])
-
-
-def _tiles(encoded, tilt, usable, rng) -> _Tiles:
-    """Up to :data:`MAX_TILES` tiles of :data:`TILE_PX` whose usable pixels hold one film:
-    of each tile the pixels within :data:`TILE_CHROMA_RANGE` of its median log chromaticity,
-    at least :data:`MIN_TILE_PIXELS` of them."""
-    t = TILE_PX
-    ok = _blocks(np.asarray(usable, bool), t)
-    keep = np.flatnonzero(ok.sum(axis=1) >= max(MIN_TILE_PIXELS, t * t // 4))
-    if keep.size > MAX_TILES:
-        keep = np.sort(rng.choice(keep, MAX_TILES, replace=False))
-    ok = ok[keep]
-    lin = np.maximum(srgb_decode(_blocks(np.asarray(encoded, np.float32), t)[keep]), 1e-4)
-    ch = np.log(lin[..., [0, 2]] / lin[..., 1:2])                              # (T, n, 2)
-    med = np.nanmedian(np.where(ok[..., None], ch, np.nan), axis=1)             # (T, 2)
-    sel = ok & np.all(np.abs(ch - med[:, None, :]) < TILE_CHROMA_RANGE, axis=2)
-    good = sel.sum(axis=1) >= MIN_TILE_PIXELS
-    sel, lin, tl = sel[good], lin[good], _blocks(tilt, t)[keep][good]
-    sums = np.einsum("tn,tnc->tc", sel.astype(np.float64), lin.astype(np.float64))
-    u = np.log(sums[:, [0, 2]] / sums[:, 1:2])
-    q = np.linspace(0.05, 0.95, TILT_QUANTILES)
-    tq = np.nanquantile(np.where(sel, tl, np.nan), q, axis=1).T                 # (T, Q)
-    return _Tiles(u, tq)
+def _tiles(usable, rng):
+    """Up to :data:`MAX_TILES` tiles of :data:`TILE_PX` with enough usable pixels: a sample
+    of :data:`TILE_SAMPLE_PX` pixel coordinates each."""
+    h, w = usable.shape
+    out = []
+    for r0 in range(0, h - TILE_PX + 1, TILE_PX):
+        for c0 in range(0, w - TILE_PX + 1, TILE_PX):
+            yy, xx = np.nonzero(usable[r0:r0 + TILE_PX, c0:c0 + TILE_PX])
+            if yy.size >= 2 * TILE_SAMPLE_PX:
+                pick = rng.choice(yy.size, TILE_SAMPLE_PX, replace=False)
+                out.append((yy[pick] + r0, xx[pick] + c0))
+    if len(out) > MAX_TILES:
+        out = [out[i] for i in np.sort(rng.choice(len(out), MAX_TILES, replace=False))]
+    return out
 
 
 class _Scorer:
     """Per-tile misfit of the film model at candidate gains, in log chromaticity.
 
-    A tile's ``(log R/G, log B/G)`` (its pixels' linear sums) does not depend on the
-    exposure, and the gains shift it by ``(log g_R, log g_B)``: the misfit of a tile at gains
-    g and thickness d is ``|u − log g − M(d)|²`` (clipped at :data:`CLIP` so that a tile the
-    film does not explain counts as one outlier), M the log chromaticity of the model's
-    linear colour averaged over the tile's tilts. Only the thicknesses whose colour lies
-    within the gains searched (and the clip) of a tile's can be its best: those are kept.
+    A pixel's ``(log R/G, log B/G)`` (linear) does not depend on the exposure, and the
+    gains shift it by ``(log g_R, log g_B)``: the misfit of a pixel at gains g and thickness
+    d is ``|u − log g − M(d, tilt)|²`` (clipped at :data:`CLIP` so that a defect pixel
+    counts as one outlier), M the model's log chromaticity.
     """
 
-    CLIP = 0.01
+    CLIP = 0.04
 
-    def __init__(self, tiles: _Tiles, model, illuminant):
-        self.n_tiles = tiles.u.shape[0]
-        # the film's linear colour at the table's nodes, and each tile's mean over its tilts
-        # as the table interpolates them (linearly in tilt at a thickness node)
-        theta, self.grid = model.table.theta_deg, model.table.thickness_nm
-        nodes = model_xyz_to_linear_srgb(model.xyz(theta[:, None], self.grid[None, :]),
-                                         white=model.white, illuminant=illuminant)
-        rgb = np.maximum(np.einsum("tk,kdc->tdc", _tilt_weights(tiles.tilt, theta),
-                                   nodes.astype(np.float64)), 1e-6)               # (T, D, 3)
-        m = np.log(rgb[..., [0, 2]] / rgb[..., 1:2])                               # (T, D, 2)
-        resid = tiles.u[:, None, :] - m
-        near = np.all(np.abs(resid) <= LOG_RANGE + math.sqrt(self.CLIP), axis=2)
-        self.tile, self.node = np.nonzero(near)
-        self.resid = resid[self.tile, self.node].astype(np.float64)               # (P, 2)
+    def __init__(self, encoded, tilt, tiles, model, illuminant):
+        ys = np.concatenate([t[0] for t in tiles])
+        xs = np.concatenate([t[1] for t in tiles])
+        self.n_tiles = len(tiles)
+        lin = np.maximum(srgb_decode(np.asarray(encoded, np.float32)[ys, xs]), 1e-4)
+        self.u = np.log(lin[:, [0, 2]] / lin[:, 1:2]).astype(np.float32)          # (T·n, 2)
+        d_lo, d_hi = model.thickness_range_nm
+        self.grid = np.arange(d_lo, d_hi + 1e-9, 2.0)
+        rgb = model_xyz_to_linear_srgb(model.xyz(tilt[ys, xs][:, None], self.grid[None, :]),
+                                       white=model.white, illuminant=illuminant)
+        rgb = np.maximum(rgb, 1e-4)
+        self.m = np.log(rgb[..., [0, 2]] / rgb[..., 1:2]).astype(np.float32)       # (T·n, D, 2)
+        self.resid = self.u[:, None, :] - self.m                                   # (T·n, D, 2)
+        self.k = max(1, int(round(PIXEL_FREEDOM_NM / 2.0)))
 
     def per_thickness(self, log_r, log_b) -> np.ndarray:
-        """Misfit (T, D) per tile and thickness of the grid at gains (e^log_r, 1, e^log_b)
-        (the clip where a thickness was not kept)."""
-        out = np.full((self.n_tiles, self.grid.size), self.CLIP)
-        e = self.resid - np.array([log_r, log_b])
-        out[self.tile, self.node] = np.minimum(np.einsum("pc,pc->p", e, e), self.CLIP)
-        return out
+        """Mean misfit (T, D) per tile and thickness of the grid at gains
+        (e^log_r, 1, e^log_b), each pixel free by ±PIXEL_FREEDOM_NM about the thickness."""
+        e = self.resid - np.array([log_r, log_b], np.float32)
+        e = np.minimum(np.einsum("ndc,ndc->nd", e, e), self.CLIP)                  # (T·n, D)
+        e = ndimage.minimum_filter1d(e, size=2 * self.k + 1, axis=1, mode="nearest")
+        return e.reshape(self.n_tiles, -1, e.shape[-1]).mean(axis=1)                # (T, D)
 
     def per_tile(self, log_r, log_b) -> np.ndarray:
-        """Misfit per tile at gains (e^log_r, 1, e^log_b), each tile at its best
-        thickness."""
-        return self.on_grid(np.atleast_1d(log_r), np.atleast_1d(log_b))[0, 0]
+        """Mean misfit per tile at gains (e^log_r, 1, e^log_b), each tile at its best
+        thickness (:meth:`per_thickness`)."""
+        return self.per_thickness(log_r, log_b).min(axis=1)
 
-    def on_grid(self, ax_r, ax_b) -> np.ndarray:
-        """:meth:`per_tile` at every pair of ``ax_r`` × ``ax_b``: shape (R, B, T); the
-        gains a block at a time (bounded memory)."""
-        gains = np.stack(np.meshgrid(ax_r, ax_b, indexing="ij"), axis=-1).reshape(-1, 2)
-        out = np.full((gains.shape[0], self.n_tiles), self.CLIP)
-        if self.tile.size:
-            # self.tile is sorted (np.nonzero): each tile's kept thicknesses are one run
-            has, start = np.unique(self.tile, return_index=True)
-            for a in range(0, gains.shape[0], 64):
-                e = self.resid[None, :, :] - gains[a:a + 64, None, :]            # (g, P, 2)
-                e = np.einsum("gpc,gpc->gp", e, e)
-                out[a:a + 64, has] = np.minimum(np.minimum.reduceat(e, start, axis=1),
-                                                self.CLIP)
-        return out.reshape(len(ax_r), len(ax_b), self.n_tiles)
-
-
-def _tilt_weights(tilt_deg, theta_deg) -> np.ndarray:
-    """Weights (T, K) of the tilt nodes ``theta_deg`` (K, increasing) that average the
-    linear interpolation at each row's tilts (T, Q) (clipped to the nodes' range).
-
-    >>> _tilt_weights(np.array([[0.0, 1.5]]), np.array([0.0, 1.0, 2.0])).tolist()
-    [[0.5, 0.25, 0.25]]
-    """
-    t = np.clip(tilt_deg, theta_deg[0], theta_deg[-1])
-    k = theta_deg.size
-    if k == 1:
-        return np.ones(t.shape[:1] + (1,))
-    i = np.clip(np.searchsorted(theta_deg, t, side="right") - 1, 0, k - 2)
-    f = (t - theta_deg[i]) / (theta_deg[i + 1] - theta_deg[i])
-    w = np.zeros((t.shape[0], k))
-    rows = np.repeat(np.arange(t.shape[0]), t.shape[1])
-    np.add.at(w, (rows, i.ravel()), (1.0 - f).ravel())
-    np.add.at(w, (rows, i.ravel() + 1), f.ravel())
-    return w / t.shape[1]
 
 
 def _at_edge(log_gain) -> bool:
@@ -474,71 +390,20 @@ def _at_edge(log_gain) -> bool:
     return bool(abs(log_gain) >= LOG_RANGE - FINE_STEP)
 
 
-def film_colours(log_chroma, *, gap=COLOUR_GAP_LOG, min_tiles=MIN_COLOUR_TILES) -> int:
-    """How many distinct film colours the tiles hold (:func:`colour_groups`).
+def film_colours(thickness_nm, *, gap_nm=COLOUR_GAP_NM, min_tiles=MIN_COLOUR_TILES) -> int:
+    """How many distinct film colours the tiles hold: their thicknesses sorted and split
+    where neighbours lie more than ``gap_nm`` apart, the groups of at least ``min_tiles``
+    counted.
 
-    >>> film_colours([[0.1, -0.2], [0.11, -0.2], [0.1, -0.21], [0.12, -0.19],
-    ...               [0.4, 0.1], [0.41, 0.1], [0.4, 0.11], [0.42, 0.12], [0.9, 0.9]])
+    >>> film_colours([100, 102, 104, 101, 180, 182, 181, 183, 300])
     2
-    """
-    return int(colour_groups(log_chroma, gap=gap, min_tiles=min_tiles).max(initial=-1) + 1)
-
-
-def colour_groups(log_chroma, *, gap=COLOUR_GAP_LOG, min_tiles=MIN_COLOUR_TILES
-                  ) -> np.ndarray:
-    """The film colour of each tile (0, 1, …; -1: a tile of a group of fewer than
-    ``min_tiles``): the tiles' log chromaticities ``(log R/G, log B/G)`` (shape (T, 2))
-    joined into groups wherever two lie within ``gap`` of each other (single linkage, the
-    largest of the two differences). Gains shift every tile alike, so the groups do not
-    depend on them; a film's spread of tilt moves its colour by far less than the gap, a
-    thickness 10 nm away by more.
-
-    >>> colour_groups([[0, 0], [0.3, 0], [0.02, 0], [0.9, 0.9], [0.01, 0.01], [0.31, 0]],
-    ...               min_tiles=2).tolist()
-    [0, 1, 0, -1, 0, 1]
-    """
-    u = np.asarray(log_chroma, np.float64)
-    out = np.full(u.shape[0], -1, np.int64)
-    if u.shape[0] == 0:
-        return out
-    u = u.reshape(u.shape[0], -1)
-    if u.shape[0] == 1:
-        run = np.zeros(1, np.int64)
-    else:
-        link = hierarchy.linkage(u, method="single", metric="chebyshev")
-        run = hierarchy.fcluster(link, t=gap, criterion="distance") - 1
-    size = np.bincount(run)
-    big = np.flatnonzero(size >= min_tiles)
-    label = np.full(size.size, -1, np.int64)
-    # numbered in order of their first tile
-    first = np.array([np.flatnonzero(run == g)[0] for g in big], np.int64)
-    label[big[np.argsort(first)]] = np.arange(big.size)
-    out[:] = label[run]
-    return out
-
-
-def _distinct_colours(log_chroma, thickness_nm) -> int:
-    """Film colours distinct in colour (whatever the gains: :func:`film_colours`) and in
-    the thickness each tile reads at the estimate (:func:`_thickness_groups`): a population
-    whose colour changes fast with thickness spreads over several groups of colour, one of
-    thickness. Groups of at least :data:`MIN_COLOUR_TILES` tiles and
-    :data:`MIN_COLOUR_SHARE` of them."""
-    least = max(MIN_COLOUR_TILES, math.ceil(MIN_COLOUR_SHARE * len(thickness_nm)))
-    return min(film_colours(log_chroma, min_tiles=least),
-               _thickness_groups(thickness_nm, min_tiles=least))
-
-
-def _thickness_groups(thickness_nm, *, min_tiles) -> int:
-    """How many groups of at least ``min_tiles`` tiles their best thicknesses form, split
-    where sorted neighbours lie more than :data:`COLOUR_GAP_NM` apart.
-
-    >>> _thickness_groups([100, 102, 104, 101, 180, 182, 181, 183, 300], min_tiles=4)
-    2
+    >>> film_colours([100, 102, 104, 101, 106, 110, 114, 118, 122])
+    1
     """
     d = np.sort(np.asarray(thickness_nm, np.float64))
     if d.size == 0:
         return 0
-    sizes = np.diff(np.flatnonzero(np.diff(d, prepend=-np.inf, append=np.inf) > COLOUR_GAP_NM))
+    sizes = np.diff(np.flatnonzero(np.diff(d, prepend=-np.inf, append=np.inf) > gap_nm))
     return int(np.count_nonzero(sizes >= min_tiles))
 
 
@@ -552,12 +417,12 @@ def _argmin_2d(scores, ax_r, ax_b):
     return ax_r[i] + di * (ax_r[1] - ax_r[0]), ax_b[j] + dj * (ax_b[1] - ax_b[0])
 
 
-def _systematic_sd(scores, ax_r, ax_b, n_obs):
-    """1σ of the log gains when the tiles' misfit holds ``n_obs`` independent observations
-    of the model's error (not only of the noise; the caller passes its film colours): a
-    quadratic fitted to the mean misfit on the fine grid, and the region where it rises by
-    its least value / ``n_obs`` (a χ² of one per observation, with the least misfit as the
-    variance)."""
+def _systematic_sd(scores, ax_r, ax_b, n_tiles):
+    """1σ of the log gains when each tile's misfit is one observation of the model's error
+    (not only of the noise): a quadratic fitted to the mean misfit on the fine grid, and the
+    region where it rises by its least value / n_tiles (a χ² of one per tile, with the
+    least misfit as the variance). A scene of one film colour leaves a direction of gains
+    that a thickness change compensates: the region is long along it."""
     rr, bb = np.meshgrid(ax_r - ax_r.mean(), ax_b - ax_b.mean(), indexing="ij")
     a = np.stack([np.ones(rr.size), rr.ravel(), bb.ravel(), rr.ravel() ** 2,
                   rr.ravel() * bb.ravel(), bb.ravel() ** 2], axis=1)
@@ -565,7 +430,7 @@ def _systematic_sd(scores, ax_r, ax_b, n_obs):
     h = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
     f0 = float(scores.min())
     try:
-        cov = 2.0 * (f0 / max(n_obs, 1)) * np.linalg.inv(h)
+        cov = 2.0 * (f0 / max(n_tiles, 1)) * np.linalg.inv(h)
     except np.linalg.LinAlgError:
         return np.array([np.inf, np.inf])
     if np.any(np.linalg.eigvalsh(h) <= 0):
@@ -598,35 +463,30 @@ def estimate_white_balance(encoded, tilt_deg, usable, model, *, illuminant, seed
     t_lo, t_hi = model.theta_range_deg
     tilt = np.clip(np.nan_to_num(np.asarray(tilt_deg, np.float64), nan=t_lo), t_lo, t_hi)
     ok = np.asarray(usable, bool) & np.isfinite(np.asarray(tilt_deg, np.float64))
-    tiles = _tiles(encoded, tilt, ok, rng)
-    if tiles.u.shape[0] < 4:
-        return WhiteBalance(determined=(False, False), tiles=int(tiles.u.shape[0]))
-    sc = _Scorer(tiles, model, illuminant)
+    tiles = _tiles(ok, rng)
+    if len(tiles) < 4:
+        return WhiteBalance(determined=(False, False), tiles=len(tiles))
+    sc = _Scorer(encoded, tilt, tiles, model, illuminant)
     coarse = np.linspace(-LOG_RANGE, LOG_RANGE, COARSE_STEPS)
-    per = sc.on_grid(coarse, coarse)                                            # (R, B, T)
+    per = np.array([[sc.per_tile(r, b) for b in coarse] for r in coarse])     # (R, B, T)
     r0, b0 = _argmin_2d(per.mean(axis=2), coarse, coarse)
     fine_r = np.arange(-3, 4) * FINE_STEP + r0
     fine_b = np.arange(-3, 4) * FINE_STEP + b0
-    fine = sc.on_grid(fine_r, fine_b)                                           # (7, 7, T)
+    fine = np.array([[sc.per_tile(r, b) for b in fine_b] for r in fine_r])     # (7, 7, T)
     lr, lb = _argmin_2d(fine.mean(axis=2), fine_r, fine_b)
     boot = []
     for _ in range(BOOTSTRAP):
         pick = rng.integers(0, sc.n_tiles, sc.n_tiles)
         boot.append(_argmin_2d(fine[:, :, pick].mean(axis=2), fine_r, fine_b))
+    sd = np.maximum(np.std(np.array(boot), axis=0), _systematic_sd(fine.mean(axis=2), fine_r,
+                                                                    fine_b, sc.n_tiles))
     at_one = float(sc.per_tile(0.0, 0.0).mean())
     per = sc.per_thickness(lr, lb)                                              # (T, D)
     best = float(per.min(axis=1).mean())
     edge_r = _at_edge(lr) or fine_r[0] >= lr or lr >= fine_r[-1]
     edge_b = _at_edge(lb) or fine_b[0] >= lb or lb >= fine_b[-1]
-    colours = _distinct_colours(tiles.u, sc.grid[per.argmin(axis=1)])
+    colours = film_colours(sc.grid[per.argmin(axis=1)])
     several = colours >= MIN_FILM_COLOURS
-    # the tiles of one film colour share its model error (one trade of gain for thickness,
-    # one set of scene effects): each colour is one observation of it, not each tile; one
-    # colour leaves a direction of gains that its thickness compensates (the misfit's
-    # valley is curved, and its width across the best says nothing of how far along it)
-    sd = (np.maximum(np.std(np.array(boot), axis=0),
-                     _systematic_sd(fine.mean(axis=2), fine_r, fine_b, colours))
-          if several else np.full(2, np.inf))
     determined = (bool(sd[0] < DETERMINED_LOG_SD and not edge_r and several),
                   bool(sd[1] < DETERMINED_LOG_SD and not edge_b and several))
     return WhiteBalance(estimate_rgb=(math.exp(lr), 1.0, math.exp(lb)),
