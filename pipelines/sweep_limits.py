@@ -200,7 +200,7 @@ def white_balance_lines(rows) -> list:
         z.append(tuple(abs(v) / g for v, g in zip(e, sd[-1])))
         colours.append(wb.get("film_colours"))
         flags.append({k: v == "1" for k, v in r.items() if k.startswith("v_")})
-    err, z = np.abs(np.array(err)), np.array(z)
+    err, z, sd = np.abs(np.array(err)), np.array(z), np.array(sd)
     by = ", ".join(f"{c}: {np.median(err[np.array(colours) == c], axis=0)[0]:.3f} / "
                    f"{np.median(err[np.array(colours) == c], axis=0)[1]:.3f}"
                    for c in sorted(set(colours) - {None}))
@@ -214,7 +214,7 @@ def white_balance_lines(rows) -> list:
             f"B {np.median(err[:, 1]):.3f} ({len(err)} scenes); in its own σ "
             f"{np.nanmedian(z[:, 0]):.2f} / {np.nanmedian(z[:, 1]):.2f}; within 2σ (R / B, "
             f"of the scenes with a finite σ) {within[0]} / {within[1]}; σ median "
-            f"{np.nanmedian(np.array(sd)[:, 0]):.3f} / {np.nanmedian(np.array(sd)[:, 1]):.3f}",
+            f"{np.nanmedian(sd[:, 0]):.3f} / {np.nanmedian(sd[:, 1]):.3f}",
             f"by film colours (R / B): {by}",
             f"with and without each variation of the sweep: medians "
             f"{np.min(meds):.3f}-{np.max(meds):.3f}"]

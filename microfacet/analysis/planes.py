@@ -368,9 +368,9 @@ def dome_coefficients(labels, height_um, *, height_sigma_um, reliable, pixel_siz
         chi2 = np.maximum(rss / np.maximum(n[ok] - 4, 1), 1.0)
         d[ok] = coef[:, 3]
         var_d[ok] = inv[:, 3, 3] * chi2 * _correlation_factor(n[ok], correlation_px)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r2 = np.where(area > 0, r2sum / np.maximum(area, 1), 0.0)
+    r2 = np.where(area > 0, r2sum / np.maximum(area, 1), 0.0)
     return DomeCoefficients(d, var_d, ok, r2, area)
+
 
 def _dome_sums(labels, height_um, height_sigma_um, reliable, pixel_size_um, S):
     """:func:`dome_mean_square_slope`'s sums per facet (arrays of length S): the normal
