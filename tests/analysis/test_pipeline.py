@@ -340,12 +340,21 @@ def _two_populations(folder, means_nm, **kw):
 def test_a_cyan_population_outside_the_srgb_gamut_is_explained_by_the_film_model(tmp_path):
     """TiO2 of ~172 nm is a cyan of negative linear red, which the synthetic camera, like
     any sRGB image, records at 0: the film model records it alike, so it explains the
-    colours (median ΔE00 within 1 of the noise floor) and the interference order is
-    established; both means within 1 nm of the populations' own. (Compared unclipped, the
-    model missed the 172 nm colours by 2-4 ΔE00 and the order was withheld.)"""
+    colours (median ΔE00 within 1 of the noise floor) and, with the camera's balance given
+    (stack.json ``white_balance``), the interference order is established; both means
+    within 1 nm of the populations' own. (Compared unclipped, the model missed the 172 nm
+    colours by 2-4 ΔE00 and the order was withheld.) Without the balance the order rests on
+    it: the cyan's red, at 0, says nothing of the R gain, so the two film colours pin one
+    gain combination, not two, and the scene's estimate leaves the gains free."""
     from microfacet.analysis.identification import MEDIAN_NOISE_FLOOR_FACTOR
 
     true_means = _two_populations(tmp_path / "s", (120.0, 172.0), seed=3)
+    unbalanced = analyse_stack(tmp_path / "s")
+    assert not unbalanced.order["established"]
+    assert unbalanced.white_balance.film_colours == 1
+    meta = json.loads((tmp_path / "s" / "stack.json").read_text())
+    (tmp_path / "s" / "stack.json").write_text(json.dumps({**meta,
+                                                          "white_balance": [1.0, 1.0, 1.0]}))
     r = analyse_stack(tmp_path / "s")
     assert r.order["established"], r.order["reasons"]
     assert r.delta_e_stats["median"] < MEDIAN_NOISE_FLOOR_FACTOR * r.colour.noise_de + 1.0
