@@ -150,8 +150,9 @@ class WhiteBalance:
     tiles : int
         Tiles the estimate used.
     film_colours : int or None
-        Distinct film colours among the tiles, in colour and in the thickness each reads
-        at the estimate (:func:`film_colours`).
+        Distinct film colours among the tiles with neither chromaticity at
+        :data:`CHROMA_FLOOR`, in colour and in the thickness each reads at the estimate
+        (:func:`film_colours`): the colours that pin the gains.
     withdrawn : str or None
         Why the analysis no longer calls the estimate determined, where it did before
         (:meth:`withdraw`).

@@ -393,6 +393,20 @@ def test_the_tiles_average_the_pixel_noise_and_the_sigma_counts_film_colours():
     assert np.all(np.abs(err) <= 2.0 * np.asarray(wb.estimate_sigma))
 
 
+def _two_films(thickness_nm, *, seed, tilt_sd_deg):
+    """A film model (0-400 nm, 0-30°), tilts |N(0, ``tilt_sd_deg``)| over 256² px, and the
+    image (:func:`_film_image`) of two films side by side, ``thickness_nm`` (left, right)."""
+    from microfacet.colour.model import FilmColourModel
+    from microfacet.colour.table import build_colour_table
+
+    model = FilmColourModel(build_colour_table(thickness_range_nm=(0.0, 400.0),
+                                               theta_range_deg=(0.0, 30.0)))
+    rng = np.random.default_rng(seed)
+    tilt = np.abs(rng.normal(0.0, tilt_sd_deg, (256, 256)))
+    two = np.kron(np.array([list(thickness_nm)]), np.ones((256, 128)))
+    return model, tilt, _film_image(model, two, tilt, rng)
+
+
 @pytest.mark.slow
 def test_a_film_at_the_chromaticity_floor_is_kept_but_pins_no_gain():
     """TiO2 near 172 nm is a cyan of negative linear red, recorded at 0: its tiles are
@@ -401,17 +415,11 @@ def test_a_film_at_the_chromaticity_floor_is_kept_but_pins_no_gain():
     of the R gain, so the two films pin one combination of the gains, and the estimate
     leaves them free (counted, the gains read 18 % and 15 % off at a σ below 1 %)."""
     from microfacet.analysis.white_balance import TILE_PX, estimate_white_balance
-    from microfacet.colour.model import FilmColourModel
-    from microfacet.colour.table import build_colour_table
 
-    model = FilmColourModel(build_colour_table(thickness_range_nm=(0.0, 400.0),
-                                               theta_range_deg=(0.0, 30.0)))
-    rng = np.random.default_rng(3)
-    tilt = np.abs(rng.normal(0.0, 5.0, (256, 256)))
-    two = np.kron(np.array([[120.0, 172.0]]), np.ones((256, 128)))
-    img = _film_image(model, two, tilt, rng)
+    model, tilt, img = _two_films((120.0, 172.0), seed=3, tilt_sd_deg=5.0)
     assert np.mean(img[:, 128:, 0] == 0.0) > 0.3            # the cyan's red is clipped
-    wb = estimate_white_balance(img, tilt, np.ones(two.shape, bool), model, illuminant="D65")
+    wb = estimate_white_balance(img, tilt, np.ones(tilt.shape, bool), model,
+                                illuminant="D65")
     assert wb.tiles == (256 // TILE_PX) ** 2
     assert wb.film_colours == 1 and not any(np.isfinite(wb.estimate_sigma))
 
@@ -423,16 +431,9 @@ def test_the_sigma_covers_tilts_the_height_map_inflated():
     taken at the wrong tilts and the R gain reads ~14 % off. The σ's tilt term (the same
     fit at half the tilts) covers it within 2σ; the noise and misfit terms alone are ~2 %."""
     from microfacet.analysis.white_balance import estimate_white_balance
-    from microfacet.colour.model import FilmColourModel
-    from microfacet.colour.table import build_colour_table
 
-    model = FilmColourModel(build_colour_table(thickness_range_nm=(0.0, 400.0),
-                                               theta_range_deg=(0.0, 30.0)))
-    rng = np.random.default_rng(2)
-    tilt = np.abs(rng.normal(0.0, 8.0, (256, 256)))
-    two = np.kron(np.array([[60.0, 250.0]]), np.ones((256, 128)))
-    img = _film_image(model, two, tilt, rng)
-    ones = np.ones(two.shape, bool)
+    model, tilt, img = _two_films((60.0, 250.0), seed=2, tilt_sd_deg=8.0)
+    ones = np.ones(tilt.shape, bool)
     right = estimate_white_balance(img, tilt, ones, model, illuminant="D65")
     wrong = estimate_white_balance(img, 2.5 * tilt, ones, model, illuminant="D65")
     err = np.log([wrong.estimate_rgb[0] / GAINS[0], wrong.estimate_rgb[2] / GAINS[2]])
