@@ -13,6 +13,8 @@ What the sweep scores, and why it is fair to the analysis:
   not count) against the region's true mean thickness; MAE and median absolute error over
   the regions of a scene. A region with fewer than ``min_pixels`` estimated interior pixels
   is not scored.
+* **Map read an order off**: the share of all mapped pixels, boundaries included, farther
+  than ``ORDER_OFF_NM`` from their true region's mean: what the per-region median hides.
 * **Populations**: the fitted mixture's component count against the populations present,
   i.e. the truth's mixture components with at least one region covering, together, at least
   ``min_area_fraction`` of the field (a population on a few pixels at the border cannot be
@@ -102,6 +104,30 @@ def region_thickness_errors(est_nm, region_id, true_mean_nm, *, erode_px=3, min_
             "n_regions": len(true_mean_nm),
             "mae_nm": float(np.mean(np.abs(errs))) if errs.size else math.nan,
             "median_ae_nm": float(np.median(np.abs(errs))) if errs.size else math.nan}
+
+
+#: A mapped thickness this far from its true region's mean is read in another interference
+#: order (the orders lie ~110 nm apart; the populations of a scene at least 12 nm).
+ORDER_OFF_NM = 50.0
+
+
+def order_off_fraction(est_nm, region_id, true_mean_nm, *, off_nm=ORDER_OFF_NM) -> float:
+    """Share of the mapped pixels (finite ``est_nm``) whose thickness lies more than
+    ``off_nm`` from their true region's mean: the map read in another interference order.
+    :func:`region_thickness_errors` scores each region by its median, blind to a minority of
+    its pixels read an order off; this counts them.
+
+    >>> rid = np.zeros((4, 4), int); rid[:, 2:] = 1
+    >>> est = np.where(rid == 0, 101.0, 222.0); est[0, 0] = 214.0; est[3, 3] = np.nan
+    >>> round(order_off_fraction(est, rid, [101.0, 222.0]), 4)     # 1 of 15 mapped pixels
+    0.0667
+    """
+    est = np.asarray(est_nm, dtype=np.float64)
+    truth = np.asarray(true_mean_nm, dtype=np.float64)[np.asarray(region_id)]
+    mapped = np.isfinite(est)
+    if not mapped.any():
+        return math.nan
+    return float(np.mean(np.abs(est[mapped] - truth[mapped]) > off_nm))
 
 
 def present_means_nm(populations, *, min_area_fraction=0.02) -> list:

@@ -10,8 +10,10 @@ into one column, their per-seed numbers listed. Prints a markdown table: the NDF
 (identified, off by more than 25 % and within 15 % of the true lobe RMS slope, their W1,
 censored against truly past the limit, height 2σ coverage) and the thickness's (true count
 of components and of distinct populations, region MAE with and without a white-balance
-error, scenes read in a wrong order and those not flagged, scenes whose order is said
-established, white-balance gains called determined and those within 2 %).
+error, the share of the map read an order off and the true count where it is more than
+5 %, scenes read in a wrong order and those not flagged, scenes whose order is said
+established, white-balance gains called determined and those within 2 %; a run without
+a column scores it "–").
 """
 
 from __future__ import annotations
@@ -27,6 +29,10 @@ from pipelines._shared import md_table
 
 #: A determined white-balance gain is right within this relative error (issue 23).
 WB_TOLERANCE = 0.02
+#: A scene whose thickness map is read an order off (``order_off_fraction``,
+#: :func:`pipelines._scoring.order_off_fraction`) over more than this share: the count's
+#: misses gather there (docs/accuracy.md, "Facets read an order off").
+ORDER_OFF_SHARE = 0.05
 
 
 class Runs:
@@ -38,7 +44,7 @@ class Runs:
         self.rows, self.run, self.determined = rows, np.asarray(run), determined
 
     def col(self, name, where=None) -> np.ndarray:
-        v = np.array([_number(r[name]) for r in self.rows])
+        v = np.array([_number(r.get(name, "")) for r in self.rows])   # older runs: NaN
         return v if where is None else v[where]
 
     def per_run(self, fn) -> str:
@@ -91,6 +97,8 @@ def scores(d: Runs) -> dict:
     distinct = d.col("pops_distinct") == d.col("pops_true")
     wrong = d.col("order_wrong") == 1
     gains = np.array([e for es in d.determined for e in es])
+    order_off = d.col("order_off_fraction")
+    much = order_off > ORDER_OFF_SHARE
     cens = np.abs(d.col("censored_fraction") - d.col("past_limit_fraction"))
     return {
         "scenes (with focus texture)": f"{len(d.rows)} ({int(d.col('textured').sum())})",
@@ -108,6 +116,12 @@ def scores(d: Runs) -> dict:
         "region MAE, median (nm)": f"{_median(mae):.3f}",
         "… white-balance scenes / the others": (f"{_median(mae[wb]):.2f} / "
                                                f"{_median(mae[~wb]):.2f}"),
+        "map read an order off, median / mean share": (
+            f"{_median(order_off):.3f} / {np.nanmean(order_off):.3f}"
+            if np.isfinite(order_off).any() else "–"),
+        f"… true count where more than {100 * ORDER_OFF_SHARE:.0f} % is": (
+            f"{int((right & much).sum())} of {int(much.sum())}"
+            if np.isfinite(order_off).any() else "–"),
         "read in a wrong order (not flagged)": (
             f"{int(wrong.sum())} ({int((wrong & (d.col('order_flagged') == 0)).sum())})"),
         "order said established": f"{int((d.col('order_flagged') == 0).sum())}",

@@ -93,7 +93,9 @@ def test_run_refuses_to_write_docs_or_inputs_wrongly(args):
 def test_sweep_scores_count_the_targets_from_a_runs_files(tmp_path):
     """Three scenes of one run: the NDF identified on two (one 30 % off, one 10 %), the
     count right on one and the distinct count on two, one scene read in a wrong order
-    without the flag, and two determined white-balance gains, one of them 5 % off."""
+    without the flag, two determined white-balance gains, one of them 5 % off, and two
+    scenes with more than 5 % of the map read an order off, one with its count right; a run
+    without that column scores it "–"."""
     import csv
     import json
 
@@ -109,11 +111,16 @@ def test_sweep_scores_count_the_targets_from_a_runs_files(tmp_path):
             "pops_distinct": [2, 2, 1], "pops_true": [2, 2, 2],
             "region_mae_nm": [0.2, 0.4, 9.0], "v_white_balance": [0, 1, 0],
             "order_wrong": [False, False, True], "order_flagged": [False, False, False],
-            "wb_true_r": [1.0, 1.1, 1.0], "wb_true_b": [1.0, 0.9, 1.0]}
-    with open(out / "generalization.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(rows)
-        w.writerows(zip(*rows.values()))
+            "wb_true_r": [1.0, 1.1, 1.0], "wb_true_b": [1.0, 0.9, 1.0],
+            "order_off_fraction": [0.3, 0.01, 0.08]}
+
+    def write(rows):
+        with open(out / "generalization.csv", "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(rows)
+            w.writerows(zip(*rows.values()))
+
+    write(rows)
     for name, est, det in (("g000", [1.01, 1.0, 1.0], [True, False]),
                            ("g001", [1.1, 1.0, 0.945], [False, True])):
         (work / "results" / "joint" / name).mkdir(parents=True)
@@ -128,6 +135,12 @@ def test_sweep_scores_count_the_targets_from_a_runs_files(tmp_path):
     assert s["white-balance gains determined (within 2 %)"] == "2 (1)"
     assert s["region MAE, median (nm)"] == "0.400"
     assert s["… white-balance scenes / the others"] == "0.40 / 4.60"
+    assert s["map read an order off, median / mean share"] == "0.080 / 0.130"
+    assert s["… true count where more than 5 % is"] == "1 of 2"
+    write({k: v for k, v in rows.items() if k != "order_off_fraction"})
+    s = scores(read_runs(f"{out}:{work}"))
+    assert s["map read an order off, median / mean share"] == "–"
+    assert s["true population count"] == "1"
 
 
 def test_sweep_limits_tell_a_lost_population_from_misread_facets(tmp_path):

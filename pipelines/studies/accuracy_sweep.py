@@ -18,7 +18,8 @@ across the first two interference orders, ≥ 12 nm and ≥ 4 SD apart), 1-2 NDF
 2-14°, facet size, waviness, per-facet thickness offsets, exposure and sensor noise. The
 stacks are analysed with ``microfacet.workflow.run_batch`` (``mode``: joint, seed or both)
 and scored with :mod:`pipelines._scoring` (its docstring says what and why): thickness per
-true region, number of thickness populations and NDF lobes, NDF W1 where the analysis says
+true region, the share of the thickness map read an order off, number of thickness
+populations and NDF lobes, NDF W1 where the analysis says
 the NDF is identified, the identified fraction on textured scenes, ΔE00 against the scene's
 colour noise floor. A scene that fails to generate, analyse or score is recorded as failed.
 
@@ -286,6 +287,7 @@ def score_scene(results: Path, truth: Path, res=None) -> dict:
         mean_coverage,
         ndf_identified,
         ndf_w1_deg,
+        order_off_fraction,
         past_limit_fraction,
         region_thickness_errors,
         true_population_count,
@@ -294,8 +296,9 @@ def score_scene(results: Path, truth: Path, res=None) -> dict:
     meta = json.loads((truth / "params.json").read_text())
     res = Results(results) if res is None else res
     est = res.map("thickness_nm")
-    reg = region_thickness_errors(est, np.load(truth / "region_id.npy"),
-                                  [r["mean_thickness_nm"] for r in meta["regions"]])
+    region_id, region_nm = (np.load(truth / "region_id.npy"),
+                            [r["mean_thickness_nm"] for r in meta["regions"]])
+    reg = region_thickness_errors(est, region_id, region_nm)
     thick, ndf = res.thickness_mixture(), res.ndf_mixture()
     lobes = list(ndf.components) if ndf else []
     truth_img = read_png(truth / "all_in_focus.png")
@@ -310,6 +313,7 @@ def score_scene(results: Path, truth: Path, res=None) -> dict:
                          meta["populations"])
     wb_parts = [u["white_balance_nm"] for u in unc if u.get("white_balance_nm") is not None]
     return {"region_mae_nm": reg["mae_nm"], "region_median_ae_nm": reg["median_ae_nm"],
+            "order_off_fraction": order_off_fraction(est, region_id, region_nm),
             "mean_pairs": cov["pairs"], "mean_within_2sigma": cov["within_2sigma"],
             "mean_within_2sigma_sampling": samp["within_2sigma"],
             "mean_wb_part_nm": float(np.median(wb_parts)) if wb_parts else math.nan,
@@ -493,8 +497,8 @@ COLUMNS = ["name", "mode", "seed", "world", "relief_file", "status", "reason", "
            "analysis_s", "variations", "exposure", "bit_depth",
            "textured", "texture_codes", "groove_fraction", "noise_pct", "film", "substrate",
            "thickness_means_nm", "thickness_span_nm", "lobes_deg", "region_mae_nm",
-           "region_median_ae_nm", "regions_scored", "regions_true", "pops_found", "pops_distinct",
-           "pops_candidates",
+           "region_median_ae_nm", "order_off_fraction", "regions_scored", "regions_true",
+           "pops_found", "pops_distinct", "pops_candidates",
            "pops_true", "mean_pairs", "mean_within_2sigma", "mean_within_2sigma_sampling",
            "mean_abs_error_nm", "mean_sigma_nm", "mean_wb_part_nm",
            "lobes_found", "lobes_true", "identified", "ndf_w1_deg", "lobe_rms_ratio",
