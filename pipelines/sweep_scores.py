@@ -33,6 +33,9 @@ WB_TOLERANCE = 0.02
 #: :func:`pipelines._scoring.order_off_fraction`) over more than this share: the count's
 #: misses gather there (docs/accuracy.md, "Facets read an order off").
 ORDER_OFF_SHARE = 0.05
+#: Columns a run recorded before they existed lacks (read as NaN, scored "–"); any other
+#: column missing is an error.
+LATER_COLUMNS = ("order_off_fraction",)
 
 
 class Runs:
@@ -44,7 +47,8 @@ class Runs:
         self.rows, self.run, self.determined = rows, np.asarray(run), determined
 
     def col(self, name, where=None) -> np.ndarray:
-        v = np.array([_number(r.get(name, "")) for r in self.rows])   # older runs: NaN
+        later = name in LATER_COLUMNS
+        v = np.array([_number(r.get(name, "") if later else r[name]) for r in self.rows])
         return v if where is None else v[where]
 
     def per_run(self, fn) -> str:
