@@ -19,7 +19,8 @@ Each ``OUT:WORK`` is one ``accuracy-sweep --set mode=joint --set work=WORK --out
   choice's independent count over the Kish count of the true regions' areas on each kind;
   the components set aside as misread facets, by why, that lie within :data:`MATCH_NM` of a
   true population (≥ 2 % of the area) no kept component lies on — a population lost — and
-  the others;
+  the others; the true count by the share of the thickness map read an order off
+  (:func:`order_off_line`);
 * the white balance: the estimate's median error per gain, its median error in units of its
   own σ, the median error by the number of film colours, and the range of the medians with
   and without each of the sweep's variations.
@@ -168,6 +169,29 @@ def set_aside_line(rows) -> str:
             f"{_counts(other) or 'none'}")
 
 
+#: Upper edges of the bins of :func:`order_off_line` (share of the map read an order off).
+ORDER_OFF_BINS = (0.01, 0.05, 0.15, 0.30, 1.0)
+
+
+def order_off_line(rows) -> str:
+    """The true count by the share of the thickness map read an order off
+    (``order_off_fraction``; runs recorded without it are left out), with the scenes read
+    in a wrong order in each bin."""
+    got = [(_f(r.get("order_off_fraction")), r["pops_found"] == r["pops_true"],
+            r["order_wrong"] == "True") for r, *_ in rows]
+    got = [g for g in got if np.isfinite(g[0])]
+    if not got:
+        return "map read an order off: not recorded"
+    share, right, wrong = (np.array(v) for v in zip(*got))
+    parts, lo = [], -np.inf
+    for hi in ORDER_OFF_BINS:
+        b = (share > lo) & (share <= hi)
+        parts.append(f"<= {100 * hi:.0f} %: {int(right[b].sum())} of {int(b.sum())}"
+                     f" ({int(wrong[b].sum())} wrong order)")
+        lo = hi
+    return "true count by the share of the map read an order off: " + "; ".join(parts)
+
+
 def thickness_lines(rows) -> list:
     kinds, ratios = [], {}
     for r, s, p, truth in rows:
@@ -178,7 +202,8 @@ def thickness_lines(rows) -> list:
         if k in ("merged", "split"):
             ratios.setdefault(k, []).append(
                 s["thickness"]["mixture"]["n_effective"] / true_kish(truth))
-    out = [f"wrong counts: {len(kinds)}; " + _counts(kinds), set_aside_line(rows)]
+    out = [f"wrong counts: {len(kinds)}; " + _counts(kinds), set_aside_line(rows),
+           order_off_line(rows)]
     for k, v in ratios.items():
         v = np.array(v)
         out.append(f"{k}: n_effective / the true regions' Kish count median {np.median(v):.2f}, "

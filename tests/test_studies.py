@@ -164,6 +164,22 @@ def test_sweep_limits_tell_a_lost_population_from_misread_facets(tmp_path):
                                     "scattered 1")
 
 
+def test_sweep_limits_count_by_the_share_read_an_order_off():
+    """Four scenes: two below 1 % (one count right), one at 20 % read in a wrong order, one
+    recorded without the column (left out)."""
+    from pipelines.sweep_limits import order_off_line
+
+    rows = [({"order_off_fraction": f, "pops_found": found, "pops_true": "2",
+              "order_wrong": wrong},) for f, found, wrong in
+            (("0.004", "2", "False"), ("0.01", "3", "False"), ("0.2", "2", "True"),
+             ("", "2", "False"))]
+    assert order_off_line(rows) == (
+        "true count by the share of the map read an order off: <= 1 %: 1 of 2 (0 wrong "
+        "order); <= 5 %: 0 of 0 (0 wrong order); <= 15 %: 0 of 0 (0 wrong order); <= 30 %: "
+        "1 of 1 (1 wrong order); <= 100 %: 0 of 0 (0 wrong order)")
+    assert order_off_line(rows[3:]) == "map read an order off: not recorded"
+
+
 def test_sweep_limits_summarize_the_dome_transfer():
     """The dome transfer's line: percentiles and the standard error's median over the scenes
     that measured it (a scene with a null transfer, or none recorded, left out), and its
