@@ -20,7 +20,8 @@ Each ``OUT:WORK`` is one ``accuracy-sweep --set mode=joint --set work=WORK --out
   the components set aside as misread facets, by why, that lie within :data:`MATCH_NM` of a
   true population (≥ 2 % of the area) no kept component lies on — a population lost — and
   the others; the true count by the share of the thickness map read an order off
-  (:func:`order_off_line`);
+  (:func:`order_off_line`); the true count were every facet read at its true region's
+  thickness (:func:`ceiling_line`: what the model choice itself gets right);
 * the white balance: the estimate's median error per gain, its median error in units of its
   own σ, the median error by the number of film colours, and the range of the medians with
   and without each of the sweep's variations.
@@ -192,6 +193,71 @@ def order_off_line(rows) -> str:
     return "true count by the share of the map read an order off: " + "; ".join(parts)
 
 
+def facets_at_truth(results: Path, truth: Path, *, seed=0):
+    """Each facet of a scene's results (``facets.npy``, ``facets.csv``) at the mean thickness
+    of the true region holding most of its pixels (``truth/region_id.npy``, ``params.json``
+    ``regions``), plus a normal error of its own reported σ (``thickness_sigma_nm``); only
+    the facets the analysis gave a thickness. Returns ``(labels, value, sigma, area)``, the
+    per-facet arrays NaN where a facet carries no sample."""
+    labels = np.load(results / "facets.npy")
+    rid = np.load(truth / "region_id.npy")
+    means = np.array([q["mean_thickness_nm"]
+                      for q in json.loads((truth / "params.json").read_text())["regions"]])
+    S, R = int(labels.max()) + 1, means.size
+    inside = rid >= 0
+    votes = np.bincount(labels[inside].astype(np.int64) * R + rid[inside],
+                        minlength=S * R).reshape(S, R)
+    region = np.where(votes.any(axis=1), votes.argmax(axis=1), -1)
+    value, sigma, area = np.full(S, np.nan), np.full(S, np.nan), np.zeros(S)
+    with open(results / "facets.csv", newline="") as f:
+        for row in csv.DictReader(f):
+            k = int(row["facet"])
+            if np.isfinite(_f(row["thickness_nm"])) and region[k] >= 0:
+                value[k], sigma[k] = means[region[k]], _f(row["thickness_sigma_nm"])
+            area[k] = _f(row["n_pixels"])
+    ok = np.isfinite(value) & np.isfinite(sigma) & (area > 0)
+    noise = np.random.default_rng(seed).standard_normal(S)
+    value = np.where(ok, value + noise * np.where(ok, sigma, 0.0), np.nan)
+    return labels, value, np.where(ok, sigma, np.nan), area
+
+
+def count_at_truth(results: Path, truth: Path, sd_ceiling_nm=None, *, seed=0) -> int:
+    """The number of components the analysis's thickness mixture (its samples, thickness
+    regions and model choice, :func:`~microfacet.analysis.mixtures.fit_thickness_mixture`
+    with a background, the SD ceiling the scene's fit used) finds in
+    :func:`facets_at_truth`: the count the model choice gets were every facet read
+    right. The pipeline's later steps (misread components set aside, order moves) are not
+    run: the facets carry no misreads."""
+    from microfacet.analysis.mixtures import fit_thickness_mixture
+    from microfacet.analysis.sampling import thickness_regions
+
+    labels, value, sigma, area = facets_at_truth(results, truth, seed=seed)
+    ok = np.isfinite(value)
+    regions = thickness_regions(labels, value, sigma)
+    fit = fit_thickness_mixture(value[ok], sigma_nm=sigma[ok], weights=area[ok],
+                                n_effective=regions, background=True, seed=seed,
+                                options=FitOptions(thickness_max_sd_nm=sd_ceiling_nm))
+    return fit.n_components
+
+
+def ceiling_line(rows) -> str:
+    """The true count were every facet read at its true region's thickness
+    (:func:`count_at_truth`) against the analysis's own, over the scenes whose results hold
+    the facets."""
+    at_truth = own = n = 0
+    for r, s, _, truth in rows:
+        results = truth.parents[2] / "results" / "joint" / r["name"]
+        if not (results / "facets.npy").is_file():
+            continue
+        k = count_at_truth(results, truth, s["thickness"]["mixture"].get("sd_ceiling_nm"),
+                           seed=int(r["seed"]))
+        n += 1
+        at_truth += k == int(r["pops_true"])
+        own += int(r["pops_found"]) == int(r["pops_true"])
+    return (f"true count were every facet read at its true region's thickness (the model "
+            f"choice's own ceiling): {at_truth} of {n}; as read: {own} of {n}")
+
+
 def thickness_lines(rows) -> list:
     kinds, ratios = [], {}
     for r, s, p, truth in rows:
@@ -203,7 +269,7 @@ def thickness_lines(rows) -> list:
             ratios.setdefault(k, []).append(
                 s["thickness"]["mixture"]["n_effective"] / true_kish(truth))
     out = [f"wrong counts: {len(kinds)}; " + _counts(kinds), set_aside_line(rows),
-           order_off_line(rows)]
+           order_off_line(rows), ceiling_line(rows)]
     for k, v in ratios.items():
         v = np.array(v)
         out.append(f"{k}: n_effective / the true regions' Kish count median {np.median(v):.2f}, "

@@ -180,6 +180,53 @@ def test_sweep_limits_count_by_the_share_read_an_order_off():
     assert order_off_line(rows[3:]) == "map read an order off: not recorded"
 
 
+def _scene_at_truth(work, name, region_means):
+    """A results folder and its truth: 8 x 8 px facets on 32 x 32 px true regions (16 facets
+    each) of the given means, every facet with a thickness and σ 0.2 nm."""
+    import json
+
+    import numpy as np
+
+    side = 32 * int(np.sqrt(len(region_means)))
+    y, x = np.mgrid[:side, :side]
+    labels = (y // 8) * (side // 8) + x // 8
+    rid = (y // 32) * (side // 32) + x // 32
+    res, truth = work / "results" / "joint" / name, work / "stacks" / name / "truth"
+    res.mkdir(parents=True)
+    truth.mkdir(parents=True)
+    np.save(res / "facets.npy", labels.astype(np.int32))
+    np.save(truth / "region_id.npy", rid.astype(np.int32))
+    (truth / "params.json").write_text(json.dumps(
+        {"regions": [{"mean_thickness_nm": m} for m in region_means]}))
+    rows = ["facet,n_pixels,thickness_nm,thickness_sigma_nm"]
+    rows += [f"{k},64,{123.0 if k % 7 else 'nan'},0.2" for k in range(labels.max() + 1)]
+    (res / "facets.csv").write_text("\n".join(rows) + "\n")
+    return res, truth
+
+
+def test_sweep_limits_count_at_truth_is_the_model_choice_on_true_thicknesses(tmp_path):
+    """Facets set to their true region's thickness: sixteen regions of two populations 50 nm
+    apart (each spread evenly over 4 nm) give two components, sixteen of one population one,
+    whatever the facets' noise draw; the line counts a scene right at truth and, as read, by
+    its own count."""
+    import numpy as np
+
+    from pipelines.sweep_limits import ceiling_line, count_at_truth
+
+    order = np.random.default_rng(1).permutation(16)
+    two = np.r_[np.linspace(98, 102, 8), np.linspace(148, 152, 8)][order]
+    one = np.linspace(118, 122, 16)[order]
+    at = {}
+    for name, means in (("g000", two), ("g001", one)):
+        at[name] = _scene_at_truth(tmp_path, name, means)
+        assert {count_at_truth(*at[name], 10.0, seed=s) for s in range(5)} == {
+            2 if name == "g000" else 1}
+    rows = [({"name": n, "seed": "7", "pops_true": t, "pops_found": f},
+             {"thickness": {"mixture": {"sd_ceiling_nm": 10.0}}}, None, at[n][1])
+            for n, t, f in (("g000", "2", "3"), ("g001", "1", "1"))]
+    assert ceiling_line(rows).endswith("ceiling): 2 of 2; as read: 1 of 2")
+
+
 def test_sweep_limits_summarize_the_dome_transfer():
     """The dome transfer's line: percentiles and the standard error's median over the scenes
     that measured it (a scene with a null transfer, or none recorded, left out), and its
