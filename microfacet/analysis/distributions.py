@@ -243,12 +243,17 @@ class PooledOrders:
         The thickness samples of ``joint``'s facets (``(ok, unexplained, regions)``) and
         their mixture, where the last round fitted them (None after a move, which the
         mixture stage then fits): :func:`fit_joint_distributions` reuses them.
+    cut : dict or None
+        The facets the order cut read in their runner-up order after the moves
+        (:func:`~.order_cut.order_cut`): ``facets`` and ``area_fraction`` of the facets'
+        pixels; None where it did not run.
     """
 
     joint: object
     moves: list = field(default_factory=list)
     samples: tuple | None = None
     fit: MixtureFit | None = None
+    cut: dict | None = None
 
 
 def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: FitOptions,
@@ -657,6 +662,8 @@ def fit_joint_distributions(joint, roi, model, scene, options: FitOptions, *,
                                 delta_e_at_estimate)
     if tfit is not None and pooled is not None:
         tfit.info["order_moves"] = [m.to_json() for m in pooled.moves]
+        if pooled.cut is not None:
+            tfit.info["order_cut"] = pooled.cut
     nfit, nj = _joint_ndf(joint, model, cens_frac, scene.max_tilt_deg, options, scene.seed)
     return Distributions(tfit, nfit, tj, nj, *_roi_flags(roi, options))
 

@@ -62,8 +62,8 @@ from .white_balance import rebalanced_lab
 
 __all__ = ["ExposureReadings", "FacetGeometry", "JointResult", "Segmented", "bootstrap_labels",
            "delta_e_rebalanced", "facet_geometry", "facet_image", "facet_labels",
-           "facets_at_exposure_readings", "facets_in_other_order", "gain_thickness_shifts",
-           "joint_pixel_tilts"]
+           "facets_at_exposure_readings", "facets_in_order", "facets_in_other_order",
+           "gain_thickness_shifts", "joint_pixel_tilts"]
 
 log = logging.getLogger(__name__)
 
@@ -386,6 +386,33 @@ def facets_in_other_order(joint: JointResult, image: FacetImage, colour, model,
     new = facet_thickness(cols, joint.prior_deg, model, options,
                           tilt_sigma_deg=joint.prior_sigma_deg, noise_de=colour.noise_de,
                           block_noise=(colour.block_noise_de, colour.block_px))
+    return _with_facets(joint, image, colour, model, new, moved)
+
+
+def facets_in_order(joint: JointResult, image: FacetImage, colour, model,
+                    options: JointOptions, *, moved, centre_nm) -> JointResult:
+    """``joint`` with the facets ``moved`` (bool, shape (S,)) solved in the interference
+    order about ``centre_nm`` (per facet), all of them, whatever another order's fit (no
+    scan of the other orders): :func:`~.order_cut.order_cut` decided it. Their runner-up
+    order is the one they left (``delta_e_other_order`` and ``thickness_other_order_nm``
+    their old ΔE and thickness); at ``options.thickness_step_nm``; the rest as
+    :func:`facets_in_other_order`."""
+    moved = np.asarray(moved, bool)
+    cols = dataclasses.replace(image.colours(), roi_thickness_nm=np.where(
+        moved, np.asarray(centre_nm, dtype=np.float64), np.nan))
+    new = facet_thickness(cols, joint.prior_deg, model,
+                          options.replace(exposure_thickness_step_nm=options.thickness_step_nm),
+                          tilt_sigma_deg=joint.prior_sigma_deg, noise_de=colour.noise_de,
+                          block_noise=(colour.block_noise_de, colour.block_px), thorough=False)
+    old = joint.thickness
+    new = dataclasses.replace(new, delta_e_other_order=old.delta_e,
+                              thickness_other_order_nm=old.thickness_nm)
+    return _with_facets(joint, image, colour, model, new, moved)
+
+
+def _with_facets(joint, image, colour, model, new: FacetThickness, moved) -> JointResult:
+    """``joint`` with the facets ``moved`` of ``new``, the others its own; the colour
+    errors of them all."""
     old = joint.thickness
     ft = FacetThickness(*(np.where(moved, getattr(new, f.name), getattr(old, f.name))
                           for f in dataclasses.fields(FacetThickness)))

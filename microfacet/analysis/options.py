@@ -200,6 +200,19 @@ class JointOptions(Options):
         0.5, help="... and with at most this fraction of the ROI order's ΔE (a facet of two "
                   "regions or of a groove fits neither; without it 1.8 % of the fixture's "
                   "pixels switched to a wrong order)", low=0, high=1)
+    order_cut_strength: float = option(
+        1000.0, help="after the order moves, the facets' orders are decided together by a "
+                     "minimum cut over the facet graph (analysis.order_cut): the cost of a "
+                     "boundary between two neighbours of one colour read in different "
+                     "orders, in dE^2 per sqrt(px); 0 keeps each facet's order",
+        low=0)
+    order_cut_contrast_de: float = option(
+        5.0, help="... the colour step between two neighbouring facets at which that cost "
+                  "has fallen to exp(-1/2) of it", unit="ΔE", low=0, low_exclusive=True)
+    order_cut_keep_de: float = option(
+        4.0, help="... added to a facet's runner-up order's dE: a facet leaves the order it "
+                  "was read in only where its neighbours' colours ask for it", unit="ΔE",
+        low=0)
     thickness_step_nm: float = option(
         0.05, help="final resolution of a facet's thickness (1 nm scan, then ±1 nm at this "
                    "step, then a parabola)", unit="nm", low=0.001, high=1)

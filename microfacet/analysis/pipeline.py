@@ -67,12 +67,15 @@ from .joint import (
     facet_image,
     facet_labels,
     facets_at_exposure_readings,
+    facets_in_order,
     facets_in_other_order,
     gain_thickness_shifts,
     joint_pixel_tilts,
 )
 from .options import AnalysisOptions, Scene, scene_of
+from .order_cut import order_cut
 from .roi import block_exposure_reading, thickness_per_roi
+from .segmentation import neighbour_pairs
 from .self_check import Conditions, SelfCheck, measured_rms_slope, self_check_ndf, slice_noise_sd
 from .stages import Stage
 from .surface import measure_height, surface_normals
@@ -440,17 +443,35 @@ def _fit_options(options, model):
 
 def _order_moves(joint, image, cols, colour, model, options, scene, fits):
     """The facets of a component that is another read in a neighbouring interference order,
-    in that order (:func:`~.distributions.pool_interference_orders`, ``fits.order_moves``);
-    ``image`` and ``cols``: the facets' image and colours (:func:`~.joint.facet_image`),
-    shared by every round; ``fits``: the mixtures' options (:func:`_fit_options`)."""
-    if fits.order_moves == "off":
-        return PooledOrders(joint)
-    return pool_interference_orders(
+    in that order (:func:`~.distributions.pool_interference_orders`, ``fits.order_moves``),
+    then every facet's order decided with its neighbours' (:func:`_order_cut`); ``image``
+    and ``cols``: the facets' image and colours (:func:`~.joint.facet_image`), shared by
+    every round; ``fits``: the mixtures' options (:func:`_fit_options`)."""
+    pooled = PooledOrders(joint) if fits.order_moves == "off" else pool_interference_orders(
         joint, lambda j, moved, centre: facets_in_other_order(
             j, image, colour, model, options.joint, moved=moved, centre_nm=centre,
             colours=cols),
         period_nm=model.period_nm, window_nm=_order_window_nm(options, model), options=fits,
         seed=scene.seed)
+    return _order_cut(pooled, image, cols, colour, model, options.joint)
+
+
+def _order_cut(pooled, image, cols, colour, model, options):
+    """``pooled`` with the facets :func:`~.order_cut.order_cut` reads in their runner-up
+    order solved in it (``options``: the joint options); its record in ``pooled.cut``."""
+    if options.order_cut_strength <= 0:
+        return pooled
+    joint = pooled.joint
+    th = joint.thickness
+    moved = order_cut(th, cols.mean_lab, neighbour_pairs(joint.facets),
+                      period_nm=model.period_nm, options=options)
+    a = joint.area_px.astype(np.float64)
+    cut = {"facets": int(moved.sum()), "area_fraction": float(a[moved].sum() / max(a.sum(), 1))}
+    if not moved.any():
+        return dataclasses.replace(pooled, cut=cut)
+    after = facets_in_order(joint, image, colour, model, options, moved=moved,
+                            centre_nm=th.thickness_other_order_nm)
+    return PooledOrders(after, pooled.moves, cut=cut)
 
 
 def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):

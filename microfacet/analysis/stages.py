@@ -50,7 +50,9 @@ class Stage(enum.Enum):
                            "refitted where they then fit better; a thickness component whose "
                            "facets fit another component's interference order alike read in "
                            "that order (`analysis.distributions.pool_interference_orders`, "
-                           "`analysis.joint.facets_in_other_order`) (joint mode)")
+                           "`analysis.joint.facets_in_other_order`); then each facet's order "
+                           "decided with its neighbours' by a minimum cut "
+                           "(`analysis.order_cut`) (joint mode)")
     TILT = StageInfo("tilt_per_pixel", "tilt per pixel", 2.3,
                      "analysis.joint.joint_pixel_tilts / analysis.tilt.seed_tilts",
                      "`PixelEstimates`: thickness, tilt, σ, ΔE per pixel")

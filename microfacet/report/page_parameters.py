@@ -232,7 +232,8 @@ def _analysis_rows(ctx):
 def _order_rows(res):
     """The thicknesses' interference order (``thickness.order``: established, or the first
     reason and how many more), each component read in another's order
-    (``thickness.mixture.order_moves``) and each set aside as misread facets
+    (``thickness.mixture.order_moves``), the facets the order cut read in their runner-up
+    order (``thickness.mixture.order_cut``) and each component set aside as misread facets
     (``thickness.mixture.misread_components``)."""
     rows = []
     order = res.get("thickness", "order")
@@ -245,6 +246,10 @@ def _order_rows(res):
         rows.append(["order move", f"{fmt(m.get('from_nm'), '.1f')} → "
                      f"{fmt(m.get('to_nm'), '.1f', 'nm')} "
                      f"({fmt(pct(m.get('area_share')), '.0f', '%')} of a component)"])
+    cut = res.get("thickness", "mixture", "order_cut")
+    if isinstance(cut, dict) and cut.get("facets"):
+        rows.append(["order cut", f"{fmt(cut['facets'], '.0f')} facets to their runner-up "
+                     f"order ({fmt(pct(cut.get('area_fraction')), '.1f', '%')} of the area)"])
     for m in res.get("thickness", "mixture", "misread_components") or []:
         why = (f"scattered, {fmt(m.get('facets_per_region'), '.1f')} facets per region"
                if m.get("why") == "scattered" else

@@ -254,8 +254,8 @@ def test_candidate_populations_are_not_drawn_on_the_tilt_panel(results_copy):
 
 def test_the_parameter_page_states_the_order_and_each_order_move(results_copy):
     """summary.json's thickness.order (its first reason and how many more), each
-    thickness.mixture.order_moves entry and each misread_components entry are rows of the
-    analysis table."""
+    thickness.mixture.order_moves entry, the order cut and each misread_components entry are
+    rows of the analysis table."""
     folder = results_copy()
     summary = json.loads((folder / "summary.json").read_text())
     summary["thickness"]["order"] = {"established": False, "reasons": [
@@ -267,6 +267,7 @@ def test_the_parameter_page_states_the_order_and_each_order_move(results_copy):
     summary["thickness"]["mixture"]["misread_components"] = [
         {"mean_nm": 367.04, "weight": 0.048, "delta_e": 1.33, "delta_e_populations": 0.55,
          "facets": 974}]
+    summary["thickness"]["mixture"]["order_cut"] = {"facets": 136, "area_fraction": 0.0895}
     (folder / "summary.json").write_text(json.dumps(summary))
     rows = parameter_tables(folder)["analysis"]["rows"]
     assert dict(rows)["interference order"] == (
@@ -275,3 +276,4 @@ def test_the_parameter_page_states_the_order_and_each_order_move(results_copy):
     assert [v for k, v in rows if k == "order move"] == ["163.1 → 50.1 nm (92 % of a component)"]
     assert [v for k, v in rows if k == "set aside (misread)"] == [
         f"367.0 nm (5 %; {DE} 1.3 vs 0.6)"]
+    assert dict(rows)["order cut"] == "136 facets to their runner-up order (8.9 % of the area)"
