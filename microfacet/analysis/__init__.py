@@ -18,6 +18,7 @@ module               stage / concern
 ``facet_thickness``  a thickness per facet from its colour at its tilt (joint mode)
 ``flat_field``       the microscope's flat field (vignetting) from the facets' brightness
 ``joint``            the joint mode's stages: facets → tilt per pixel
+``order_cut``        the facets' interference orders decided together: a minimum cut
 ``sampling``         independent samples in a map; the samples a mixture is fitted to
 ``mixtures``         thickness mixture (deconvolved), components by BIC with honest n
 ``ndf_fit``          NDF lobes (deconvolved, censored Rayleigh EM)
