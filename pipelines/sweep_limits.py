@@ -20,8 +20,9 @@ Each ``OUT:WORK`` is one ``accuracy-sweep --set mode=joint --set work=WORK --out
   the components set aside as misread facets, by why, that lie within :data:`MATCH_NM` of a
   true population (≥ 2 % of the area) no kept component lies on — a population lost — and
   the others; the true count by the share of the thickness map read an order off
-  (:func:`order_off_line`); the true count were every facet read at its true region's
-  thickness (:func:`ceiling_line`: what the model choice itself gets right);
+  (:func:`order_off_line`) and by the slices' JPEG quality (:func:`jpeg_line`); the true
+  count were every facet read at its true region's thickness (:func:`ceiling_line`: what
+  the model choice itself gets right);
 * the white balance: the estimate's median error per gain, its median error in units of its
   own σ, the median error by the number of film colours, and the range of the medians with
   and without each of the sweep's variations.
@@ -193,13 +194,36 @@ def order_off_line(rows) -> str:
     return "true count by the share of the map read an order off: " + "; ".join(parts)
 
 
+#: Upper edges of the bins of :func:`jpeg_line` (the slices' JPEG quality; the sweep draws
+#: 70-95).
+JPEG_BINS = (75, 80, 85, 90, 100)
+
+
+def jpeg_line(rows) -> str:
+    """The true count by the slices' JPEG quality (``params.json`` ``params.jpeg_quality``;
+    lossless slices first)."""
+    q = np.array([_f((p.get("params") or {}).get("jpeg_quality")) for _, _, p, _ in rows])
+    right = np.array([r["pops_found"] == r["pops_true"] for r, *_ in rows])
+    parts, lo = [f"lossless {int(right[~np.isfinite(q)].sum())} of "
+                 f"{int((~np.isfinite(q)).sum())}"], 0
+    for hi in JPEG_BINS:
+        b = (q > lo) & (q <= hi)
+        parts.append(f"{lo + 1}-{hi}: {int(right[b].sum())} of {int(b.sum())}")
+        lo = hi
+    return "true count by the slices' JPEG quality: " + "; ".join(parts)
+
+
 def facets_at_truth(results: Path, truth: Path, *, seed=0):
-    """Each facet of a scene's results (``facets.npy``, ``facets.csv``) at the mean thickness
-    of the true region holding most of its pixels (``truth/region_id.npy``, ``params.json``
-    ``regions``), plus a normal error of its own reported σ (``thickness_sigma_nm``); only
-    the facets the analysis gave a thickness. Returns ``(labels, value, sigma, area)``, the
-    per-facet arrays NaN where a facet carries no sample."""
-    labels = np.load(results / "facets.npy")
+    """Each facet of a scene's results (its ``facets`` map and table,
+    :class:`~microfacet.io.results.Results`) at the mean thickness of the true region holding
+    most of its pixels (``truth/region_id.npy``, ``params.json`` ``regions``), plus a normal
+    error of its own reported σ (``thickness_sigma_nm``); only the facets the analysis gave a
+    thickness. Returns ``(labels, value, sigma, area)``, the per-facet arrays NaN where a
+    facet carries no sample."""
+    from microfacet.io.results import Results
+
+    res = Results(results)
+    labels, table = res.map("facets"), res.table("facets")
     rid = np.load(truth / "region_id.npy")
     means = np.array([q["mean_thickness_nm"]
                       for q in json.loads((truth / "params.json").read_text())["regions"]])
@@ -208,13 +232,11 @@ def facets_at_truth(results: Path, truth: Path, *, seed=0):
     votes = np.bincount(labels[inside].astype(np.int64) * R + rid[inside],
                         minlength=S * R).reshape(S, R)
     region = np.where(votes.any(axis=1), votes.argmax(axis=1), -1)
+    k = table["facet"].astype(np.int64)
     value, sigma, area = np.full(S, np.nan), np.full(S, np.nan), np.zeros(S)
-    with open(results / "facets.csv", newline="") as f:
-        for row in csv.DictReader(f):
-            k = int(row["facet"])
-            if np.isfinite(_f(row["thickness_nm"])) and region[k] >= 0:
-                value[k], sigma[k] = means[region[k]], _f(row["thickness_sigma_nm"])
-            area[k] = _f(row["n_pixels"])
+    value[k] = np.where(np.isfinite(table["thickness_nm"]) & (region[k] >= 0),
+                        means[np.maximum(region[k], 0)], np.nan)
+    sigma[k], area[k] = table["thickness_sigma_nm"], table["n_pixels"]
     ok = np.isfinite(value) & np.isfinite(sigma) & (area > 0)
     noise = np.random.default_rng(seed).standard_normal(S)
     value = np.where(ok, value + noise * np.where(ok, sigma, 0.0), np.nan)
@@ -269,7 +291,7 @@ def thickness_lines(rows) -> list:
             ratios.setdefault(k, []).append(
                 s["thickness"]["mixture"]["n_effective"] / true_kish(truth))
     out = [f"wrong counts: {len(kinds)}; " + _counts(kinds), set_aside_line(rows),
-           order_off_line(rows), ceiling_line(rows)]
+           order_off_line(rows), jpeg_line(rows), ceiling_line(rows)]
     for k, v in ratios.items():
         v = np.array(v)
         out.append(f"{k}: n_effective / the true regions' Kish count median {np.median(v):.2f}, "

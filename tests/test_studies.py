@@ -180,6 +180,17 @@ def test_sweep_limits_count_by_the_share_read_an_order_off():
     assert order_off_line(rows[3:]) == "map read an order off: not recorded"
 
 
+def test_sweep_limits_count_by_jpeg_quality():
+    """Lossless scenes (no quality) first, then the quality bins; each scene in one bin."""
+    from pipelines.sweep_limits import jpeg_line
+
+    rows = [({"pops_found": f, "pops_true": "2"}, None, {"params": {"jpeg_quality": q}}, None)
+            for f, q in (("2", None), ("3", None), ("2", 72), ("2", 90), ("1", 91))]
+    assert jpeg_line(rows) == ("true count by the slices' JPEG quality: lossless 1 of 2; "
+                               "1-75: 1 of 1; 76-80: 0 of 0; 81-85: 0 of 0; 86-90: 1 of 1; "
+                               "91-100: 0 of 1")
+
+
 def _scene_at_truth(work, name, region_means):
     """A results folder and its truth: 8 x 8 px facets on 32 x 32 px true regions (16 facets
     each) of the given means, every facet with a thickness and σ 0.2 nm."""
@@ -198,8 +209,10 @@ def _scene_at_truth(work, name, region_means):
     np.save(truth / "region_id.npy", rid.astype(np.int32))
     (truth / "params.json").write_text(json.dumps(
         {"regions": [{"mean_thickness_nm": m} for m in region_means]}))
-    rows = ["facet,n_pixels,thickness_nm,thickness_sigma_nm"]
-    rows += [f"{k},64,{123.0 if k % 7 else 'nan'},0.2" for k in range(labels.max() + 1)]
+    (res / "summary.json").write_text("{}")
+    rows = ["facet,n_pixels,tilt_deg,tilt_sigma_deg,height_plane,thickness_nm,"
+            "thickness_sigma_nm"]
+    rows += [f"{k},64,5,1,1,{123.0 if k % 7 else 'nan'},0.2" for k in range(labels.max() + 1)]
     (res / "facets.csv").write_text("\n".join(rows) + "\n")
     return res, truth
 

@@ -247,6 +247,9 @@ class PooledOrders:
         The facets the order cut read in their runner-up order after the moves
         (:func:`~.order_cut.order_cut`): ``facets`` and ``area_fraction`` of the facets'
         pixels; None where it did not run.
+    pairs : ndarray or None
+        The facets' neighbour pairs (:func:`~.segmentation.neighbour_pairs` of
+        ``joint.facets``) where the cut scanned them: the mixture stage reuses them.
     """
 
     joint: object
@@ -254,6 +257,7 @@ class PooledOrders:
     samples: tuple | None = None
     fit: MixtureFit | None = None
     cut: dict | None = None
+    pairs: np.ndarray | None = None
 
 
 def pool_interference_orders(joint, resolve, *, period_nm, window_nm, options: FitOptions,
@@ -344,7 +348,9 @@ def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders
     if regions is None:
         return None, NO_SAMPLES["thickness"]
     fit = pooled.fit if ready else _thickness_fit(joint, ok, regions, options, scene.seed)
-    pairs = neighbour_pairs(joint.facets)       # the facets' neighbours, one scan of the map
+    scanned = (pooled is not None and pooled.pairs is not None
+               and pooled.joint.facets is joint.facets)
+    pairs = pooled.pairs if scanned else neighbour_pairs(joint.facets)   # one scan of the map
     fit, (ok, unexplained, regions), misread = _set_aside_misread(
         joint, fit, (ok, unexplained, regions), options, scene.seed, delta_e_at_estimate,
         pairs=pairs)

@@ -390,16 +390,18 @@ def facets_in_other_order(joint: JointResult, image: FacetImage, colour, model,
 
 
 def facets_in_order(joint: JointResult, image: FacetImage, colour, model,
-                    options: JointOptions, *, moved, centre_nm) -> JointResult:
+                    options: JointOptions, *, moved, centre_nm,
+                    colours: FacetColours | None = None) -> JointResult:
     """``joint`` with the facets ``moved`` (bool, shape (S,)) solved in the interference
     order about ``centre_nm`` (per facet), all of them, whatever another order's fit (no
     scan of the other orders): :func:`~.order_cut.order_cut` decided it. Their runner-up
     order is the one they left (``delta_e_other_order`` and ``thickness_other_order_nm``
-    their old ΔE and thickness); at ``options.thickness_step_nm``; the rest as
-    :func:`facets_in_other_order`."""
+    their old ΔE and thickness); at ``options.thickness_step_nm``; the rest (``colours``
+    too) as :func:`facets_in_other_order`."""
     moved = np.asarray(moved, bool)
-    cols = dataclasses.replace(image.colours(), roi_thickness_nm=np.where(
-        moved, np.asarray(centre_nm, dtype=np.float64), np.nan))
+    cols = dataclasses.replace(image.colours() if colours is None else colours,
+                               roi_thickness_nm=np.where(
+                                   moved, np.asarray(centre_nm, dtype=np.float64), np.nan))
     new = facet_thickness(cols, joint.prior_deg, model,
                           options.replace(exposure_thickness_step_nm=options.thickness_step_nm),
                           tilt_sigma_deg=joint.prior_sigma_deg, noise_de=colour.noise_de,

@@ -463,15 +463,15 @@ def _order_cut(pooled, image, cols, colour, model, options):
         return pooled
     joint = pooled.joint
     th = joint.thickness
-    moved = order_cut(th, cols.mean_lab, neighbour_pairs(joint.facets),
-                      period_nm=model.period_nm, options=options)
+    pairs = neighbour_pairs(joint.facets)
+    moved = order_cut(th, cols.mean_lab, pairs, period_nm=model.period_nm, options=options)
     a = joint.area_px.astype(np.float64)
     cut = {"facets": int(moved.sum()), "area_fraction": float(a[moved].sum() / max(a.sum(), 1))}
     if not moved.any():
-        return dataclasses.replace(pooled, cut=cut)
+        return dataclasses.replace(pooled, cut=cut, pairs=pairs)
     after = facets_in_order(joint, image, colour, model, options, moved=moved,
-                            centre_nm=th.thickness_other_order_nm)
-    return PooledOrders(after, pooled.moves, cut=cut)
+                            centre_nm=th.thickness_other_order_nm, colours=cols)
+    return PooledOrders(after, pooled.moves, cut=cut, pairs=pairs)
 
 
 def _flat_field_pass(first, colour, facets_in, *, model, options, scene, wb):
