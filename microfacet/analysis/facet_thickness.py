@@ -11,6 +11,16 @@ thickness: the colours of the neighbouring orders, a period away, stay out), wit
 from the curvature of ΔE² and the tilt's own error. Every search is
 :func:`~.search.coarse_to_fine` on a uniform grid.
 
+A facet is often darker than its film: the dark grooves and rims its mean averages in, a
+stain, the part of the illumination cone a tilted facet returns outside the objective, the
+vignetting the flat field leaves. Each darkens it by a factor k ≤ 1 and leaves its film's
+chromaticity, so a facet is compared with the film at the brightness k ∈
+[``facet_brightness_min``, 1] that fits it best, at a cost of ``facet_brightness_penalty_de``
+ΔE per unit |ln k| in quadrature (:func:`brightness_factors`): compared at the image's
+exposure alone, a facet at half the light matched a darker look-alike in another
+interference order (docs/accuracy.md, "A facet darker than its film"). The exposure itself
+is refined at k = 1 (the film's full brightness).
+
 References
 ----------
 .. [1] N. Nagata et al., the seed, §3.3.3 (2) (thickness of least mean ΔE).
@@ -32,10 +42,13 @@ from .search import coarse_to_fine, refine
 
 optimize = load("scipy.optimize")
 
-__all__ = ["FacetThickness", "facet_thickness", "refine_exposure_on_facets"]
+__all__ = ["FacetThickness", "brightness_factors", "facet_thickness",
+           "refine_exposure_on_facets"]
 
 #: Facets in flight in the vectorised searches (bounded temporaries; split over the threads).
 _CHUNK = 2048
+#: Largest ratio between neighbouring brightness factors (:func:`brightness_factors`).
+BRIGHTNESS_STEP = 0.9
 #: Strides of the coarse-to-fine searches: the 1 nm order window (every other nm, then the
 #: nodes next to the best), the fine scan below 1 nm, the whole-range order scan.
 _WINDOW_STRIDE, _FINE_STRIDE, _ORDER_STRIDE = 2, 5, 2
@@ -131,21 +144,52 @@ class FacetThickness:
     thickness_other_order_nm: np.ndarray
 
 
+def brightness_factors(min_factor, penalty_de):
+    """The brightness factors k a facet's colour is compared at, and the cost of each (ΔE,
+    added in quadrature): k from ``min_factor`` to 1, geometric, neighbours at most
+    :data:`BRIGHTNESS_STEP` apart; cost ``penalty_de`` · |ln k|. ``min_factor`` 1: k = 1 only.
+
+    >>> k, cost = brightness_factors(0.5, 4.0)
+    >>> len(k), round(float(k[0]), 2), float(k[-1]), round(float(cost[0]), 2), float(cost[-1])
+    (8, 0.5, 1.0, 2.77, 0.0)
+    """
+    if min_factor >= 1.0:
+        return np.ones(1), np.zeros(1)
+    n = int(math.ceil(math.log(min_factor) / math.log(BRIGHTNESS_STEP) - 1e-9)) + 1
+    k = np.geomspace(min_factor, 1.0, n)
+    k[-1] = 1.0
+    return k, penalty_de * np.abs(np.log(k))
+
+
 class _Rows:
     """ΔE of a chunk of facets' mean colours against the model at thicknesses of a uniform
-    grid per facet, ``clip(centre + offsets[node])``: the objective of the searches."""
+    grid per facet, ``clip(centre + offsets[node])``: the objective of the searches. With
+    ``brightness`` (:func:`brightness_factors`), the least over the factors of the ΔE with
+    the model's colour scaled by k and the factor's cost in quadrature."""
 
-    def __init__(self, model, tilt, mean_lab, centre, offsets):
+    def __init__(self, model, tilt, mean_lab, centre, offsets, brightness=None):
         self.model, self.tilt, self.offsets = model, tilt[:, None], offsets
         self.lab = mean_lab[:, None, :].astype(np.float32)
         self.centre = centre[:, None]
         self.lo, self.hi = model.thickness_range_nm
+        self.brightness = brightness
 
     def thickness(self, nodes):
         return np.clip(self.centre + self.offsets[nodes], self.lo, self.hi)
 
     def __call__(self, nodes):
-        return self.model.delta_e(self.lab, self.tilt, self.thickness(nodes)).astype(np.float64)
+        d = self.thickness(nodes)
+        if self.brightness is None or self.brightness[0].size == 1:
+            return self.model.delta_e(self.lab, self.tilt, d).astype(np.float64)
+        xyz = self.model.xyz(self.tilt, d)
+        best = None
+        for k, cost in zip(*self.brightness):
+            de = self.model.difference(self.model.lab_from_xyz(xyz * k),
+                                       self.lab).astype(np.float64)
+            if cost > 0:
+                de = np.hypot(de, cost)
+            best = de if best is None else np.minimum(best, de)
+        return best
 
 
 def _window_minimum(rows):
@@ -157,24 +201,24 @@ def _window_minimum(rows):
     return rows.thickness(k[:, None])[:, 0], k, scan.value
 
 
-def _order_scan(model, tilt, mean_lab, centre, hw):
+def _order_scan(model, tilt, mean_lab, centre, hw, brightness):
     """Least ΔE inside the order window ±``hw`` about ``centre`` and the best thickness and
     ΔE outside it, over the table's whole range at 1 nm (coarse-to-fine, shared coarse
     pass). Returns ``best_in, d_out, de_out`` (inf where a side has no node)."""
     lo, hi = model.thickness_range_nm
     g = np.arange(lo, hi + 1e-9, 1.0)
-    rows = _Rows(model, tilt, mean_lab, np.zeros(centre.size), g)
+    rows = _Rows(model, tilt, mean_lab, np.zeros(centre.size), g, brightness)
     inside = np.abs(g[None, :] - centre[:, None]) <= hw
     s_in, s_out = coarse_to_fine(rows, g.size, centre.size, stride=_ORDER_STRIDE, reach=1,
                                  allowed=[inside, ~inside])
     return s_in.value, g[s_out.node], s_out.value
 
 
-def _fine(model, tilt, mean_lab, d_k, step):
+def _fine(model, tilt, mean_lab, d_k, step, brightness):
     """±1 nm at ``step`` about ``d_k``, coarse-to-fine, and the parabola through the least
     ΔE² (:func:`~.search.refine`): thickness, ΔE and d²(ΔE²)/dd² (NaN where not convex)."""
     fine = np.arange(-1.0, 1.0 + 1e-9, step)
-    rows = _Rows(model, tilt, mean_lab, d_k, fine)
+    rows = _Rows(model, tilt, mean_lab, d_k, fine, brightness)
     sq = lambda nodes: rows(nodes) ** 2   # noqa: E731 - the objective is ΔE²
     stride = _FINE_STRIDE if fine.size >= 4 * _FINE_STRIDE else 1
     m = refine(coarse_to_fine(sq, fine.size, d_k.size, stride=stride), fine.size)
@@ -200,7 +244,7 @@ def _sigma(model, fine, n_px, tilt, tilt_sigma_deg, search, hw):
     return np.where(np.isfinite(s), s, hw / math.sqrt(3.0))
 
 
-def _other_orders(model, tilt, mean_lab, d, window):
+def _other_orders(model, tilt, mean_lab, d, window, brightness):
     """The least ΔE in the windows (``window = (hw, offsets)``) one colour period above and
     below ``d``, and the thickness (1 nm grid) where it lies."""
     lo, hi = model.thickness_range_nm
@@ -210,7 +254,8 @@ def _other_orders(model, tilt, mean_lab, d, window):
         c2 = d + shift
         inside = (c2 + hw >= lo) & (c2 - hw <= hi)
         if inside.any():
-            rows = _Rows(model, tilt[inside], mean_lab[inside], c2[inside], offsets)
+            rows = _Rows(model, tilt[inside], mean_lab[inside], c2[inside], offsets,
+                         brightness)
             t, _, v = _window_minimum(rows)
             better = v < alt[inside]
             idx = np.flatnonzero(inside)[better]
@@ -222,13 +267,15 @@ def _other_orders(model, tilt, mean_lab, d, window):
 class _Search:
     """How :func:`facet_thickness` searches: the whole range for another order and the
     neighbouring orders (``thorough``), the final step, the colour noise, the tilts' error,
-    the JPEG block error and the pixels that share it."""
+    the JPEG block error and the pixels that share it, the brightness factors and their
+    costs (:func:`brightness_factors`; None: the image's exposure alone)."""
 
     thorough: bool
     step_nm: float
     noise_de: float
     tilt_sigma_deg: np.ndarray | None
     block_noise: tuple = (0.0, 64)
+    brightness: tuple | None = None
 
 
 def _chunk(model, colours, ii, tilt, options, search: _Search):
@@ -238,25 +285,26 @@ def _chunk(model, colours, ii, tilt, options, search: _Search):
     t_lo, t_hi = model.theta_range_deg
     th = np.clip(tilt[ii], t_lo, t_hi)
     lab, cen = colours.mean_lab[ii], colours.roi_thickness_nm[ii]
+    br = search.brightness
     if search.thorough:
-        best_in, d_out, de_out = _order_scan(model, th, lab, cen, hw)
+        best_in, d_out, de_out = _order_scan(model, th, lab, cen, hw, br)
         switch = ((de_out < best_in - options.order_switch_de)
                   & (de_out < options.order_switch_ratio * best_in))
         cen = np.where(switch, d_out, cen)
     offsets = np.arange(-hw, hw + 1e-9, 1.0)
-    d_k, k, _ = _window_minimum(_Rows(model, th, lab, cen, offsets))
+    d_k, k, _ = _window_minimum(_Rows(model, th, lab, cen, offsets, br))
     edge = (k == 0) | (k == offsets.size - 1)
-    d, de, curv = _fine(model, th, lab, d_k, search.step_nm)
+    d, de, curv = _fine(model, th, lab, d_k, search.step_nm, br)
     ts = None if search.tilt_sigma_deg is None else search.tilt_sigma_deg[ii]
     s = _sigma(model, (d, de, curv), colours.n_pixels[ii], th, ts, search, hw)
-    alt, alt_d = (_other_orders(model, th, lab, d, (hw, offsets)) if search.thorough
+    alt, alt_d = (_other_orders(model, th, lab, d, (hw, offsets), br) if search.thorough
                   else (np.full(ii.size, np.nan),) * 2)
     return d, s, de, edge, alt, alt_d
 
 
 def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOptions, *,
                     tilt_sigma_deg=None, noise_de=1.0, block_noise=(0.0, 64),
-                    thorough=True) -> FacetThickness:
+                    thorough=True, brightness=True) -> FacetThickness:
     """Thickness per facet from its mean Lab at its tilt, within its interference order.
 
     The order is the ROI's (the window ±``order_window_fraction`` colour periods about the
@@ -265,7 +313,8 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
     ``options.order_switch_de`` and with at most ``options.order_switch_ratio`` of the ROI
     order's ΔE: a facet of another population than its ROI's majority, in another order,
     takes its own. Within ``order_switch_de`` the orders are not told apart by colour and the
-    ROI's is kept.
+    ROI's is kept. Every ΔE is the facet's against the film at the brightness factor that fits
+    it best (module notes; ``options.facet_brightness_min`` 1: at the model's exposure).
 
     Parameters
     ----------
@@ -287,6 +336,10 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
         Scan the whole range for another order and the neighbouring orders for
         ``delta_e_other_order``, at ``options.thickness_step_nm``; False (the exposure
         refinement): stay in the ROI's order, at ``options.exposure_thickness_step_nm``.
+    brightness : bool
+        Compare at the brightness factors of ``options.facet_brightness_min`` and
+        ``facet_brightness_penalty_de``; False: at the model's exposure alone (the exposure
+        refinement: the exposure is the film's full brightness).
 
     Returns
     -------
@@ -299,7 +352,10 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
     search = _Search(thorough, options.thickness_step_nm if thorough
                      else options.exposure_thickness_step_nm, noise_de,
                      None if tilt_sigma_deg is None else np.asarray(tilt_sigma_deg, np.float64),
-                     block_noise)
+                     block_noise,
+                     brightness_factors(options.facet_brightness_min,
+                                        options.facet_brightness_penalty_de)
+                     if brightness else None)
     idx = np.flatnonzero(has)
 
     def chunk(ab):
@@ -333,13 +389,13 @@ def refine_exposure_on_facets(image: FacetImage, tilt_deg, model, options: Joint
     pick[rng.choice(cand, min(options.exposure_facets, cand.size), replace=False)] = True
     colours = image.colours(image.usable & pick[image.labels])
     tilt = np.where(pick, tilt_deg, np.nan)
-    start = facet_thickness(colours, tilt, model, options, thorough=True)
+    start = facet_thickness(colours, tilt, model, options, thorough=True, brightness=False)
     colours = dataclasses.replace(colours, roi_thickness_nm=np.where(
         np.isfinite(start.thickness_nm), start.thickness_nm, colours.roi_thickness_nm))
 
     def objective(log_e):
         ft = facet_thickness(colours, tilt, model.with_exposure(math.exp(log_e)), options,
-                             thorough=False)
+                             thorough=False, brightness=False)
         return float(np.nanmedian(ft.delta_e))
 
     e0 = model.exposure

@@ -394,16 +394,26 @@ def _ndf_width_deg(ndf_fit):
 
 
 def _spike_warning(fit) -> Reason | None:
-    """A thickness component whose SD sits at the floor: its spread is not measured."""
-    floor = (fit.info.get("sd_at_floor") or []) if fit is not None else []
-    if not floor:
+    """A thickness component whose SD sits at the floor, or that rests on one thickness
+    region (``info["mean_uncertainty"]``: a Kish count below 1.5, its spread not measured):
+    its SD is not a population's spread."""
+    if fit is None:
+        return None
+    floor = list(fit.info.get("sd_at_floor") or [])
+    unc = fit.info.get("mean_uncertainty") or []
+    one = [i for i, u in enumerate(unc) if u.get("regions", 2.0) < 1.5
+           and not u.get("spread_measured", True) and i not in floor]
+    spikes = sorted(floor + one)
+    if not spikes:
         return None
     comps = fit.mixture.components
-    what = ", ".join(f"{comps[i][1]:.1f} nm ({100 * comps[i][0]:.0f} %)" for i in floor)
+    what = ", ".join(f"{comps[i][1]:.1f} nm ({100 * comps[i][0]:.0f} %)" for i in spikes)
+    sd = ", ".join(f"{comps[i][2]:.2f}" for i in spikes)
+    why = ("the floor" if not one else "one region's own scatter" if not floor
+           else "the floor or one region's own scatter")
     return Reason("thickness_sd_not_measured", f"thickness component(s) {what} rest on too "
-                  f"few regions for a spread: their SD is the floor "
-                  f"({comps[floor[0]][2]:.2f} nm), not a measurement; a larger field would "
-                  f"measure it", "fits.thickness_sd_floor_nm")
+                  f"few regions for a spread: their SD ({sd} nm) is {why}, not a "
+                  f"population's; a larger field would measure it", "fits.thickness_sd_floor_nm")
 
 
 #: Area fraction of the facets with a runner-up order within ``fits.ambiguous_order_de``

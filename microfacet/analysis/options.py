@@ -200,6 +200,15 @@ class JointOptions(Options):
         0.5, help="... and with at most this fraction of the ROI order's ΔE (a facet of two "
                   "regions or of a groove fits neither; without it 1.8 % of the fixture's "
                   "pixels switched to a wrong order)", low=0, high=1)
+    facet_brightness_min: float = option(
+        0.5, help="a facet's colour is compared with the film's at the brightness factor k in "
+                  "[this, 1] that fits it best (analysis.facet_thickness): grooves and rims "
+                  "averaged into a facet, stains, the light a tilted facet returns outside "
+                  "the objective and vignetting left by the flat field darken a facet, not "
+                  "its film's chromaticity; 1: at the image's exposure alone", low=0.05, high=1)
+    facet_brightness_penalty_de: float = option(
+        4.0, help="... at a cost of this many dE per unit |ln k|, in quadrature with the "
+                  "colour's dE (k = 0.8: 0.9 dE; k = 0.5: 2.8 dE)", unit="ΔE", low=0)
     order_cut_strength: float = option(
         1000.0, help="after the order moves, the facets' orders are decided together by a "
                      "minimum cut over the facet graph (analysis.order_cut): the cost of a "

@@ -388,6 +388,20 @@ def test_a_component_at_the_sd_floor_is_said_not_measured():
     assert _warn(_dist()) == []                  # no component at the floor: no warning
 
 
+def test_a_component_on_one_region_is_said_not_measured_whatever_its_sd():
+    """A population on one thickness region (Kish count < 1.5, its spread not measured by
+    ``mean_uncertainty``) has an SD above the floor — the region's own scatter — and is
+    named alike; one on several regions, or measured, is not."""
+    unc = [{"regions": 1.0, "spread_measured": False}, {"regions": 15.0, "spread_measured": False},
+           {"regions": 1.2, "spread_measured": True}]
+    fit = MixtureFit(ThicknessMixture([(0.1, 108.3, 0.14), (0.7, 131.5, 1.5), (0.2, 151.0, 3.7)]),
+                     0.0, {3: 0.0}, 10, 10.0, info={"sd_at_floor": [], "mean_uncertainty": unc})
+    w = [r for r in _warn(_dist(thickness_fit=fit)) if r.code == "thickness_sd_not_measured"]
+    assert len(w) == 1 and "108.3 nm (10 %)" in w[0].text and "0.14 nm" in w[0].text
+    assert "one region's own scatter" in w[0].text
+    assert "131.5" not in w[0].text and "151.0" not in w[0].text
+
+
 def test_a_reported_candidate_population_is_a_warning_naming_the_field():
     from microfacet.analysis.mixtures import PopulationCandidate
 
