@@ -361,6 +361,7 @@ def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders
         fit.mixture, regions, np.where(ok, th.thickness_nm, np.nan), area,
         touching=touching_regions(pairs, regions.patch_region),
         gain_shifts_nm=gain_shifts_nm)
+    fit.info["sd_one_region"] = one_region_components(fit.info["mean_uncertainty"])
     a_t = area[ok].sum()
     edge = float(area[ok & th.at_window_edge].sum() / a_t)
     amb = ok & ambiguous_order(th.delta_e_other_order - th.delta_e, options.ambiguous_order_de)
@@ -381,6 +382,21 @@ def _joint_thickness(joint, roi, options, scene, cens_frac, pooled: PooledOrders
 #: Fewest separate (not touching) groups of regions (:func:`mean_uncertainty`) over which a
 #: component's SD measures its population's spread.
 MIN_SPREAD_GROUPS = 2
+#: A component whose regions' Kish count is below this rests on one region.
+ONE_REGION_KISH = 1.5
+
+
+def one_region_components(uncertainty) -> list:
+    """Indices of the components that rest on one thickness region (Kish count below
+    :data:`ONE_REGION_KISH`) and whose spread is not measured (:func:`mean_uncertainty`'s
+    entries): their SD, at or above the floor, is that region's own scatter.
+
+    >>> one_region_components([{"regions": 1.0, "spread_measured": False},
+    ...                        {"regions": 9.0, "spread_measured": False}])
+    [0]
+    """
+    return [i for i, u in enumerate(uncertainty)
+            if u["regions"] < ONE_REGION_KISH and not u["spread_measured"]]
 
 
 def mean_uncertainty(mixture, regions, thickness_nm, area, *, touching=None,

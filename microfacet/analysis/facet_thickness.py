@@ -304,7 +304,7 @@ def _chunk(model, colours, ii, tilt, options, search: _Search):
 
 def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOptions, *,
                     tilt_sigma_deg=None, noise_de=1.0, block_noise=(0.0, 64),
-                    thorough=True, brightness=True) -> FacetThickness:
+                    thorough=True) -> FacetThickness:
     """Thickness per facet from its mean Lab at its tilt, within its interference order.
 
     The order is the ROI's (the window ±``order_window_fraction`` colour periods about the
@@ -336,11 +336,6 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
         Scan the whole range for another order and the neighbouring orders for
         ``delta_e_other_order``, at ``options.thickness_step_nm``; False (the exposure
         refinement): stay in the ROI's order, at ``options.exposure_thickness_step_nm``.
-    brightness : bool
-        Compare at the brightness factors of ``options.facet_brightness_min`` and
-        ``facet_brightness_penalty_de``; False: at the model's exposure alone (the exposure
-        refinement: the exposure is the film's full brightness).
-
     Returns
     -------
     FacetThickness
@@ -354,8 +349,7 @@ def facet_thickness(colours: FacetColours, tilt_deg, model, options: JointOption
                      None if tilt_sigma_deg is None else np.asarray(tilt_sigma_deg, np.float64),
                      block_noise,
                      brightness_factors(options.facet_brightness_min,
-                                        options.facet_brightness_penalty_de)
-                     if brightness else None)
+                                        options.facet_brightness_penalty_de))
     idx = np.flatnonzero(has)
 
     def chunk(ab):
@@ -389,13 +383,14 @@ def refine_exposure_on_facets(image: FacetImage, tilt_deg, model, options: Joint
     pick[rng.choice(cand, min(options.exposure_facets, cand.size), replace=False)] = True
     colours = image.colours(image.usable & pick[image.labels])
     tilt = np.where(pick, tilt_deg, np.nan)
-    start = facet_thickness(colours, tilt, model, options, thorough=True, brightness=False)
+    full = options.replace(facet_brightness_min=1.0)   # the exposure: the film's full light
+    start = facet_thickness(colours, tilt, model, full, thorough=True)
     colours = dataclasses.replace(colours, roi_thickness_nm=np.where(
         np.isfinite(start.thickness_nm), start.thickness_nm, colours.roi_thickness_nm))
 
     def objective(log_e):
-        ft = facet_thickness(colours, tilt, model.with_exposure(math.exp(log_e)), options,
-                             thorough=False, brightness=False)
+        ft = facet_thickness(colours, tilt, model.with_exposure(math.exp(log_e)), full,
+                             thorough=False)
         return float(np.nanmedian(ft.delta_e))
 
     e0 = model.exposure

@@ -395,14 +395,12 @@ def _ndf_width_deg(ndf_fit):
 
 def _spike_warning(fit) -> Reason | None:
     """A thickness component whose SD sits at the floor, or that rests on one thickness
-    region (``info["mean_uncertainty"]``: a Kish count below 1.5, its spread not measured):
-    its SD is not a population's spread."""
+    region (``info["sd_one_region"]``, :func:`~.distributions.one_region_components`): its
+    SD is not a population's spread."""
     if fit is None:
         return None
     floor = list(fit.info.get("sd_at_floor") or [])
-    unc = fit.info.get("mean_uncertainty") or []
-    one = [i for i, u in enumerate(unc) if u.get("regions", 2.0) < 1.5
-           and not u.get("spread_measured", True) and i not in floor]
+    one = [i for i in fit.info.get("sd_one_region") or [] if i not in floor]
     spikes = sorted(floor + one)
     if not spikes:
         return None

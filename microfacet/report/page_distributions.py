@@ -108,12 +108,17 @@ def _not_identified(ax, reason):
             zorder=10)
 
 
-def _means_at_floor(ctx) -> set:
-    """The means of the thickness components whose SD sits at the floor (summary.json's
-    ``thickness.mixture.sd_at_floor``): their spread is not measured."""
-    idx = ctx.res.get("thickness", "mixture", "sd_at_floor") or []
+def _sd_not_measured(ctx) -> dict:
+    """Mean → why, for the thickness components whose spread is not measured: SD at the
+    floor (summary.json's ``thickness.mixture.sd_at_floor``) or on one region
+    (``sd_one_region``)."""
     comps = ctx.thick.components if ctx.thick is not None else ()
-    return {comps[i][1] for i in idx if i < len(comps)}
+    out = {}
+    for key, why in (("sd_one_region", "one region"), ("sd_at_floor", "at the floor")):
+        for i in ctx.res.get("thickness", "mixture", key) or []:
+            if i < len(comps):
+                out[comps[i][1]] = why
+    return out
 
 
 def _candidate_lines(ax, ctx) -> int:
@@ -148,12 +153,13 @@ def _thickness_panel(ax, ctx):
     if rng is not None:
         pad = max(0.06 * (rng[1] - rng[0]), 2.0)
         rng = (max(0.0, rng[0] - pad), rng[1] + pad)
-    at_floor = _means_at_floor(ctx)
+    unmeasured = _sd_not_measured(ctx)
     n = _density_panel(
         ax, x, dens, mixd, mix, src=src, unit="nm", what="oxide thickness",
         comp_pdf=lambda m, g: m.pdf(g),
         comp_label=lambda c: f"weight {c[0]:.2f}, mean {c[1]:.1f} nm, " + (
-            "SD not measured (at the floor)" if c[1] in at_floor else f"SD {c[2]:.2f} nm"),
+            f"SD not measured ({unmeasured[c[1]]})" if c[1] in unmeasured
+            else f"SD {c[2]:.2f} nm"),
         xrange=rng or (0.0, 1.0))
     roi = ctx.res.table("thickness_roi")
     roi_t = roi["thickness_nm"][np.isfinite(roi["thickness_nm"])] if roi is not None else None

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from microfacet.analysis.distributions import Distributions
+from microfacet.analysis.distributions import Distributions, one_region_components
 from microfacet.analysis.identification import (
     MEDIAN_NOISE_FLOOR_FACTOR,
     NO_SAMPLES,
@@ -394,8 +394,10 @@ def test_a_component_on_one_region_is_said_not_measured_whatever_its_sd():
     named alike; one on several regions, or measured, is not."""
     unc = [{"regions": 1.0, "spread_measured": False}, {"regions": 15.0, "spread_measured": False},
            {"regions": 1.2, "spread_measured": True}]
+    assert one_region_components(unc) == [0]
     fit = MixtureFit(ThicknessMixture([(0.1, 108.3, 0.14), (0.7, 131.5, 1.5), (0.2, 151.0, 3.7)]),
-                     0.0, {3: 0.0}, 10, 10.0, info={"sd_at_floor": [], "mean_uncertainty": unc})
+                     0.0, {3: 0.0}, 10, 10.0,
+                     info={"sd_at_floor": [], "sd_one_region": one_region_components(unc)})
     w = [r for r in _warn(_dist(thickness_fit=fit)) if r.code == "thickness_sd_not_measured"]
     assert len(w) == 1 and "108.3 nm (10 %)" in w[0].text and "0.14 nm" in w[0].text
     assert "one region's own scatter" in w[0].text
