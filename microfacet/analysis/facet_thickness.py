@@ -163,11 +163,11 @@ def brightness_factors(min_factor, penalty_de):
 
 class _Rows:
     """ΔE of a chunk of facets' mean colours against the model at thicknesses of a uniform
-    grid per facet, ``clip(centre + offsets[node])``: the objective of the searches. With
-    ``brightness`` (:func:`brightness_factors`), the least over the factors of the ΔE with
-    the model's colour scaled by k and the factor's cost in quadrature."""
+    grid per facet, ``clip(centre + offsets[node])``: the objective of the searches: the
+    least over the ``brightness`` factors (:func:`brightness_factors`) of the ΔE with the
+    model's colour scaled by k and the factor's cost in quadrature (k = 1 alone: the ΔE)."""
 
-    def __init__(self, model, tilt, mean_lab, centre, offsets, brightness=None):
+    def __init__(self, model, tilt, mean_lab, centre, offsets, brightness):
         self.model, self.tilt, self.offsets = model, tilt[:, None], offsets
         self.lab = mean_lab[:, None, :].astype(np.float32)
         self.centre = centre[:, None]
@@ -179,7 +179,7 @@ class _Rows:
 
     def __call__(self, nodes):
         d = self.thickness(nodes)
-        if self.brightness is None or self.brightness[0].size == 1:
+        if self.brightness[0].size == 1:
             return self.model.delta_e(self.lab, self.tilt, d).astype(np.float64)
         xyz = self.model.xyz(self.tilt, d)
         best = None
@@ -268,14 +268,14 @@ class _Search:
     """How :func:`facet_thickness` searches: the whole range for another order and the
     neighbouring orders (``thorough``), the final step, the colour noise, the tilts' error,
     the JPEG block error and the pixels that share it, the brightness factors and their
-    costs (:func:`brightness_factors`; None: the image's exposure alone)."""
+    costs (:func:`brightness_factors`)."""
 
     thorough: bool
     step_nm: float
     noise_de: float
     tilt_sigma_deg: np.ndarray | None
-    block_noise: tuple = (0.0, 64)
-    brightness: tuple | None = None
+    block_noise: tuple
+    brightness: tuple
 
 
 def _chunk(model, colours, ii, tilt, options, search: _Search):

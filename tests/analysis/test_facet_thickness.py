@@ -232,7 +232,8 @@ def test_brightness_factors_span_the_range_in_small_steps():
         assert np.all(k[:-1] / k[1:] >= 0.9 - 1e-12)
         np.testing.assert_allclose(cost, 4.0 * np.abs(np.log(k)))
     k, cost = brightness_factors(1.0, 4.0)
-    np.testing.assert_array_equal(k, [1.0]) and np.testing.assert_array_equal(cost, [0.0])
+    np.testing.assert_array_equal(k, [1.0])
+    np.testing.assert_array_equal(cost, [0.0])
 
 
 def test_facet_colours_use_the_interior_where_a_facet_has_one():
