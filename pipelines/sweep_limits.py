@@ -23,9 +23,15 @@ Each ``OUT:WORK`` is one ``accuracy-sweep --set mode=joint --set work=WORK --out
   (:func:`order_off_line`) and by the slices' JPEG quality (:func:`jpeg_line`); the true
   count were every facet read at its true region's thickness (:func:`ceiling_line`: what
   the model choice itself gets right);
+* the region MAE: the scenes above 0.5 nm by kind (a true region read an order off, all
+  regions off alike, scattered; :func:`region_mae_kind`), with and without a white-balance
+  error, and the median signed region error by world on the scenes with no region an order
+  off (:func:`region_mae_lines`);
 * the white balance: the estimate's median error per gain, its median error in units of its
   own σ, the median error by the number of film colours, and the range of the medians with
-  and without each of the sweep's variations.
+  and without each of the sweep's variations; and what applying the gains the estimate
+  names off 1 (more than 3σ and 3 %) with a σ below 3 % would do (:func:`apply_rule_line`:
+  docs/accuracy.md, "What keeps the region MAE above 0.5 nm").
 """
 
 from __future__ import annotations
@@ -40,7 +46,7 @@ import numpy as np
 
 from microfacet.analysis.identification import self_check_passes
 from microfacet.analysis.options import FitOptions
-from pipelines._scoring import present_means_nm
+from pipelines._scoring import present_means_nm, region_thickness_errors
 
 #: A component this wide (nm) spanning two true means within :data:`SPAN_SD` of its SD is two
 #: populations fitted as one; two components this close (nm) nearest one true population are
@@ -48,6 +54,14 @@ from pipelines._scoring import present_means_nm
 WIDE_SD_NM, SPAN_SD, SPLIT_NM, FAR_NM = 4.5, 2.5, 8.0, 60.0
 #: A component within this (nm) of a true population's mean lies on it.
 MATCH_NM = 5.0
+#: The region MAE target (nm); a true region whose median is this far (nm) from its mean is
+#: read an order off; regions "off alike" when the signed mean error is at least this share
+#: of the MAE (the regions without one an order off).
+MAE_TARGET_NM, ORDER_OFF_NM, COMMON_SHARE = 0.5, 50.0, 0.6
+#: The rule :func:`apply_rule_line` tallies: a gain the estimate names off 1 by more than
+#: GAIN_OFF_SIGMAS σ and GAIN_OFF_MIN (``identification.gains_off_one``), with σ below
+#: APPLY_SIGMA and inside the ±0.2 log-gain search (0.002 from its edge).
+GAIN_OFF_SIGMAS, GAIN_OFF_MIN, APPLY_SIGMA, SEARCH_EDGE = 3.0, 0.03, 0.03, 0.198
 
 
 def scenes(specs):
@@ -300,6 +314,81 @@ def thickness_lines(rows) -> list:
     return out
 
 
+def region_errors(row_summary_params_truth) -> np.ndarray:
+    """A scene's signed region errors (nm, ``region_thickness_errors`` on its thickness map,
+    ``WORK/results/joint/NAME/thickness_nm.npy`` beside the truth's ``stacks/NAME``)."""
+    r, _, p, truth = row_summary_params_truth
+    res = truth.parent.parent.parent / "results" / "joint" / r["name"] / "thickness_nm.npy"
+    est = np.load(res)
+    reg = region_thickness_errors(est, np.load(truth / "region_id.npy"),
+                                  [x["mean_thickness_nm"] for x in p["regions"]])
+    return np.asarray(reg["errors_nm"], dtype=np.float64)
+
+
+def region_mae_kind(errors_nm) -> str:
+    """Why a scene's region MAE is above :data:`MAE_TARGET_NM`: ``"order off"`` (a region read
+    an order off), ``"alike"`` (the others' signed mean at least :data:`COMMON_SHARE` of their
+    MAE), ``"scattered"``; ``"met"`` at or below the target, ``"none"`` without a region.
+
+    >>> region_mae_kind([0.2, -0.3]), region_mae_kind([0.9, 1.1, 110.0])
+    ('met', 'order off')
+    >>> region_mae_kind([0.9, 1.1, 0.7]), region_mae_kind([0.9, -1.1, 0.7])
+    ('alike', 'scattered')
+    """
+    e = np.asarray(errors_nm, dtype=np.float64)
+    if e.size == 0:
+        return "none"
+    if np.mean(np.abs(e)) <= MAE_TARGET_NM:
+        return "met"
+    off = np.abs(e) > ORDER_OFF_NM
+    if off.any():
+        return "order off"
+    return "alike" if abs(np.mean(e)) >= COMMON_SHARE * np.mean(np.abs(e)) else "scattered"
+
+
+def region_mae_lines(rows) -> list:
+    kinds = {True: [], False: []}
+    signed = {}
+    for row in rows:
+        e = region_errors(row)
+        wb = row[0].get("v_white_balance") == "1"
+        kinds[wb].append(region_mae_kind(e))
+        if e.size and not wb and not (np.abs(e) > ORDER_OFF_NM).any():
+            signed.setdefault(row[0]["world"], []).append(float(np.mean(e)))
+    every = [v for vs in signed.values() for v in vs]
+    by_world = ", ".join(f"{w} {np.median(v):+.3f} ({len(v)})" for w, v in sorted(signed.items()))
+    return [f"region MAE by kind, white-balance scenes: {_counts(kinds[True])}; the others: "
+            f"{_counts(kinds[False])}",
+            f"signed region error, median over the scenes without a white-balance error or a "
+            f"region an order off: {np.median(every):+.3f} nm ({len(every)}); by world "
+            f"{by_world}" if every else "signed region error: no scene"]
+
+
+def apply_rule_line(rows) -> str:
+    """What applying each gain the estimate names off 1 with a σ below :data:`APPLY_SIGMA`
+    would do: the gains applied on scenes with a white-balance error (and how many within 2 %
+    of the truth) and on balanced ones (and how many put more than 3 % off)."""
+    wb_n, wb_ok, bal_n, bal_off = 0, 0, 0, 0
+    for r, s, _, _ in rows:
+        w = s.get("white_balance") or {}
+        est, sig = w.get("estimate_rgb"), w.get("estimate_sigma_rb")
+        if not est or not sig:
+            continue
+        for g, sd, t in ((est[0], sig[0], r["wb_true_r"]), (est[2], sig[1], r["wb_true_b"])):
+            lg, sd = np.log(g), _f(sd)
+            if not (np.isfinite(sd) and sd < APPLY_SIGMA and abs(lg) < SEARCH_EDGE
+                    and abs(lg) > max(GAIN_OFF_SIGMAS * sd, GAIN_OFF_MIN)):
+                continue
+            err = abs(g / float(t) - 1.0)
+            if r.get("v_white_balance") == "1":
+                wb_n, wb_ok = wb_n + 1, wb_ok + (err <= 0.02)
+            else:
+                bal_n, bal_off = bal_n + 1, bal_off + (err > 0.03)
+    return (f"gains off 1 (> {GAIN_OFF_SIGMAS:g}σ, > {100 * GAIN_OFF_MIN:g} %) with σ < "
+            f"{100 * APPLY_SIGMA:g} %: {wb_n} on white-balance scenes ({wb_ok} within 2 %), "
+            f"{bal_n} on balanced ones ({bal_off} more than 3 % off)")
+
+
 def white_balance_lines(rows) -> list:
     err, z, sd, colours, flags = [], [], [], [], []
     for r, s, _, _ in rows:
@@ -338,7 +427,8 @@ def main(argv) -> None:
         raise SystemExit(__doc__.splitlines()[2].strip())
     rows = list(scenes(argv))
     for line in (ndf_lines(rows, FitOptions()) + thickness_lines(rows)
-                 + white_balance_lines(rows)):
+                 + region_mae_lines(rows) + white_balance_lines(rows)
+                 + [apply_rule_line(rows)]):
         print(line)
 
 

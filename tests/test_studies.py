@@ -278,3 +278,41 @@ def test_sweep_limits_score_the_white_balance_estimate_against_the_truth():
                      "in its own σ 1.75 / 0.75; within 2σ (R / B, of the scenes with a finite "
                      "σ) 1 of 2 / 2 of 2; σ median 0.015 / 0.055")
     assert by == "by film colours (R / B): 1: 0.100 / 0.100, 2: 0.010 / 0.010, 3: 0.050 / 0.050"
+
+
+def test_sweep_limits_tally_the_region_mae_by_kind_and_the_gains_a_rule_would_apply(tmp_path):
+    """Three scenes' thickness maps against their truth (two 30 x 30 px regions each): one
+    within 0.5 nm, one with a region read an order off, one with both regions 1 nm thin (off
+    alike, with a white-balance error); the signed error over the balanced scenes without an
+    order-off region. The gains a σ-capped rule would apply: an estimate off 1 by 10 % ± 2 %
+    on a white-balance scene (right within 2 %) and on a balanced one (put 10 % off), one at
+    ± 4 % (σ too wide) and one within 3 % of 1 (not off 1)."""
+    import numpy as np
+
+    from pipelines.sweep_limits import apply_rule_line, region_mae_lines
+
+    rows = []
+    for name, errs, wb, est, sig, true_r in (
+            ("g000", (0.2, -0.3), "0", (1.10, 1.0, 1.0), (0.02, 0.5), "1"),
+            ("g001", (0.1, 110.0), "0", (1.10, 1.0, 1.0), (0.04, 0.5), "1"),
+            ("g002", (-1.0, -1.0), "1", (1.10, 1.0, 1.02), (0.02, 0.001), "1.1")):
+        truth = tmp_path / "stacks" / name / "truth"
+        res = tmp_path / "results" / "joint" / name
+        truth.mkdir(parents=True)
+        res.mkdir(parents=True)
+        rid = np.repeat(np.arange(2), 30)[:, None] * np.ones((1, 30), int)
+        means = [100.0, 150.0]
+        np.save(truth / "region_id.npy", rid)
+        np.save(res / "thickness_nm.npy", np.choose(rid, [m + e for m, e in zip(means, errs)]))
+        params = {"regions": [{"mean_thickness_nm": m} for m in means]}
+        summary = {"white_balance": {"estimate_rgb": list(est), "estimate_sigma_rb": list(sig)}}
+        rows.append(({"name": name, "world": "faceted", "v_white_balance": wb,
+                      "wb_true_r": true_r, "wb_true_b": "1"}, summary, params, truth))
+    lines = region_mae_lines(rows)
+    assert lines[0] == ("region MAE by kind, white-balance scenes: alike 1; the others: met 1, "
+                        "order off 1")
+    assert lines[1].startswith("signed region error, median over the scenes without a "
+                               "white-balance error or a region an order off: -0.050 nm (1)")
+    assert apply_rule_line(rows) == ("gains off 1 (> 3σ, > 3 %) with σ < 3 %: 1 on "
+                                     "white-balance scenes (1 within 2 %), 1 on balanced ones "
+                                     "(1 more than 3 % off)")
