@@ -182,9 +182,10 @@ class _Rows:
         if self.brightness[0].size == 1:
             return self.model.delta_e(self.lab, self.tilt, d).astype(np.float64)
         xyz = self.model.xyz(self.tilt, d)
+        lab = self.model.lab_from_xyz(xyz)
         best = None
         for k, cost in zip(*self.brightness):
-            de = self.model.difference(self.model.lab_from_xyz(xyz * k),
+            de = self.model.difference(self.model.lab_scaled(lab, xyz, k),
                                        self.lab).astype(np.float64)
             if cost > 0:
                 de = np.hypot(de, cost)

@@ -146,6 +146,43 @@ class FilmColourModel:
                 white=image_white_xyz(illuminant=t.illuminant, observer=t.observer))
         return lab
 
+    def lab_scaled(self, lab, xyz, factor) -> np.ndarray:
+        """:meth:`lab_from_xyz` of ``xyz × factor`` (``factor`` > 0) from ``lab``, the Lab of
+        ``xyz`` (its :meth:`lab_from_xyz`), without a second cube root where that is exact.
+
+        Scaling XYZ by k scales the CIE function f(t) = t^(1/3) by k^(1/3) while t stays
+        above its linear segment, so L* + 16, a* and b* scale by k^(1/3); a colour outside
+        the sRGB gamut is recorded at 0 in that channel, which scales alike. Elsewhere — a
+        scaled f at or below 6/29 (t ≤ 216/24389: within 0.9 % of black), or a clip level
+        (``clip_rgb``), which does not scale — it is :meth:`lab_from_xyz` of ``xyz × factor``.
+        The brightness-factor searches of :mod:`microfacet.analysis.facet_thickness` compare
+        each colour at eight factors: one cube root instead of eight (docs/benchmarks.md).
+
+        >>> from microfacet.colour.table import build_colour_table
+        >>> m = FilmColourModel(build_colour_table(thickness_range_nm=(0, 300),
+        ...                                        theta_range_deg=(0, 20)), exposure=0.9)
+        >>> xyz = m.xyz(np.array([0.0, 10.0, 20.0]), np.array([5.0, 150.0, 290.0]))
+        >>> lab = m.lab_from_xyz(xyz)
+        >>> for k in (0.5, 0.8, 1.0, 1e-3):
+        ...     assert np.allclose(m.lab_scaled(lab, xyz, k), m.lab_from_xyz(xyz * k), atol=2e-4)
+        """
+        k = float(factor)
+        if k == 1.0:
+            return lab
+        if self.clip_rgb is not None:
+            return self.lab_from_xyz(np.asarray(xyz) * k)
+        c = np.float32(np.cbrt(k))
+        fy = (lab[..., 0] + np.float32(16.0)) / np.float32(116.0)
+        low = np.minimum(np.minimum(fy + lab[..., 1] / np.float32(500.0),
+                                    fy - lab[..., 2] / np.float32(200.0)), fy) * c
+        out = np.empty_like(lab)
+        out[..., 0] = (lab[..., 0] + np.float32(16.0)) * c - np.float32(16.0)
+        out[..., 1:] = lab[..., 1:] * c
+        exact = low <= np.float32(6.0 / 29.0)          # NaN compares False and stays NaN
+        if exact.any():
+            out[exact] = self.lab_from_xyz(np.asarray(xyz)[exact] * k)
+        return out
+
     @functools.cached_property
     def _xyz_to_rgb(self) -> np.ndarray:
         """(3, 3) float32: ``xyz @ this`` is the linear sRGB of the table's XYZ
