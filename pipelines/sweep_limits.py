@@ -44,8 +44,14 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from microfacet.analysis.identification import self_check_passes
+from microfacet.analysis.identification import (
+    GAIN_OFF_MIN,
+    GAIN_OFF_SIGMAS,
+    gains_off_one,
+    self_check_passes,
+)
 from microfacet.analysis.options import FitOptions
+from microfacet.analysis.white_balance import WhiteBalance
 from pipelines._scoring import present_means_nm, region_thickness_errors
 
 #: A component this wide (nm) spanning two true means within :data:`SPAN_SD` of its SD is two
@@ -58,10 +64,10 @@ MATCH_NM = 5.0
 #: read an order off; regions "off alike" when the signed mean error is at least this share
 #: of the MAE (the regions without one an order off).
 MAE_TARGET_NM, ORDER_OFF_NM, COMMON_SHARE = 0.5, 50.0, 0.6
-#: The rule :func:`apply_rule_line` tallies: a gain the estimate names off 1 by more than
-#: GAIN_OFF_SIGMAS σ and GAIN_OFF_MIN (``identification.gains_off_one``), with σ below
-#: APPLY_SIGMA and inside the ±0.2 log-gain search (0.002 from its edge).
-GAIN_OFF_SIGMAS, GAIN_OFF_MIN, APPLY_SIGMA, SEARCH_EDGE = 3.0, 0.03, 0.03, 0.198
+#: The rule :func:`apply_rule_line` tallies: a gain the estimate names off 1
+#: (``identification.gains_off_one``), inside its search (``WhiteBalance.at_search_edge``),
+#: with σ below this.
+APPLY_SIGMA = 0.03
 
 
 def scenes(specs):
@@ -374,12 +380,14 @@ def apply_rule_line(rows) -> str:
         est, sig = w.get("estimate_rgb"), w.get("estimate_sigma_rb")
         if not est or not sig:
             continue
-        for g, sd, t in ((est[0], sig[0], r["wb_true_r"]), (est[2], sig[1], r["wb_true_b"])):
-            lg, sd = np.log(g), _f(sd)
-            if not (np.isfinite(sd) and sd < APPLY_SIGMA and abs(lg) < SEARCH_EDGE
-                    and abs(lg) > max(GAIN_OFF_SIGMAS * sd, GAIN_OFF_MIN)):
+        wb = WhiteBalance(estimate_rgb=tuple(est), estimate_sigma=tuple(
+            float("inf") if v is None else float(v) for v in sig))
+        edge = dict(zip("RB", wb.at_search_edge()))
+        truth = {"R": r["wb_true_r"], "B": r["wb_true_b"]}
+        for name, g, sd in gains_off_one(wb):
+            if sd >= APPLY_SIGMA or edge[name]:
                 continue
-            err = abs(g / float(t) - 1.0)
+            err = abs(g / float(truth[name]) - 1.0)
             if r.get("v_white_balance") == "1":
                 wb_n, wb_ok = wb_n + 1, wb_ok + (err <= 0.02)
             else:
