@@ -39,6 +39,7 @@ import numpy as np
 
 from ..core.pixels import pixel_area_side
 from ..core.threads import chunk_starts, thread_map
+from ..focus.measures import measure_spread_px
 from .facet_thickness import (
     FacetColours,
     FacetImage,
@@ -53,6 +54,7 @@ from .planes import (
     dome_mean_square_slope,
     facet_edge_distance,
     fit_facet_planes,
+    fit_unmixed_planes,
 )
 from .roi import EXPOSURE_DISTINCT
 from .sampling import weighted_median
@@ -61,7 +63,7 @@ from .tilt import PixelEstimates, TiltRows, invert_tilt_into, model_lab_rows
 from .white_balance import rebalanced_lab
 
 __all__ = ["ExposureReadings", "FacetGeometry", "JointResult", "Segmented", "bootstrap_labels",
-           "delta_e_rebalanced", "facet_geometry", "facet_image", "facet_labels",
+           "delta_e_rebalanced", "evidence_planes", "facet_geometry", "facet_image", "facet_labels",
            "facets_at_exposure_readings", "facets_in_order", "facets_in_other_order",
            "gain_thickness_shifts", "joint_pixel_tilts"]
 
@@ -85,6 +87,9 @@ class HeightInputs:
     stored_sigma_um: np.ndarray
     reliable: np.ndarray
     correlation_px: float
+    #: σ (px) of the support each height is the texture-weighted mean over
+    #: (:func:`~microfacet.focus.measures.measure_spread_px`; 0: a height at its pixel)
+    mixing_px: float = 0.0
 
     @property
     def height_um(self) -> np.ndarray:
@@ -99,7 +104,7 @@ class HeightInputs:
     def crop(self, crop) -> HeightInputs:
         """The inputs of ``crop`` (a pair of slices)."""
         return HeightInputs(self.stored_height_um[crop], self.stored_sigma_um[crop],
-                            self.reliable[crop], self.correlation_px)
+                            self.reliable[crop], self.correlation_px, self.mixing_px)
 
 
 @dataclass
@@ -187,8 +192,10 @@ def focus_heights(foc, options: JointOptions, *, evidence=True) -> HeightInputs:
     if evidence and foc.evidence_height_um is not None:
         h, sig = np.asarray(foc.evidence_height_um), np.asarray(foc.evidence_sigma_um)
         ok = np.isfinite(h) & np.isfinite(sig) & (sig > 0)
-        win = float(foc.params.get("evidence_window_px", 1))
-        return HeightInputs(h, sig, ok, options.focus_error_correlation * win ** 2)
+        win = int(foc.params.get("evidence_window_px", 1))
+        spread = measure_spread_px(operator=foc.params.get("operator", "tenengrad"),
+                                   window_px=win, window=foc.params.get("window", "gaussian"))
+        return HeightInputs(h, sig, ok, options.focus_error_correlation * win ** 2, spread)
     h = np.asarray(foc.height_fit_um)
     rel = np.asarray(foc.reliable, bool) & np.isfinite(h)
     sig = getattr(foc, "height_sigma_um", None)
@@ -199,6 +206,21 @@ def focus_heights(foc, options: JointOptions, *, evidence=True) -> HeightInputs:
     sig = np.asarray(sig)
     corr = options.focus_error_correlation * float(foc.params.get("window_px", 1)) ** 2
     return HeightInputs(h, sig, rel & np.isfinite(sig) & (sig > 0), corr)
+
+
+def evidence_planes(labels, h: HeightInputs, *, reliable, pixel_size_um,
+                    options: JointOptions, surround_um=None) -> tuple[FacetFit, np.ndarray]:
+    """The NDF's planes: :func:`~.planes.fit_unmixed_planes` through ``h``'s heights on
+    ``reliable`` (the segments' interiors) with its mixing undone (``h.mixing_px``,
+    ``options.unmix_heights``), and the unmixed heights (float64, (H, W)). The analysis and
+    its self-check fit them alike."""
+    return fit_unmixed_planes(labels, h.height_um,
+                              mixing_px=h.mixing_px if options.unmix_heights else 0.0,
+                              surround_um=surround_um,
+                              height_sigma_um=h.sigma_um, reliable=h.reliable & reliable,
+                              pixel_size_um=pixel_size_um,
+                              min_pixels=options.min_plane_pixels,
+                              correlation_px=h.correlation_px)
 
 
 def _stand_in_tilt(planes, area):
@@ -324,7 +346,12 @@ def facet_geometry(seg: Segmented, scene, options: JointOptions) -> FacetGeometr
                                 correlation_px=h.correlation_px)
 
     planes = planes_through(hi)
-    ev_planes = None if seg.evidence is None else planes_through(seg.evidence)
+    ev_planes, h = None, hi
+    if seg.evidence is not None:
+        ev_planes, unmixed = evidence_planes(facets, seg.evidence, reliable=inside,
+                                             pixel_size_um=scene.pixel_size_um,
+                                             options=options, surround_um=hi.height_um)
+        h = dataclasses.replace(seg.evidence, stored_height_um=unmixed)
     fitted = planes.fitted
     t_in, s_in = _stand_in_tilt(planes, area)
     log.info("facets: %d, %d with a height tilt (%.0f%% of the area); stand-in tilt %.1f ± "
@@ -332,7 +359,6 @@ def facet_geometry(seg: Segmented, scene, options: JointOptions) -> FacetGeometr
              t_in, s_in)
     tilt_f = np.where(fitted, np.clip(planes.tilt_deg, 0, scene.max_tilt_deg), t_in)
     tsig_f = np.where(fitted, planes.tilt_sigma_deg, s_in)
-    h = hi if seg.evidence is None else seg.evidence
     dome = dome_mean_square_slope(facets, h.height_um, height_sigma_um=h.sigma_um,
                                   reliable=h.reliable & inside,
                                   pixel_size_um=scene.pixel_size_um,

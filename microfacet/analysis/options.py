@@ -178,6 +178,13 @@ class JointOptions(Options):
     plane_edge_px: float = option(
         1.0, help="heights closer than this to a facet boundary are not used by its plane",
         unit="px", low=0)
+    unmix_heights: bool = option(
+        False, help="undo the focus support's mixing of neighbouring facets' heights before "
+                    "the NDF's planes are fitted (analysis.planes.fit_unmixed_planes): against "
+                    "the sweep's true facets their slope gain goes from 0.73 to 0.96 "
+                    "(median), but the NDF's identification checks cannot yet vouch for what "
+                    "it then identifies (2 of 16 scenes off by more than a quarter, "
+                    "docs/accuracy.md); off: planes through the heights as measured")
     interior_px: float = option(
         1.5, help="pixels at least this far from a facet boundary give its mean colour "
                   "(boundaries are partly shadowed)", unit="px", low=0)

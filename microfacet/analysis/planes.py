@@ -16,6 +16,7 @@ References
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -28,7 +29,7 @@ from .segmentation import label_groups, plane_from_moments, plane_moments
 
 cv2 = load("cv2")
 
-__all__ = ["FacetFit", "fit_facet_planes"]
+__all__ = ["FacetFit", "fit_facet_planes", "fit_unmixed_planes"]
 
 #: Rounds of robust refitting of the plane fits: ``HALF_ROUNDS`` concentration steps on the
 #: better half (a quarter of a facet 1 µm down in a pit: 6° off after one, 0.03° after four,
@@ -66,6 +67,10 @@ class FacetFit:
         facet is one plane).
     fitted : ndarray of bool
         The facet has a height tilt.
+    offset_um : ndarray or None
+        The plane's height at the image centre (µm; x and y as in
+        :func:`~.segmentation.plane_moments`): with the slopes, the plane itself
+        (:func:`plane_heights`).
     """
 
     slope_x: np.ndarray
@@ -77,6 +82,7 @@ class FacetFit:
     n_pixels: np.ndarray
     chi2_dof: np.ndarray
     fitted: np.ndarray
+    offset_um: np.ndarray | None = None
 
 
 def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size_um,
@@ -157,7 +163,408 @@ def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size
     ssig = np.where(fitted, np.sqrt(np.maximum(cov[:, 0, 0] + cov[:, 1, 1], 0.0) / 2.0),
                     np.nan)
     nan = np.where(fitted, 0.0, np.nan)
-    return FacetFit(a + nan, b + nan, cov, ssig, tilt, tsig, n, chi2, fitted)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        offset = (m[:, 3] - a * m[:, 1] - b * m[:, 2]) / m[:, 0]
+    return FacetFit(a + nan, b + nan, cov, ssig, tilt, tsig, n, chi2, fitted, offset + nan)
+
+
+def plane_heights(labels, planes: FacetFit, *, pixel_size_um) -> np.ndarray:
+    """The heights (µm, float64, shape (H, W)) of each pixel's facet plane; NaN on the facets
+    without one.
+
+    >>> labels = np.zeros((3, 4), np.int32)
+    >>> ff = fit_facet_planes(labels, np.arange(4.0)[None, :].repeat(3, 0) * 0.5,
+    ...                       height_sigma_um=0.01, reliable=np.ones((3, 4), bool),
+    ...                       pixel_size_um=0.5, min_pixels=4)
+    >>> plane_heights(labels, ff, pixel_size_um=0.5)[0].round(6).tolist()
+    [0.0, 0.5, 1.0, 1.5]
+    """
+    h, w = labels.shape
+    py, px = pixel_size_yx(pixel_size_um)
+    x = (np.arange(w) - (w - 1) / 2.0) * px
+    y = (np.arange(h) - (h - 1) / 2.0) * py
+    z = (planes.slope_x[labels] * x[None, :] + planes.slope_y[labels] * y[:, None]
+         + planes.offset_um[labels])
+    return np.where(planes.fitted[labels], z, np.nan)
+
+
+def mixing_kernel(mixing_px) -> np.ndarray:
+    """The focus support as a kernel: a Gaussian of σ ``mixing_px`` (px) truncated at
+    ⌈2.5σ⌉ px (2D, rows and columns, float32, unnormalized: the blurs divide by the
+    kernel's mass over the pixels that have a height)."""
+    r = max(1, int(math.ceil(2.5 * float(mixing_px))))
+    q = np.arange(-r, r + 1, dtype=np.float64)
+    g = np.exp(-q * q / (2.0 * float(mixing_px) ** 2))
+    return np.outer(g, g).astype(np.float32)
+
+
+def _mixed(surf, kernel):
+    """The normalized blur of ``surf`` by ``kernel`` over its finite pixels (outside the
+    image counts as without a height; NaN where none is near)."""
+    valid = np.isfinite(surf)
+    sm, sv = (cv2.filter2D(a, -1, kernel, borderType=cv2.BORDER_CONSTANT)
+              for a in (np.where(valid, surf, 0.0).astype(np.float32),
+                        valid.astype(np.float32)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(sv > 0, sm.astype(np.float64) / sv, np.nan)
+
+
+def unmixed_heights(labels, height_um, planes: FacetFit, *, mixing_px, pixel_size_um,
+                    surround_um=None) -> np.ndarray:
+    """``height_um`` less what the focus measure's support mixed into it across facet edges:
+    the planes' surface blurred by the support (:func:`mixing_kernel` of σ ``mixing_px``:
+    what a height from focus reports of a piecewise-planar surface,
+    :func:`~microfacet.focus.measures.measure_spread_px`) minus the surface itself. Inside a
+    facet the blur of its plane is the plane (no change); within about 2σ of a crease the
+    two sides' heights mix. Facets without a plane take ``surround_um`` (a dense height;
+    NaN or None: left out of the blur, and their heights kept as they are)."""
+    surf = plane_heights(labels, planes, pixel_size_um=pixel_size_um)
+    if surround_um is not None:
+        surf = np.where(np.isfinite(surf), surf, surround_um)
+    bias = _mixed(surf, mixing_kernel(mixing_px)) - surf
+    return np.asarray(height_um, dtype=np.float64) - np.where(np.isfinite(bias), bias, 0.0)
+
+
+def fit_unmixed_planes(labels, height_um, *, mixing_px, surround_um=None, probes=64,
+                       **fit_options) -> tuple[FacetFit, np.ndarray]:
+    """Facet planes fitted to heights whose focus support mixed neighbouring facets: the
+    planes that, seen through that mixing, give the measured heights.
+
+    A height from focus is the mean height over the focus measure's support (σ
+    ``mixing_px``), weighted by its texture; on facets whose texture lies at their edges
+    (region edges, pits, scratches) the heights within a pixel or two of a crease are
+    pulled toward the neighbour's plane, and a plane through them is flatter than the facet
+    (0.66-0.96 of the true slopes on the sweep's faceted scenes, median per scene, against
+    their true facets: docs/accuracy.md). With the first (robust) fit's inliers and weights
+    held, the plane fit F is linear in the heights, and so is the support's blur K of the
+    planes' surface P v: the planes v whose blurred surface the fit reads as it reads the
+    heights e solve ``F(K P v) = F(e − K s)`` (s: the surround, on the facets without a
+    plane), a sparse linear system with a 3 × 3 block for each pair of facets within the
+    support's reach, solved exactly (sparse LU). The planes are then fitted again (robustly,
+    with their χ²) to the heights so unmixed (:func:`unmixed_heights`). Their slope
+    covariance is that fit's propagated through the system's inverse, which grows the noise
+    of a facet whose heights are mostly its neighbours' and passes its neighbours' noise
+    into it: ``probes`` random draws of the plain fits' errors (a fixed seed) through the
+    factorized system.
+
+    Parameters
+    ----------
+    labels, height_um
+        As :func:`fit_facet_planes`.
+    mixing_px : float
+        σ of the focus support (px); 0 returns :func:`fit_facet_planes`' planes.
+    surround_um : ndarray (H, W), optional
+        A dense height for the facets without a plane (their part of the mixing).
+    probes : int
+        Random draws for the slope covariance.
+    **fit_options
+        :func:`fit_facet_planes`' keywords.
+
+    Returns
+    -------
+    FacetFit
+        The unmixed planes.
+    ndarray of float64, shape (H, W)
+        The unmixed heights the planes went through (the input where nothing was undone).
+
+    Examples
+    --------
+    Two facets meeting at a crease (slopes ±0.1), each with heights only within 2 px of it,
+    seen through the support of σ 1.2 px:
+
+    >>> yy, xx = np.mgrid[0:20, 0:40] * 0.5
+    >>> labels = (xx >= 10).astype(np.int32)
+    >>> true = -0.1 * np.abs(xx - 9.75)
+    >>> seen = _mixed(true, mixing_kernel(1.2))
+    >>> near = np.abs(xx - 9.75) < 1.0
+    >>> kw = dict(height_sigma_um=0.01, reliable=near, pixel_size_um=0.5, min_pixels=8)
+    >>> round(float(fit_facet_planes(labels, seen, **kw).slope_x[0]), 3)
+    0.057
+    >>> ff, _ = fit_unmixed_planes(labels, seen, mixing_px=1.2, **kw)
+    >>> round(float(ff.slope_x[0]), 4)
+    0.1
+    """
+    first = fit_facet_planes(labels, height_um, **fit_options)
+    h = np.asarray(height_um, dtype=np.float64)
+    if not mixing_px or mixing_px <= 0 or not first.fitted.any():
+        return first, h
+    psz = fit_options["pixel_size_um"]
+    kernel = mixing_kernel(mixing_px)
+    wt = _fit_weights(labels, h, fit_options)
+    unknown = first.fitted & (first.slope_sigma < MAX_SLOPE_SIGMA)
+    fixed = np.where(unknown[labels], np.nan, plane_heights(labels, first, pixel_size_um=psz))
+    if surround_um is not None:
+        fixed = np.where(np.isfinite(fixed) | unknown[labels], fixed, surround_um)
+    system = _MixingSystem(labels, wt, unknown, kernel, fixed, psz)
+    # a facet with no share of its own heights keeps its first plane (slivers already mix
+    # in as their first planes, through ``fixed``)
+    weak = unknown & ~system.resolvable
+    if weak.any():
+        system.fix(weak, system.params(first))
+        unknown = unknown & ~weak
+    if not unknown.any():
+        return first, h
+    planes = system.as_fit(system.solve(h), first)
+    h = unmixed_heights(labels, h, planes, mixing_px=mixing_px, pixel_size_um=psz,
+                        surround_um=surround_um)
+    fit = fit_facet_planes(labels, h, **fit_options)
+    chi2 = np.maximum(np.nan_to_num(fit.chi2_dof, nan=1.0), 1.0)
+    sigma = (np.broadcast_to(np.asarray(fit_options["height_sigma_um"], dtype=np.float64),
+                             labels.shape) * np.sqrt(chi2)[labels])
+    cov = np.where(unknown[:, None, None],
+                   system.slope_covariance(sigma, fit_options.get("correlation_px", 1.0),
+                                           probes),
+                   fit.slope_cov)
+    cov = np.where(fit.fitted[:, None, None], cov, np.nan)
+    return dataclasses.replace(fit, slope_cov=cov, **_slope_errors(fit, cov)), h
+
+
+def _slope_errors(fit: FacetFit, cov) -> dict:
+    """``slope_sigma`` and ``tilt_sigma_deg`` of ``fit``'s slopes under the covariance
+    ``cov`` (S, 2, 2), as :func:`fit_facet_planes` derives them."""
+    a, b = np.nan_to_num(fit.slope_x), np.nan_to_num(fit.slope_y)
+    g = np.hypot(a, b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ux = np.where(g > 0, a / g, 1 / np.sqrt(2))
+        uy = np.where(g > 0, b / g, 1 / np.sqrt(2))
+    var_g = cov[:, 0, 0] * ux * ux + 2 * cov[:, 0, 1] * ux * uy + cov[:, 1, 1] * uy * uy
+    return {"slope_sigma": np.sqrt(np.maximum(cov[:, 0, 0] + cov[:, 1, 1], 0.0) / 2.0),
+            "tilt_sigma_deg": np.degrees(np.sqrt(np.maximum(var_g, 0.0)) / (1.0 + g * g))}
+
+
+class _MixingSystem:
+    """``T v = b`` of :func:`fit_unmixed_planes`: per facet the normal equations of its held
+    weighted plane fit (weights ``wt``), with the heights replaced by the support's blur of
+    all planes near it. Planes as ``v = (height at the facet's weighted centroid, slopes ×
+    its weighted RMS radius L)`` (µm, all three), one block of 3 per facet ``unknown``; the
+    others keep v = 0 (identity rows) and mix in as ``fixed`` (their heights, NaN: none).
+
+    Sums run in ``u = (1, x, y)`` (µm from the image centre): a facet's basis is ``A_f u``,
+    and a pixel ``o`` away has ``u_q = M_o u_p``, so each facet pair's block is
+    ``A_f (Σ_o Σ_p w k_o u_p u_pᵀ M_oᵀ) A_gᵀ``: six weighted moments per pair and offset.
+    Only inliers whose support meets another facet, a pixel without a height or the image
+    border take the offsets; elsewhere the blur of a plane is the plane."""
+
+    def __init__(self, labels, wt, unknown, kernel, fixed, pixel_size_um):
+        H, W = labels.shape
+        S = self.S = unknown.size
+        ok = self.ok = unknown
+        self.solved = unknown.copy()
+        lab = labels.ravel()
+        idx = np.flatnonzero((wt.ravel() > 0) & ok[lab])
+        f, w = lab[idx], wt.ravel()[idx]
+        rows, cols = np.divmod(idx, W)
+        py, px = pixel_size_yx(pixel_size_um)
+        self.step = (py, px)
+        x, y = (cols - (W - 1) / 2.0) * px, (rows - (H - 1) / 2.0) * py
+        n_u = _moments(f, w, x, y, S)
+        sw = n_u[:, 0, 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mx, my = np.nan_to_num(n_u[:, 0, 1] / sw), np.nan_to_num(n_u[:, 0, 2] / sw)
+            r2 = (n_u[:, 1, 1] + n_u[:, 2, 2]) / sw - mx * mx - my * my
+        self.mx, self.my = mx, my
+        self.L = np.sqrt(np.maximum(np.nan_to_num(r2), 1e-12))
+        A = np.zeros((S, 3, 3))
+        A[:, 0, 0] = 1.0
+        A[:, 1, 0], A[:, 1, 1] = -mx / self.L, 1.0 / self.L
+        A[:, 2, 0], A[:, 2, 2] = -my / self.L, 1.0 / self.L
+        self.A = A
+        self.N = A @ n_u @ np.transpose(A, (0, 2, 1))
+        self.inliers = (idx, f, w, x, y)
+        valid = ok[labels] | np.isfinite(fixed)
+        self._build(labels, valid, np.nan_to_num(fixed), kernel, rows, cols)
+
+    def _edge(self, labels, valid, r, rows, cols):
+        """Inliers whose (2r+1)² support holds another label, a pixel without a height or
+        the image border."""
+        H, W = labels.shape
+        box = np.ones((2 * r + 1, 2 * r + 1), np.uint8)
+        lab = labels.astype(np.float32)              # exact below 2^24 labels
+        hi = cv2.dilate(lab, box, borderType=cv2.BORDER_REPLICATE)
+        lo = cv2.erode(lab, box, borderType=cv2.BORDER_REPLICATE)
+        vmin = cv2.erode(valid.astype(np.uint8), box, borderType=cv2.BORDER_REPLICATE)
+        inside = (rows >= r) & (rows < H - r) & (cols >= r) & (cols < W - r)
+        return ~(inside & (hi[rows, cols] == lo[rows, cols]) & (vmin[rows, cols] > 0))
+
+    def _build(self, labels, valid, s, kernel, rows, cols):
+        idx, f, w, x, y = self.inliers
+        S, ok, A = self.S, self.ok, self.A
+        H, W = labels.shape
+        r = kernel.shape[0] // 2
+        py, px = self.step
+        edge = self._edge(labels, valid, r, rows, cols)
+        # the interior: the blur of its own plane is the plane
+        own = _moments(f[~edge], w[~edge], x[~edge], y[~edge], S)
+        fe, we, xe, ye, re, ce = (a[edge] for a in (f, w, x, y, rows, cols))
+        tot = cv2.filter2D(valid.astype(np.float32), -1, kernel,
+                           borderType=cv2.BORDER_CONSTANT)[re, ce].astype(np.float64)
+        wt_e = we / np.maximum(tot, 1e-30)
+        offsets = [(dy, dx, float(kernel[dy + r, dx + r]))
+                   for dy in range(-r, r + 1) for dx in range(-r, r + 1)]
+
+        def neighbours(dy, dx):
+            qr, qc = re + dy, ce + dx
+            inb = (qr >= 0) & (qr < H) & (qc >= 0) & (qc < W)
+            qr, qc = np.clip(qr, 0, H - 1), np.clip(qc, 0, W - 1)
+            return qr, qc, inb & valid[qr, qc], labels[qr, qc]
+
+        keys = []
+        for dy, dx, _ in offsets:
+            _, _, v, g = neighbours(dy, dx)
+            cross = v & ok[g] & (g != fe)
+            k = fe[cross].astype(np.int64) * S + g[cross]
+            if k.size:
+                keys.append(k[np.r_[True, k[1:] != k[:-1]]])      # runs along the rows
+        pairs = np.unique(np.concatenate(keys)) if keys else np.zeros(0, np.int64)
+        R = np.zeros((pairs.size, 3, 3))
+        b = np.zeros((S, 3))
+        for dy, dx, k_o in offsets:
+            qr, qc, v, g = neighbours(dy, dx)
+            m = np.eye(3)
+            m[1, 0], m[2, 0] = dx * px, dy * py                    # u_q = M u_p
+            wk = np.where(v, wt_e * k_o, 0.0)
+            same = v & (g == fe)
+            own += _moments(fe[same], wk[same], xe[same], ye[same], S) @ m.T
+            cross = v & ok[g] & (g != fe)
+            if cross.any():
+                pos = np.searchsorted(pairs, fe[cross].astype(np.int64) * S + g[cross])
+                R += _moments(pos, wk[cross], xe[cross], ye[cross], pairs.size) @ m.T
+            fix = v & ~ok[g]
+            if fix.any():
+                sv = wk[fix] * s[qr[fix], qc[fix]]
+                for i, u in enumerate((1.0, xe[fix], ye[fix])):
+                    b[:, i] -= np.bincount(fe[fix], sv * u, S)
+        pf, pg = np.divmod(pairs, S)
+        T_own = A @ own @ np.transpose(A, (0, 2, 1))
+        T_pair = A[pf] @ R @ np.transpose(A[pg], (0, 2, 1))
+        self.resolvable = ok & _own_gain_ok(self.N, T_own, ok)
+        self.b_fixed = np.where(ok[:, None], np.einsum("sij,sj->si", A, b), 0.0).ravel()
+        ii, jj = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+        fi = np.arange(S)
+        free = np.flatnonzero(~ok)
+        rr = np.concatenate([(3 * fi[:, None, None] + ii).ravel(),
+                             (3 * pf[:, None, None] + ii).ravel(),
+                             3 * np.repeat(free, 3) + np.tile(np.arange(3), free.size)])
+        cc = np.concatenate([(3 * fi[:, None, None] + jj).ravel(),
+                             (3 * pg[:, None, None] + jj).ravel(),
+                             3 * np.repeat(free, 3) + np.tile(np.arange(3), free.size)])
+        vals = np.concatenate([np.where(ok[:, None, None], T_own, 0.0).ravel(),
+                               T_pair.ravel(), np.ones(3 * free.size)])
+        sparse = load("scipy.sparse")
+        self.T = sparse.csc_matrix((vals, (rr, cc)), shape=(3 * S, 3 * S))
+        self._lu = None
+
+    def fix(self, facets, v):
+        """Hold the planes of ``facets`` (bool, (S,)) at ``v`` (3S,): their columns move to
+        the right-hand side, their rows become identities."""
+        sparse = load("scipy.sparse")
+        keep = np.repeat(~facets, 3).astype(np.float64)
+        vf = np.where(np.repeat(facets, 3), v, 0.0)
+        self.b_fixed = self.b_fixed - self.T @ vf
+        self.b_fixed = np.where(np.repeat(facets, 3), vf, self.b_fixed * keep)
+        D = sparse.diags(keep)
+        self.T = (D @ self.T @ D + sparse.diags(1.0 - keep)).tocsc()
+        self.ok = self.ok & ~facets
+        self._lu = None
+
+    @property
+    def lu(self):
+        if self._lu is None:
+            self._lu = load("scipy.sparse.linalg").splu(self.T)
+        return self._lu
+
+    def _rhs(self, e):
+        """The held fits' right-hand sides of the inliers' heights ``e`` (3S, ...)."""
+        _, f, w, x, y = self.inliers
+        b = np.stack([np.bincount(f, w * u * e, self.S) for u in (1.0, x, y)], axis=1)
+        return np.where(self.ok[:, None], np.einsum("sij,sj->si", self.A, b), 0.0).ravel()
+
+    def solve(self, h) -> np.ndarray:
+        """The planes v whose blurred surface the held fit reads as it reads ``h``."""
+        e = np.asarray(h, dtype=np.float64).ravel()[self.inliers[0]]
+        return self.lu.solve(self._rhs(e) + self.b_fixed)
+
+    def params(self, fit: FacetFit) -> np.ndarray:
+        """``fit``'s planes as v (3S,)."""
+        a, b = np.nan_to_num(fit.slope_x), np.nan_to_num(fit.slope_y)
+        c = np.nan_to_num(fit.offset_um) + a * self.mx + b * self.my
+        return np.stack([c, a * self.L, b * self.L], axis=1).ravel()
+
+    def as_fit(self, v, first: FacetFit) -> FacetFit:
+        """``first`` with the planes ``v`` on the facets solved for (the held ones included)."""
+        c, a, b = v.reshape(self.S, 3).T
+        a, b = a / self.L, b / self.L
+        on = self.solved
+        return dataclasses.replace(
+            first, slope_x=np.where(on, a, first.slope_x),
+            slope_y=np.where(on, b, first.slope_y),
+            offset_um=np.where(on, c - a * self.mx - b * self.my, first.offset_um))
+
+    def slope_covariance(self, sigma_um, correlation_px, probes) -> np.ndarray:
+        """(S, 2, 2) covariance of the solved slopes (µm/µm) under height errors of σ
+        ``sigma_um`` (H, W) correlated over ``correlation_px`` (px², the area of a
+        Gaussian-smoothed white noise): ``probes`` error fields (a fixed seed) through the
+        held fits and the factorized system. The errors of neighbouring facets' edge heights
+        are correlated as the real ones are (one focus window sees both sides)."""
+        idx = self.inliers[0]
+        shape = np.shape(sigma_um)
+        s_c = math.sqrt(max(float(correlation_px), 1.0) / (4.0 * math.pi))
+        rng = np.random.default_rng(0)
+        sig = np.asarray(sigma_um, dtype=np.float64).ravel()[idx]
+        rhs = np.empty((3 * self.S, int(probes)))
+        for k in range(int(probes)):
+            n = rng.standard_normal(shape).astype(np.float32)
+            if s_c > 0.3:
+                n = cv2.GaussianBlur(n, (0, 0), s_c, borderType=cv2.BORDER_REFLECT)
+                n *= np.float32(2.0 * math.sqrt(math.pi) * s_c)     # back to unit variance
+            rhs[:, k] = self._rhs(n.ravel()[idx] * sig)
+        x = self.lu.solve(rhs).reshape(self.S, 3, -1)[:, 1:, :] / self.L[:, None, None]
+        return np.einsum("sip,sjp->sij", x, x) / x.shape[-1]
+
+
+def _moments(label, w, x, y, n) -> np.ndarray:
+    """(n, 3, 3): Σ w u uᵀ per label, u = (1, x, y)."""
+    out = np.empty((n, 3, 3))
+    sums = [np.bincount(label, w * t, n) for t in (1.0, x, y, x * x, x * y, y * y)]
+    for (i, j), v in zip(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)), sums):
+        out[:, i, j] = out[:, j, i] = v
+    return out
+
+
+#: Least share of each direction of its plane (its own block's smallest singular value over
+#: the plain fit's) a facet's own heights must keep for it to be unmixed: a guard against a
+#: singular system only. A facet whose heights are mostly its neighbours' is unmixed with
+#: the noise that costs (its propagated covariance; past :data:`MAX_SLOPE_SIGMA` it leaves
+#: the NDF); holding such facets at their flattened planes instead biased their
+#: neighbours (tests/analysis/test_planes.py).
+MIN_OWN_GAIN = 1e-3
+
+
+def _own_gain_ok(N, own, ok) -> np.ndarray:
+    """Per facet: the smallest singular value of ``N⁻¹ own`` (the share of its plane its own
+    blurred heights keep) is at least :data:`MIN_OWN_GAIN`."""
+    out = np.zeros(ok.size, bool)
+    if ok.any():
+        g = np.linalg.pinv(N[ok]) @ own[ok]
+        out[ok] = np.linalg.svd(g, compute_uv=False)[:, -1] >= MIN_OWN_GAIN
+    return out
+
+
+def _fit_weights(labels, height_um, fit_options) -> np.ndarray:
+    """The weights (H, W) :func:`fit_facet_planes` ends with for these options: 1/σ² on the
+    reliable heights its robust rounds keep, 0 elsewhere."""
+    sig = np.broadcast_to(np.asarray(fit_options["height_sigma_um"], dtype=np.float64),
+                          labels.shape)
+    z = np.asarray(height_um, dtype=np.float64)
+    use = (np.asarray(fit_options["reliable"], bool) & np.isfinite(z) & np.isfinite(sig)
+           & (sig > 0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        wt = np.where(use, 1.0 / sig ** 2, 0.0)
+    rounds = fit_options.get("robust_rounds", ROBUST_ROUNDS)
+    if rounds > 0:
+        wt = _robust_weights(labels, np.where(use, z, np.nan), wt, fit_options["pixel_size_um"],
+                             int(labels.max()) + 1, rounds)
+    return wt
 
 
 def _correlation_factor(n, correlation_px):

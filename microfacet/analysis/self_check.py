@@ -51,7 +51,7 @@ from ..core.pixels import pixel_size_yx
 from ..focus.height import height_from_focus
 from ..focus.options import FocusOptions
 from ..focus.uncertainty import height_sigma_with_bias
-from .joint import focus_heights
+from .joint import evidence_planes, focus_heights
 from .options import JointOptions
 from .planes import (
     MAX_SLOPE_SIGMA,
@@ -451,10 +451,9 @@ def _recovered_planes(sc, height_um, focus_options, joint, seed, interior, *, do
     z_scores = np.abs(foc.height_fit_um[rel] - height_um[rel]) / sig[rel]
     got = focus_heights(foc, joint)
     reliable = got.reliable & interior
-    fit = fit_facet_planes(sc.labels, got.height_um, height_sigma_um=got.sigma_um,
-                           reliable=reliable, pixel_size_um=sc.pixel_yx,
-                           min_pixels=joint.min_plane_pixels, correlation_px=got.correlation_px)
-    dome = (dome_coefficients(sc.labels, got.height_um, height_sigma_um=got.sigma_um,
+    fit, unmixed = evidence_planes(sc.labels, got, reliable=interior, pixel_size_um=sc.pixel_yx,
+                                   options=joint, surround_um=foc.height_fit_um)
+    dome = (dome_coefficients(sc.labels, unmixed, height_sigma_um=got.sigma_um,
                               reliable=reliable, pixel_size_um=sc.pixel_yx,
                               correlation_px=got.correlation_px) if domes else None)
     return fit, z_scores, dome

@@ -47,7 +47,7 @@ from .options import COLOURS, OPERATORS, WINDOWS, FocusOptions, odd_window_reaso
 
 cv2 = load("cv2")
 
-__all__ = ["focus_measure", "focus_measures"]
+__all__ = ["focus_measure", "focus_measures", "measure_spread_px"]
 
 #: The defaults of the keyword arguments: those of :class:`~microfacet.focus.options.
 #: FocusOptions` (declared there only).
@@ -236,6 +236,50 @@ def focus_measure(image: np.ndarray, *, operator: str = _DEFAULTS.operator,
     _check_window(window_px, window)
     return focus_measures(image, [(window_px, window, 1)], operator=operator,
                           colour=colour)[0]
+
+
+#: Each operator's kernels (rows y, columns x) and the power of the filter response its
+#: energy sums: squared Sobel responses for tenengrad, absolute modified-Laplacian ones for
+#: sml; glv has none (its window is its only support).
+_OPERATOR_KERNELS = {
+    "tenengrad": ((np.outer([1.0, 2.0, 1.0], [-1.0, 0.0, 1.0]),
+                   np.outer([-1.0, 0.0, 1.0], [1.0, 2.0, 1.0])), 2),
+    "sml": ((np.array([[-1.0, 2.0, -1.0]]), np.array([[-1.0], [2.0], [-1.0]])), 1),
+    "glv": ((), 2),
+}
+
+
+def measure_spread_px(*, operator: str, window_px: int, window: str) -> float:
+    """σ (px, per axis) of the support of a focus measure at one pixel: how far from a pixel
+    the texture lies whose focus its measure (and so its height) reports.
+
+    A height from focus is the texture-weighted mean height over this support, not the
+    height at the pixel: at a crease between two facets each side's heights mix (the
+    facet planes undo that, :func:`~microfacet.analysis.planes.fit_unmixed_planes`). The
+    variance is the window's (``window_px²/12``, a box's ``(window_px² − 1)/12``) plus the
+    operator's: the mean over both axes and both kernels of ``Σ q² |k(q)|^p / Σ |k(q)|^p``
+    (p = 2 for tenengrad's squared responses, 1 for sml's absolute ones), the spread of a
+    point's share of the energy (tenengrad 2/3 px², sml 1/4 px², glv 0).
+
+    >>> round(measure_spread_px(operator="tenengrad", window_px=3, window="gaussian"), 4)
+    1.1902
+    >>> measure_spread_px(operator="glv", window_px=1, window="box")
+    0.0
+    """
+    if operator not in OPERATORS:
+        raise ValueError(f"operator must be one of {OPERATORS}, not {operator!r}")
+    _check_window(window_px, window)
+    var_w = window_px * window_px / 12.0 if window == "gaussian" else (window_px ** 2 - 1) / 12.0
+    var_k = []
+    kernels, power = _OPERATOR_KERNELS[operator]
+    for k in kernels:
+        w = np.abs(k) ** power
+        qy = np.arange(k.shape[0]) - (k.shape[0] - 1) / 2.0
+        qx = np.arange(k.shape[1]) - (k.shape[1] - 1) / 2.0
+        var_k.append(0.5 * (float(np.sum(w * qy[:, None] ** 2)) + float(np.sum(w * qx ** 2)))
+                     / float(np.sum(w)))
+    var_op = float(np.mean(var_k)) if var_k else 0.0
+    return math.sqrt(var_w + var_op)
 
 
 _NOISE_SHAPE: dict = {}

@@ -76,7 +76,10 @@ STUDY = Study(
                           "the sweep resumes"),
              "reference": ("none", "none, or substrate: every session also has a field of the "
                                    "bare metal through its camera (native oxide drawn in 2-5 "
-                                   "nm), given as stack.json's substrate_reference")},
+                                   "nm), given as stack.json's substrate_reference"),
+             "analysis": ("", "analysis options over the defaults, SECTION.KEY=VALUE joined "
+                              "by ';' (e.g. joint.unmix_heights=true); with a work folder of "
+                              "its own (a resumed sweep keeps the results it has)")},
     doc_files={"generalization.csv": "docs/data/generalization.csv",
                "generalization.png": "docs/img/generalization.png"},
 )
@@ -454,9 +457,31 @@ def substrate_session(work: Path, name: str, p, seed: int) -> Path:
     return dst
 
 
-def run_mode(mode, plan, gen, work: Path, jobs, scheduler, reference="none"):
+def analysis_changes(text: str) -> dict:
+    """``{section: {key: value}}`` of the study's ``analysis`` option (``SECTION.KEY=VALUE``
+    joined by ';'; values read as JSON where they parse, else as text).
+
+    >>> analysis_changes("joint.unmix_heights=true; fits.self_check_sigmas=0.5")
+    {'joint': {'unmix_heights': True}, 'fits': {'self_check_sigmas': 0.5}}
+    """
+    out: dict = {}
+    for item in filter(None, (t.strip() for t in text.split(";"))):
+        key, eq, value = item.partition("=")
+        section, dot, name = key.strip().partition(".")
+        if not (eq and dot and section and name):
+            raise SystemExit(f"accuracy-sweep: analysis: SECTION.KEY=VALUE, got {item!r}")
+        try:
+            value = json.loads(value)
+        except json.JSONDecodeError:
+            value = value.strip()
+        out.setdefault(section, {})[name.strip()] = value
+    return out
+
+
+def run_mode(mode, plan, gen, work: Path, jobs, scheduler, reference="none", analysis=""):
     """Analyse the generated stacks in ``mode`` (with ``reference = "substrate"``, each with
-    a bare-substrate field: :func:`substrate_session`) and score them: one row per scene."""
+    a bare-substrate field: :func:`substrate_session`; with ``analysis``, the options of
+    :func:`analysis_changes` over the defaults) and score them: one row per scene."""
     from microfacet.analysis.options import AnalysisOptions
     from microfacet.workflow.batch import run_batch
 
@@ -473,7 +498,8 @@ def run_mode(mode, plan, gen, work: Path, jobs, scheduler, reference="none"):
                             jobs=jobs or None,
                             scheduler=scheduler or None,
                             options=AnalysisOptions(mode=mode).replace(
-                                optics={"white_balance": "report"}), report=False)
+                                optics={"white_balance": "report"}).replace(
+                                **analysis_changes(analysis)), report=False)
             brows = dict(zip(todo, res.rows))
         except Exception as exc:  # the whole batch refused: every scene failed
             brows = {n: {"status": "failed", "reason": f"batch: {exc}"} for n in todo}
@@ -626,7 +652,8 @@ def plot(rows, path: Path) -> None:
     save_figure(fig, path)
 
 
-def sweep(*, n, seed, size, slices, modes, jobs, scheduler, work: Path, reference="none"):
+def sweep(*, n, seed, size, slices, modes, jobs, scheduler, work: Path, reference="none",
+          analysis=""):
     """Draw, generate, analyse and score the scenes: ``(rows, summaries, header)``."""
     from pipelines._scoring import summarize
 
@@ -637,7 +664,7 @@ def sweep(*, n, seed, size, slices, modes, jobs, scheduler, work: Path, referenc
     rows, summaries, t_an = [], {}, {}
     for mode in modes:
         t1 = time.perf_counter()
-        mrows = run_mode(mode, plan, gen, work, jobs, scheduler, reference)
+        mrows = run_mode(mode, plan, gen, work, jobs, scheduler, reference, analysis)
         t_an[mode] = time.perf_counter() - t1
         rows += mrows
         summaries[mode] = summarize(mrows)
@@ -659,7 +686,7 @@ def sweep(*, n, seed, size, slices, modes, jobs, scheduler, work: Path, referenc
 
 
 def run(*, quick: bool, out: Path, n=30, seed=0, size="256x256", slices=16, mode="both",
-        jobs=0, scheduler="", work="", reference="none") -> str:
+        jobs=0, scheduler="", work="", reference="none", analysis="") -> str:
     hw = tuple(int(v) for v in size.lower().split("x"))
     if quick:
         n, hw, slices, jobs = min(n, 2), (64, 64), min(slices, 6), jobs or 1
@@ -667,9 +694,15 @@ def run(*, quick: bool, out: Path, n=30, seed=0, size="256x256", slices=16, mode
     work = Path(work) if work else out / "work"
     if reference not in ("none", "substrate"):
         raise SystemExit(f"accuracy-sweep: reference: none or substrate, got {reference!r}")
+    from microfacet.analysis.options import AnalysisOptions
+    from microfacet.core.errors import InputError
+    try:                                   # refuse a misspelt option before any work
+        AnalysisOptions().replace(**analysis_changes(analysis))
+    except InputError as exc:
+        raise SystemExit(f"accuracy-sweep: analysis: {exc}") from None
     rows, summaries, header = sweep(n=n, seed=seed, size=hw, slices=slices, modes=modes,
                                     jobs=jobs, scheduler=scheduler, work=work,
-                                    reference=reference)
+                                    reference=reference, analysis=analysis)
     csv_path = write_csv(out / "generalization.csv", rows, COLUMNS)
     plot(rows, out / "generalization.png")
     note("\n" + per_scene_table(rows) + "\n")

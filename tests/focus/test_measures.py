@@ -5,7 +5,12 @@ import cv2
 import numpy as np
 import pytest
 
-from microfacet.focus.measures import focus_measure, focus_measures, noise_shape
+from microfacet.focus.measures import (
+    focus_measure,
+    focus_measures,
+    measure_spread_px,
+    noise_shape,
+)
 
 
 @pytest.mark.parametrize("op", ["tenengrad", "sml", "glv"])
@@ -91,3 +96,23 @@ def test_measures_written_into_given_arrays_are_the_same(op):
         np.testing.assert_array_equal(g, r)
     with pytest.raises(ValueError, match="one array per window"):
         focus_measures(img, windows, operator=op, out=out[:2])
+
+
+@pytest.mark.parametrize("op", ["tenengrad", "sml"])
+@pytest.mark.parametrize("px, window", [(3, "gaussian"), (5, "box"), (1, "box")])
+def test_measure_spread_is_the_second_moment_of_a_points_focus(op, px, window):
+    """A single bright pixel's focus measure spreads over the pixels around it: its second
+    moment about the pixel (per axis, averaged) is the spread's square. The reference is
+    the measure OpenCV computes, not the kernel arithmetic of measure_spread_px."""
+    img = np.zeros((41, 41), np.float32)
+    img[20, 20] = 1.0
+    m = focus_measure(img, operator=op, window_px=px, window=window).astype(np.float64)
+    yy, xx = np.mgrid[-20:21, -20:21]
+    var = 0.5 * float(np.sum(m * (yy ** 2 + xx ** 2)) / np.sum(m))
+    assert measure_spread_px(operator=op, window_px=px, window=window) == pytest.approx(
+        np.sqrt(var), rel=0.03)
+
+
+def test_measure_spread_refuses_an_unknown_operator():
+    with pytest.raises(ValueError, match="operator"):
+        measure_spread_px(operator="laplace", window_px=3, window="gaussian")
