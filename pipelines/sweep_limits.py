@@ -13,6 +13,8 @@ Each ``OUT:WORK`` is one ``accuracy-sweep --set mode=joint --set work=WORK --out
   off by more than 25 %; the correlation of the self-check's width transfer with the
   scene's true width ratio, and, on the textured scenes without rounded facets whose spread
   is within the limit, the median ratio and the quartiles of the ratio over the transfer;
+  the dome transfer; the segments' purity against the true facets and its correlation with
+  the scenes' lobe RMS ratio (:func:`purity_line`);
 * the thickness: the scenes with too few and too many components, and the kinds (two true
   populations under one wide component; a population split into close components; a
   component far above every true population: another interference order), with the model
@@ -119,7 +121,48 @@ def ndf_lines(rows, fits: FitOptions) -> list:
                f"median {np.median(ratio[steady]):.2f}; ratio / width transfer median "
                f"{q[1]:.2f}, quartiles {q[0]:.2f}-{q[2]:.2f}")
     out.append(_dome_line(sc))
+    out.append(purity_line(rows))
     return out
+
+
+def segment_purity(facets, true_facets) -> float:
+    """The share of the segments' area that lies in each segment's majority true facet
+    (``facets``, ``true_facets``: label maps of one shape); 1 where every segment is within
+    one true facet.
+
+    >>> seg = np.array([[0, 0, 1, 1]]); true = np.array([[0, 0, 0, 1]])
+    >>> segment_purity(seg, true)
+    0.75
+    """
+    seg = np.asarray(facets, np.int64).ravel()
+    true = np.unique(np.asarray(true_facets).ravel(), return_inverse=True)[1]
+    n_true = int(true.max()) + 1
+    key, count = np.unique(seg * n_true + true, return_counts=True)
+    best = np.zeros(int(seg.max()) + 1, np.int64)
+    np.maximum.at(best, key // n_true, count)
+    return float(best.sum() / seg.size)
+
+
+def purity_line(rows) -> str:
+    """Issue 22's item 2 measured: the segments' purity (:func:`segment_purity`, the joint
+    results' ``facets.npy`` against ``truth/facet_id.npy``) on the textured faceted scenes,
+    and how the scenes' lobe RMS ratio follows it."""
+    pur, ratio = [], []
+    for r, _, _, truth in rows:
+        seg = truth.parents[2] / "results" / "joint" / r["name"] / "facets.npy"
+        if (r["textured"] != "True" or r["world"] != "faceted" or not seg.is_file()
+                or not (truth / "facet_id.npy").is_file()):
+            continue
+        pur.append(segment_purity(np.load(seg), np.load(truth / "facet_id.npy")))
+        ratio.append(_f(r["lobe_rms_ratio"]))
+    if not pur:
+        return "segment purity: no textured faceted scene with its segments"
+    pur, ratio = np.array(pur), np.array(ratio)
+    q = np.percentile(pur, [25, 50, 75])
+    ok = np.isfinite(ratio)
+    return (f"segment purity (textured faceted, {pur.size} scenes): median {q[1]:.2f}, "
+            f"quartiles {q[0]:.2f}-{q[2]:.2f}; correlation with the lobe RMS ratio "
+            f"{np.corrcoef(pur[ok], ratio[ok])[0, 1]:.2f}")
 
 
 def _dome_line(sc) -> str:

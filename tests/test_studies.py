@@ -333,3 +333,30 @@ def test_facet_gain_scores_planes_on_the_true_facets(tmp_path):
     assert n_plain >= 10 and n_unmixed >= 10
     assert plain < 0.85 and 0.9 < unmixed < 1.1
     assert zu < 1.3 < zp
+
+
+def test_sweep_limits_measure_the_segments_purity_against_the_true_facets(tmp_path):
+    """Two textured faceted scenes whose segments are half (a segment across two true
+    facets of equal size) and wholly (the true facets) pure: purities 0.5 and 1, median
+    0.75; their lobe ratios follow the purity (correlation 1); a scene of another world is
+    left out."""
+    import numpy as np
+
+    from pipelines.sweep_limits import purity_line
+
+    true = np.repeat(np.arange(4), 4)[None, :].repeat(3, 0)        # four true facets
+    rows = []
+    for name, seg, ratio, world in (("g000", true // 2, "0.6", "faceted"),
+                                    ("g001", true, "0.95", "faceted"),
+                                    ("g002", true // 4, "0.1", "measured")):
+        truth = tmp_path / "work" / "stacks" / name / "truth"
+        res = tmp_path / "work" / "results" / "joint" / name
+        truth.mkdir(parents=True)
+        res.mkdir(parents=True)
+        np.save(truth / "facet_id.npy", true)
+        np.save(res / "facets.npy", seg.astype(np.int32))
+        rows.append(({"name": name, "textured": "True", "world": world,
+                      "lobe_rms_ratio": ratio}, {}, {}, truth))
+    assert purity_line(rows) == ("segment purity (textured faceted, 2 scenes): median 0.75, "
+                                 "quartiles 0.62-0.88; correlation with the lobe RMS ratio "
+                                 "1.00")
