@@ -184,7 +184,8 @@ class JointOptions(Options):
                     "the sweep's true facets their slope gain goes from 0.73 to 0.96 "
                     "(median), but the NDF's identification checks cannot yet vouch for what "
                     "it then identifies (2 of 16 scenes off by more than a quarter, "
-                    "docs/accuracy.md); off: planes through the heights as measured")
+                    "docs/accuracy.md); off: planes through the heights as measured",
+        cli=True)
     interior_px: float = option(
         1.5, help="pixels at least this far from a facet boundary give its mean colour "
                   "(boundaries are partly shadowed)", unit="px", low=0)

@@ -381,3 +381,27 @@ def test_unmixed_planes_slope_sigma_covers_their_errors(seed, side, n):
                                  ((fit.slope_y - b) / fit.slope_sigma)[ok]]))
     z = np.concatenate(z)
     assert 0.8 < np.sqrt(np.mean(z ** 2)) < 1.25
+
+
+def test_unmixed_planes_on_non_square_pixels_without_a_surround_and_without_planes():
+    """On (y, x) = (0.2, 0.3) µm pixels the unmixed planes have the true slopes (the support
+    is in pixels, the slopes in µm/µm); without a surround the facets without a plane are
+    left out of the blur; with no plane at all the plain fit comes back unchanged."""
+    from microfacet.analysis.planes import _mixed, fit_unmixed_planes, mixing_kernel
+
+    # slopes per pixel; on (0.2, 0.3) µm pixels they are a / 0.3 and b / 0.2 in µm/µm
+    h, labels, a, b = _creased(2, side=120, n=30, px=1.0)
+    seen = _mixed(h, mixing_kernel(1.2))
+    near = facet_edge_distance(labels) < 1.5
+    kw = dict(height_sigma_um=0.01, reliable=near, pixel_size_um=(0.2, 0.3), min_pixels=8)
+    fit, _ = fit_unmixed_planes(labels, seen, mixing_px=1.2, surround_um=h, **kw)
+    ok = fit.fitted & (np.hypot(a, b) > 0.05)
+    np.testing.assert_allclose(fit.slope_x[ok], a[ok] / 0.3, atol=0.02 * np.abs(a).max() / 0.3)
+    np.testing.assert_allclose(fit.slope_y[ok], b[ok] / 0.2, atol=0.02 * np.abs(b).max() / 0.2)
+    bare, _ = fit_unmixed_planes(labels, seen, mixing_px=1.2, surround_um=None, **kw)
+    assert np.isfinite(bare.slope_x[bare.fitted]).all()
+    none = dict(kw, reliable=np.zeros(h.shape, bool))
+    first = fit_facet_planes(labels, seen, **none)
+    got, hh = fit_unmixed_planes(labels, seen, mixing_px=1.2, **none)
+    assert not got.fitted.any() and np.array_equal(hh, seen)
+    np.testing.assert_array_equal(got.tilt_deg, first.tilt_deg)
