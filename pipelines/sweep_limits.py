@@ -13,8 +13,10 @@ Each ``OUT:WORK`` is one ``accuracy-sweep --set mode=joint --set work=WORK --out
   off by more than 25 %; the correlation of the self-check's width transfer with the
   scene's true width ratio, and, on the textured scenes without rounded facets whose spread
   is within the limit, the median ratio and the quartiles of the ratio over the transfer;
-  the dome transfer; the segments' purity against the true facets and its correlation with
-  the scenes' lobe RMS ratio (:func:`purity_line`);
+  the dome transfer; every textured scene's NDF as reported and the dome share read
+  (:func:`reported_line`); the segments' purity against the true facets, its correlation
+  with the scenes' lobe RMS ratio (:func:`purity_line`) and its range on the identified NDFs
+  by their error (:func:`purity_identified_line`);
 * the thickness: the scenes with too few and too many components, and the kinds (two true
   populations under one wide component; a population split into close components; a
   component far above every true population: another interference order), with the model
@@ -121,8 +123,29 @@ def ndf_lines(rows, fits: FitOptions) -> list:
                f"median {np.median(ratio[steady]):.2f}; ratio / width transfer median "
                f"{q[1]:.2f}, quartiles {q[0]:.2f}-{q[2]:.2f}")
     out.append(_dome_line(sc))
+    out.append(reported_line(tex))
     out.append(purity_line(rows))
+    out.append(purity_identified_line(rows))
     return out
+
+
+def reported_line(tex) -> str:
+    """Every textured scene's NDF as reported (identified or for inspection): its lobe RMS
+    ratio's median and the shares within 15 % and off by more than 25 %; and the dome share
+    the planar-facet check read (``ndf.mixture.dome_share_measured``) on the faceted scenes
+    without rounded facets (median, quartiles)."""
+    r = np.array([_f(row["lobe_rms_ratio"]) for row, _ in tex])
+    r = r[np.isfinite(r)]
+    d = np.array([_f((s["ndf"].get("mixture") or {}).get("dome_share_measured"))
+                  for row, s in tex if row["world"] == "faceted" and row["v_rounded"] == "0"])
+    d = d[np.isfinite(d)]
+    if r.size == 0:
+        return "reported NDFs: none scored"
+    q = np.percentile(d, [25, 50, 75]) if d.size else [np.nan] * 3
+    return (f"reported NDFs ({r.size} textured scenes): ratio median {np.median(r):.2f}, "
+            f"within 15 % on {np.mean(np.abs(r - 1) <= 0.15):.0%}, off by more than 25 % on "
+            f"{np.mean(np.abs(r - 1) > 0.25):.0%}; dome share read, faceted without rounding "
+            f"({d.size}): median {q[1]:.2f}, quartiles {q[0]:.2f}-{q[2]:.2f}")
 
 
 def segment_purity(facets, true_facets) -> float:
@@ -143,26 +166,43 @@ def segment_purity(facets, true_facets) -> float:
     return float(best.sum() / seg.size)
 
 
-def purity_line(rows) -> str:
-    """Issue 22's item 2 measured: the segments' purity (:func:`segment_purity`, the joint
-    results' ``facets.npy`` against ``truth/facet_id.npy``) on the textured faceted scenes,
-    and how the scenes' lobe RMS ratio follows it."""
-    pur, ratio = [], []
-    for r, _, _, truth in rows:
+def _purities(rows):
+    """Per textured faceted scene with its segments: the segments' purity
+    (:func:`segment_purity`), the lobe RMS ratio and whether the NDF was identified."""
+    out = []
+    for r, summary, _, truth in rows:
         seg = truth.parents[2] / "results" / "joint" / r["name"] / "facets.npy"
         if (r["textured"] != "True" or r["world"] != "faceted" or not seg.is_file()
                 or not (truth / "facet_id.npy").is_file()):
             continue
-        pur.append(segment_purity(np.load(seg), np.load(truth / "facet_id.npy")))
-        ratio.append(_f(r["lobe_rms_ratio"]))
-    if not pur:
+        out.append((segment_purity(np.load(seg), np.load(truth / "facet_id.npy")),
+                    _f(r["lobe_rms_ratio"]), bool((summary.get("ndf") or {}).get("identified"))))
+    return np.array(out, dtype=np.float64).reshape(-1, 3)
+
+
+def purity_line(rows) -> str:
+    """Issue 22's item 2 measured: the segments' purity (:func:`segment_purity`, the joint
+    results' ``facets.npy`` against ``truth/facet_id.npy``) on the textured faceted scenes,
+    and how the scenes' lobe RMS ratio follows it."""
+    p = _purities(rows)
+    if not len(p):
         return "segment purity: no textured faceted scene with its segments"
-    pur, ratio = np.array(pur), np.array(ratio)
+    pur, ratio = p[:, 0], p[:, 1]
     q = np.percentile(pur, [25, 50, 75])
     ok = np.isfinite(ratio)
     return (f"segment purity (textured faceted, {pur.size} scenes): median {q[1]:.2f}, "
             f"quartiles {q[0]:.2f}-{q[2]:.2f}; correlation with the lobe RMS ratio "
             f"{np.corrcoef(pur[ok], ratio[ok])[0, 1]:.2f}")
+
+
+def purity_identified_line(rows) -> str:
+    """The segments' purity of the scenes whose NDF was identified, within 15 % of its true
+    RMS slope and more than 25 % off."""
+    p = _purities(rows)
+    ident, err = p[:, 2] > 0, np.abs(p[:, 1] - 1)
+    near, far = list(p[ident & (err <= 0.15), 0]), list(p[ident & (err > 0.25), 0])
+    return (f"segment purity of the identified NDFs: within 15 % {_range(near)}, more than "
+            f"25 % off {_range(far)}")
 
 
 def _dome_line(sc) -> str:

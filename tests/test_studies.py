@@ -335,6 +335,20 @@ def test_facet_gain_scores_planes_on_the_true_facets(tmp_path):
     assert zu < 1.3 < zp
 
 
+def _segments_on_disk(tmp_path, name, segments, true_facets):
+    """A sweep scene's truth folder with ``true_facets`` and its joint results' ``segments``
+    (facets.npy) under ``tmp_path/work``; the truth folder."""
+    import numpy as np
+
+    truth = tmp_path / "work" / "stacks" / name / "truth"
+    res = tmp_path / "work" / "results" / "joint" / name
+    truth.mkdir(parents=True)
+    res.mkdir(parents=True)
+    np.save(truth / "facet_id.npy", true_facets)
+    np.save(res / "facets.npy", segments.astype(np.int32))
+    return truth
+
+
 def test_sweep_limits_measure_the_segments_purity_against_the_true_facets(tmp_path):
     """Two textured faceted scenes whose segments are half (a segment across two true
     facets of equal size) and wholly (the true facets) pure: purities 0.5 and 1, median
@@ -349,14 +363,36 @@ def test_sweep_limits_measure_the_segments_purity_against_the_true_facets(tmp_pa
     for name, seg, ratio, world in (("g000", true // 2, "0.6", "faceted"),
                                     ("g001", true, "0.95", "faceted"),
                                     ("g002", true // 4, "0.1", "measured")):
-        truth = tmp_path / "work" / "stacks" / name / "truth"
-        res = tmp_path / "work" / "results" / "joint" / name
-        truth.mkdir(parents=True)
-        res.mkdir(parents=True)
-        np.save(truth / "facet_id.npy", true)
-        np.save(res / "facets.npy", seg.astype(np.int32))
+        truth = _segments_on_disk(tmp_path, name, seg, true)
         rows.append(({"name": name, "textured": "True", "world": world,
                       "lobe_rms_ratio": ratio}, {}, {}, truth))
     assert purity_line(rows) == ("segment purity (textured faceted, 2 scenes): median 0.75, "
                                  "quartiles 0.62-0.88; correlation with the lobe RMS ratio "
                                  "1.00")
+
+
+def test_sweep_limits_purity_of_the_identified_and_the_reported_ndfs(tmp_path):
+    """The identified scenes' purity by their error (0.5 for the one 40 % off, 1 for the one
+    within 15 %; the unidentified one left out), and the reported NDFs' ratio shares and the
+    dome share read on the faceted scenes without rounded facets."""
+    import numpy as np
+
+    from pipelines.sweep_limits import purity_identified_line, reported_line
+
+    true = np.repeat(np.arange(4), 4)[None, :].repeat(3, 0)
+    rows, tex = [], []
+    for name, seg, ratio, ident, dome in (("g000", true // 2, "0.6", True, 0.4),
+                                          ("g001", true, "0.95", True, 0.1),
+                                          ("g002", true // 4, "0.7", False, 0.2)):
+        truth = _segments_on_disk(tmp_path, name, seg, true)
+        row = {"name": name, "textured": "True", "world": "faceted", "v_rounded": "0",
+               "lobe_rms_ratio": ratio}
+        summary = {"ndf": {"identified": ident, "mixture": {"dome_share_measured": dome}}}
+        rows.append((row, summary, {}, truth))
+        tex.append((row, summary))
+    assert purity_identified_line(rows) == ("segment purity of the identified NDFs: within "
+                                            "15 % 1.00-1.00, more than 25 % off 0.50-0.50")
+    assert reported_line(tex) == ("reported NDFs (3 textured scenes): ratio median 0.70, "
+                                  "within 15 % on 33%, off by more than 25 % on 67%; dome "
+                                  "share read, faceted without rounding (3): median 0.20, "
+                                  "quartiles 0.15-0.30")

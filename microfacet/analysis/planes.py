@@ -133,17 +133,34 @@ def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size
     >>> ff.fitted.tolist(), round(float(ff.slope_x[0]), 6), bool(np.isnan(ff.tilt_deg[1]))
     ([True, False], 0.1, True)
     """
-    S = int(labels.max()) + 1
+    wt = _fit_weights(labels, height_um, height_sigma_um=height_sigma_um, reliable=reliable,
+                      pixel_size_um=pixel_size_um, robust_rounds=robust_rounds)
+    return _planes_from_weights(labels, height_um, wt, pixel_size_um=pixel_size_um,
+                                min_pixels=min_pixels, correlation_px=correlation_px)
+
+
+def _fit_weights(labels, height_um, *, height_sigma_um, reliable, pixel_size_um,
+                 robust_rounds=ROBUST_ROUNDS) -> np.ndarray:
+    """The weights (H, W) of :func:`fit_facet_planes`' last round: 1/σ² on the reliable
+    heights its robust rounds keep, 0 elsewhere."""
     sig = np.broadcast_to(np.asarray(height_sigma_um, dtype=np.float64), labels.shape)
     z = np.asarray(height_um, dtype=np.float64)
     use = np.asarray(reliable, bool) & np.isfinite(z) & np.isfinite(sig) & (sig > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         wt = np.where(use, 1.0 / sig ** 2, 0.0)
-    zu = np.where(use, z, np.nan)
     if robust_rounds > 0:
-        wt = _robust_weights(labels, zu, wt, pixel_size_um, S, robust_rounds)
+        wt = _robust_weights(labels, np.where(use, z, np.nan), wt, pixel_size_um,
+                             int(labels.max()) + 1, robust_rounds)
+    return wt
+
+
+def _planes_from_weights(labels, height_um, wt, *, pixel_size_um, min_pixels,
+                         correlation_px) -> FacetFit:
+    """:func:`fit_facet_planes` with its weights ``wt`` (:func:`_fit_weights`) given."""
+    S = int(labels.max()) + 1
+    use = wt > 0
+    zu = np.where(use, np.asarray(height_um, dtype=np.float64), np.nan)
     m = plane_moments(labels, zu, wt, pixel_size_um=pixel_size_um, n_labels=S)
-    use = use & (wt > 0)
     n = np.bincount(labels.ravel(), weights=use.ravel(), minlength=S).astype(np.int64)
     a, b, rss, cov = plane_from_moments(m)
     fitted = (n >= max(int(min_pixels), 4)) & np.isfinite(a) & np.isfinite(b)
@@ -152,20 +169,26 @@ def fit_facet_planes(labels, height_um, *, height_sigma_um, reliable, pixel_size
     infl = np.where(fitted, np.maximum(chi2, 1.0) * _correlation_factor(n, correlation_px),
                     np.nan)
     cov = np.where(fitted[:, None, None], cov * infl[:, None, None], np.nan)
+    ssig, tsig = _slope_errors(a, b, cov)
+    nan = np.where(fitted, 0.0, np.nan)
+    tilt = np.degrees(np.arctan(np.hypot(a, b)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        offset = (m[:, 3] - a * m[:, 1] - b * m[:, 2]) / m[:, 0]
+    return FacetFit(a + nan, b + nan, cov, ssig + nan, tilt + nan, tsig + nan, n, chi2,
+                    fitted, offset + nan)
+
+
+def _slope_errors(a, b, cov):
+    """``slope_sigma`` (√(trace/2)) and ``tilt_sigma_deg`` (along the gradient) of the slopes
+    ``a, b`` (S,) under their covariance ``cov`` (S, 2, 2)."""
+    a, b = np.nan_to_num(a), np.nan_to_num(b)
     g = np.hypot(a, b)
     with np.errstate(invalid="ignore", divide="ignore"):
         ux = np.where(g > 0, a / g, 1 / np.sqrt(2))
         uy = np.where(g > 0, b / g, 1 / np.sqrt(2))
-        var_g = (cov[:, 0, 0] * ux * ux + 2 * cov[:, 0, 1] * ux * uy + cov[:, 1, 1] * uy * uy)
-    tilt = np.where(fitted, np.degrees(np.arctan(g)), np.nan)
-    tsig = np.where(fitted, np.degrees(np.sqrt(np.maximum(var_g, 0.0)) / (1.0 + g * g)),
-                    np.nan)
-    ssig = np.where(fitted, np.sqrt(np.maximum(cov[:, 0, 0] + cov[:, 1, 1], 0.0) / 2.0),
-                    np.nan)
-    nan = np.where(fitted, 0.0, np.nan)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        offset = (m[:, 3] - a * m[:, 1] - b * m[:, 2]) / m[:, 0]
-    return FacetFit(a + nan, b + nan, cov, ssig, tilt, tsig, n, chi2, fitted, offset + nan)
+    var_g = cov[:, 0, 0] * ux * ux + 2 * cov[:, 0, 1] * ux * uy + cov[:, 1, 1] * uy * uy
+    return (np.sqrt(np.maximum(cov[:, 0, 0] + cov[:, 1, 1], 0.0) / 2.0),
+            np.degrees(np.sqrt(np.maximum(var_g, 0.0)) / (1.0 + g * g)))
 
 
 def plane_heights(labels, planes: FacetFit, *, pixel_size_um) -> np.ndarray:
@@ -284,13 +307,16 @@ def fit_unmixed_planes(labels, height_um, *, mixing_px, surround_um=None, probes
     >>> round(float(ff.slope_x[0]), 4)
     0.1
     """
-    first = fit_facet_planes(labels, height_um, **fit_options)
     h = np.asarray(height_um, dtype=np.float64)
+    psz = fit_options["pixel_size_um"]
+    wt = _fit_weights(labels, h, **{k: v for k, v in fit_options.items()
+                                    if k not in ("min_pixels", "correlation_px")})
+    first = _planes_from_weights(labels, h, wt, pixel_size_um=psz,
+                                 min_pixels=fit_options["min_pixels"],
+                                 correlation_px=fit_options.get("correlation_px", 1.0))
     if not mixing_px or mixing_px <= 0 or not first.fitted.any():
         return first, h
-    psz = fit_options["pixel_size_um"]
     kernel = mixing_kernel(mixing_px)
-    wt = _fit_weights(labels, h, fit_options)
     unknown = first.fitted & (first.slope_sigma < MAX_SLOPE_SIGMA)
     fixed = np.where(unknown[labels], np.nan, plane_heights(labels, first, pixel_size_um=psz))
     if surround_um is not None:
@@ -316,20 +342,8 @@ def fit_unmixed_planes(labels, height_um, *, mixing_px, surround_um=None, probes
                                            probes),
                    fit.slope_cov)
     cov = np.where(fit.fitted[:, None, None], cov, np.nan)
-    return dataclasses.replace(fit, slope_cov=cov, **_slope_errors(fit, cov)), h
-
-
-def _slope_errors(fit: FacetFit, cov) -> dict:
-    """``slope_sigma`` and ``tilt_sigma_deg`` of ``fit``'s slopes under the covariance
-    ``cov`` (S, 2, 2), as :func:`fit_facet_planes` derives them."""
-    a, b = np.nan_to_num(fit.slope_x), np.nan_to_num(fit.slope_y)
-    g = np.hypot(a, b)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ux = np.where(g > 0, a / g, 1 / np.sqrt(2))
-        uy = np.where(g > 0, b / g, 1 / np.sqrt(2))
-    var_g = cov[:, 0, 0] * ux * ux + 2 * cov[:, 0, 1] * ux * uy + cov[:, 1, 1] * uy * uy
-    return {"slope_sigma": np.sqrt(np.maximum(cov[:, 0, 0] + cov[:, 1, 1], 0.0) / 2.0),
-            "tilt_sigma_deg": np.degrees(np.sqrt(np.maximum(var_g, 0.0)) / (1.0 + g * g))}
+    ssig, tsig = _slope_errors(fit.slope_x, fit.slope_y, cov)
+    return dataclasses.replace(fit, slope_cov=cov, slope_sigma=ssig, tilt_sigma_deg=tsig), h
 
 
 class _MixingSystem:
@@ -548,23 +562,6 @@ def _own_gain_ok(N, own, ok) -> np.ndarray:
         g = np.linalg.pinv(N[ok]) @ own[ok]
         out[ok] = np.linalg.svd(g, compute_uv=False)[:, -1] >= MIN_OWN_GAIN
     return out
-
-
-def _fit_weights(labels, height_um, fit_options) -> np.ndarray:
-    """The weights (H, W) :func:`fit_facet_planes` ends with for these options: 1/σ² on the
-    reliable heights its robust rounds keep, 0 elsewhere."""
-    sig = np.broadcast_to(np.asarray(fit_options["height_sigma_um"], dtype=np.float64),
-                          labels.shape)
-    z = np.asarray(height_um, dtype=np.float64)
-    use = (np.asarray(fit_options["reliable"], bool) & np.isfinite(z) & np.isfinite(sig)
-           & (sig > 0))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        wt = np.where(use, 1.0 / sig ** 2, 0.0)
-    rounds = fit_options.get("robust_rounds", ROBUST_ROUNDS)
-    if rounds > 0:
-        wt = _robust_weights(labels, np.where(use, z, np.nan), wt, fit_options["pixel_size_um"],
-                             int(labels.max()) + 1, rounds)
-    return wt
 
 
 def _correlation_factor(n, correlation_px):

@@ -238,15 +238,16 @@ def focus_measure(image: np.ndarray, *, operator: str = _DEFAULTS.operator,
                           colour=colour)[0]
 
 
-#: Each operator's kernels (rows y, columns x) and the power of the filter response its
-#: energy sums: squared Sobel responses for tenengrad, absolute modified-Laplacian ones for
-#: sml; glv has none (its window is its only support).
-_OPERATOR_KERNELS = {
-    "tenengrad": ((np.outer([1.0, 2.0, 1.0], [-1.0, 0.0, 1.0]),
-                   np.outer([-1.0, 0.0, 1.0], [1.0, 2.0, 1.0])), 2),
-    "sml": ((np.array([[-1.0, 2.0, -1.0]]), np.array([[-1.0], [2.0], [-1.0]])), 1),
-    "glv": ((), 2),
-}
+def _operator_kernels(operator):
+    """The 2D kernels whose responses an operator's energy sums (:func:`_energy`), and the
+    power of those responses: OpenCV's own 3×3 Sobel pair for tenengrad (squared), the
+    modified Laplacian's pair for sml (absolute); none for glv (its window is its support)."""
+    if operator == "tenengrad":
+        kx, ky = cv2.getDerivKernels(1, 0, 3)
+        return (np.outer(ky, kx), np.outer(kx, ky)), 2
+    if operator == "sml":
+        return (_ML_KX, _ML_KX.T), 1
+    return (), 2
 
 
 def measure_spread_px(*, operator: str, window_px: int, window: str) -> float:
@@ -271,9 +272,9 @@ def measure_spread_px(*, operator: str, window_px: int, window: str) -> float:
     _check_window(window_px, window)
     var_w = window_px * window_px / 12.0 if window == "gaussian" else (window_px ** 2 - 1) / 12.0
     var_k = []
-    kernels, power = _OPERATOR_KERNELS[operator]
+    kernels, power = _operator_kernels(operator)
     for k in kernels:
-        w = np.abs(k) ** power
+        w = np.abs(np.asarray(k, dtype=np.float64)) ** power
         qy = np.arange(k.shape[0]) - (k.shape[0] - 1) / 2.0
         qx = np.arange(k.shape[1]) - (k.shape[1] - 1) / 2.0
         var_k.append(0.5 * (float(np.sum(w * qy[:, None] ** 2)) + float(np.sum(w * qx ** 2)))
