@@ -124,28 +124,33 @@ def ndf_lines(rows, fits: FitOptions) -> list:
                f"{q[1]:.2f}, quartiles {q[0]:.2f}-{q[2]:.2f}")
     out.append(_dome_line(sc))
     out.append(reported_line(tex))
+    out.append(reported_line([(r, s) for r, s, _, _ in rows if r["textured"] != "True"],
+                             "scenes without focus texture"))
     out.append(purity_line(rows))
     out.append(purity_identified_line(rows))
     return out
 
 
-def reported_line(tex) -> str:
-    """Every textured scene's NDF as reported (identified or for inspection): its lobe RMS
-    ratio's median and the shares within 15 % and off by more than 25 %; and the dome share
-    the planar-facet check read (``ndf.mixture.dome_share_measured``) on the faceted scenes
-    without rounded facets (median, quartiles)."""
+def reported_line(tex, label="textured scenes") -> str:
+    """Every scene's NDF of ``tex`` as reported (identified or for inspection): its lobe RMS
+    ratio's median and the shares within 15 % and off by more than 25 %, its W1's median;
+    and the dome share the planar-facet check read (``ndf.mixture.dome_share_measured``) on
+    the faceted scenes without rounded facets (median, quartiles)."""
     r = np.array([_f(row["lobe_rms_ratio"]) for row, _ in tex])
     r = r[np.isfinite(r)]
+    w1 = np.array([_f(row.get("ndf_w1_deg")) for row, _ in tex])
+    w1 = w1[np.isfinite(w1)]
     d = np.array([_f((s["ndf"].get("mixture") or {}).get("dome_share_measured"))
                   for row, s in tex if row["world"] == "faceted" and row["v_rounded"] == "0"])
     d = d[np.isfinite(d)]
     if r.size == 0:
-        return "reported NDFs: none scored"
+        return f"reported NDFs ({label}): none scored"
     q = np.percentile(d, [25, 50, 75]) if d.size else [np.nan] * 3
-    return (f"reported NDFs ({r.size} textured scenes): ratio median {np.median(r):.2f}, "
+    return (f"reported NDFs ({r.size} {label}): ratio median {np.median(r):.2f}, "
             f"within 15 % on {np.mean(np.abs(r - 1) <= 0.15):.0%}, off by more than 25 % on "
-            f"{np.mean(np.abs(r - 1) > 0.25):.0%}; dome share read, faceted without rounding "
-            f"({d.size}): median {q[1]:.2f}, quartiles {q[0]:.2f}-{q[2]:.2f}")
+            f"{np.mean(np.abs(r - 1) > 0.25):.0%}, W1 median "
+            f"{np.median(w1) if w1.size else np.nan:.2f}°; dome share read, faceted without "
+            f"rounding ({d.size}): median {q[1]:.2f}, quartiles {q[0]:.2f}-{q[2]:.2f}")
 
 
 def segment_purity(facets, true_facets) -> float:

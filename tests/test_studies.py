@@ -335,6 +335,20 @@ def test_facet_gain_scores_planes_on_the_true_facets(tmp_path):
     assert zu < 1.3 < zp
 
 
+def test_self_check_oracle_renders_the_truth_as_the_stack_does():
+    """pipelines.self_check_oracle on the bundled fixture: the self-check's renderer and
+    plane fits applied to the true heights let through about the width the real stack does
+    (0.79 against 0.85 here), both well below 1; the reported lobes, scaled to the planes'
+    width over the self-check's transfer, meet the truth's RMS slope where the lobes as
+    fitted do not."""
+    from pipelines.self_check_oracle import scene_ratios
+
+    got = scene_ratios(Path(__file__).parents[1] / "fixtures" / "stacks" / "nd-fixture")
+    assert got["scene"] < 0.9 and got["oracle"] < 0.9
+    assert abs(got["oracle"] - got["scene"]) < 0.15
+    assert abs(got["ndf"] - 1.0) < 0.05 < abs(got["ndf_fitted"] - 1.0)
+
+
 def _segments_on_disk(tmp_path, name, segments, true_facets):
     """A sweep scene's truth folder with ``true_facets`` and its joint results' ``segments``
     (facets.npy) under ``tmp_path/work``; the truth folder."""
@@ -386,13 +400,15 @@ def test_sweep_limits_purity_of_the_identified_and_the_reported_ndfs(tmp_path):
                                           ("g002", true // 4, "0.7", False, 0.2)):
         truth = _segments_on_disk(tmp_path, name, seg, true)
         row = {"name": name, "textured": "True", "world": "faceted", "v_rounded": "0",
-               "lobe_rms_ratio": ratio}
+               "lobe_rms_ratio": ratio, "ndf_w1_deg": ratio}
         summary = {"ndf": {"identified": ident, "mixture": {"dome_share_measured": dome}}}
         rows.append((row, summary, {}, truth))
         tex.append((row, summary))
     assert purity_identified_line(rows) == ("segment purity of the identified NDFs: within "
                                             "15 % 1.00-1.00, more than 25 % off 0.50-0.50")
     assert reported_line(tex) == ("reported NDFs (3 textured scenes): ratio median 0.70, "
-                                  "within 15 % on 33%, off by more than 25 % on 67%; dome "
-                                  "share read, faceted without rounding (3): median 0.20, "
-                                  "quartiles 0.15-0.30")
+                                  "within 15 % on 33%, off by more than 25 % on 67%, W1 "
+                                  "median 0.70°; dome share read, faceted without rounding "
+                                  "(3): median 0.20, quartiles 0.15-0.30")
+    assert reported_line([], "scenes without focus texture") == (
+        "reported NDFs (scenes without focus texture): none scored")

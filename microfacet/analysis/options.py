@@ -313,11 +313,18 @@ class FitOptions(Options):
                   "an identified NDF: a transfer the stack measures too noisily to place "
                   "inside the range does not establish it", low=0)
     self_check_correct: bool = option(
-        True, help="divide the facet planes' slopes by the self-check's width transfer before "
-                   "the NDF's lobes are fitted, where the self-check passes (both transfers "
-                   "in self_check_range by self_check_sigmas of their standard errors, the "
-                   "spread within self_check_max_spread; the "
-                   "correction's size stays in the width's error)")
+        True, help="scale the NDF's lobes to the RMS slope the self-check vouches for (the "
+                   "facet planes' RMS slope below the acceptance, slope noise removed, over "
+                   "the self-check's width transfer), where the self-check measured both its "
+                   "transfers in [self_check_min_transfer, the top of self_check_range] and "
+                   "those planes cover most of the NDF's (analysis.distributions."
+                   "SECOND_MOMENT_MIN_COVERAGE), identified or not (the correction's size "
+                   "stays in the width's error)")
+    self_check_min_transfer: float = option(
+        0.5, help="smallest slope gain and width transfer of the self-check that the NDF's "
+                  "width is corrected by (a correction of at most 1/this: below it the "
+                  "heights keep too little of the slopes for the correction to be a "
+                  "measurement)", low=0, low_exclusive=True, high=1)
     max_dome_share: float = option(
         0.3, help="largest mean square slope inside the facets (which planes miss) as a share "
                   "of the planes' own, for an identified NDF (0.3: the planes' RMS slope at "

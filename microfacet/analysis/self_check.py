@@ -63,8 +63,8 @@ from .planes import (
 )
 from .segmentation import relabel
 
-__all__ = ["Conditions", "RenderedStack", "SelfCheck", "measured_rms_slope", "self_check_ndf",
-           "slice_noise_sd", "slope_gain"]
+__all__ = ["Conditions", "RenderedStack", "SelfCheck", "measured_rms_slope",
+           "rendered_width_ratio", "self_check_ndf", "slice_noise_sd", "slope_gain"]
 
 cv2 = load("cv2")
 
@@ -575,6 +575,38 @@ def self_check_ndf(focus, labels, *, cells=None, conditions: Conditions, rms_slo
                      float(np.median(wgood)) if wgood else math.nan,
                      *_sigma_scale(np.concatenate([z for _, (_, z, _) in runs[1:]])), *se,
                      *dome)
+
+
+def rendered_width_ratio(focus, labels, height_um, true_tilt_deg, *, conditions: Conditions,
+                         max_tilt_deg, focus_options: FocusOptions, joint: JointOptions) -> float:
+    """The width transfer of one given surface in the scene's conditions: ``height_um`` (µm,
+    the image's shape) rendered as the self-check renders its injections (the scene's
+    all-in-focus image as texture, its z grid, aperture and slice noise; the same crop),
+    its facet planes fitted on ``labels`` as the analysis fits the NDF's, and their RMS
+    slope below ``max_tilt_deg`` with the slope noise removed
+    (:func:`~.planes.deconvolved_rms_slope`) over the RMS slope of ``true_tilt_deg`` (°, the
+    surface's own per-pixel tilts, NaN off the facets) below it on the segments with a plane.
+
+    With the true surface of a synthetic stack this is the self-check's renderer and
+    plane fits applied to the truth: how much of the width the scene's own geometry lets
+    through, where the self-check injects a surface of its own making (docs/accuracy.md,
+    "One width for the lobes and the self-check"). NaN where no segment has a plane.
+    """
+    c = conditions
+    sc = _scene(focus, labels, labels, z_um=c.z_um, pixel_size_um=c.pixel_size_um,
+                numerical_aperture=c.numerical_aperture, noise_sd=c.noise_sd)
+    rs, cs = _crop(np.shape(labels))
+    surface = np.asarray(height_um, np.float64)[rs, cs]
+    tilt = np.asarray(true_tilt_deg, np.float64)[rs, cs]
+    fo = focus_options.replace(align=None, fill=None)
+    fit, _, _ = _recovered_planes(sc, surface, fo, joint, (c.seed, 7), _interior(sc, joint))
+    ok = _usable(fit) & (fit.tilt_deg < max_tilt_deg)
+    px = ok[sc.labels] & np.isfinite(tilt) & (tilt < max_tilt_deg)
+    if not ok.any() or not px.any():
+        return math.nan
+    true = math.sqrt(float(np.mean(np.tan(np.radians(tilt[px])) ** 2)))
+    area = np.bincount(sc.labels.ravel(), minlength=ok.size).astype(np.float64)
+    return deconvolved_rms_slope(fit, ok, area[ok]) / true if true > 0 else math.nan
 
 
 def _domes(cells, rms_slope, pixel_yx):

@@ -49,6 +49,8 @@ NDF_FORM = "gaussian-slope"
 #: because the forward models' cost grows with the component count.
 MAX_COMPONENTS = 10
 _DEG = math.pi / 180.0
+#: Widest lobe :meth:`NDFMixture.scaled` gives (the constructor refuses 89° and more).
+_MAX_SD_DEG = 88.9
 
 
 def _json_components(data, name) -> list:
@@ -217,6 +219,43 @@ class NDFMixture:
     def beckmann_alpha(self):
         """Beckmann roughness of each lobe, ``α = √2 s``."""
         return math.sqrt(2.0) * self.slope_sd
+
+    def rms_slope(self, max_tilt_deg=None) -> float:
+        """RMS slope magnitude ``E[tan² θ]^½`` (|∇h|, dimensionless) of the facets, or of
+        those tilted less than ``max_tilt_deg`` (what an objective of that acceptance sees).
+
+        Per lobe ``tan² θ`` is exponential with mean ``2 s²``; below ``L = tan θ_max`` its
+        mean is ``(2 s² (1 − e) − L² e) / (1 − e)`` with ``e = exp(−L² / 2 s²)``, exact.
+
+        >>> f = NDFMixture([(1.0, 10.0)])
+        >>> round(f.rms_slope() / (math.sqrt(2.0) * math.tan(math.radians(10.0))), 6)
+        1.0
+        >>> th = np.linspace(0.0, 20.0, 200001)
+        >>> p = f.tilt_pdf(th)
+        >>> num = np.trapezoid(p * np.tan(np.radians(th)) ** 2, th)
+        >>> round(float(np.sqrt(num / np.trapezoid(p, th))) / f.rms_slope(20.0), 5)
+        1.0
+        """
+        s2 = self.slope_sd ** 2
+        w = self.weights
+        if max_tilt_deg is None:
+            return float(math.sqrt(np.sum(w * 2.0 * s2)))
+        L2 = math.tan(float(max_tilt_deg) * _DEG) ** 2
+        e = np.exp(-L2 / (2.0 * s2))
+        seen = np.sum(w * -np.expm1(-L2 / (2.0 * s2)))
+        ms = np.sum(w * (2.0 * s2 * (1.0 - e) - L2 * e))
+        return float(math.sqrt(ms / seen)) if seen > 0 else math.nan
+
+    def scaled(self, factor) -> "NDFMixture":
+        """The lobes with every facet's slope multiplied by ``factor`` (> 0): ``s → factor·s``
+        (``sd_deg`` capped just below 89°).
+
+        >>> NDFMixture([(0.5, 5.0), (0.5, 10.0)]).scaled(2.0).rms_slope() / NDFMixture(
+        ...     [(0.5, 5.0), (0.5, 10.0)]).rms_slope()
+        2.0
+        """
+        sd = np.degrees(np.arctan(float(factor) * self.slope_sd))
+        return NDFMixture([(w, min(float(s), _MAX_SD_DEG)) for w, s in zip(self.weights, sd)])
 
     def tilt_pdf(self, theta_deg):
         """Density per degree of the tilt of the projected surface (pixel histograms).

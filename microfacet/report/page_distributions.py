@@ -82,8 +82,9 @@ def _self_check_note(ax, check, correction=None):
     wt = check.get("width_transfer")
     width = ("" if wt is None else
              f"; width after noise removal {wt:.2f}{_se(check, 'width_transfer_se')}×")
-    fixed = ("\nlobes fitted to the slopes over it (ndf.mixture.width_correction)"
-             if isinstance(correction, dict) else "")
+    fixed = (f"\nlobes scaled ×{correction['scale']:.2f} to the planes' RMS slope over it "
+             f"(ndf.mixture.width_correction)"
+             if isinstance(correction, dict) and correction.get("scale") is not None else "")
     dome = check.get("dome_transfer")
     domes = "" if dome is None else (f"; domes {dome:.2f}"
                                      f"{_se(check, 'dome_transfer_se')}× (planar-facet check "

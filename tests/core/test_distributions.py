@@ -121,6 +121,38 @@ def test_tilt_pdf_of_sampled_slopes():
     np.testing.assert_allclose(hist, f.tilt_pdf(centres), atol=0.006)
 
 
+@pytest.mark.parametrize("limit", [None, 40.0, 20.0, 8.0])
+def test_rms_slope_of_sampled_slopes(limit):
+    """Monte Carlo: the RMS of |∇h| of slopes drawn from the lobes, of all or of those
+    tilted less than ``limit``, is rms_slope(limit)."""
+    f = NDFS[1]
+    rng = np.random.default_rng(1)
+    n = 1_000_000
+    s = f.slope_sd[rng.choice(len(f.weights), n, p=f.weights)]
+    m2 = (rng.normal(0, 1, n) * s) ** 2 + (rng.normal(0, 1, n) * s) ** 2
+    if limit is not None:
+        m2 = m2[m2 < math.tan(math.radians(limit)) ** 2]
+    assert f.rms_slope(limit) == pytest.approx(math.sqrt(m2.mean()), rel=3e-3)
+
+
+@pytest.mark.parametrize("factor", [0.5, 1.0, 1.7])
+def test_scaled_lobes_are_the_slopes_times_the_factor(factor):
+    """scaled(k): the lobes of the slopes k·∇h — the same weights, slope SDs × k, so the
+    tilt density is the original's in tan θ / k and the RMS slope k times as large."""
+    f = NDFS[1]
+    g = f.scaled(factor)
+    np.testing.assert_allclose(g.weights, f.weights, rtol=1e-12)
+    np.testing.assert_allclose(g.slope_sd, factor * f.slope_sd, rtol=1e-12)
+    assert g.rms_slope() == pytest.approx(factor * f.rms_slope(), rel=1e-12)
+    th = np.linspace(0.5, 60.0, 50)
+    t = np.tan(np.radians(th))
+    # density of m = tan θ: p_g(m) = p_f(m / k) / k, with p(m) = tilt_pdf · dθ/dm
+    pm_g = g.tilt_pdf(th) * np.cos(np.radians(th)) ** 2
+    th_f = np.degrees(np.arctan(t / factor))
+    pm_f = f.tilt_pdf(th_f) * np.cos(np.radians(th_f)) ** 2
+    np.testing.assert_allclose(pm_g, pm_f / factor, rtol=1e-9, atol=1e-15)
+
+
 def _smith_lambda_by_integration(f, theta_deg):
     """Λ(θ) = (1/μ) ∫_μ^∞ (q − μ) p(q) dq with μ = cot θ and p the slope density along the
     direction's azimuth (a mixture of N(0, s²)): Smith's definition."""
