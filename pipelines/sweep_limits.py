@@ -56,7 +56,13 @@ from microfacet.analysis.identification import (
 )
 from microfacet.analysis.options import FitOptions
 from microfacet.analysis.white_balance import WhiteBalance
-from pipelines._scoring import present_means_nm, region_thickness_errors
+from microfacet.core.distributions import NDFMixture
+from pipelines._scoring import (
+    facet_tilts,
+    lobe_rms_ratio,
+    present_means_nm,
+    region_thickness_errors,
+)
 
 #: A component this wide (nm) spanning two true means within :data:`SPAN_SD` of its SD is two
 #: populations fitted as one; two components this close (nm) nearest one true population are
@@ -126,6 +132,7 @@ def ndf_lines(rows, fits: FitOptions) -> list:
     out.append(reported_line(tex))
     out.append(reported_line([(r, s) for r, s, _, _ in rows if r["textured"] != "True"],
                              "scenes without focus texture"))
+    out.append(correction_line(rows))
     out.append(purity_line(rows))
     out.append(purity_identified_line(rows))
     return out
@@ -151,6 +158,42 @@ def reported_line(tex, label="textured scenes") -> str:
             f"{np.mean(np.abs(r - 1) > 0.25):.0%}, W1 median "
             f"{np.median(w1) if w1.size else np.nan:.2f}°; dome share read, faceted without "
             f"rounding ({d.size}): median {q[1]:.2f}, quartiles {q[0]:.2f}-{q[2]:.2f}")
+
+
+def _share_line(r) -> str:
+    r = np.asarray(r, np.float64)
+    r = r[np.isfinite(r)]
+    return (f"median {np.median(r):.2f}, within 15 % {np.mean(np.abs(r - 1) <= 0.15):.0%}, "
+            f"off > 25 % {np.mean(np.abs(r - 1) > 0.25):.0%}" if r.size else "none")
+
+
+def correction_line(rows, constants=(1.15, 1.2, 1.25)) -> str:
+    """The textured scenes whose NDF the self-check's width correction scaled
+    (``ndf.mixture.width_correction``): the planes' second moment over the truth's RMS slope
+    below the acceptance, the lobes as fitted (``uncorrected``) and as corrected, and the
+    lobes as fitted scaled by each one of ``constants`` instead (does the scene's own
+    correction do better than one factor for all?)."""
+    got = []
+    for r, s, _, truth in rows:
+        ndf = s.get("ndf") or {}
+        corr = (ndf.get("mixture") or {}).get("width_correction") or {}
+        if r["textured"] != "True" or "uncorrected" not in corr:
+            continue
+        lim = ndf["max_tilt_deg"]
+        tilt = facet_tilts(truth)
+        seen = tilt[np.isfinite(tilt) & (tilt < lim)]
+        true = float(np.sqrt(np.mean(np.tan(np.radians(seen)) ** 2))) if seen.size else np.nan
+        fitted = NDFMixture([(c["weight"], c["sd_deg"]) for c in corr["uncorrected"]])
+        got.append([corr["planes_rms_slope"] / true, lobe_rms_ratio(fitted.components, tilt, lim),
+                    _f(r["lobe_rms_ratio"])]
+                   + [lobe_rms_ratio(fitted.scaled(k).components, tilt, lim) for k in constants])
+    if not got:
+        return "width correction: no textured scene corrected"
+    g = np.array(got, np.float64)
+    each = "; ".join(f"×{k:g}: {_share_line(g[:, 3 + i])}" for i, k in enumerate(constants))
+    return (f"width correction ({len(g)} textured scenes): planes' second moment "
+            f"{_share_line(g[:, 0])}; lobes as fitted {_share_line(g[:, 1])}; corrected "
+            f"{_share_line(g[:, 2])}; as fitted × one constant {each}")
 
 
 def segment_purity(facets, true_facets) -> float:

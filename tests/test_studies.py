@@ -349,6 +349,50 @@ def test_self_check_oracle_renders_the_truth_as_the_stack_does():
     assert abs(got["ndf"] - 1.0) < 0.05 < abs(got["ndf_fitted"] - 1.0)
 
 
+def test_sweep_limits_width_correction_line(tmp_path):
+    """correction_line on two corrected textured scenes whose truth is one 8° lobe: the
+    planes' second moment, the lobes as fitted (6°, 0.75 of the truth) and as corrected
+    (8°, the truth's) scored against the truth; a constant of 4/3 meets it where 1.1 does
+    not; an uncorrected scene is left out."""
+    import math
+
+    import numpy as np
+
+    from microfacet.core.distributions import NDFMixture
+    from pipelines._scoring import lobe_rms_ratio
+    from pipelines.sweep_limits import correction_line
+
+    rng = np.random.default_rng(0)
+    s = math.tan(math.radians(8.0))
+    tilt = np.degrees(np.arctan(np.hypot(*rng.normal(0, s, (2, 200_000))))).reshape(400, 500)
+    truth = tmp_path / "truth"
+    truth.mkdir()
+    np.save(truth / "tilt_deg.npy", tilt.astype(np.float32))
+    lim = 26.57
+    seen = tilt[tilt < lim]
+    true = math.sqrt(float(np.mean(np.tan(np.radians(seen)) ** 2)))
+    rows = []
+    for name, corrected in (("g000", True), ("g001", True), ("g002", False)):
+        corr = ({"planes_rms_slope": 0.7 * true, "uncorrected": [
+            {"weight": 1.0, "mean_deg": 0.0, "sd_deg": math.degrees(math.atan(0.75 * s))}]}
+            if corrected else None)
+        mix = {"components": [{"weight": 1.0, "mean_deg": 0.0, "sd_deg": 8.0}]}
+        if corr:
+            mix["width_correction"] = corr
+        row = {"name": name, "textured": "True",
+               "lobe_rms_ratio": str(lobe_rms_ratio([(1.0, 8.0)], tilt, lim))}
+        rows.append((row, {"ndf": {"max_tilt_deg": lim, "mixture": mix}}, {}, truth))
+    line = correction_line(rows, constants=(1.1, 4 / 3))
+    fitted = lobe_rms_ratio(NDFMixture([(1.0, math.degrees(math.atan(0.75 * s)))]).components,
+                            tilt, lim)
+    assert line.startswith("width correction (2 textured scenes): planes' second moment "
+                           "median 0.70, within 15 % 0%, off > 25 % 100%; lobes as fitted "
+                           f"median {fitted:.2f}, within 15 % 0%")
+    assert "corrected median 1.00, within 15 % 100%, off > 25 % 0%" in line
+    assert "×1.1: median 0.83, within 15 % 0%, off > 25 % 0%" in line
+    assert "×1.33333: median 1.00, within 15 % 100%" in line
+
+
 def _segments_on_disk(tmp_path, name, segments, true_facets):
     """A sweep scene's truth folder with ``true_facets`` and its joint results' ``segments``
     (facets.npy) under ``tmp_path/work``; the truth folder."""

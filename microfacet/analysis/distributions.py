@@ -566,11 +566,10 @@ class _PlaneSamples:
         a = self.area[self.use] if self.use.any() else self.area
         return float(self.use.sum()) + self.censored / max(float(a.mean()), 1.0)
 
-    def fit(self, planes, max_tilt_deg, options, seed, *, slope_gain=1.0) -> MixtureFit:
-        """The lobes of the planes' slopes (and slope noise) divided by ``slope_gain``."""
+    def fit(self, planes, max_tilt_deg, options, seed) -> MixtureFit:
+        """The lobes of the planes' slopes (and slope noise)."""
         u, C = self.use, self.censored
-        tilt = np.degrees(np.arctan(np.tan(np.radians(planes.tilt_deg[u])) / slope_gain))
-        return fit_ndf_mixture(tilt, slope_sigma=planes.slope_sigma[u] / slope_gain,
+        return fit_ndf_mixture(planes.tilt_deg[u], slope_sigma=planes.slope_sigma[u],
                                weights=self.area[u],
                                censored=(C, max_tilt_deg) if C > 0 else None,
                                n_effective=max(self.n_effective, 1.0), options=options,
